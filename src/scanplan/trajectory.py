@@ -168,7 +168,9 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
         try:
             values[i - 2] = [float(c) for c in cells]
         except ValueError:
-            raise ValueError(f"trajectory file {path} line {i}: not a number in {row[:80]!r}")
+            raise ValueError(
+                f"trajectory file {path} line {i}: not a number in {row[:80]!r}"
+            ) from None
         if not np.isfinite(values[i - 2]).all():
             raise ValueError(f"trajectory file {path} line {i}: non-finite value")
         if np.linalg.norm(values[i - 2, 5:]) < 1e-9:
@@ -214,12 +216,12 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         swath = [int(p["swath"]) for p in poses_in]
         scanning = [bool(p["scanning"]) for p in poses_in]
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"trajectory file {path} is not a scanplan JSON trajectory: {exc}")
+        raise ValueError(
+            f"trajectory file {path} is not a scanplan JSON trajectory: {exc}"
+        ) from None
     if len(xyz) == 0:
         raise ValueError(f"trajectory file {path} has no poses")
-    return Trajectory(
-        poses_from_xyz_quat(xyz, q), swath, scanning, planner=data.get("planner", "")
-    )
+    return Trajectory(poses_from_xyz_quat(xyz, q), swath, scanning, planner=data.get("planner", ""))
 
 
 def read_trajectory(path: str | os.PathLike) -> Trajectory:

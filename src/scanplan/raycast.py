@@ -1,0 +1,70 @@
+"""The one place that talks to Embree (through `embreex`).
+
+Embree works in float32: coordinates are shifted to the mesh centre first, so parts far from
+the origin keep their precision.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+# Embree's "no hit" primitive id.
+_MISS = -1
+
+
+class RayEngine:
+    """First-hit and occlusion queries against one triangle mesh.
+
+    vertices: (v, 3) float, faces: (f, 3) int. Coordinates are shifted to the mesh centre
+    before going to float32, so parts far from the origin keep their precision.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        vertices = np.asarray(vertices, dtype=np.float64)
+        faces = np.asarray(faces, dtype=np.int64)
+        self.offset = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+        self.triangles = vertices[faces]  # (f, 3, 3) float64, for exact refinement
+        edge1 = self.triangles[:, 1] - self.triangles[:, 0]
+        edge2 = self.triangles[:, 2] - self.triangles[:, 0]
+        normals = np.cross(edge1, edge2)
+        lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+        self.face_normals = normals / np.where(lengths > 0, lengths, 1.0)
+        self._scene = rtcore_scene.EmbreeScene()
+        # The TriangleMesh registers itself with the scene; keep a reference alive.
+        self._mesh = TriangleMesh(self._scene, (self.triangles - self.offset).astype(np.float32))
+
+    def first_hit(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Distance along each ray to its first hit and the face index (-1 = miss).
+
+        origins, directions: (n, 3) float; directions must be unit vectors.
+        Returns t (n,) float64 (inf on a miss) and face (n,) int64. Embree's float32 distance
+        is exact to ~1e-7 relative: 0.05 um at 400 mm, far below any sensor's Z resolution.
+        """
+        o = np.ascontiguousarray(origins - self.offset, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        result = self._scene.run(o, d, output=1)
+        face = np.asarray(result["primID"], dtype=np.int64)
+        t = np.where(face != _MISS, result["tfar"].astype(np.float64), np.inf)
+        return t, face
+
+    def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """The bare Embree first-hit call (face index per ray), the benchmarks' reference."""
+        o = np.ascontiguousarray(origins - self.offset, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        return np.asarray(self._scene.run(o, d))
+
+    def occluded(
+        self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray
+    ) -> np.ndarray:
+        """True where something lies on the ray between 0 and max_distance. (n,) bool."""
+        if len(origins) == 0:
+            return np.zeros(0, dtype=bool)
+        o = np.ascontiguousarray(origins - self.offset, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        dist = np.ascontiguousarray(max_distance, dtype=np.float32)
+        result = np.asarray(self._scene.run(o, d, dists=dist, query="OCCLUDED"))
+        return result != _MISS

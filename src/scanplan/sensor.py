@@ -1,0 +1,300 @@
+"""The laser-triangulation line profilometer: datasheet (`SensorSpec`) and simulator.
+
+`LineProfilometer.measure_many` casts the sensor's pixel-column fan from many poses at once,
+keeps the points a real sensor would return (depth window, camera line of sight, incidence
+cutoff) and adds seeded noise. Sensor frame: z_s = laser axis towards the part, x_s = along
+the line, y_s = z_s x x_s = scan direction; the camera sits at baseline W_d*tan(gamma) on y_s.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+from enum import IntEnum
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from scanplan.noise import NoiseModel
+
+if TYPE_CHECKING:
+    from scanplan.part import Part
+
+
+class PointStatus(IntEnum):
+    """Why a pixel column returned (or did not return) a point."""
+
+    VALID = 0
+    NO_HIT = 1
+    OUT_OF_RANGE = 2  # outside W_d +- Z_r/2
+    GRAZING = 3  # laser incidence above the cutoff
+    SHADOWED = 4  # the camera does not see the lit point (occluded or back-facing)
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """Datasheet of a line profilometer. Lengths in mm, angles in radians."""
+
+    name: str = "at-c5-4090cs30-495"
+    working_distance_mm: float = 400.0
+    z_range_mm: float = 250.0
+    fov_rad: float = math.radians(63.5)
+    points_per_profile: int = 4096
+    z_resolution_mm: float = 0.0038
+    triangulation_angle_rad: float = math.radians(30.0)
+    camera_side: int = 1  # +1: camera on +y_s (ahead), -1: behind
+    incidence_cutoff_rad: float = math.radians(80.0)
+    noise: NoiseModel | None = field(default_factory=NoiseModel)
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.working_distance_mm > 0, "working distance must be > 0 mm"),
+            (0 < self.z_range_mm < 2 * self.working_distance_mm, "Z range must be in (0, 2*W_d)"),
+            (0 < self.fov_rad < math.pi, "fan angle must be in (0, 180) degrees"),
+            (self.points_per_profile >= 2, "points per profile must be >= 2"),
+            (self.z_resolution_mm >= 0, "Z resolution must be >= 0"),
+            (0 < self.triangulation_angle_rad < math.pi / 2, "triangulation angle in (0, 90) deg"),
+            (self.camera_side in (-1, 1), "camera side must be +1 or -1"),
+            (0 < self.incidence_cutoff_rad <= math.pi / 2, "incidence cutoff in (0, 90] deg"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"sensor {self.name}: {message}")
+
+    @property
+    def line_width_mm(self) -> float:
+        """Length of the laser line at the working distance."""
+        return 2.0 * self.working_distance_mm * math.tan(self.fov_rad / 2)
+
+    @property
+    def baseline_mm(self) -> float:
+        return self.working_distance_mm * math.tan(self.triangulation_angle_rad)
+
+    @property
+    def depth_window_mm(self) -> tuple[float, float]:
+        half = self.z_range_mm / 2
+        return self.working_distance_mm - half, self.working_distance_mm + half
+
+    @property
+    def camera_sensor(self) -> np.ndarray:
+        """Camera centre in the sensor frame, (3,)."""
+        return np.array([0.0, self.camera_side * self.baseline_mm, 0.0])
+
+    def ray_directions(self, points: int | None = None) -> np.ndarray:
+        """Unit ray directions in the sensor frame, (N, 3): the pixel columns are evenly spaced
+        in x across the line at z = W_d (not evenly spaced in angle)."""
+        n = points or self.points_per_profile
+        half = self.line_width_mm / 2
+        x = np.linspace(-half, half, n)
+        d = np.stack([x, np.zeros(n), np.full(n, self.working_distance_mm)], axis=1)
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def without_noise(self) -> SensorSpec:
+        return replace(self, noise=None)
+
+    def with_points(self, points_per_profile: int) -> SensorSpec:
+        """The same sensor with a sub-sampled fan (the same line width)."""
+        return replace(self, points_per_profile=points_per_profile)
+
+
+PRESETS: dict[str, SensorSpec] = {"at-c5-4090cs30-495": SensorSpec()}
+
+
+@dataclass(frozen=True)
+class Scan:
+    """Profiles measured from m poses with N pixel columns each.
+
+    poses:        (m, 4, 4) float64, T_part_sensor.
+    z_sensor:     (m, N) float64, measured depth along z_s (noise, quantization); NaN if invalid.
+    x_sensor:     (m, N) float64, lateral position along x_s; NaN if invalid.
+    points_part:  (m, N, 3) float64, measured points in the part frame; NaN if invalid.
+    true_z_sensor:(m, N) float64, noise-free depth of the first hit; inf where no hit.
+    normals_part: (m, N, 3) float64, face normals flipped towards the incoming ray (0 if no hit).
+    face:         (m, N) int64, hit face index, -1 where no hit.
+    status:       (m, N) uint8, `PointStatus` of each column.
+    """
+
+    poses: np.ndarray
+    z_sensor: np.ndarray
+    x_sensor: np.ndarray
+    points_part: np.ndarray
+    true_z_sensor: np.ndarray
+    normals_part: np.ndarray
+    face: np.ndarray
+    status: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(m, N) bool."""
+        return self.status == PointStatus.VALID
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def profile(self, i: int) -> Profile:
+        return Profile(
+            T_part_sensor=self.poses[i],
+            z_sensor=self.z_sensor[i],
+            x_sensor=self.x_sensor[i],
+            points_part=self.points_part[i],
+            true_z_sensor=self.true_z_sensor[i],
+            normals_part=self.normals_part[i],
+            face=self.face[i],
+            status=self.status[i],
+        )
+
+
+@dataclass(frozen=True)
+class Profile:
+    """One profile: the fields of `Scan` for a single pose, shapes (N,) / (N, 3) / (4, 4)."""
+
+    T_part_sensor: np.ndarray
+    z_sensor: np.ndarray
+    x_sensor: np.ndarray
+    points_part: np.ndarray
+    true_z_sensor: np.ndarray
+    normals_part: np.ndarray
+    face: np.ndarray
+    status: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.status == PointStatus.VALID
+
+
+class LineProfilometer:
+    """A SensorSpec looking at a Part.
+
+    rng: the Generator the Gaussian noise draws from (pass `env.np_random` for seeded
+    rollouts); by default one seeded with `seed`. threads: workers for large batches.
+    """
+
+    # Lift of occlusion-ray origins off the surface, mm: above float32 error of Embree at
+    # part scale, far below any feature a profilometer resolves.
+    _SURFACE_EPS_MM = 1e-2
+
+    def __init__(
+        self, part: Part, spec: SensorSpec, seed: int = 0, threads: int | None = None
+    ) -> None:
+        self.part = part
+        self.spec = spec
+        self.rng = np.random.default_rng(seed)
+        self.threads = threads or os.cpu_count() or 1
+        # ~100k rays a chunk: large enough to amortize Python, small enough to stay in cache.
+        self.chunk_poses = max(1, 100_000 // spec.points_per_profile)
+        self._rays_sensor = spec.ray_directions()
+
+    def measure(self, T_part_sensor: np.ndarray, rng: np.random.Generator | None = None):
+        """One profile from one pose."""
+        return self.measure_many(np.asarray(T_part_sensor)[None], rng).profile(0)
+
+    def measure_many(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> Scan:
+        """Profiles from (m, 4, 4) poses.
+
+        Large batches are cut into chunks measured on a thread pool (Embree and numpy release
+        the GIL); each chunk draws its Gaussian noise from a child seed taken from `rng` in
+        order, so the result is reproducible whatever the thread timing.
+        """
+        poses = np.asarray(poses, dtype=np.float64)
+        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+            raise ValueError(f"poses must be (m, 4, 4), got {poses.shape}")
+        rng = rng if rng is not None else self.rng
+        if len(poses) <= self.chunk_poses:
+            return self._measure_chunk(poses, rng)
+        chunks = [poses[i : i + self.chunk_poses] for i in range(0, len(poses), self.chunk_poses)]
+        seeds = rng.integers(0, 2**63 - 1, size=len(chunks))
+        with ThreadPoolExecutor(max_workers=self.threads) as pool:
+            scans = list(
+                pool.map(
+                    lambda job: self._measure_chunk(job[0], np.random.default_rng(job[1])),
+                    zip(chunks, seeds, strict=True),
+                )
+            )
+        return Scan(
+            **{
+                name: np.concatenate([getattr(s, name) for s in scans])
+                for name in Scan.__dataclass_fields__
+            }
+        )
+
+    def _measure_chunk(self, poses: np.ndarray, rng: np.random.Generator) -> Scan:
+        spec = self.spec
+        rays = self._rays_sensor
+        m, n = len(poses), len(rays)
+        rot = poses[:, :3, :3]
+        origin = poses[:, :3, 3]
+        engine = self.part.ray_engine
+
+        # Laser rays of all poses in one Embree call: (m*n, 3).
+        dirs = np.matmul(rays, rot.transpose(0, 2, 1)).reshape(-1, 3)
+        origins = np.repeat(origin, n, axis=0)
+        t, face = engine.first_hit(origins, dirs)
+        status = np.full(m * n, PointStatus.NO_HIT, dtype=np.uint8)
+        normals = np.zeros((m * n, 3))
+        true_z = np.full(m * n, np.inf)
+
+        # Everything below works on the hit columns only.
+        hit = np.flatnonzero(face >= 0)
+        cos_axis = np.tile(rays[:, 2], m)  # z_s = t * cos(angle of the column to the axis)
+        true_z[hit] = t[hit] * cos_axis[hit]
+        d_hit = dirs[hit]
+        p_hit = origins[hit] + d_hit * t[hit, None]
+        n_hit = engine.face_normals[face[hit]]
+        # CAD exports often have inconsistent winding: face every normal towards its ray.
+        cos_incidence = -np.einsum("ij,ij->i", n_hit, d_hit)
+        flip = cos_incidence < 0
+        n_hit[flip] *= -1.0
+        cos_incidence = np.abs(cos_incidence)
+        normals[hit] = n_hit
+
+        z_lo, z_hi = spec.depth_window_mm
+        in_window = (true_z[hit] >= z_lo) & (true_z[hit] <= z_hi)
+        lit = in_window & (cos_incidence > math.cos(spec.incidence_cutoff_rad))
+        status[hit] = PointStatus.OUT_OF_RANGE
+        status[hit[in_window]] = PointStatus.GRAZING
+        status[hit[lit]] = PointStatus.SHADOWED
+
+        # Camera line of sight: a lit point must face the camera and see it unobstructed.
+        camera = rot @ spec.camera_sensor + origin  # (m, 3)
+        lit_idx = np.flatnonzero(lit)
+        to_camera = camera[hit[lit_idx] // n] - p_hit[lit_idx]
+        dist_camera = np.linalg.norm(to_camera, axis=1)
+        to_camera /= dist_camera[:, None]
+        faces_camera = np.einsum("ij,ij->i", n_hit[lit_idx], to_camera) > 0
+        cand = lit_idx[faces_camera]
+        to_camera, dist_camera = to_camera[faces_camera], dist_camera[faces_camera]
+        start = p_hit[cand] + n_hit[cand] * self._SURFACE_EPS_MM
+        blocked = engine.occluded(start, to_camera, dist_camera - self._SURFACE_EPS_MM)
+        seen = cand[~blocked]  # indices into the hit arrays
+        valid_idx = hit[seen]
+        status[valid_idx] = PointStatus.VALID
+
+        # Measured depth: true depth + noise, quantized to the Z resolution.
+        z_valid = true_z[valid_idx]
+        if spec.noise is not None and len(valid_idx):
+            z_valid = z_valid + spec.noise.depth_noise_mm(
+                z_valid, cos_incidence[seen], p_hit[seen], spec.working_distance_mm, rng
+            )
+        if spec.z_resolution_mm > 0:
+            z_valid = np.round(z_valid / spec.z_resolution_mm) * spec.z_resolution_mm
+        z_meas = np.full(m * n, np.nan)
+        z_meas[valid_idx] = z_valid
+        # The measured point lies on the same pixel column's ray, at the measured depth.
+        points_meas = np.full((m * n, 3), np.nan)
+        scale = z_valid / cos_axis[valid_idx]
+        points_meas[valid_idx] = origins[valid_idx] + d_hit[seen] * scale[:, None]
+        x_meas = np.full(m * n, np.nan)
+        x_meas[valid_idx] = np.tile(rays[:, 0] / rays[:, 2], m)[valid_idx] * z_valid
+
+        return Scan(
+            poses=poses,
+            z_sensor=z_meas.reshape(m, n),
+            x_sensor=x_meas.reshape(m, n),
+            points_part=points_meas.reshape(m, n, 3),
+            true_z_sensor=true_z.reshape(m, n),
+            normals_part=normals.reshape(m, n, 3),
+            face=face.reshape(m, n),
+            status=status.reshape(m, n),
+        )
