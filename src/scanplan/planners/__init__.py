@@ -1,0 +1,50 @@
+"""Planners: each turns one Swath into the sensor poses of that pass.
+
+A planner is any object with a `name` and `plan(part, swath, sensor) -> Trajectory`;
+`plan_path` runs one over a whole Boustrophedon base path and adds the lift-off transitions.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+import numpy as np
+
+from scanplan.part import Part
+from scanplan.sensor import SensorSpec
+from scanplan.swaths import Swath, transition_poses
+from scanplan.trajectory import Trajectory
+
+
+class Planner(Protocol):
+    name: str
+
+    def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
+        """The scanning poses of one pass (all flagged scanning, swath = swath.index)."""
+        ...
+
+
+def plan_path(
+    part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swath]
+) -> Trajectory:
+    """All passes in snake order, joined by non-scanning lift-off transitions."""
+    if not swaths:
+        raise ValueError("no swath to plan")
+    start = time.perf_counter()
+    pieces: list[Trajectory] = []
+    for i, swath in enumerate(swaths):
+        if i > 0:
+            moves = transition_poses(swaths[i - 1], swath)
+            pieces.append(
+                Trajectory(moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool))
+            )
+        pieces.append(planner.plan(part, swath, sensor))
+    traj = Trajectory.concatenate(pieces, planner=planner.name)
+    return Trajectory(
+        traj.poses,
+        traj.swath,
+        traj.scanning,
+        plan_time_s=time.perf_counter() - start,
+        planner=planner.name,
+    )
