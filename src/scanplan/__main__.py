@@ -1,0 +1,3 @@
+from scanplan.cli import app
+
+app()

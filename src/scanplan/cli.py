@@ -1,0 +1,134 @@
+"""The `scanplan` command line (SPEC §8): parses, calls the library, prints.
+
+Every user mistake ends as one line on stderr and exit code 2, with no partial output file
+(writers in the library are atomic).
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="Plan, simulate, evaluate and export laser-profilometer scan trajectories.",
+)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def user_errors(fn: F) -> F:
+    """Turn the library's ValueError (and file errors) into one clear line and exit 2."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (ValueError, OSError) as exc:
+            message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            typer.echo(f"error: {message}", err=True)
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(130) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+PartArg = Annotated[
+    str, typer.Argument(help="built-in part name or mesh file (STL/OBJ/PLY/OFF/GLB)")
+]
+UnitsOpt = Annotated[str, typer.Option("--units", help="units of a mesh file: mm, m or in")]
+SensorOpt = Annotated[
+    str, typer.Option("--sensor", help="sensor preset name or TOML/YAML datasheet file")
+]
+OutOpt = Annotated[Path, typer.Option("-o", "--output", help="output file")]
+
+
+# ---- part -------------------------------------------------------------------------------
+@app.command("part")
+@user_errors
+def part_cmd(name: Annotated[str, typer.Argument(help="built-in part name")], output: OutOpt):
+    """Write a built-in procedural part as a mesh file (STL, PLY, OBJ, ...)."""
+    from scanplan.part import load_part
+    from scanplan.parts import PART_NAMES
+    from scanplan.trajectory import atomic_write_bytes
+
+    if name not in PART_NAMES:
+        raise ValueError(f"unknown part {name!r}; built-in parts: {', '.join(PART_NAMES)}")
+    part = load_part(name)
+    file_type = output.suffix.lower().lstrip(".") or "stl"
+    try:
+        data = part.mesh.export(file_type=file_type)
+    except (ValueError, KeyError, NotImplementedError):
+        raise ValueError(
+            f"cannot write mesh format {output.suffix!r}; use .stl, .ply or .obj"
+        ) from None
+    atomic_write_bytes(output, data if isinstance(data, bytes) else data.encode())
+    e = part.extents
+    typer.echo(
+        f"{name}: {len(part.mesh.faces)} triangles, {e[0]:.0f} x {e[1]:.0f} x {e[2]:.0f} mm "
+        f"-> {output}"
+    )
+
+
+# ---- scan -------------------------------------------------------------------------------
+@app.command("scan")
+@user_errors
+def scan_cmd(
+    part: PartArg,
+    trajectory: Annotated[Path, typer.Argument(help="trajectory CSV (SPEC §8 columns)")],
+    output: OutOpt,
+    sensor: SensorOpt = "at-c5-4090cs30-495",
+    units: UnitsOpt = "mm",
+    seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+    no_noise: Annotated[bool, typer.Option("--no-noise", help="switch noise off")] = False,
+):
+    """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields."""
+    from scanplan.cloud import simulate_cloud, write_ply
+    from scanplan.config import load_sensor
+    from scanplan.part import load_part
+    from scanplan.trajectory import read_trajectory
+
+    if output.suffix.lower() != ".ply":
+        raise ValueError(f"output {output} must be a .ply file")
+    spec = load_sensor(sensor)
+    if no_noise:
+        spec = spec.without_noise()
+    the_part = load_part(part, units)
+    traj = read_trajectory(trajectory)
+    if not traj.scanning.any():
+        raise ValueError(f"trajectory {trajectory} has no scanning pose")
+    cloud = simulate_cloud(the_part, spec, traj, seed=seed)
+    if len(cloud.points_part) == 0:
+        raise ValueError(
+            f"no valid point: part {part} is outside the sensor's reach along {trajectory}"
+        )
+    write_ply(cloud, output)
+    typer.echo(
+        f"{len(cloud.points_part)} points from {int(traj.scanning.sum())} profiles -> {output}"
+    )
+
+
+# ---- plan / evaluate (planners and metrics) ----------------------------------------------
+
+
+# ---- train (RL) --------------------------------------------------------------------------
+
+
+# ---- export (robot programs) --------------------------------------------------------------
+
+
+# ---- demo ---------------------------------------------------------------------------------
+
+
+def main() -> None:  # pragma: no cover - console entry for `python -m scanplan`
+    app()
+    sys.exit(0)

@@ -1,0 +1,83 @@
+"""Simulated point clouds of a whole trajectory, with per-point error fields, as PLY."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from scanplan.part import Part
+from scanplan.quantities import point_orientation_error
+from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.trajectory import Trajectory, atomic_write_bytes
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """Valid points of a simulated scan.
+
+    points_part: (k, 3) float64, mm.  distance_error_mm: (k,) z_s - W_d.
+    orientation_error_rad: (k,) alpha_i.  profile: (k,) int index of the scanning pose.
+    swath: (k,) int.
+    """
+
+    points_part: np.ndarray
+    distance_error_mm: np.ndarray
+    orientation_error_rad: np.ndarray
+    profile: np.ndarray
+    swath: np.ndarray
+
+
+def simulate_cloud(
+    part: Part, sensor: SensorSpec, traj: Trajectory, seed: int = 0, chunk_poses: int = 256
+) -> PointCloud:
+    """Measure every scanning pose and keep the valid points (chunked to bound memory)."""
+    profilometer = LineProfilometer(part, sensor, seed=seed)
+    poses = traj.scan_poses
+    swath_of_pose = traj.swath[traj.scanning]
+    out: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
+    for start in range(0, len(poses), chunk_poses):
+        scan = profilometer.measure_many(poses[start : start + chunk_poses])
+        valid = scan.valid
+        rows = np.nonzero(valid)[0]
+        out["points_part"].append(scan.points_part[valid])
+        out["distance_error_mm"].append(scan.z_sensor[valid] - sensor.working_distance_mm)
+        alpha = point_orientation_error(scan.normals_part, scan.poses)
+        out["orientation_error_rad"].append(alpha[valid])
+        out["profile"].append(rows + start)
+        out["swath"].append(swath_of_pose[rows + start])
+    return PointCloud(
+        **{
+            k: np.concatenate(v) if v else np.zeros((0, 3) if k == "points_part" else 0)
+            for k, v in out.items()
+        }
+    )
+
+
+def _colormap(values: np.ndarray, limit: float) -> np.ndarray:
+    """RGBA uint8 from a diverging map, symmetric around 0 within +-limit."""
+    from matplotlib import colormaps
+
+    scaled = 0.5 + 0.5 * np.clip(values / max(limit, 1e-12), -1.0, 1.0)
+    return (colormaps["coolwarm"](scaled) * 255).astype(np.uint8)
+
+
+def write_ply(cloud: PointCloud, path: str | os.PathLike, color_limit_mm: float = 5.0) -> None:
+    """Binary PLY: x, y, z, colour by distance error, and the scalar fields
+    distance_error_mm, orientation_error_deg, profile, swath (CloudCompare/MeshLab read them)."""
+    mesh = trimesh.Trimesh(
+        vertices=cloud.points_part, faces=np.zeros((0, 3), dtype=np.int64), process=False
+    )
+    mesh.visual = trimesh.visual.ColorVisuals(
+        mesh, vertex_colors=_colormap(cloud.distance_error_mm, color_limit_mm)
+    )
+    mesh.vertex_attributes["distance_error_mm"] = cloud.distance_error_mm.astype(np.float32)
+    mesh.vertex_attributes["orientation_error_deg"] = np.degrees(
+        cloud.orientation_error_rad
+    ).astype(np.float32)
+    mesh.vertex_attributes["profile"] = cloud.profile.astype(np.int32)
+    mesh.vertex_attributes["swath"] = cloud.swath.astype(np.int32)
+    data = trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=True)
+    atomic_write_bytes(path, data)
