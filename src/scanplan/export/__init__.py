@@ -1,0 +1,82 @@
+"""Robot programs from a trajectory: URScript, ABB RAPID, KUKA KRL, ROS 2 YAML, base-frame CSV.
+
+Every dialect writes the sensor poses in the robot base frame, `T_base_sensor = part_pose @
+T_part_sensor`, with the program's tool set to the sensor (`tcp` = `T_flange_sensor`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanplan.export import csv_export, krl, rapid, ros, urscript
+from scanplan.export.common import (
+    ExportOptions,
+    Motion,
+    Parsed,
+    flange_poses,
+    parse_pose_arg,
+    plan_motion,
+)
+from scanplan.trajectory import Trajectory
+
+__all__ = [
+    "FORMATS",
+    "Dialect",
+    "ExportOptions",
+    "Parsed",
+    "export_program",
+    "flange_poses",
+    "parse_pose_arg",
+    "parse_program",
+    "parse_program_details",
+]
+
+
+@dataclass(frozen=True)
+class Dialect:
+    name: str
+    suffix: str  # the file extension the controller expects
+    write: Callable[[Motion, ExportOptions], str]
+    parse: Callable[[str], Parsed]
+
+
+FORMATS: dict[str, Dialect] = {
+    name: Dialect(name, module.SUFFIX, module.write, module.parse)
+    for name, module in (
+        ("urscript", urscript),
+        ("rapid", rapid),
+        ("krl", krl),
+        ("ros", ros),
+        ("csv", csv_export),
+    )
+}
+
+
+def _dialect(fmt: str) -> Dialect:
+    try:
+        return FORMATS[fmt]
+    except KeyError:
+        raise ValueError(
+            f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}"
+        ) from None
+
+
+def export_program(traj: Trajectory, fmt: str, options: ExportOptions | None = None) -> str:
+    """The program text for `fmt`; the caller writes it (with `atomic_write_text`)."""
+    dialect = _dialect(fmt)
+    options = options or ExportOptions()
+    return dialect.write(plan_motion(traj, options), options)
+
+
+def parse_program_details(text: str, fmt: str) -> Parsed:
+    """Poses, scanning flags, speeds and blending read back from a program of `fmt`."""
+    return _dialect(fmt).parse(text)
+
+
+def parse_program(text: str, fmt: str) -> tuple[np.ndarray, np.ndarray]:
+    """(poses (n, 4, 4) `T_base_sensor` in mm, scanning (n,) bool) read back from a program."""
+    parsed = parse_program_details(text, fmt)
+    return parsed.poses, parsed.scanning

@@ -1,0 +1,82 @@
+"""ROS 2 YAML: the path as a `geometry_msgs/PoseArray` and a `nav_msgs/Path` (metres).
+
+One YAML mapping with three keys: `pose_array` and `path` are the messages exactly as
+`ros2 topic pub` / rosidl YAML expects them, `scanplan` carries what no message holds (the
+scanning flags, swath indices and speeds). Path stamps are the planned arrival times from the
+start (distance / commanded speed, accelerations ignored). No rosbag2: writing one needs the
+`rosbags` package, which is not a dependency.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from scanplan.export.common import ExportOptions, Motion, Parsed, poses_from_parts, quat_wxyz
+
+SUFFIX = ".yaml"
+
+
+def _stamp(t: float) -> str:
+    sec = int(np.floor(t))
+    return f"{{sec: {sec}, nanosec: {int(round((t - sec) * 1e9)) % 1_000_000_000}}}"
+
+
+def write(motion: Motion, options: ExportOptions) -> str:
+    frame = options.ros_frame_id
+    xyz = motion.poses[:, :3, 3] / 1000.0
+    q = quat_wxyz(motion.poses[:, :3, :3])
+    seg = np.linalg.norm(np.diff(motion.poses[:, :3, 3], axis=0), axis=1)
+    t = np.r_[0.0, np.cumsum(seg / motion.speed_mm_s[1:])]
+    body = [
+        f"position: {{x: {p[0]:.9f}, y: {p[1]:.9f}, z: {p[2]:.9f}}}\n"
+        f"orientation: {{x: {r[1]:.9f}, y: {r[2]:.9f}, z: {r[3]:.9f}, w: {r[0]:.9f}}}"
+        for p, r in zip(xyz, q, strict=True)
+    ]
+    out = [
+        f"# {options.program_name}: laser-profilometer scan path written by scanplan",
+        f"# Poses are T_{frame}_sensor (sensor pose in the robot base frame, part_pose @",
+        "# T_part_sensor), metres and unit quaternions. On a UR arm, note that the ROS frame",
+        "# base_link is the controller's base frame turned 180 deg about Z.",
+        "scanplan:",
+        f"  frame_id: {frame}",
+        f"  scanning: [{', '.join('true' if s else 'false' for s in motion.scanning)}]",
+        f"  swath: [{', '.join(str(int(k)) for k in motion.swath)}]",
+        f"  speed_mm_s: [{', '.join(f'{v:g}' for v in motion.speed_mm_s)}]",
+        "pose_array:",
+        "  header:",
+        "    stamp: {sec: 0, nanosec: 0}",
+        f"    frame_id: {frame}",
+        "  poses:",
+    ]
+    for b in body:
+        out.append("  - " + b.replace("\n", "\n    "))
+    out += ["path:", "  header:", "    stamp: {sec: 0, nanosec: 0}", f"    frame_id: {frame}"]
+    out.append("  poses:")
+    for b, ti in zip(body, t, strict=True):
+        out.append(f"  - header:\n      stamp: {_stamp(ti)}\n      frame_id: {frame}")
+        out.append("    pose:\n      " + b.replace("\n", "\n      "))
+    return "\n".join(out) + "\n"
+
+
+def parse(text: str) -> Parsed:
+    try:
+        # libyaml when present: the pure-Python loader takes a minute on a long path.
+        doc = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        poses_in = [p["pose"] for p in doc["path"]["poses"]]
+        array_in = doc["pose_array"]["poses"]
+        extra = doc["scanplan"]
+    except (yaml.YAMLError, KeyError, TypeError) as exc:
+        raise ValueError(f"not a scanplan ROS YAML file: {exc}") from None
+    if len(poses_in) != len(array_in):
+        raise ValueError("ROS YAML: path and pose_array differ in length")
+    xyz = np.array([[p["position"][k] for k in "xyz"] for p in array_in]) * 1000.0
+    xyzw = np.array([[p["orientation"][k] for k in "xyzw"] for p in array_in])
+    poses = poses_from_parts(xyz, Rotation.from_quat(xyzw))
+    path_xyz = np.array([[p["position"][k] for k in "xyz"] for p in poses_in]) * 1000.0
+    if not np.allclose(path_xyz, xyz, atol=1e-6):
+        raise ValueError("ROS YAML: path and pose_array hold different poses")
+    return Parsed(
+        poses, np.array(extra["scanning"], dtype=bool), np.array(extra["speed_mm_s"]), None
+    )

@@ -1,0 +1,83 @@
+"""Universal Robots URScript: one `movel` per pose, metres and rotation vectors."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from scanplan.export.common import (
+    ExportOptions,
+    Motion,
+    Parsed,
+    PassTracker,
+    floats,
+    poses_from_parts,
+)
+
+SUFFIX = ".script"
+_MOVEL = re.compile(r"movel\(p\[([^\]]*)\],\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)")
+
+
+def _poses_m(T: np.ndarray) -> list[str]:
+    """`p[x, y, z, rx, ry, rz]` per pose of (n, 4, 4) mm poses."""
+    values = np.concatenate(
+        [T[:, :3, 3] / 1000.0, Rotation.from_matrix(T[:, :3, :3]).as_rotvec()], axis=1
+    )
+    # 9 decimals in metres = 1 nm: the file never limits accuracy, the controller does.
+    return ["p[" + ", ".join(f"{v:.9f}" for v in row) + "]" for row in values]
+
+
+def write(motion: Motion, options: ExportOptions) -> str:
+    name = options.program_name
+    a = options.accel_mm_s2 / 1000.0
+    out = [
+        f"# {name}: laser-profilometer scan path written by scanplan",
+        "# Targets are T_base_sensor (sensor pose in the robot base frame, part_pose @",
+        "# T_part_sensor) because set_tcp below makes the sensor the TCP. Units: metres,",
+        "# rotation vectors in radians, speeds m/s, accelerations m/s^2, blend radii metres.",
+        f"# {len(motion.poses)} targets, {int(motion.pass_start.sum())} scanning runs; "
+        f"scan speed {options.scan_speed:g} mm/s, travel {options.travel_speed_mm_s:g} mm/s.",
+        "# Blend r = 0 at every run start/end and transition, so the sensor triggers on a "
+        "stopped robot;",
+        f"# elsewhere r = {options.blend_mm:g} mm, capped at half the distance to the "
+        "neighbouring targets so blends never overlap.",
+        f"def {name}():",
+        f"  set_tcp({_poses_m(options.tcp[None])[0]})",
+    ]
+    for i, target in enumerate(_poses_m(motion.poses)):
+        k = int(motion.swath[i])
+        if motion.pass_start[i]:
+            out.append(f"  # pass {k} start")
+        v = motion.speed_mm_s[i] / 1000.0
+        r = motion.blend_mm[i] / 1000.0
+        out.append(f"  movel({target}, a={a:.6g}, v={v:.6g}, r={r:.6g})")
+        if motion.pass_start[i]:
+            out.append(f'  textmsg("scanplan: pass {k} start")')
+            out.append("  # set_digital_out(0, True)  # hook: start the sensor's acquisition")
+        if motion.pass_end[i]:
+            out.append("  # set_digital_out(0, False)  # hook: stop the sensor's acquisition")
+            out.append(f'  textmsg("scanplan: pass {k} end")')
+            out.append(f"  # pass {k} end")
+    out += ["end", "", f"{name}()", ""]
+    return "\n".join(out)
+
+
+def parse(text: str) -> Parsed:
+    values: list[list[float]] = []
+    tracker = PassTracker()
+    for line in text.splitlines():
+        s = line.strip()
+        if s.startswith("#"):
+            tracker.line(s)
+            continue
+        m = _MOVEL.search(s)
+        if m:
+            values.append([*floats(m.group(1)), *(float(m.group(j)) for j in (2, 3, 4))])
+            tracker.move()
+    if not values:
+        raise ValueError("URScript program holds no movel")
+    arr = np.asarray(values)
+    poses = poses_from_parts(arr[:, :3] * 1000.0, Rotation.from_rotvec(arr[:, 3:6]))
+    return Parsed(poses, np.array(tracker.flags), arr[:, 7] * 1000.0, arr[:, 8] > 0)
