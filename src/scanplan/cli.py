@@ -124,6 +124,56 @@ def scan_cmd(
 
 
 # ---- export (robot programs) --------------------------------------------------------------
+POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
+
+
+@app.command("export")
+@user_errors
+def export_cmd(
+    trajectory: Annotated[Path, typer.Argument(help="trajectory CSV or JSON")],
+    output: OutOpt,
+    fmt: Annotated[
+        str, typer.Option("--format", help="urscript, rapid, krl, ros or csv")
+    ] = "urscript",
+    tcp: Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}")] = "0,0,0,0,0,0",
+    part_pose: Annotated[
+        str, typer.Option("--part-pose", help=f"part in the robot base frame: {POSE_HELP}")
+    ] = "0,0,0,0,0,0",
+    profile_rate: Annotated[
+        float, typer.Option(help="sensor profile rate, Hz; scan speed = rate x spacing")
+    ] = 200.0,
+    spacing: Annotated[float, typer.Option(help="profile spacing on the part, mm")] = 0.5,
+    travel_speed: Annotated[float, typer.Option(help="speed between passes, mm/s")] = 250.0,
+    robot: Annotated[
+        str, typer.Option(help="check reach for ur3e, ur5e or ur10e; 'none' to skip")
+    ] = "ur5e",
+):
+    """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or CSV)."""
+    from scanplan.export import FORMATS, ExportOptions, export_program, flange_poses, parse_pose_arg
+    from scanplan.robot import check_reach
+    from scanplan.trajectory import atomic_write_text, read_trajectory
+
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown format {fmt!r}; use one of {', '.join(FORMATS)}")
+    name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else None
+    options = ExportOptions(
+        part_pose=parse_pose_arg(part_pose),
+        tcp=parse_pose_arg(tcp),
+        profile_rate_hz=profile_rate,
+        delta_s_opt_mm=spacing,
+        travel_speed_mm_s=travel_speed,
+        **({"program_name": name} if name and fmt == "krl" else {}),
+    )
+    traj = read_trajectory(trajectory)
+    text = export_program(traj, fmt, options)
+    if robot.lower() != "none":
+        report = check_reach(flange_poses(traj, options), robot)
+        if not report.ok:
+            typer.echo(f"warning: {report.summary()}", err=True)
+        else:
+            typer.echo(report.summary())
+    atomic_write_text(output, text)
+    typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
 
 
 # ---- demo ---------------------------------------------------------------------------------
