@@ -54,6 +54,7 @@ def validate_mesh(mesh: trimesh.Trimesh, where: str) -> trimesh.Trimesh:
     if bad.any():
         raise ValueError(f"mesh {where} has {int(bad.sum())} non-finite vertices")
     mesh = mesh.copy()
+    mesh.merge_vertices()
     good_faces = mesh.nondegenerate_faces(height=1e-9)
     if not good_faces.any():
         raise ValueError(f"mesh {where} has only degenerate (zero-area) triangles")
@@ -80,7 +81,8 @@ def load_mesh_file(path: str | Path, units: str = "mm") -> trimesh.Trimesh:
             f"part file {path}: unsupported format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})"
         )
     try:
-        loaded = trimesh.load(path, force="mesh", process=True)
+        # process=False: merging would silently drop non-finite vertices we must report.
+        loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types on corrupt files
         raise ValueError(f"part file {path} cannot be read as a mesh: {exc}") from None
     if not isinstance(loaded, trimesh.Trimesh):

@@ -1,0 +1,160 @@
+"""Sensor files, part loading, trajectory files: bad input says what and where."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from scanplan.config import load_sensor
+from scanplan.part import load_part
+from scanplan.sensor import PRESETS
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory, read_csv, read_json, write_csv, write_json
+
+GOOD_TOML = """
+name = "my-sensor"
+working_distance_mm = 300
+z_range_mm = 200
+fov_deg = 45
+points_per_profile = 2048
+z_resolution_um = 2.5
+triangulation_angle_deg = 25
+camera_side = "-y"
+[noise]
+sigma0_um = 3
+"""
+
+
+def test_preset_matches_the_datasheet():
+    spec = load_sensor("at-c5-4090cs30-495")
+    assert spec is PRESETS["at-c5-4090cs30-495"]
+    assert spec.working_distance_mm == 400
+    assert spec.z_range_mm == 250
+    assert math.degrees(spec.fov_rad) == pytest.approx(63.5)
+    assert spec.points_per_profile == 4096
+    assert spec.z_resolution_mm == pytest.approx(0.0038)
+    assert spec.line_width_mm == pytest.approx(495.0, abs=0.5)
+
+
+def test_toml_and_yaml_sensor_files(tmp_path):
+    toml = tmp_path / "s.toml"
+    toml.write_text(GOOD_TOML)
+    spec = load_sensor(toml)
+    assert spec.working_distance_mm == 300
+    assert spec.camera_side == -1
+    assert spec.noise is not None and spec.noise.sigma0_mm == pytest.approx(0.003)
+    assert spec.z_resolution_mm == pytest.approx(0.0025)
+    yml = tmp_path / "s.yaml"
+    yml.write_text(
+        "working_distance_mm: 300\nz_range_mm: 200\nfov_deg: 45\npoints_per_profile: 64\n"
+        "z_resolution_um: 2\ntriangulation_angle_deg: 30\nnoise: false\n"
+    )
+    assert load_sensor(yml).noise is None
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (GOOD_TOML.replace("fov_deg = 45", "fov_deg = 200"), "fov_deg"),
+        (GOOD_TOML.replace("z_range_mm = 200", "z_range_mm = 700"), "z_range_mm"),
+        (GOOD_TOML.replace("points_per_profile = 2048", ""), "points_per_profile"),
+        (GOOD_TOML + "\ncolour = 'red'\n", "colour"),
+        ("working_distance_mm = = 3", "cannot be parsed"),
+    ],
+)
+def test_invalid_sensor_files_say_what_and_where(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as err:
+        load_sensor(path)
+    assert str(path) in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_unknown_sensor():
+    with pytest.raises(ValueError, match="neither a file nor a preset"):
+        load_sensor("no-such-sensor")
+
+
+def test_mesh_units_and_scene_merge(tmp_path):
+    a = trimesh.creation.box((0.2, 0.1, 0.05))
+    b = trimesh.creation.box((0.1, 0.1, 0.1))
+    b.apply_translation((0.5, 0, 0))
+    scene = trimesh.Scene([a, b])
+    path = tmp_path / "two_bodies.glb"
+    scene.export(path)
+    part = load_part(path, units="m")
+    assert part.extents[0] == pytest.approx(650.0, rel=1e-6)
+    assert len(part.mesh.faces) == 24
+    stl = tmp_path / "block.stl"
+    trimesh.creation.box((2.0, 1.0, 0.5)).export(stl)
+    assert load_part(stl, units="in").extents == pytest.approx([50.8, 25.4, 12.7])
+
+
+def test_bad_meshes_fail_clearly(tmp_path):
+    corrupt = tmp_path / "corrupt.stl"
+    corrupt.write_bytes(b"solid x\nfacet normal 0 0 1\n garbage\n")
+    with pytest.raises(ValueError, match="corrupt.stl"):
+        load_part(corrupt)
+    with pytest.raises(ValueError, match="does not exist"):
+        load_part(tmp_path / "missing.stl")
+    with pytest.raises(ValueError, match="neither a file nor a built-in part"):
+        load_part("no-such-part")
+    flat = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], process=False)
+    path = tmp_path / "degenerate.ply"
+    flat.export(path)
+    with pytest.raises(ValueError, match="degenerate|empty"):
+        load_part(path)
+    tiny = tmp_path / "tiny.stl"
+    trimesh.creation.box((0.1, 0.1, 0.1)).export(tiny)
+    with pytest.raises(ValueError, match="check --units"):
+        load_part(tiny, units="mm")
+    nan = trimesh.creation.box((10, 10, 10))
+    nan.vertices[0] = np.nan
+    path = tmp_path / "nan.ply"
+    nan.export(path)
+    with pytest.raises(ValueError, match="non-finite|cannot be read|empty|degenerate"):
+        load_part(path)
+
+
+def _trajectory() -> Trajectory:
+    sw = Swath(0, np.array([0.0, 5, 400]), np.array([100.0, 5, 400]), np.eye(3)[0], np.eye(3)[1])
+    poses = sw.poses(np.linspace(0, 100, 11), np.linspace(0, 3, 11), np.linspace(-0.2, 0.2, 11))
+    swath = np.r_[np.zeros(6, int), np.ones(5, int)]
+    return Trajectory(poses, swath, np.arange(11) != 5, planner="test")
+
+
+def test_trajectory_csv_and_json_round_trip(tmp_path):
+    traj = _trajectory()
+    write_csv(traj, tmp_path / "t.csv")
+    back = read_csv(tmp_path / "t.csv")
+    assert np.allclose(back.poses, traj.poses, atol=1e-6)
+    assert np.array_equal(back.swath, traj.swath)
+    assert np.array_equal(back.scanning, traj.scanning)
+    header = (tmp_path / "t.csv").read_text().splitlines()[0]
+    assert header == "swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz"
+    write_json(traj, tmp_path / "t.json")
+    assert np.allclose(read_json(tmp_path / "t.json").poses, traj.poses, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("", "empty"),
+        ("a,b,c\n1,2,3\n", "line 1: header"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n", "no poses"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,400,1,0,0\n", "line 2: expected 9"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,x,1,0,0,0\n", "line 2: not a number"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,nan,1,0,0,0\n", "non-finite"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,4,0,0,0,0\n", "zero length"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,3,0,0,4,1,0,0,0\n", "scanning column"),
+    ],
+)
+def test_malformed_trajectory_files(tmp_path, body, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(body)
+    with pytest.raises(ValueError, match=message):
+        read_csv(path)
