@@ -1,0 +1,288 @@
+"""The self-contained HTML report: interactive 3-D views (plotly), metrics, maps, training.
+
+One file, plotly.js inlined once, PNGs embedded as data URIs, so it opens offline and can be
+mailed as is. The metrics table is built from the same `to_json_dict()` the CLI prints.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scanplan.cloud import PointCloud
+from scanplan.part import Part
+from scanplan.trajectory import Trajectory, atomic_write_text
+
+# Enough for a smooth picture, small enough that the file stays a few MB.
+MAX_POINTS_PER_PLANNER = 25_000
+MAX_PART_FACES = 15_000
+MAX_ARROWS = 120
+
+
+@dataclass(frozen=True)
+class PlannerResult:
+    """What the report shows of one planner: its path, its simulated scan, its numbers."""
+
+    name: str
+    trajectory: Trajectory
+    cloud: PointCloud
+    metrics: dict
+
+
+# Rows of the metrics table: (label, path into the metrics dict, format).
+TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
+    ("profiles", ("profiles",), "{:.0f}"),
+    ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
+    ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),
+    ("p95 |distance error| (mm)", ("distance_error_mm", "p95_abs"), "{:.3f}"),
+    ("mean orientation error (°)", ("orientation_error_deg", "mean"), "{:.2f}"),
+    ("p95 orientation error (°)", ("orientation_error_deg", "p95"), "{:.2f}"),
+    ("points in range", ("in_range_fraction",), "{:.1%}"),
+    ("coverage", ("coverage_fraction",), "{:.1%}"),
+    ("mean spacing (mm)", ("spacing_mm", "mean"), "{:.3f}"),
+    ("spacing CV", ("spacing_mm", "cv"), "{:.3f}"),
+    ("largest gap (mm)", ("spacing_mm", "max_gap"), "{:.2f}"),
+    ("backward steps", ("spacing_mm", "backward_steps"), "{:.0f}"),
+    ("path length (mm)", ("path_length_mm",), "{:.0f}"),
+    ("cycle time (s)", ("cycle_time_s",), "{:.1f}"),
+    ("plan time (s)", ("plan_time_s",), "{:.2f}"),
+    ("mean reward", ("reward", "mean"), "{:.4f}"),
+]
+
+
+def _lookup(metrics: dict, path: tuple[str, ...]):
+    value = metrics
+    for key in path:
+        if not isinstance(value, dict) or key not in value:
+            return None
+        value = value[key]
+    return value
+
+
+def metrics_table_html(results: list[PlannerResult]) -> str:
+    head = "".join(f"<th>{html.escape(r.name)}</th>" for r in results)
+    rows = []
+    for label, path, fmt in TABLE_ROWS:
+        values = [_lookup(r.metrics, path) for r in results]
+        if all(v is None for v in values):
+            continue
+        cells = "".join(
+            f"<td>{fmt.format(v) if isinstance(v, int | float) else '–'}</td>" for v in values
+        )
+        rows.append(f"<tr><th>{html.escape(label)}</th>{cells}</tr>")
+    return f"<table><tr><th>metric</th>{head}</tr>{''.join(rows)}</table>"
+
+
+def _subsample(n: int, k: int, seed: int = 0) -> np.ndarray:
+    if n <= k:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, size=k, replace=False))
+
+
+def _part_trace(part: Part):
+    import plotly.graph_objects as go
+
+    mesh = part.mesh
+    if len(mesh.faces) > MAX_PART_FACES:
+        try:
+            mesh = mesh.simplify_quadric_decimation(face_count=MAX_PART_FACES)
+        except (ImportError, ValueError):  # decimation is cosmetic: fall back to the full mesh
+            mesh = part.mesh
+    v, f = mesh.vertices, mesh.faces
+    return go.Mesh3d(
+        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2],
+        color="lightgray", opacity=0.45, name="part", hoverinfo="skip", flatshading=True,
+    )  # fmt: skip
+
+
+def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float):
+    import plotly.graph_objects as go
+
+    traj, cloud = result.trajectory, result.cloud
+    pos = traj.positions_mm
+    traces = [part_trace]
+    traces.append(
+        go.Scatter3d(
+            x=pos[:, 0], y=pos[:, 1], z=pos[:, 2], mode="lines",
+            line={"color": "black", "width": 3}, name="sensor path",
+        )
+    )  # fmt: skip
+    # Sensor poses as arrows: the laser axis z_s drawn 60 mm long from the emitter.
+    scan_idx = np.flatnonzero(traj.scanning)
+    arrows = scan_idx[np.linspace(0, len(scan_idx) - 1, min(MAX_ARROWS, len(scan_idx))).astype(int)]
+    tips = pos[arrows] + traj.poses[arrows, :3, 2] * 60.0
+    segments = np.full((3 * len(arrows), 3), np.nan)  # NaN rows break the line between arrows
+    segments[0::3], segments[1::3] = pos[arrows], tips
+    traces.append(
+        go.Scatter3d(
+            x=segments[:, 0], y=segments[:, 1], z=segments[:, 2], mode="lines",
+            line={"color": "royalblue", "width": 4}, name="laser axis (z_s)", connectgaps=False,
+        )
+    )  # fmt: skip
+    keep = _subsample(len(cloud.points_part), MAX_POINTS_PER_PLANNER)
+    p = cloud.points_part[keep]
+    dist = cloud.distance_error_mm[keep]
+    orient = np.degrees(cloud.orientation_error_rad[keep])
+    traces.append(
+        go.Scatter3d(
+            x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", name="scan points",
+            marker={
+                "size": 1.6, "color": dist, "colorscale": "RdBu_r",
+                "cmin": -distance_limit_mm, "cmax": distance_limit_mm,
+                "colorbar": {"title": "distance error (mm)"},
+            },
+            hovertemplate="z_s − W_d %{marker.color:.3f}<extra></extra>",
+        )
+    )  # fmt: skip
+    fig = go.Figure(traces)
+    points_index = len(traces) - 1
+    orient_max = float(np.percentile(orient, 99)) if len(orient) else 1.0
+    fig.update_layout(
+        title=f"{result.name}: trajectory and simulated scan",
+        height=560,
+        margin={"l": 0, "r": 0, "t": 40, "b": 0},
+        scene={"aspectmode": "data"},
+        legend={"x": 0, "y": 1},
+        updatemenus=[
+            {
+                "type": "buttons", "direction": "right", "x": 0.5, "y": 1.08,
+                "buttons": [
+                    {"label": "distance error", "method": "restyle", "args": [{
+                        "marker.color": [dist], "marker.colorscale": ["RdBu_r"],
+                        "marker.cmin": [-distance_limit_mm], "marker.cmax": [distance_limit_mm],
+                        "marker.colorbar.title.text": ["distance error (mm)"],
+                    }, [points_index]]},
+                    {"label": "orientation error", "method": "restyle", "args": [{
+                        "marker.color": [orient], "marker.colorscale": ["Viridis"],
+                        "marker.cmin": [0.0], "marker.cmax": [max(orient_max, 1.0)],
+                        "marker.colorbar.title.text": ["orientation error (°)"],
+                    }, [points_index]]},
+                ],
+            }
+        ],
+    )  # fmt: skip
+    return fig
+
+
+def read_training_log(path: Path) -> dict[str, np.ndarray]:
+    """Numeric columns of a training CSV log."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    columns: dict[str, np.ndarray] = {}
+    for key in rows[0].keys() if rows else []:
+        try:
+            columns[key] = np.array([float(r[key]) for r in rows])
+        except (TypeError, ValueError):
+            continue
+    return columns
+
+
+def _training_figure(log: dict[str, np.ndarray]):
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    x_key = next((k for k in ("timesteps", "total_timesteps", "step") if k in log), None)
+    x = log[x_key] if x_key else np.arange(len(next(iter(log.values()))))
+    keys = [k for k in log if k != x_key and np.isfinite(log[k]).any()]
+    cols = 3
+    rows = max(1, -(-len(keys) // cols))
+    fig = make_subplots(rows=rows, cols=cols, subplot_titles=keys)
+    for i, key in enumerate(keys):
+        fig.add_trace(
+            go.Scatter(x=x, y=log[key], mode="lines", name=key, showlegend=False),
+            row=i // cols + 1,
+            col=i % cols + 1,
+        )
+    fig.update_layout(height=260 * rows, title="PPO training (the paper's training figures)")
+    fig.update_xaxes(title_text=x_key or "update")
+    return fig
+
+
+def _png_data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode()
+
+
+_STYLE = """
+body{font-family:system-ui,sans-serif;margin:24px auto;max-width:1400px;color:#222}
+table{border-collapse:collapse;margin:12px 0}th,td{border:1px solid #ccc;padding:4px 10px}
+td{text-align:right;font-variant-numeric:tabular-nums}tr:nth-child(even){background:#f6f6f6}
+.grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(600px,1fr));gap:12px}
+img{max-width:100%;border:1px solid #ddd}.note{color:#555;font-size:0.9em}
+"""
+
+
+def write_html_report(
+    path: str | os.PathLike,
+    part: Part,
+    results: list[PlannerResult],
+    sensor_name: str,
+    training_log: Path | None = None,
+    pictures: list[Path] | None = None,
+    notes: list[str] | None = None,
+) -> None:
+    """Write the report atomically. `pictures` are PNGs embedded at the end (error maps)."""
+    import plotly
+    import plotly.io as pio
+
+    if not results:
+        raise ValueError("the report needs at least one planner result")
+    finite = [np.abs(r.cloud.distance_error_mm) for r in results if len(r.cloud.points_part)]
+    limit = float(np.percentile(np.concatenate(finite), 98)) if finite else 1.0
+    limit = max(limit, 0.05)
+    part_trace = _part_trace(part)
+    figures = [_planner_figure(part_trace, r, limit) for r in results]
+    divs = [
+        pio.to_html(f, full_html=False, include_plotlyjs=False, default_width="100%")
+        for f in figures
+    ]
+    sections = [
+        f"<h1>scanplan report — {html.escape(part.name)}</h1>",
+        f"<p>part <b>{html.escape(part.name)}</b> "
+        f"({' × '.join(f'{e:.0f}' for e in part.extents)} mm, {len(part.mesh.faces)} triangles),"
+        f" sensor <b>{html.escape(sensor_name)}</b>.</p>",
+        "<h2>Scan quality</h2>",
+        metrics_table_html(results),
+    ]
+    coverage_note = _lookup(results[0].metrics, ("coverage_definition",))
+    if coverage_note:
+        sections.append(f"<p class='note'>Coverage: {html.escape(str(coverage_note))}</p>")
+    for note in notes or []:
+        sections.append(f"<p class='note'>{html.escape(note)}</p>")
+    sections.append("<h2>Trajectories and simulated scans</h2>")
+    sections.append(
+        "<p class='note'>Drag to rotate. Buttons switch the point colours between distance "
+        "error (z_s − W_d) and orientation error (angle between the beam and the normal); "
+        "cones show the laser axis along the path.</p>"
+    )
+    sections.append("<div class='grid'>" + "".join(f"<div>{d}</div>" for d in divs) + "</div>")
+    if training_log is not None and Path(training_log).is_file():
+        log = read_training_log(Path(training_log))
+        if log:
+            sections.append("<h2>Training</h2>")
+            sections.append(
+                pio.to_html(_training_figure(log), full_html=False, include_plotlyjs=False)
+            )
+    if pictures:
+        sections.append("<h2>Error maps</h2><div class='grid'>")
+        for pic in pictures:
+            name = html.escape(Path(pic).name)
+            sections.append(
+                f"<figure><img src='{_png_data_uri(Path(pic))}' alt='{name}'>"
+                f"<figcaption>{name}</figcaption></figure>"
+            )
+        sections.append("</div>")
+    page = (
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>"
+        f"<title>scanplan report — {html.escape(part.name)}</title>"
+        f"<style>{_STYLE}</style>"
+        f"<script>{plotly.offline.get_plotlyjs()}</script></head><body>"
+        + "\n".join(sections)
+        + "</body></html>"
+    )
+    atomic_write_text(path, page)
