@@ -71,6 +71,8 @@ def part_cmd(name: Annotated[str, typer.Argument(help="built-in part name")], ou
         raise ValueError(
             f"cannot write mesh format {output.suffix!r}; use .stl, .ply or .obj"
         ) from None
+    if not isinstance(data, bytes | str):
+        raise ValueError(f"cannot write mesh format {output.suffix!r}; use .stl, .ply or .obj")
     atomic_write_bytes(output, data if isinstance(data, bytes) else data.encode())
     e = part.extents
     typer.echo(
@@ -155,14 +157,15 @@ def export_cmd(
 
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; use one of {', '.join(FORMATS)}")
-    name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else None
+    # KUKA wants the .src file named after its DEF.
+    name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
     options = ExportOptions(
         part_pose=parse_pose_arg(part_pose),
         tcp=parse_pose_arg(tcp),
         profile_rate_hz=profile_rate,
         delta_s_opt_mm=spacing,
         travel_speed_mm_s=travel_speed,
-        **({"program_name": name} if name and fmt == "krl" else {}),
+        program_name=name if name and fmt == "krl" else "scanplan_path",
     )
     traj = read_trajectory(trajectory)
     text = export_program(traj, fmt, options)

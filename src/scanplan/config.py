@@ -65,7 +65,7 @@ class SensorFile(BaseModel):
         if self.noise is False:
             noise = None
         else:
-            nf = self.noise if isinstance(self.noise, NoiseFile) else NoiseFile()
+            nf = self.noise if isinstance(self.noise, NoiseFile) else NoiseFile.model_validate({})
             noise = NoiseModel(
                 sigma0_mm=nf.sigma0_um / 1000,
                 speckle_amplitude_mm=nf.speckle_amplitude_um / 1000,

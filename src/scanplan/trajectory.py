@@ -226,7 +226,12 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         ) from None
     if len(xyz) == 0:
         raise ValueError(f"trajectory file {path} has no poses")
-    return Trajectory(poses_from_xyz_quat(xyz, q), swath, scanning, planner=data.get("planner", ""))
+    return Trajectory(
+        poses_from_xyz_quat(xyz, q),
+        np.asarray(swath),
+        np.asarray(scanning),
+        planner=data.get("planner", ""),
+    )
 
 
 def read_trajectory(path: str | os.PathLike) -> Trajectory:

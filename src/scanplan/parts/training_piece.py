@@ -6,6 +6,8 @@ errors exist. Steps are exactly vertical (a repeated x in the grid).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import trimesh
 
@@ -58,7 +60,7 @@ _FEATURES: tuple[tuple, ...] = (
 _Z_START_MM = 30.0
 
 
-def _feature_length(kind: str, args: tuple) -> float:
+def _feature_length(kind: str, args: Sequence[float]) -> float:
     if kind == "ramp":
         angle, dz = args
         return abs(dz) / np.tan(np.radians(angle))
@@ -73,7 +75,7 @@ def profile() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     x repeats at each step (the two heights of the vertical face).
     """
-    fixed = sum(_feature_length(k, a) for k, *a in _FEATURES)
+    fixed = float(sum(_feature_length(k, a) for k, *a in _FEATURES))
     weights = sum(a[0] for k, *a in _FEATURES if k == "flat")
     per_weight = (LENGTH_MM - fixed) / weights
     if per_weight <= 10.0:

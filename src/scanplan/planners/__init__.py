@@ -25,9 +25,7 @@ class Planner(Protocol):
         ...
 
 
-def plan_path(
-    part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swath]
-) -> Trajectory:
+def plan_path(part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swath]) -> Trajectory:
     """All passes in snake order, joined by non-scanning lift-off transitions."""
     if not swaths:
         raise ValueError("no swath to plan")
