@@ -1,0 +1,72 @@
+"""The HTML report: self-contained, one figure per planner, table equal to the metrics."""
+
+from __future__ import annotations
+
+import csv
+import re
+
+import numpy as np
+import pytest
+import trimesh
+
+from scanplan.cloud import simulate_cloud
+from scanplan.part import part_from_mesh
+from scanplan.report.html import PlannerResult, metrics_table_html, write_html_report
+from scanplan.sensor import SensorSpec
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory
+
+
+@pytest.fixture(scope="module")
+def results():
+    plate = trimesh.creation.box((400, 400, 10))
+    plate.apply_translation((0, 0, -5))
+    part = part_from_mesh(plate, "plate")
+    spec = SensorSpec().with_points(64)
+    sw = Swath(0, np.array([-100.0, 0, 400]), np.array([100.0, 0, 400]), np.eye(3)[0], np.eye(3)[1])
+    out = []
+    for name, h in (("high", 30.0), ("right", 0.0)):
+        s = np.linspace(0, 200, 41)
+        traj = Trajectory(sw.poses(s, np.full(41, h), np.zeros(41)), np.zeros(41), np.ones(41))
+        cloud = simulate_cloud(part, spec, traj)
+        metrics = {
+            "profiles": 41,
+            "distance_error_mm": {"mean_abs": float(np.abs(cloud.distance_error_mm).mean())},
+            "coverage_definition": "test definition",
+        }
+        out.append(PlannerResult(name, traj, cloud, metrics))
+    return part, out
+
+
+def test_report_is_self_contained_and_shows_every_planner(tmp_path, results):
+    part, res = results
+    log = tmp_path / "train.csv"
+    with open(log, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["timesteps", "ep_rew_mean", "r_d"])
+        writer.writerows([[i * 2048, -100 + i, -0.5 + 0.01 * i] for i in range(5)])
+    out = tmp_path / "report.html"
+    write_html_report(out, part, res, "at-c5-4090cs30-495", training_log=log)
+    page = out.read_text()
+    assert page.startswith("<!DOCTYPE html>")
+    assert "<script src=" not in page  # plotly.js is inlined, nothing is fetched
+    assert page.count("Plotly.newPlot") == 3  # two planners + the training curves
+    for name in ("high", "right", "ep_rew_mean", "test definition"):
+        assert name in page
+    # The table shows each planner's number, rounded as the CLI JSON would be read.
+    for r in res:
+        assert f"{r.metrics['distance_error_mm']['mean_abs']:.3f}" in page
+
+
+def test_metrics_table_marks_missing_values(results):
+    _, res = results
+    table = metrics_table_html(res)
+    assert re.search(r"<th>profiles</th><td>41</td><td>41</td>", table)
+    assert "RMS" not in table  # rows no planner has are left out
+
+
+def test_report_needs_a_result(tmp_path, results):
+    part, _ = results
+    with pytest.raises(ValueError, match="at least one"):
+        write_html_report(tmp_path / "r.html", part, [], "s")
+    assert not (tmp_path / "r.html").exists()
