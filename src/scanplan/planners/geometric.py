@@ -1,0 +1,337 @@
+"""Model-based surface following (SPEC §4 `geometric`): the reference the RL agent is measured
+against.
+
+For each pass: probe the surface under the laser line from the CAD with vertical rays (a
+coarse grid along the pass, a sub-sampled set of columns across it), turn it into target
+pitch and height profiles along the footprint, shape them with a look-ahead so the per-step
+limits of the agent (Δy, Δz, Δθ) hold without lag, place stations so the footprint advances
+by Δs_opt, then refine against a noiseless sub-sampled sensor: its measured D and α correct
+the targets, and the candidate with the lowest cost (the reward's, via `reward.reward_terms`)
+wins. The full sensor is never called per candidate action.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from scanplan.part import Part
+from scanplan.quantities import advance, mean_distance, signed_alpha
+from scanplan.reward import RewardConfig, reward_terms
+from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.swaths import UP, Swath
+from scanplan.trajectory import Trajectory
+
+# ---- strategies (passed in, DESIGN habit 6) ----------------------------------------------
+
+
+class Cost(Protocol):
+    """Mean cost of a pass from its per-profile D (mm), α (rad) and Δs (mm); lower is better."""
+
+    def __call__(
+        self,
+        d_mm: np.ndarray,
+        alpha_rad: np.ndarray,
+        delta_s_mm: np.ndarray,
+        sensor: SensorSpec,
+        delta_s_opt_mm: float,
+    ) -> float: ...
+
+
+@dataclass(frozen=True)
+class RewardCost:
+    """−(mean reward): the agent's own objective, from `reward.reward_terms`."""
+
+    alpha_max_rad: float = math.radians(30.0)
+    w_d: float = 1.0 / 3.0
+    w_alpha: float = 1.0 / 3.0
+    w_delta_s: float = 1.0 / 3.0
+
+    def __call__(self, d_mm, alpha_rad, delta_s_mm, sensor, delta_s_opt_mm) -> float:
+        cfg = RewardConfig(
+            working_distance_mm=sensor.working_distance_mm,
+            z_range_mm=sensor.z_range_mm,
+            alpha_max_rad=self.alpha_max_rad,
+            delta_s_opt_mm=delta_s_opt_mm,
+            w_d=self.w_d,
+            w_alpha=self.w_alpha,
+            w_delta_s=self.w_delta_s,
+        )
+        return -float(np.mean(reward_terms(d_mm, alpha_rad, delta_s_mm, cfg)["reward"]))
+
+
+class Lookahead(Protocol):
+    """Shape a target profile sampled on `grid_mm` so |slope| <= `max_rate_per_mm`."""
+
+    def shape(
+        self, grid_mm: np.ndarray, values: np.ndarray, max_rate_per_mm: float
+    ) -> np.ndarray: ...
+
+
+def _rate_limit(values: np.ndarray, max_step: float, backwards: bool = False) -> np.ndarray:
+    """One pass of |v[i] - v[i-1]| <= max_step (a sequential recurrence, over grid cells)."""
+    v = values[::-1].copy() if backwards else values.copy()
+    for i in range(1, len(v)):
+        v[i] = min(max(v[i], v[i - 1] - max_step), v[i - 1] + max_step)
+    return v[::-1] if backwards else v
+
+
+@dataclass(frozen=True)
+class CentredLookahead:
+    """Gaussian pre-smoothing (`smooth_mm`, 0 = none), then a rate limit centred on each
+    feature: the mean of a forward (lagging) and a backward (leading) pass at twice the rate
+    puts each ramp half before and half after a step, then a last pass makes the rate exact.
+    Symmetric costs (R_D, R_α) make the centred ramp the least costly one."""
+
+    smooth_mm: float = 0.0
+
+    def shape(self, grid_mm, values, max_rate_per_mm):
+        values = np.asarray(values, dtype=np.float64)
+        if len(values) < 2:
+            return values.copy()
+        cell = float(np.mean(np.diff(grid_mm)))
+        if self.smooth_mm > 0:
+            values = gaussian_filter1d(values, self.smooth_mm / cell, mode="nearest")
+        step = max_rate_per_mm * cell
+        both = 0.5 * (_rate_limit(values, 2 * step) + _rate_limit(values, 2 * step, True))
+        return _rate_limit(both, step)
+
+
+# ---- the surface model under a pass -------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SurfaceProbe:
+    """The surface under a pass, seen by vertical rays: k grid positions x c columns.
+
+    grid_mm: (k,) footprint advance along u from the pass start.
+    height_mm: (k,) mean surface height over the hit columns, relative to `start_mm[2]`.
+    pitch_rad: (k,) the pitch that aligns the beam with the mean normal (in the u-w plane).
+    arc_mm: (k,) cumulative mean per-column 3-D advance of the surface points.
+    """
+
+    grid_mm: np.ndarray
+    height_mm: np.ndarray
+    pitch_rad: np.ndarray
+    arc_mm: np.ndarray
+
+
+def probe_swath(
+    part: Part,
+    swath: Swath,
+    sensor: SensorSpec,
+    step_mm: float = 2.0,
+    columns: int = 48,
+    max_slope_deg: float = 75.0,
+    max_pitch_slope_deg: float = 60.0,
+) -> SurfaceProbe:
+    """Cast a vertical raster under the laser line; holes and run-in are filled from the
+    nearest hits. Raises ValueError if the pass sees nothing."""
+    length = max(swath.length_mm, step_mm)
+    grid = np.linspace(0.0, length, max(2, int(round(length / step_mm)) + 1))
+    half = sensor.line_width_mm / 2
+    lateral = np.linspace(-half, half, columns)
+    top = float(part.bounds[1, 2]) + 10.0
+    base = swath.start_mm + grid[:, None, None] * swath.u + lateral[None, :, None] * swath.v
+    origins = base.reshape(-1, 3).copy()
+    origins[:, 2] = top
+    dirs = np.tile(-UP, (len(origins), 1))
+    engine = part.ray_engine
+    t, face = engine.first_hit(origins, dirs)
+    hit = (face >= 0).reshape(len(grid), columns)
+    if not hit.any():
+        raise ValueError(
+            f"pass {swath.index} sees no surface of part {part.name}: "
+            "the part is outside the sensor's reach"
+        )
+    z = np.where(hit, (top - t).reshape(hit.shape) - swath.start_mm[2], np.nan)
+    normals = np.zeros((len(origins), 3))
+    normals[face >= 0] = engine.face_normals[face[face >= 0]]
+    normals *= np.where(normals[:, 2:3] < 0, -1.0, 1.0)  # face up, whatever the winding
+    normals = normals.reshape(*hit.shape, 3)
+    # Walls steeper than max_pitch_slope return little to a sensor looking down, and the pitch
+    # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
+    facing = hit & (normals[..., 2] > math.cos(math.radians(max_pitch_slope_deg)))
+    n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
+    n_u, n_w = n_mean @ swath.u, n_mean[:, 2]
+
+    rows = hit.any(axis=1)
+    count = np.maximum(hit.sum(axis=1), 1)
+    height = np.where(hit, z, 0.0).sum(axis=1) / count
+    pitch = np.arctan2(n_u, np.maximum(n_w, 1e-9))  # beam = -normal: sin = n_u, cos = n_w
+    height = np.interp(grid, grid[rows], height[rows])
+    flat_rows = facing.any(axis=1)
+    pitch = np.interp(grid, grid[flat_rows], pitch[flat_rows]) if flat_rows.any() else 0 * grid
+
+    # Per-column 3-D advance; a wall counts as flat: the sensor sees (almost) none of it.
+    dz = np.abs(np.diff(z, axis=0))
+    cap = step_mm * math.tan(math.radians(max_slope_deg))
+    seg = np.hypot(np.diff(grid)[:, None], np.where(dz <= cap, dz, 0.0))
+    both = hit[1:] & hit[:-1]
+    seg_mean = np.where(
+        both.any(axis=1), np.where(both, seg, 0.0).sum(axis=1) / np.maximum(both.sum(1), 1), 1.0
+    )
+    seg_mean = np.where(both.any(axis=1), seg_mean, np.diff(grid))
+    arc = np.concatenate([[0.0], np.cumsum(seg_mean)])
+    # The footprint runs from the first to the last row that sees the part: beyond, a pitched
+    # beam would only look back at the part's end walls.
+    first, last = np.flatnonzero(rows)[[0, -1]]
+    keep = slice(first, last + 1)
+    if last - first < 1:
+        keep = slice(max(first - 1, 0), max(first - 1, 0) + 2)
+    return SurfaceProbe(grid[keep], height[keep], pitch[keep], arc[keep] - arc[keep][0])
+
+
+# ---- per-step actions ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StepLimits:
+    """The agent's per-step limits (SPEC §5): Δy along u, Δz along z_s, Δθ about x_s."""
+
+    dy_max_mm: float = 1.0
+    dz_max_mm: float = 1.0
+    dtheta_max_rad: float = math.radians(1.0)
+
+
+def step_actions(s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
+    """(Δy, Δz, Δθ) of each step between consecutive stations (s, h, θ) of a pass, (n-1, 3).
+
+    A step moves Δy along u and Δz along the beam z_s = -sinθ u - cosθ w of the pose it
+    starts from, then pitches by Δθ."""
+    ds, dh, dth = np.diff(s_mm), np.diff(h_mm), np.diff(pitch_rad)
+    th = pitch_rad[:-1]
+    dz = -dh / np.cos(th)
+    dy = ds + dz * np.sin(th)
+    return np.stack([dy, dz, dth], axis=1)
+
+
+def enforce_limits(
+    s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray, limits: StepLimits
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Track the stations with steps clipped to the limits (a safety net: the look-ahead
+    already shapes the targets so that clipping is rare and the tracker does not lag)."""
+    acts = step_actions(s_mm, h_mm, pitch_rad)
+    lim = np.array([limits.dy_max_mm, limits.dz_max_mm, limits.dtheta_max_rad]) * (1 - 1e-9)
+    if np.all(np.abs(acts) <= lim):
+        return s_mm, h_mm, pitch_rad
+    s, h, th = s_mm.copy(), h_mm.copy(), pitch_rad.copy()
+    for i in range(1, len(s)):  # a recurrence over stations: each step starts where the last ended
+        c, sn = math.cos(th[i - 1]), math.sin(th[i - 1])
+        dz = min(max(-(h_mm[i] - h[i - 1]) / c, -lim[1]), lim[1])
+        dy = min(max(s_mm[i] - s[i - 1] + dz * sn, -lim[0]), lim[0])
+        dth = min(max(pitch_rad[i] - th[i - 1], -lim[2]), lim[2])
+        s[i] = s[i - 1] + dy - dz * sn
+        h[i] = h[i - 1] - dz * c
+        th[i] = th[i - 1] + dth
+    return s, h, th
+
+
+# ---- the planner --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GeometricPlanner:
+    """Surface following with look-ahead under the agent's per-step limits.
+
+    cost: what the candidates are ranked by (default −mean reward).
+    lookaheads: candidate pitch shapers; each is planned, refined and costed, the best kept.
+    height_lookahead: shaper of the height (no smoothing by default: heights need only the
+    rate limit, and smoothing a ramp would bend it at its ends).
+    limits: per-step limits. pitch_lever: pitch rate as a fraction of 1/W_d rad per mm of
+    footprint, so that the sensor's swing (W_d·Δθ) stays within a step's translation.
+    refinements: sensor-measured corrections of each candidate.
+    """
+
+    delta_s_opt_mm: float = 0.5
+    cost: Cost = field(default_factory=RewardCost)
+    lookaheads: tuple[Lookahead, ...] = (
+        CentredLookahead(0.0),
+        CentredLookahead(15.0),
+        CentredLookahead(50.0),
+    )
+    height_lookahead: Lookahead = field(default_factory=CentredLookahead)
+    limits: StepLimits = field(default_factory=StepLimits)
+    pitch_lever: float = 0.6
+    probe_step_mm: float = 2.0
+    probe_columns: int = 48
+    sensor_points: int = 64
+    refinements: int = 2
+    name: str = "geometric"
+
+    def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
+        probe = probe_swath(part, swath, sensor, self.probe_step_mm, self.probe_columns)
+        fan = LineProfilometer(part, sensor.without_noise().with_points(self.sensor_points))
+        best: tuple[float, np.ndarray] | None = None
+        for lookahead in self.lookaheads:
+            pitch_t, height_t, arc = probe.pitch_rad, probe.height_mm, probe.arc_mm
+            for it in range(self.refinements + 1):
+                s, h, th, sigma = self._stations(
+                    probe.grid_mm, pitch_t, height_t, arc, lookahead, sensor
+                )
+                poses = swath.poses(s, h, th)
+                scan = fan.measure_many(poses)
+                d = mean_distance(scan.z_sensor, scan.valid)
+                alpha = signed_alpha(scan.normals_part, scan.valid, poses)
+                ds = advance(
+                    scan.points_part[:-1],
+                    scan.valid[:-1],
+                    scan.points_part[1:],
+                    scan.valid[1:],
+                    swath.u,
+                )
+                cost = self.cost(d[1:], alpha[1:], ds, sensor, self.delta_s_opt_mm)
+                if best is None or cost < best[0]:
+                    best = (cost, poses)
+                if it == self.refinements:
+                    break
+                pitch_t, height_t, arc = self._refine(
+                    probe.grid_mm, sigma, th, h, d, alpha, ds, (pitch_t, height_t, arc)
+                )
+        assert best is not None
+        poses = best[1]
+        return Trajectory(
+            poses, np.full(len(poses), swath.index), np.ones(len(poses), bool), planner=self.name
+        )
+
+    def _stations(self, grid, pitch_t, height_t, arc, lookahead: Lookahead, sensor: SensorSpec):
+        """Shaped targets on the grid -> stations every Δs_opt of footprint arc."""
+        wd = sensor.working_distance_mm
+        lim = self.limits
+        pitch = lookahead.shape(grid, pitch_t, self.pitch_lever / wd)
+        pitch = np.clip(pitch, -math.radians(80), math.radians(80))
+        # Sensor on the beam through the footprint, W_d away: D = W_d whatever the tilt.
+        s_grid = grid + wd * np.sin(pitch)
+        h_grid = height_t + wd * np.cos(pitch)
+        h_rate = 0.8 * lim.dz_max_mm * float(np.cos(pitch).min()) / self.delta_s_opt_mm
+        h_grid = self.height_lookahead.shape(grid, h_grid, h_rate)
+        n = int(math.floor(arc[-1] / self.delta_s_opt_mm + 1e-9)) + 1
+        sigma = np.interp(np.arange(n) * self.delta_s_opt_mm, arc, grid)
+        s = np.interp(sigma, grid, s_grid)
+        h = np.interp(sigma, grid, h_grid)
+        th = np.interp(sigma, grid, pitch)
+        s, h, th = enforce_limits(s, h, th, lim)
+        return s, h, th, sigma
+
+    def _refine(self, grid, sigma, th, h, d, alpha, ds, targets):
+        """Targets corrected by what the sensor measured at the stations: the pitch that
+        aligns (θ + α), the height that puts D at W_d, the arc that gives Δs = Δs_opt."""
+        arc = targets[2]
+        ok = np.isfinite(d) & np.isfinite(alpha)
+        if ok.sum() < 2:
+            return targets
+        pitch_t = np.interp(grid, sigma[ok], (th + alpha)[ok])
+        # Move along the beam by D - W_d: the vertical part of that, as a surface height.
+        surface_h = h - d * np.cos(th)
+        height_t = np.interp(grid, sigma[ok], surface_h[ok])
+        ratio = ds / self.delta_s_opt_mm
+        good = np.isfinite(ratio) & (ratio > 0.05) & (ratio < 20)
+        if good.sum() >= 2:
+            mid = 0.5 * (sigma[1:] + sigma[:-1])
+            scale = np.interp(grid, mid[good], gaussian_filter1d(ratio[good], 5, mode="nearest"))
+            arc = np.concatenate([[0.0], np.cumsum(np.diff(arc) * 0.5 * (scale[1:] + scale[:-1]))])
+        return pitch_t, height_t, arc
