@@ -120,6 +120,120 @@ def scan_cmd(
 
 
 # ---- plan / evaluate (planners and metrics) ----------------------------------------------
+PLANNERS = ("fixed", "geometric", "rl")
+
+
+def make_planner(name: str, policy: Path | None = None):
+    """The planner called `name`; `rl` loads a policy file (or the packaged default)."""
+    if name == "fixed":
+        from scanplan.planners.fixed import FixedPlanner
+
+        return FixedPlanner()
+    if name == "geometric":
+        from scanplan.planners.geometric import GeometricPlanner
+
+        return GeometricPlanner()
+    if name == "rl":
+        try:
+            from scanplan.planners.rl import RLPlanner
+        except ImportError as exc:
+            raise ValueError(f"the rl planner is not available in this install ({exc})") from None
+        if policy is not None:
+            return RLPlanner.from_file(policy)
+        default = getattr(RLPlanner, "default", None)
+        if default is None:
+            raise ValueError("no default policy ships with this install; pass --policy FILE")
+        return default()
+    raise ValueError(f"unknown planner {name!r}; use one of {', '.join(PLANNERS)}")
+
+
+@app.command("plan")
+@user_errors
+def plan_cmd(
+    part: PartArg,
+    output: OutOpt,
+    planner: Annotated[str, typer.Option(help="fixed, geometric or rl")] = "geometric",
+    sensor: SensorOpt = "at-c5-4090cs30-495",
+    policy: Annotated[
+        Path | None, typer.Option(help="trained policy file for --planner rl")
+    ] = None,
+    direction: Annotated[str, typer.Option(help="scan direction: x, y or auto")] = "auto",
+    overlap: Annotated[float, typer.Option(help="overlap of adjacent passes, [0, 1)")] = 0.2,
+    units: UnitsOpt = "mm",
+):
+    """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
+    from scanplan.config import load_sensor
+    from scanplan.part import load_part
+    from scanplan.planners import plan_path
+    from scanplan.swaths import plan_swaths
+    from scanplan.trajectory import write_csv, write_json
+
+    if output.suffix.lower() not in (".csv", ".json"):
+        raise ValueError(f"output {output} must be a .csv or .json file")
+    spec = load_sensor(sensor)
+    the_part = load_part(part, units)
+    the_planner = make_planner(planner, policy)
+    swaths = plan_swaths(the_part, spec, direction, overlap)
+    traj = plan_path(the_part, spec, the_planner, swaths)
+    (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
+    typer.echo(
+        f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
+        f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
+    )
+
+
+@app.command("evaluate")
+@user_errors
+def evaluate_cmd(
+    part: PartArg,
+    trajectory: Annotated[Path, typer.Argument(help="trajectory CSV or JSON")],
+    as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="report directory (PNG maps, metrics)")
+    ] = None,
+    sensor: SensorOpt = "at-c5-4090cs30-495",
+    units: UnitsOpt = "mm",
+    points: Annotated[
+        int | None, typer.Option("--points", help="sub-sample the fan to N points (faster)")
+    ] = None,
+    seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+):
+    """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
+    import json
+
+    from scanplan.config import load_sensor
+    from scanplan.metrics import evaluate
+    from scanplan.part import load_part
+    from scanplan.trajectory import atomic_write_text, read_trajectory
+
+    if points is not None and points < 2:
+        raise ValueError(f"--points must be >= 2, got {points}")
+    spec = load_sensor(sensor)
+    the_part = load_part(part, units)
+    traj = read_trajectory(trajectory)
+    metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
+    data = metrics.to_json_dict()
+    if output is not None:
+        from scanplan.report.maps import metrics_table_markdown, plot_error_maps
+
+        plot_error_maps(metrics, output, planner=traj.planner or trajectory.stem)
+        atomic_write_text(output / "metrics.json", json.dumps(data, indent=1) + "\n")
+        atomic_write_text(
+            output / "metrics.md",
+            f"# {the_part.name}: {trajectory.name}\n\n"
+            + metrics_table_markdown([metrics], [traj.planner or trajectory.stem]),
+        )
+    if as_json:
+        typer.echo(json.dumps(data))
+        return
+    d, o, s = data["distance_error_mm"], data["orientation_error_deg"], data["spacing_mm"]
+    typer.echo(
+        f"{data['profiles']} profiles | |distance error| mean {d['mean_abs']:.3f} "
+        f"p95 {d['p95_abs']:.3f} mm | orientation mean {o['mean']:.2f} p95 {o['p95']:.2f} deg | "
+        f"coverage {data['coverage_fraction']:.1%} | spacing {s['mean']:.3f} mm "
+        f"(cv {s['cv']:.3f}, {s['backward_steps']} backward) | reward {data['reward']['mean']:.4f}"
+        + (f" -> {output}" if output is not None else "")
+    )
 
 
 # ---- train (RL) --------------------------------------------------------------------------

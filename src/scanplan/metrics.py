@@ -250,7 +250,8 @@ def evaluate(
     d_prof = np.full(m, np.nan)
     a_prof = np.full(m, np.nan)
     ds_prof = np.full(m, np.nan)
-    map_stride = max(1, int(m * n_cols // (2 * max_map_points)))
+    map_stride = max(1.0, m * n_cols / (2 * max_map_points))
+    map_rng = np.random.default_rng(seed)
     sample: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
     prev_points: np.ndarray | None = None
     prev_valid: np.ndarray | None = None
@@ -304,7 +305,8 @@ def evaluate(
                 covered[which[np.isfinite(dist)]] = True
 
         rows, cols_idx = np.nonzero(valid)
-        pick = np.arange(0, len(rows), map_stride)
+        # Seeded random pick: a stride over row-major points would draw moire on the maps.
+        pick = np.flatnonzero(map_rng.random(len(rows)) * map_stride < 1.0)
         r, c = rows[pick], cols_idx[pick]
         sample["points_part"].append(pts[r, c])
         sample["distance_error_mm"].append(scan.z_sensor[r, c] - wd)

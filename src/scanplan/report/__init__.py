@@ -1,0 +1,1 @@
+"""Reports of a scan: PNG error maps and the metrics table (`maps`), the HTML report (`html`)."""

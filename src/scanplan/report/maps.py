@@ -1,0 +1,210 @@
+"""The paper's error maps as PNG (matplotlib): scanned points seen from above, coloured by
+distance error (diverging, mm) or orientation error (sequential, degrees), and the metrics
+table as Markdown.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from scanplan.cloud import PointCloud
+from scanplan.metrics import Metrics
+
+MAX_PLOT_POINTS = 120_000
+DISTANCE_CMAP = "RdBu_r"  # diverging: too far red, too close blue, W_d white
+ORIENTATION_CMAP = "viridis"  # sequential from 0 deg
+
+
+def _cloud_of(source: PointCloud | Metrics) -> PointCloud:
+    cloud = source.cloud if isinstance(source, Metrics) else source
+    if cloud is None or len(cloud.points_part) == 0:
+        raise ValueError("no scanned point to draw")
+    return cloud
+
+
+def _subsample(n: int, k: int) -> np.ndarray:
+    """Seeded random indices in random order: a stride would draw moire over the scan lines,
+    and drawing in scan order would let the last pass hide the overlap."""
+    rng = np.random.default_rng(0)
+    return rng.permutation(n)[: min(n, k)]
+
+
+def _limits(clouds: Sequence[PointCloud]) -> tuple[float, float]:
+    """Shared colour limits: 98th percentile of |distance error| (mm) and of orientation (deg),
+    so a few wall points do not wash out the surface (the colour bars extend beyond)."""
+    d = np.concatenate([np.abs(c.distance_error_mm) for c in clouds])
+    o = np.degrees(np.concatenate([c.orientation_error_rad for c in clouds]))
+    return max(float(np.percentile(d, 98)), 0.05), max(float(np.percentile(o, 98)), 0.5)
+
+
+def _draw(ax, cloud: PointCloud, quantity: str, limit: float, title: str):
+    idx = _subsample(len(cloud.points_part), MAX_PLOT_POINTS)
+    p = cloud.points_part[idx]
+    if quantity == "distance":
+        values, cmap, vmin = cloud.distance_error_mm[idx], DISTANCE_CMAP, -limit
+    else:
+        values, cmap, vmin = np.degrees(cloud.orientation_error_rad[idx]), ORIENTATION_CMAP, 0.0
+    artist = ax.scatter(
+        p[:, 0],
+        p[:, 1],
+        c=values,
+        s=0.4,
+        cmap=cmap,
+        vmin=vmin,
+        vmax=limit,
+        linewidths=0,
+        rasterized=True,
+    )
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(title, fontsize=10)
+    return artist
+
+
+_LABELS = {
+    "distance": ("distance_error.png", "distance error z_s − W_d (mm)", "Distance error"),
+    "orientation": ("orientation_error.png", "orientation error α_i (°)", "Orientation error"),
+}
+
+
+def _save(fig, path: Path) -> None:
+    """Write atomically: render to a temporary file beside the target, then rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    try:
+        fig.savefig(tmp, dpi=150, bbox_inches="tight")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def plot_error_maps(
+    source: PointCloud | Metrics,
+    out_dir: str | os.PathLike,
+    planner: str = "",
+    part: str = "",
+    distance_limit_mm: float | None = None,
+    orientation_limit_deg: float | None = None,
+) -> list[Path]:
+    """Write `distance_error.png` and `orientation_error.png` of one scan into out_dir.
+
+    source: a PointCloud, or Metrics (its sampled cloud; planner and part taken from it).
+    Colour limits default to the 98th percentile of the data."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cloud = _cloud_of(source)
+    if isinstance(source, Metrics):
+        planner, part = planner or source.planner, part or source.part
+    d_lim, o_lim = _limits([cloud])
+    limits = {"distance": distance_limit_mm or d_lim, "orientation": orientation_limit_deg or o_lim}
+    written = []
+    for quantity, (name, unit, label) in _LABELS.items():
+        fig, ax = plt.subplots(figsize=(8, 6))
+        title = f"{label} — {planner or 'trajectory'} on {part or 'part'}"
+        artist = _draw(ax, cloud, quantity, limits[quantity], title)
+        fig.colorbar(
+            artist,
+            ax=ax,
+            label=unit,
+            shrink=0.8,
+            extend="both" if quantity == "distance" else "max",
+        )
+        path = Path(out_dir) / name
+        _save(fig, path)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def plot_comparison(
+    sources: Sequence[tuple[str, PointCloud | Metrics]],
+    quantity: str,
+    out_path: str | os.PathLike,
+    part: str = "",
+) -> Path:
+    """Side-by-side maps of several planners with one shared colour scale (the paper's
+    figure pairs). sources: (label, cloud or metrics); quantity: 'distance' or 'orientation'."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if quantity not in _LABELS:
+        raise ValueError(f"unknown quantity {quantity!r}: use distance or orientation")
+    if not sources:
+        raise ValueError("nothing to compare")
+    clouds = [_cloud_of(src) for _, src in sources]
+    d_lim, o_lim = _limits(clouds)
+    limit = d_lim if quantity == "distance" else o_lim
+    _, unit, label = _LABELS[quantity]
+    fig, axes = plt.subplots(1, len(sources), figsize=(6 * len(sources), 5.5), squeeze=False)
+    artist = None
+    for ax, (name, _), cloud in zip(axes[0], sources, clouds, strict=True):
+        artist = _draw(ax, cloud, quantity, limit, name)
+    fig.suptitle(f"{label} — {part}" if part else label)
+    fig.colorbar(
+        artist,
+        ax=list(axes[0]),
+        label=unit,
+        shrink=0.8,
+        extend="both" if quantity == "distance" else "max",
+    )
+    path = Path(out_path)
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+# Rows of the Markdown table: (label, key path in Metrics.to_json_dict(), format).
+TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
+    ("profiles", ("profiles",), "{:.0f}"),
+    ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
+    ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),
+    ("p95 |distance error| (mm)", ("distance_error_mm", "p95_abs"), "{:.3f}"),
+    ("mean per-profile |D − W_d| (mm)", ("distance_error_mm", "profile_mean_abs"), "{:.3f}"),
+    ("mean orientation error (°)", ("orientation_error_deg", "mean"), "{:.2f}"),
+    ("p95 orientation error (°)", ("orientation_error_deg", "p95"), "{:.2f}"),
+    ("points in range", ("in_range_fraction",), "{:.1%}"),
+    ("valid points", ("valid_fraction",), "{:.1%}"),
+    ("coverage", ("coverage_fraction",), "{:.1%}"),
+    ("mean spacing Δs (mm)", ("spacing_mm", "mean"), "{:.3f}"),
+    ("spacing CV", ("spacing_mm", "cv"), "{:.3f}"),
+    ("largest gap (mm)", ("spacing_mm", "max_gap"), "{:.2f}"),
+    ("backward steps", ("spacing_mm", "backward_steps"), "{:.0f}"),
+    ("path length (mm)", ("path_length_mm",), "{:.0f}"),
+    ("cycle time (s)", ("cycle_time_s",), "{:.1f}"),
+    ("plan time (s)", ("plan_time_s",), "{:.2f}"),
+    ("mean reward", ("reward", "mean"), "{:.4f}"),
+    ("R_D", ("reward", "r_d"), "{:.4f}"),
+    ("R_α", ("reward", "r_alpha"), "{:.4f}"),
+    ("R_Δs", ("reward", "r_delta_s"), "{:.4f}"),
+]
+
+
+def metrics_table_markdown(metrics: Sequence[Metrics], labels: Sequence[str] | None = None) -> str:
+    """One column per trajectory, one row per metric."""
+    if not metrics:
+        raise ValueError("no metrics to tabulate")
+    names = list(labels) if labels else [m.planner or f"#{i}" for i, m in enumerate(metrics)]
+    dicts = [m.to_json_dict() for m in metrics]
+    lines = [
+        "| metric | " + " | ".join(names) + " |",
+        "|---|" + "---:|" * len(names),
+    ]
+    for label, path, fmt in TABLE_ROWS:
+        cells = []
+        for d in dicts:
+            value = d
+            for key in path:
+                value = value[key]
+            cells.append(fmt.format(value))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
