@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -120,33 +121,6 @@ def scan_cmd(
 
 
 # ---- plan / evaluate (planners and metrics) ----------------------------------------------
-PLANNERS = ("fixed", "geometric", "rl")
-
-
-def make_planner(name: str, policy: Path | None = None):
-    """The planner called `name`; `rl` loads a policy file (or the packaged default)."""
-    if name == "fixed":
-        from scanplan.planners.fixed import FixedPlanner
-
-        return FixedPlanner()
-    if name == "geometric":
-        from scanplan.planners.geometric import GeometricPlanner
-
-        return GeometricPlanner()
-    if name == "rl":
-        try:
-            from scanplan.planners.rl import RLPlanner
-        except ImportError as exc:
-            raise ValueError(f"the rl planner is not available in this install ({exc})") from None
-        if policy is not None:
-            return RLPlanner.from_file(policy)
-        default = getattr(RLPlanner, "default", None)
-        if default is None:
-            raise ValueError("no default policy ships with this install; pass --policy FILE")
-        return default()
-    raise ValueError(f"unknown planner {name!r}; use one of {', '.join(PLANNERS)}")
-
-
 @app.command("plan")
 @user_errors
 def plan_cmd(
@@ -164,7 +138,7 @@ def plan_cmd(
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.config import load_sensor
     from scanplan.part import load_part
-    from scanplan.planners import plan_path
+    from scanplan.planners import make_planner, plan_path
     from scanplan.swaths import plan_swaths
     from scanplan.trajectory import write_csv, write_json
 
@@ -237,6 +211,73 @@ def evaluate_cmd(
 
 
 # ---- train (RL) --------------------------------------------------------------------------
+@app.command("train")
+@user_errors
+def train_cmd(
+    output: Annotated[Path, typer.Option("-o", "--output", help="policy directory")],
+    part: Annotated[
+        list[str] | None, typer.Option("--part", help="training part(s): built-in name or mesh")
+    ] = None,
+    timesteps: Annotated[int, typer.Option(help="total PPO timesteps")] = 1_000_000,
+    seed: Annotated[int, typer.Option(help="seed of PPO and the environments")] = 0,
+    n_envs: Annotated[int, typer.Option("--n-envs", help="parallel environments")] = 2,
+    resume: Annotated[
+        Path | None, typer.Option(help="continue from the latest checkpoint in DIR")
+    ] = None,
+    state: Annotated[
+        str, typer.Option(help="paper (P, θ, D, α, Δs) | no-position | lookahead")
+    ] = "paper",
+    procedural: Annotated[
+        int, typer.Option(help="also train on N randomized procedural parts")
+    ] = 0,
+    fan_points: Annotated[int, typer.Option(help="sub-sampled fan for training")] = 128,
+    log_std_init: Annotated[float, typer.Option(help="initial log std of the policy")] = 0.0,
+    no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+):
+    """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
+    import shlex
+
+    from scanplan.train import TrainConfig, train
+
+    states = {
+        "paper": (True, False),
+        "no-position": (False, False),
+        "lookahead": (False, True),
+        "lookahead-position": (True, True),
+    }
+    if state not in states:
+        raise ValueError(f"unknown --state {state!r}; use one of {', '.join(states)}")
+    if timesteps <= 0 or n_envs < 1 or fan_points < 2 or procedural < 0:
+        raise ValueError("--timesteps, --n-envs, --fan-points and --procedural must be positive")
+    if resume is not None and not resume.is_dir():
+        raise ValueError(f"--resume {resume} is not a directory")
+    use_position, lookahead = states[state]
+    config = TrainConfig(
+        output_dir=str(output),
+        parts=tuple(part or ["training-piece"]),
+        total_timesteps=timesteps,
+        seed=seed,
+        n_envs=n_envs,
+        log_std_init=log_std_init,
+        env={
+            "fan_points": fan_points,
+            "noise": False,
+            "use_position": use_position,
+            "lookahead": lookahead,
+            "segment_mm": (100.0, 400.0),
+            "procedural_parts": procedural,
+        },
+        resume=str(resume) if resume else None,
+        progress_bar=not no_progress,
+        command=shlex.join(["scanplan", *sys.argv[1:]]),
+    )
+    result = train(config)
+    f = result.final
+    typer.echo(
+        f"{result.timesteps} timesteps in {result.wall_time_s:.0f} s | reward/step "
+        f"{f['reward_per_step']:.4f} (R_D {f['r_d']:.4f}, R_α {f['r_alpha']:.4f}, "
+        f"R_Δs {f['r_delta_s']:.4f}) -> {result.policy_json}"
+    )
 
 
 # ---- export (robot programs) --------------------------------------------------------------
@@ -294,6 +335,48 @@ def export_cmd(
 
 
 # ---- demo ---------------------------------------------------------------------------------
+@app.command("demo")
+@user_errors
+def demo_cmd(
+    output: Annotated[Path, typer.Option("-o", "--output", help="output directory")] = Path(
+        "out/demo"
+    ),
+    part: Annotated[str, typer.Option(help="built-in part or mesh file")] = "door",
+    points: Annotated[
+        int, typer.Option("--points", help="pixel columns per profile in the evaluation")
+    ] = 1024,
+    seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+):
+    """The main job: three planners on the door, table, maps, HTML report, URScript."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from scanplan.demo import metrics_rows, run_demo
+
+    console = Console()
+    if points < 2:
+        raise ValueError(f"--points must be >= 2, got {points}")
+    with console.status("starting") as status:
+        started = time.perf_counter()
+
+        def step(message: str) -> None:
+            console.log(message)
+            status.update(f"{message} ({time.perf_counter() - started:.0f} s)")
+
+        result = run_demo(output, part_name=part, points_per_profile=points, seed=seed, step=step)
+    table = Table(title=f"{part}: scan quality by planner")
+    table.add_column("metric")
+    for name in result.metrics:
+        table.add_column(name, justify="right")
+    for label, values in metrics_rows({n: m.to_json_dict() for n, m in result.metrics.items()}):
+        table.add_row(label, *values)
+    console.print(table)
+    console.print(f"report:   {result.report}")
+    console.print(
+        f"URScript: {result.program} (parses back to the planned poses within "
+        f"{result.program_error_m:.1e} m)"
+    )
+    console.print(f"done in {result.seconds:.0f} s -> {result.out_dir}")
 
 
 def main() -> None:  # pragma: no cover - console entry for `python -m scanplan`

@@ -6,6 +6,7 @@ A planner is any object with a `name` and `plan(part, swath, sensor) -> Trajecto
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Protocol
 
@@ -23,6 +24,26 @@ class Planner(Protocol):
     def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
         """The scanning poses of one pass (all flagged scanning, swath = swath.index)."""
         ...
+
+
+PLANNERS = ("fixed", "geometric", "rl")
+
+
+def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
+    """The planner called `name`; `rl` loads a policy directory (None: the shipped one)."""
+    if name == "fixed":
+        from scanplan.planners.fixed import FixedPlanner
+
+        return FixedPlanner()
+    if name == "geometric":
+        from scanplan.planners.geometric import GeometricPlanner
+
+        return GeometricPlanner()
+    if name == "rl":
+        from scanplan.planners.rl import RLPlanner
+
+        return RLPlanner.from_file(policy)
+    raise ValueError(f"unknown planner {name!r}; use one of {', '.join(PLANNERS)}")
 
 
 def plan_path(part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swath]) -> Trajectory:
