@@ -149,10 +149,10 @@ def probe_swath(
             "the part is outside the sensor's reach"
         )
     z = np.where(hit, (top - t).reshape(hit.shape) - swath.start_mm[2], np.nan)
-    normals = np.zeros((len(origins), 3))
-    normals[face >= 0] = engine.face_normals[face[face >= 0]]
-    normals *= np.where(normals[:, 2:3] < 0, -1.0, 1.0)  # face up, whatever the winding
-    normals = normals.reshape(*hit.shape, 3)
+    flat_normals = np.zeros((len(origins), 3))
+    flat_normals[face >= 0] = engine.face_normals[face[face >= 0]]
+    flat_normals *= np.where(flat_normals[:, 2:3] < 0, -1.0, 1.0)  # face up, whatever winding
+    normals = flat_normals.reshape(*hit.shape, 3)
     # Walls steeper than max_pitch_slope return little to a sensor looking down, and the pitch
     # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
     facing = hit & (normals[..., 2] > math.cos(math.radians(max_pitch_slope_deg)))

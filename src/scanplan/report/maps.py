@@ -146,12 +146,13 @@ def plot_comparison(
     limit = d_lim if quantity == "distance" else o_lim
     _, unit, label = _LABELS[quantity]
     fig, axes = plt.subplots(1, len(sources), figsize=(6 * len(sources), 5.5), squeeze=False)
-    artist = None
-    for ax, (name, _), cloud in zip(axes[0], sources, clouds, strict=True):
-        artist = _draw(ax, cloud, quantity, limit, name)
+    artists = [
+        _draw(ax, cloud, quantity, limit, name)
+        for ax, (name, _), cloud in zip(axes[0], sources, clouds, strict=True)
+    ]
     fig.suptitle(f"{label} — {part}" if part else label)
     fig.colorbar(
-        artist,
+        artists[0],
         ax=list(axes[0]),
         label=unit,
         shrink=0.8,
