@@ -191,7 +191,10 @@ def probe_swath(
 
 @dataclass(frozen=True)
 class StepLimits:
-    """The agent's per-step limits (SPEC §5): Δy along u, Δz along z_s, Δθ about x_s."""
+    """The agent's per-step limits (SPEC §5): Δy along u, Δz along z_s, Δθ about x_s.
+
+    Magnitudes only: the agent's dynamic sign clipping (paper eqs. clipActionD/N) is a
+    training aid that forbids anticipation, which is the point of this planner."""
 
     dy_max_mm: float = 1.0
     dz_max_mm: float = 1.0
