@@ -220,7 +220,10 @@ def train_cmd(
     ] = None,
     timesteps: Annotated[int, typer.Option(help="total PPO timesteps")] = 1_000_000,
     seed: Annotated[int, typer.Option(help="seed of PPO and the environments")] = 0,
-    n_envs: Annotated[int, typer.Option("--n-envs", help="parallel environments")] = 2,
+    n_envs: Annotated[int, typer.Option("--n-envs", help="parallel environments")] = 16,
+    vec: Annotated[
+        str, typer.Option(help="batched (envs stepped together, one process) | subproc")
+    ] = "batched",
     resume: Annotated[
         Path | None, typer.Option(help="continue from the latest checkpoint in DIR")
     ] = None,
@@ -231,7 +234,9 @@ def train_cmd(
         int, typer.Option(help="also train on N randomized procedural parts")
     ] = 0,
     fan_points: Annotated[int, typer.Option(help="sub-sampled fan for training")] = 128,
-    log_std_init: Annotated[float, typer.Option(help="initial log std of the policy")] = 0.0,
+    log_std_init: Annotated[
+        str, typer.Option(help="initial log std: one value, or Δy,Δz,Δθ (SB3 default 0)")
+    ] = "0",
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
 ):
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
@@ -249,16 +254,26 @@ def train_cmd(
         raise ValueError(f"unknown --state {state!r}; use one of {', '.join(states)}")
     if timesteps <= 0 or n_envs < 1 or fan_points < 2 or procedural < 0:
         raise ValueError("--timesteps, --n-envs, --fan-points and --procedural must be positive")
+    if vec not in ("batched", "subproc"):
+        raise ValueError(f"unknown --vec {vec!r}; use batched or subproc")
     if resume is not None and not resume.is_dir():
         raise ValueError(f"--resume {resume} is not a directory")
     use_position, lookahead = states[state]
+    try:
+        stds = tuple(float(v) for v in log_std_init.split(","))
+    except ValueError:
+        raise ValueError(f"--log-std-init {log_std_init!r}: expected numbers") from None
+    if len(stds) not in (1, 3):
+        raise ValueError("--log-std-init takes one value or three (Δy,Δz,Δθ)")
     config = TrainConfig(
         output_dir=str(output),
         parts=tuple(part or ["training-piece"]),
         total_timesteps=timesteps,
         seed=seed,
         n_envs=n_envs,
-        log_std_init=log_std_init,
+        vec_env=vec,
+        n_steps=max(2048 // n_envs, 8),
+        log_std_init=stds[0] if len(stds) == 1 else stds,
         env={
             "fan_points": fan_points,
             "noise": False,

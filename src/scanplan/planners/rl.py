@@ -1,0 +1,118 @@
+"""The `rl` planner (SPEC §4): a trained PPO actor run pass by pass, deterministic actions.
+
+A policy is a directory (or its `policy.json`) written by `scanplan.train.save_policy`: plain
+weights (`.safetensors` or `.pt` read with `weights_only=True`) and JSON, so loading a policy
+never unpickles code. The packaged default lives in `scanplan/policies/default/`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from scanplan.part import Part
+from scanplan.sensor import SensorSpec
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory
+
+DEFAULT_POLICY = Path(__file__).resolve().parent.parent / "policies" / "default"
+# Env options a planning run takes from the policy file; the rest is fixed for planning.
+_ENV_KEYS = ("fan_points", "use_position", "lookahead", "dy_max_mm", "dz_max_mm")
+
+
+def build_actor(arch: dict[str, Any]) -> nn.Sequential:
+    """The MLP of `architecture` in policy.json: Linear/activation pairs, then the head."""
+    act = {"relu": nn.ReLU, "tanh": nn.Tanh}[arch["activation"]]
+    sizes = [int(arch["obs_dim"]), *map(int, arch["hidden"])]
+    layers: list[nn.Module] = []
+    for a, b in zip(sizes[:-1], sizes[1:], strict=True):
+        layers += [nn.Linear(a, b), act()]
+    layers.append(nn.Linear(sizes[-1], int(arch["action_dim"])))
+    return nn.Sequential(*layers)
+
+
+def load_weights(path: Path) -> dict[str, torch.Tensor]:
+    if path.suffix == ".safetensors":
+        from safetensors.torch import load_file
+
+        return load_file(str(path))
+    return torch.load(path, map_location="cpu", weights_only=True)
+
+
+@dataclass
+class RLPlanner:
+    """Runs `SwathScanEnv` dynamics on each swath (noise-free sensor, the policy's fan) with
+    the deterministic actor; every station of the episode becomes a scanning pose."""
+
+    actor: nn.Sequential
+    config: dict[str, Any] = field(default_factory=dict)
+    name: str = "rl"
+
+    @classmethod
+    def from_file(cls, path: str | Path | None = None) -> RLPlanner:
+        """A policy directory or its policy.json; None = the packaged default policy."""
+        path = Path(path) if path is not None else DEFAULT_POLICY
+        json_path = path / "policy.json" if path.is_dir() else path
+        if not json_path.is_file():
+            raise ValueError(f"policy {path}: no policy.json found")
+        try:
+            config = json.loads(json_path.read_text())
+            arch = config["architecture"]
+            actor = build_actor(arch)
+            actor.load_state_dict(load_weights(json_path.parent / config["weights"]))
+        except (OSError, KeyError, TypeError, ValueError, RuntimeError) as exc:
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ValueError(f"policy {json_path} cannot be loaded: {first}") from None
+        actor.eval()
+        return cls(actor=actor, config=config)
+
+    @classmethod
+    def default(cls) -> RLPlanner:
+        return cls.from_file(None)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Deterministic action in [-1, 1]^3 for one observation."""
+        with torch.no_grad():
+            out = self.actor(torch.as_tensor(obs, dtype=torch.float32)[None])[0].numpy()
+        return np.clip(out, -1.0, 1.0)
+
+    def make_env(self, part: Part, swath: Swath, sensor: SensorSpec):
+        from scanplan.env import SwathScanEnv
+
+        env_cfg = self.config.get("env", {})
+        kwargs = {k: env_cfg[k] for k in _ENV_KEYS if k in env_cfg}
+        return SwathScanEnv(
+            parts=[part],
+            swaths=[swath],
+            sensor=sensor,
+            noise=False,
+            segment_mm=None,
+            lost_patience=None,
+            **kwargs,
+        )
+
+    def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
+        start = time.perf_counter()
+        env = self.make_env(part, swath, sensor)
+        obs, _ = env.reset(seed=0, options={"swath": 0})
+        poses = [swath.pose(*env.state)]
+        done = False
+        while not done:
+            obs, _, terminated, truncated, _ = env.step(self.act(obs))
+            poses.append(swath.pose(*env.state))
+            done = terminated or truncated
+        poses_arr = np.stack(poses)
+        return Trajectory(
+            poses_arr,
+            np.full(len(poses_arr), swath.index),
+            np.ones(len(poses_arr), bool),
+            plan_time_s=time.perf_counter() - start,
+            planner=self.name,
+        )
