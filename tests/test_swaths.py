@@ -80,3 +80,21 @@ def test_pose_pitch_convention_and_inverse():
     assert np.dot(pose[:3, 2], swath.u) < 0
     s, h, th = swath.to_swath_frame(pose)
     assert (s, h, th) == pytest.approx((12.0, -3.0, math.radians(10)))
+
+
+def test_auto_direction_scans_across_curvature_a_pitch_only_planner_cannot_follow():
+    """The door bulges across its width: passes along its length would leave ~20 mm of
+    cross-line height variation, passes across it ~4 mm. A training piece varies only along
+    its length, so it is scanned lengthwise."""
+    from scanplan.part import load_part
+    from scanplan.swaths import cross_line_residual_mm, scan_direction
+
+    width = SensorSpec().line_width_mm
+    door = load_part("door")
+    assert np.allclose(np.abs(scan_direction(door, "long")), [1, 0, 0], atol=1e-6)
+    assert np.allclose(np.abs(scan_direction(door, "auto", width)), [0, 1, 0], atol=1e-6)
+    along_x = cross_line_residual_mm(door, np.array([1.0, 0, 0]), width)
+    along_y = cross_line_residual_mm(door, np.array([0.0, 1, 0]), width)
+    assert along_y < 0.5 * along_x
+    piece = load_part("training-piece")
+    assert np.allclose(np.abs(scan_direction(piece, "auto", width)), [1, 0, 0], atol=1e-6)

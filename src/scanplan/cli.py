@@ -131,7 +131,13 @@ def plan_cmd(
     policy: Annotated[
         Path | None, typer.Option(help="trained policy file for --planner rl")
     ] = None,
-    direction: Annotated[str, typer.Option(help="scan direction: x, y or auto")] = "auto",
+    direction: Annotated[
+        str,
+        typer.Option(
+            help="scan direction: x, y, long (the footprint's long side) or auto "
+            "(the long side unless scanning across leaves clearly less cross-line error)"
+        ),
+    ] = "auto",
     overlap: Annotated[float, typer.Option(help="overlap of adjacent passes, [0, 1)")] = 0.2,
     units: UnitsOpt = "mm",
 ):

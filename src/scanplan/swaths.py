@@ -62,29 +62,87 @@ class Swath:
         return float(np.dot(d, self.u)), float(np.dot(d, UP)), theta
 
 
-def scan_direction(part: Part, direction: str | np.ndarray = "auto") -> np.ndarray:
-    """Unit horizontal scan direction: 'x', 'y', a vector, or 'auto' = the long side of the
-    minimum-area rectangle around the part seen from above."""
+def rectangle_axes(part: Part) -> tuple[np.ndarray, np.ndarray]:
+    """The long and the short axis (unit, horizontal) of the minimum-area rectangle around the
+    part seen from above."""
+    hull = part.mesh.convex_hull.vertices[:, :2]
+    transform, extents = trimesh.bounds.oriented_bounds_2D(hull)
+    # transform maps the points into the rectangle's frame; its rows are the axes.
+    long_i = 0 if extents[0] >= extents[1] else 1
+    axes = [np.array([transform[i, 0], transform[i, 1], 0.0]) for i in (long_i, 1 - long_i)]
+    return axes[0], axes[1]
+
+
+def cross_line_residual_mm(
+    part: Part, u: np.ndarray, line_width_mm: float, overlap: float = 0.2, grid_mm: float = 10.0
+) -> float:
+    """Mean |height - mean height| across the laser line, over passes along u.
+
+    During a pass only height and pitch follow the surface (roll is fixed), so what varies
+    across the line (along v) within one station is error no planner can remove. Heights come
+    from vertical rays on a grid over the footprint.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    v = np.cross(UP, u)
+    lo, hi = part.bounds
+    xs = np.arange(lo[0], hi[0] + grid_mm, grid_mm)
+    ys = np.arange(lo[1], hi[1] + grid_mm, grid_mm)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    origins = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, hi[2] + 10.0)], axis=1)
+    t, face = part.ray_engine.first_hit(origins, np.tile(-UP, (len(origins), 1)))
+    hit = face >= 0
+    if hit.sum() < 2:
+        return 0.0
+    points = origins[hit] - t[hit, None] * UP
+    along, across = points @ u, points @ v
+    step = line_width_mm * (1.0 - overlap)
+    lane = np.floor((across - across.min()) / step).astype(np.int64)
+    station = np.floor((along - along.min()) / grid_mm).astype(np.int64)
+    group = lane * (station.max() + 1) + station
+    _, group = np.unique(group, return_inverse=True)
+    count = np.bincount(group)
+    mean = np.bincount(group, points[:, 2]) / count
+    return float(np.mean(np.abs(points[:, 2] - mean[group])))
+
+
+def scan_direction(
+    part: Part,
+    direction: str | np.ndarray = "auto",
+    line_width_mm: float | None = None,
+    overlap: float = 0.2,
+) -> np.ndarray:
+    """Unit horizontal scan direction.
+
+    'x', 'y' or a vector: as given. 'long': the long side of the minimum-area rectangle around
+    the part seen from above (SPEC §3). 'auto' (needs line_width_mm): of the rectangle's two
+    sides, the one whose passes leave less surface variation across the laser line (what
+    height and pitch cannot follow); the long side unless the short one is clearly (>25 %)
+    better — so a plate or a training piece scans along its length, a car door across the
+    tumblehome.
+    """
     if isinstance(direction, str):
         key = direction.lower()
         if key == "x":
-            return np.array([1.0, 0.0, 0.0])
-        if key == "y":
-            return np.array([0.0, 1.0, 0.0])
-        if key != "auto":
-            raise ValueError(f"unknown scan direction {direction!r}: use x, y or auto")
-        hull = part.mesh.convex_hull.vertices[:, :2]
-        transform, extents = trimesh.bounds.oriented_bounds_2D(hull)
-        # transform maps the points into the rectangle's frame; its rows are the axes.
-        axis = transform[0, :2] if extents[0] >= extents[1] else transform[1, :2]
-        u = np.array([axis[0], axis[1], 0.0])
+            u = np.array([1.0, 0.0, 0.0])
+        elif key == "y":
+            u = np.array([0.0, 1.0, 0.0])
+        elif key in ("auto", "long"):
+            long_axis, short_axis = rectangle_axes(part)
+            u = long_axis
+            if key == "auto" and line_width_mm is not None:
+                along_long = cross_line_residual_mm(part, long_axis, line_width_mm, overlap)
+                along_short = cross_line_residual_mm(part, short_axis, line_width_mm, overlap)
+                if along_short < 0.75 * along_long:
+                    u = short_axis
+        else:
+            raise ValueError(f"unknown scan direction {direction!r}: use x, y, long or auto")
     else:
         u = np.asarray(direction, dtype=np.float64).copy()
         u[2] = 0.0
     norm = np.linalg.norm(u)
     if norm < 1e-9:
         raise ValueError("scan direction must have a horizontal component")
-    u /= norm
+    u = u / norm
     # A canonical sign (first non-zero component positive) keeps plans reproducible.
     if u[0] < -1e-9 or (abs(u[0]) <= 1e-9 and u[1] < 0):
         u = -u
@@ -106,7 +164,7 @@ def plan_swaths(
     """
     if not 0.0 <= overlap < 1.0:
         raise ValueError(f"overlap must be in [0, 1), got {overlap}")
-    u = scan_direction(part, direction)
+    u = scan_direction(part, direction, sensor.line_width_mm, overlap)
     v = np.cross(UP, u)
     vertices = np.asarray(part.mesh.vertices)
     along, across = vertices @ u, vertices @ v

@@ -230,6 +230,7 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         poses_from_xyz_quat(xyz, q),
         np.asarray(swath),
         np.asarray(scanning),
+        plan_time_s=float(data.get("plan_time_s", 0.0)),
         planner=data.get("planner", ""),
     )
 
