@@ -172,6 +172,7 @@ def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
     assert result.exit_code == 0, result.output
     names = {p.name for p in report.iterdir()}
     assert {"distance_error.png", "orientation_error.png", "metrics.md", "metrics.json"} <= names
+    assert "report.html" in names
 
 
 def test_cli_bad_trajectory_and_out_of_reach(plate_file, tmp_path):

@@ -194,9 +194,19 @@ def evaluate_cmd(
     metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
     data = metrics.to_json_dict()
     if output is not None:
+        from scanplan.report.html import PlannerResult, write_html_report
         from scanplan.report.maps import metrics_table_markdown, plot_error_maps
 
-        plot_error_maps(metrics, output, planner=traj.planner or trajectory.stem)
+        label = traj.planner or trajectory.stem
+        pictures = plot_error_maps(metrics, output, planner=label)
+        if metrics.cloud is not None:
+            write_html_report(
+                output / "report.html",
+                the_part,
+                [PlannerResult(label, traj, metrics.cloud, data)],
+                spec.name,
+                pictures=pictures,
+            )
         atomic_write_text(output / "metrics.json", json.dumps(data, indent=1) + "\n")
         atomic_write_text(
             output / "metrics.md",
