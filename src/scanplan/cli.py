@@ -373,18 +373,23 @@ def demo_cmd(
         "out/demo"
     ),
     part: Annotated[str, typer.Option(help="built-in part or mesh file")] = "door",
+    units: UnitsOpt = "mm",
+    sensor: SensorOpt = "at-c5-4090cs30-495",
     points: Annotated[
         int, typer.Option("--points", help="pixel columns per profile in the evaluation")
     ] = 1024,
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
 ):
-    """The main job: three planners on the door, table, maps, HTML report, URScript."""
+    """The main job: three planners on a part (the door by default), the table, maps, an
+    HTML report and a URScript program."""
     from rich.console import Console
     from rich.table import Table
 
+    from scanplan.config import load_sensor
     from scanplan.demo import metrics_rows, run_demo
 
     console = Console()
+    spec = load_sensor(sensor)
     if points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")
     with console.status("starting") as status:
@@ -394,7 +399,15 @@ def demo_cmd(
             console.log(message)
             status.update(f"{message} ({time.perf_counter() - started:.0f} s)")
 
-        result = run_demo(output, part_name=part, points_per_profile=points, seed=seed, step=step)
+        result = run_demo(
+            output,
+            part_name=part,
+            units=units,
+            sensor=spec,
+            points_per_profile=points,
+            seed=seed,
+            step=step,
+        )
     table = Table(title=f"{part}: scan quality by planner")
     table.add_column("metric")
     for name in result.metrics:

@@ -52,6 +52,7 @@ def metrics_rows(metrics: dict[str, dict]) -> list[tuple[str, list[str]]]:
 def run_demo(
     out_dir: Path,
     part_name: str = "door",
+    units: str = "mm",
     sensor: SensorSpec | None = None,
     points_per_profile: int | None = 1024,
     seed: int = 0,
@@ -66,7 +67,7 @@ def run_demo(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     step(f"loading part {part_name}")
-    part: Part = load_part(part_name)
+    part: Part = load_part(part_name, units)
     swaths = plan_swaths(part, sensor)
 
     metrics: dict[str, Metrics] = {}
@@ -99,9 +100,9 @@ def run_demo(
 
     step("writing the HTML report")
     results = [
-        PlannerResult(name, trajectories[name], metrics[name].cloud, json_metrics[name])
-        for name in metrics
-        if metrics[name].cloud is not None
+        PlannerResult(name, trajectories[name], cloud, json_metrics[name])
+        for name, m in metrics.items()
+        if (cloud := m.cloud) is not None
     ]
     fan = f"{points_per_profile} of {sensor.points_per_profile}" if points_per_profile else "all"
     report = out_dir / "report.html"

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -22,7 +23,7 @@ class RewardConfig:
     w_delta_s: float = 1.0 / 3.0
 
 
-def reward_distance(d_mm: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+def reward_distance(d_mm: ArrayLike, cfg: RewardConfig) -> np.ndarray:
     """R_D = -(W_d - D)^2 / (Z_r/2)^2; -1 outside the range or with no valid point."""
     d = np.asarray(d_mm, dtype=np.float64)
     half = cfg.z_range_mm / 2
@@ -31,14 +32,14 @@ def reward_distance(d_mm: np.ndarray, cfg: RewardConfig) -> np.ndarray:
         return np.where(np.isfinite(d) & (r >= -1.0), r, -1.0)
 
 
-def reward_alpha(alpha_rad: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+def reward_alpha(alpha_rad: ArrayLike, cfg: RewardConfig) -> np.ndarray:
     """R_alpha = max(-1, -alpha^2 / alpha_max^2)."""
     a = np.asarray(alpha_rad, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         return np.where(np.isfinite(a), np.maximum(-1.0, -(a**2) / cfg.alpha_max_rad**2), -1.0)
 
 
-def reward_advance(delta_s_mm: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+def reward_advance(delta_s_mm: ArrayLike, cfg: RewardConfig) -> np.ndarray:
     """R_delta-s = max(-1, -(ds - ds_opt)^2 / ds_opt^2)."""
     s = np.asarray(delta_s_mm, dtype=np.float64)
     opt = cfg.delta_s_opt_mm
@@ -47,7 +48,7 @@ def reward_advance(delta_s_mm: np.ndarray, cfg: RewardConfig) -> np.ndarray:
 
 
 def reward_terms(
-    d_mm: np.ndarray, alpha_rad: np.ndarray, delta_s_mm: np.ndarray, cfg: RewardConfig
+    d_mm: ArrayLike, alpha_rad: ArrayLike, delta_s_mm: ArrayLike, cfg: RewardConfig
 ) -> dict[str, np.ndarray]:
     """The three terms and their weighted sum: keys r_d, r_alpha, r_delta_s, reward."""
     r_d = reward_distance(d_mm, cfg)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
@@ -19,7 +20,8 @@ from scanplan.trajectory import Trajectory
 
 
 class Planner(Protocol):
-    name: str
+    @property
+    def name(self) -> str: ...
 
     def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
         """The scanning poses of one pass (all flagged scanning, swath = swath.index)."""
@@ -42,7 +44,7 @@ def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
     if name == "rl":
         from scanplan.planners.rl import RLPlanner
 
-        return RLPlanner.from_file(policy)
+        return RLPlanner.from_file(None if policy is None else Path(policy))
     raise ValueError(f"unknown planner {name!r}; use one of {', '.join(PLANNERS)}")
 
 
