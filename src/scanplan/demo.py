@@ -92,7 +92,9 @@ def run_demo(
             sources, "orientation", out_dir / "orientation_error_maps.png", part=part.name
         ),
     ]
-    training_log = _copy_training_curves(make_planner("rl"), out_dir)
+    from scanplan.planners.rl import DEFAULT_POLICY
+
+    training_log = _copy_training_curves(DEFAULT_POLICY, out_dir)
     pictures += sorted(out_dir.glob("training_*.png"))
 
     json_metrics = {name: m.to_json_dict() for name, m in metrics.items()}
@@ -129,13 +131,13 @@ def run_demo(
     )
 
 
-def _copy_training_curves(planner: Planner, out_dir: Path) -> Path | None:
-    """The shipped policy's training log and curves, next to the demo's outputs."""
-    policy_dir = getattr(planner, "policy_dir", None)
-    if policy_dir is None:
+def _copy_training_curves(policy_dir: Path, out_dir: Path) -> Path | None:
+    """The shipped policy's training log and curves (written by `scanplan train`), next to
+    the demo's outputs; the log's path, or None if the policy has none."""
+    if not policy_dir.is_dir():
         return None
     log = None
-    for path in Path(policy_dir).iterdir():
+    for path in sorted(policy_dir.iterdir()):
         if path.suffix == ".png":
             shutil.copy(path, out_dir / f"training_{path.name.removeprefix('training_')}")
         elif path.suffix == ".csv":
