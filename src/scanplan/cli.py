@@ -253,6 +253,9 @@ def train_cmd(
     log_std_init: Annotated[
         str, typer.Option(help="initial log std: one value, or Δy,Δz,Δθ (SB3 default 0)")
     ] = "0",
+    init_advance: Annotated[
+        float | None, typer.Option(help="initial mean Δy action (0.5 = Δs_opt); default none")
+    ] = None,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
 ):
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
@@ -290,6 +293,7 @@ def train_cmd(
         vec_env=vec,
         n_steps=max(2048 // n_envs, 8),
         log_std_init=stds[0] if len(stds) == 1 else stds,
+        init_advance=init_advance,
         env={
             "fan_points": fan_points,
             "noise": False,

@@ -96,29 +96,33 @@ class SwathScanEnv(gym.Env):
 
     ## Action space
 
-    | index | action | scale | limitation (paper eqs. clipActionD/N)                   |
-    |-------|--------|-------|----------------------------------------------------------|
-    | 0     | Δy     | ±Δy_max mm along u                 | none                         |
-    | 1     | Δz     | ±Δz_max mm along z_s (+ = towards the part) | [0, Δz_max] if D ≥ W_d else [−Δz_max, 0] |
-    | 2     | Δθ     | ±Δθ_max about x_s                  | [0, Δθ_max] if α ≥ 0 else [−Δθ_max, 0] |
+    `Box(-1, 1, (3,), float32)`, scaled by (Δy_max, Δz_max, Δθ_max), default (1 mm, 1 mm, 1°):
 
-    `Box(-1, 1, (3,), float32)`; defaults Δy_max = Δz_max = 1 mm, Δθ_max = 1°. Where the
-    profile has no valid point, D and α are unknown and the step is not limited.
+    | index | action | meaning                          | limitation (paper eqs. clipActionD/N) |
+    |-------|--------|----------------------------------|---------------------------------------|
+    | 0     | Δy     | along u                          | none                                  |
+    | 1     | Δz     | along z_s, + = towards the part  | [0, max] if D ≥ W_d else [−max, 0]    |
+    | 2     | Δθ     | pitch about x_s                  | [0, max] if α ≥ 0 else [−max, 0]      |
+
+    Where the profile has no valid point, D and α are unknown and the step is not limited.
 
     ## Observation space
 
     `Box(-10, 10, (k,), float32)`, every entry clipped to ±10:
 
-    | entries | observation | normalization |
-    |---------|-------------|---------------|
-    | 0-2 (if `use_position`) | P: advance s, lateral (0), height h of the sensor relative to the episode's start, swath frame | s / 1000 mm, 0, h / (Z_r/2) |
-    | next | θ pitch | θ / α_max |
-    | next | D mean profile distance | (D − W_d) / (Z_r/2); 0 if no valid point |
-    | next | α signed angle to the mean normal | α / α_max; 0 if no valid point |
-    | next | Δs advance since the previous profile | Δs / Δs_opt; 1 if undefined |
-    | next 2·5 (if `lookahead`) | surface ahead from the CAD at 10, 30, 60, 120, 200 mm along u: height change and pitch to align | Δh / (Z_r/2), (θ_surface − θ) / α_max |
+    | entries        | observation                                  | normalization        |
+    |----------------|----------------------------------------------|----------------------|
+    | 3 if P         | P = (s, 0, h): advance, lateral, height of   | s / 1000 mm, 0,      |
+    |                | the sensor from the episode's start (swath)  | h / (Z_r/2)          |
+    | 1              | θ pitch                                      | θ / α_max            |
+    | 1              | D mean profile distance                      | (D − W_d) / (Z_r/2)  |
+    | 1              | α signed angle to the mean normal            | α / α_max            |
+    | 1              | Δs advance since the previous profile        | Δs / Δs_opt          |
+    | 10 if lookahead| CAD surface at 10/30/60/120/200 mm ahead:    | Δh / (Z_r/2),        |
+    |                | height change, pitch that aligns minus θ     | Δθ / α_max           |
 
-    The paper's state is `use_position=True, lookahead=False` (k = 7).
+    No valid point: D and α read 0 (nominal), Δs reads 1. The paper's state is
+    `use_position=True, lookahead=False` (k = 7).
 
     ## Reward
 
@@ -126,8 +130,8 @@ class SwathScanEnv(gym.Env):
     the terms are in `info` (`r_d`, `r_alpha`, `r_delta_s`) with `d_mm`, `alpha_rad`,
     `delta_s_mm`. A pass that loses the surface for good (`lost_patience` consecutive profiles
     without a valid point) ends and is charged −1 for each of its remaining nominal steps
-    (remaining length / Δs_opt, at most the steps left before truncation), in `info["lost_penalty"]`:
-    ending early is never cheaper than finishing.
+    (remaining length / Δs_opt, at most the steps left before truncation), in
+    `info["lost_penalty"]`: ending early is never cheaper than finishing.
 
     ## Starting state
 
@@ -147,7 +151,8 @@ class SwathScanEnv(gym.Env):
 
     | version | change |
     |---------|--------|
-    | v0      | first version: the paper's state/action/reward; optional look-ahead, no-P state, sub-segments and procedural parts |
+    | v0      | the paper's state, action, reward; options: look-ahead, no-P state,    |
+    |         | sub-segments of passes, procedural parts                                |
     """
 
     metadata: dict[str, Any] = {"render_modes": []}

@@ -57,6 +57,7 @@ class TrainConfig:
     net_arch: tuple[int, ...] = (64, 64)
     activation: str = "relu"
     log_std_init: float | tuple[float, ...] = 0.0  # one per action: (Δy, Δz, Δθ)
+    init_advance: float | None = None  # initial mean Δy action (0.5 = Δs_opt at Δy_max 1 mm)
     env: dict[str, Any] = field(
         default_factory=lambda: {
             "fan_points": 128,
@@ -461,6 +462,10 @@ def train(config: TrainConfig) -> TrainResult:
             # so exploring Δθ as widely as Δy ruins every Δs reward (capped at −1, no gradient).
             with torch.no_grad():
                 model.policy.log_std[:] = torch.as_tensor(config.log_std_init)
+                # Start from the nominal advance: a policy that starts at Δy ≈ 0 first learns
+                # that standing still at a flat start beats meeting the ramps ahead.
+                if config.init_advance is not None:
+                    model.policy.action_net.bias[0] = config.init_advance
         remaining = config.total_timesteps - model.num_timesteps
         if remaining > 0:
             callback = _callback_class()(out, config.checkpoint_every_updates, start, wall_offset)
@@ -477,7 +482,7 @@ def train(config: TrainConfig) -> TrainResult:
     log = read_log(out / LOG_CSV)
     tail = slice(-5, None)
     final = {
-        k: float(np.nanmean(log[k][tail])) if len(log[k]) else math.nan
+        k: float(np.mean(v[np.isfinite(v)])) if np.isfinite(v := log[k][tail]).any() else math.nan
         for k in ("ep_rew_mean", "ep_len_mean", "reward_per_step", "r_d", "r_alpha", "r_delta_s")
     }
     cfg = {k: v for k, v in asdict(config).items() if k not in ("command", "resume")}

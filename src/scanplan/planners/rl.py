@@ -24,7 +24,7 @@ from scanplan.trajectory import Trajectory
 
 DEFAULT_POLICY = Path(__file__).resolve().parent.parent / "policies" / "default"
 # Env options a planning run takes from the policy file; the rest is fixed for planning.
-_ENV_KEYS = ("fan_points", "use_position", "lookahead", "dy_max_mm", "dz_max_mm")
+_ENV_KEYS = ("use_position", "lookahead", "dy_max_mm", "dz_max_mm", "dtheta_max_rad")
 
 
 def build_actor(arch: dict[str, Any]) -> nn.Sequential:
@@ -48,11 +48,16 @@ def load_weights(path: Path) -> dict[str, torch.Tensor]:
 
 @dataclass
 class RLPlanner:
-    """Runs `SwathScanEnv` dynamics on each swath (noise-free sensor, the policy's fan) with
-    the deterministic actor; every station of the episode becomes a scanning pose."""
+    """Runs `SwathScanEnv` dynamics on each swath (noise-free sensor) with the deterministic
+    actor; every station of the episode becomes a scanning pose.
+
+    fan_points: columns of the planning sensor. More than training's 128: on narrow curved
+    parts (the drone) 128 columns put D off by ~1 mm; 512 agree with the full fan to ~0.2 mm.
+    """
 
     actor: nn.Sequential
     config: dict[str, Any] = field(default_factory=dict)
+    fan_points: int = 512
     name: str = "rl"
 
     @classmethod
@@ -93,6 +98,7 @@ class RLPlanner:
             swaths=[swath],
             sensor=sensor,
             noise=False,
+            fan_points=self.fan_points,
             segment_mm=None,
             lost_patience=None,
             **kwargs,
