@@ -392,7 +392,7 @@ def demo_cmd(
     from scanplan.config import load_sensor
     from scanplan.demo import metrics_rows, run_demo
 
-    console = Console()
+    console = Console(log_path=False)
     spec = load_sensor(sensor)
     if points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")

@@ -23,6 +23,7 @@ from scanplan.trajectory import Trajectory, atomic_write_text
 MAX_POINTS_PER_PLANNER = 25_000
 MAX_PART_FACES = 15_000
 MAX_ARROWS = 120
+TRAINING_CURVES = ("ep_rew_mean", "ep_len_mean", "reward_per_step", "r_d", "r_alpha", "r_delta_s")
 
 
 @dataclass(frozen=True)
@@ -145,9 +146,9 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
     orient_max = float(np.percentile(orient, 99)) if len(orient) else 1.0
     fig.update_layout(
         title=f"{result.name}: trajectory and simulated scan",
-        height=560,
+        height=620,
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
-        scene={"aspectmode": "data"},
+        scene={"aspectmode": "data", "camera": {"eye": {"x": 1.3, "y": -1.3, "z": 1.0}}},
         legend={"x": 0, "y": 1},
         updatemenus=[
             {
@@ -189,13 +190,16 @@ def _training_figure(log: dict[str, np.ndarray]):
 
     x_key = next((k for k in ("timesteps", "total_timesteps", "step") if k in log), None)
     x = log[x_key] if x_key else np.arange(len(next(iter(log.values()))))
-    keys = [k for k in log if k != x_key and np.isfinite(log[k]).any()]
+    # The paper's figures: episodic reward, episode length, reward per step, partial rewards.
+    keys = [k for k in TRAINING_CURVES if k in log and np.isfinite(log[k]).any()]
+    if not keys:
+        keys = [k for k in log if k != x_key and np.isfinite(log[k]).any()]
     cols = 3
     rows = max(1, -(-len(keys) // cols))
     fig = make_subplots(rows=rows, cols=cols, subplot_titles=keys)
     for i, key in enumerate(keys):
         fig.add_trace(
-            go.Scatter(x=x, y=log[key], mode="lines", name=key, showlegend=False),
+            go.Scatter(x=x, y=log[key], mode="lines+markers", name=key, showlegend=False),
             row=i // cols + 1,
             col=i % cols + 1,
         )
@@ -213,6 +217,7 @@ body{font-family:system-ui,sans-serif;margin:24px auto;max-width:1400px;color:#2
 table{border-collapse:collapse;margin:12px 0}th,td{border:1px solid #ccc;padding:4px 10px}
 td{text-align:right;font-variant-numeric:tabular-nums}tr:nth-child(even){background:#f6f6f6}
 .grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(600px,1fr));gap:12px}
+.grid>*{min-width:0}
 img{max-width:100%;border:1px solid #ddd}.note{color:#555;font-size:0.9em}
 """
 
@@ -260,7 +265,7 @@ def write_html_report(
         "error (z_s − W_d) and orientation error (angle between the beam and the normal); "
         "cones show the laser axis along the path.</p>"
     )
-    sections.append("<div class='grid'>" + "".join(f"<div>{d}</div>" for d in divs) + "</div>")
+    sections.extend(f"<div>{d}</div>" for d in divs)
     if training_log is not None and Path(training_log).is_file():
         log = read_training_log(Path(training_log))
         if log:

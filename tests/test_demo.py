@@ -1,0 +1,69 @@
+"""The main job end to end, on the small drone part to keep CI short (the door is `make demo`)."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from scanplan.cli import app
+from scanplan.export import parse_program
+from scanplan.trajectory import read_csv
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    result = CliRunner().invoke(
+        app, ["demo", "--part", "drone", "--points", "96", "-o", str(out)], terminal_width=200
+    )
+    assert result.exit_code == 0, result.output
+    return out, result.output
+
+
+def test_demo_writes_every_output(demo):
+    out, _ = demo
+    for name in (
+        "report.html",
+        "scan_rl.script",
+        "metrics.json",
+        "distance_error_maps.png",
+        "orientation_error_maps.png",
+        "trajectory_fixed.csv",
+        "trajectory_geometric.csv",
+        "trajectory_rl.csv",
+    ):
+        assert (out / name).is_file(), name
+    page = (out / "report.html").read_text()
+    assert all(planner in page for planner in ("fixed", "geometric", "rl"))
+
+
+def test_printed_table_matches_the_report(demo):
+    out, printed = demo
+    metrics = json.loads((out / "metrics.json").read_text())
+    page = (out / "report.html").read_text()
+    for label, key in (
+        ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs")),
+        ("mean orientation error (°)", ("orientation_error_deg", "mean")),
+    ):
+        fmt = "{:.3f}" if "mm" in label else "{:.2f}"
+        values = [fmt.format(metrics[p][key[0]][key[1]]) for p in ("fixed", "geometric", "rl")]
+        row = next(line for line in printed.splitlines() if label in line)
+        assert re.findall(r"-?\d+\.\d+", row) == values
+        html_row = re.search(re.escape(label.replace("|", "|")) + r"</th>(.*?)</tr>", page)
+        assert html_row is not None
+        assert re.findall(r"<td>(.*?)</td>", html_row.group(1)) == values
+
+
+def test_urscript_parses_back_to_the_planned_poses(demo):
+    out, _ = demo
+    planned = read_csv(out / "trajectory_rl.csv")
+    poses, scanning = parse_program((out / "scan_rl.script").read_text(), "urscript")
+    assert len(poses) == len(planned)
+    assert np.abs(poses[:, :3, 3] - planned.poses[:, :3, 3]).max() / 1000 < 1e-6
+    assert np.array_equal(scanning, planned.scanning)
