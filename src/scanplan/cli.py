@@ -390,7 +390,8 @@ def demo_cmd(
     from rich.table import Table
 
     from scanplan.config import load_sensor
-    from scanplan.demo import metrics_rows, run_demo
+    from scanplan.demo import run_demo
+    from scanplan.report.table import table_rows
 
     console = Console(log_path=False)
     spec = load_sensor(sensor)
@@ -416,7 +417,7 @@ def demo_cmd(
     table.add_column("metric")
     for name in result.metrics:
         table.add_column(name, justify="right")
-    for label, values in metrics_rows({n: m.to_json_dict() for n, m in result.metrics.items()}):
+    for label, values in table_rows([m.to_json_dict() for m in result.metrics.values()]):
         table.add_row(label, *values)
     console.print(table)
     console.print(f"report:   {result.report}")

@@ -19,7 +19,7 @@ import numpy as np
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
 from scanplan.planners import Planner, make_planner, plan_path
-from scanplan.report.html import TABLE_ROWS, PlannerResult, _lookup, write_html_report
+from scanplan.report.html import PlannerResult, write_html_report
 from scanplan.sensor import PRESETS, SensorSpec
 from scanplan.swaths import plan_swaths
 from scanplan.trajectory import Trajectory, atomic_write_text, write_csv
@@ -36,17 +36,6 @@ class DemoResult:
     program: Path
     program_error_m: float
     seconds: float
-
-
-def metrics_rows(metrics: dict[str, dict]) -> list[tuple[str, list[str]]]:
-    """The metrics table as text rows, from the same JSON and formats as the HTML report."""
-    rows = []
-    for label, path, fmt in TABLE_ROWS:
-        values = [_lookup(m, path) for m in metrics.values()]
-        if all(v is None for v in values):
-            continue
-        rows.append((label, [fmt.format(v) if isinstance(v, int | float) else "–" for v in values]))
-    return rows
 
 
 def run_demo(

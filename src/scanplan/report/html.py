@@ -17,6 +17,7 @@ import numpy as np
 
 from scanplan.cloud import PointCloud
 from scanplan.part import Part
+from scanplan.report.table import lookup, table_rows
 from scanplan.trajectory import Trajectory, atomic_write_text
 
 # Enough for a smooth picture, small enough that the file stays a few MB.
@@ -36,47 +37,12 @@ class PlannerResult:
     metrics: dict
 
 
-# Rows of the metrics table: (label, path into the metrics dict, format).
-TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
-    ("profiles", ("profiles",), "{:.0f}"),
-    ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
-    ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),
-    ("p95 |distance error| (mm)", ("distance_error_mm", "p95_abs"), "{:.3f}"),
-    ("mean orientation error (°)", ("orientation_error_deg", "mean"), "{:.2f}"),
-    ("p95 orientation error (°)", ("orientation_error_deg", "p95"), "{:.2f}"),
-    ("points in range", ("in_range_fraction",), "{:.1%}"),
-    ("coverage", ("coverage_fraction",), "{:.1%}"),
-    ("mean spacing (mm)", ("spacing_mm", "mean"), "{:.3f}"),
-    ("spacing CV", ("spacing_mm", "cv"), "{:.3f}"),
-    ("largest gap (mm)", ("spacing_mm", "max_gap"), "{:.2f}"),
-    ("backward steps", ("spacing_mm", "backward_steps"), "{:.0f}"),
-    ("path length (mm)", ("path_length_mm",), "{:.0f}"),
-    ("cycle time (s)", ("cycle_time_s",), "{:.1f}"),
-    ("plan time (s)", ("plan_time_s",), "{:.2f}"),
-    ("mean reward", ("reward", "mean"), "{:.4f}"),
-]
-
-
-def _lookup(metrics: dict, path: tuple[str, ...]):
-    value = metrics
-    for key in path:
-        if not isinstance(value, dict) or key not in value:
-            return None
-        value = value[key]
-    return value
-
-
 def metrics_table_html(results: list[PlannerResult]) -> str:
     head = "".join(f"<th>{html.escape(r.name)}</th>" for r in results)
-    rows = []
-    for label, path, fmt in TABLE_ROWS:
-        values = [_lookup(r.metrics, path) for r in results]
-        if all(v is None for v in values):
-            continue
-        cells = "".join(
-            f"<td>{fmt.format(v) if isinstance(v, int | float) else '–'}</td>" for v in values
-        )
-        rows.append(f"<tr><th>{html.escape(label)}</th>{cells}</tr>")
+    rows = [
+        f"<tr><th>{html.escape(label)}</th>" + "".join(f"<td>{v}</td>" for v in values) + "</tr>"
+        for label, values in table_rows([r.metrics for r in results])
+    ]
     return f"<table><tr><th>metric</th>{head}</tr>{''.join(rows)}</table>"
 
 
@@ -254,7 +220,7 @@ def write_html_report(
         "<h2>Scan quality</h2>",
         metrics_table_html(results),
     ]
-    coverage_note = _lookup(results[0].metrics, ("coverage_definition",))
+    coverage_note = lookup(results[0].metrics, ("coverage_definition",))
     if coverage_note:
         sections.append(f"<p class='note'>Coverage: {html.escape(str(coverage_note))}</p>")
     for note in notes or []:

@@ -13,6 +13,7 @@ import numpy as np
 
 from scanplan.cloud import PointCloud
 from scanplan.metrics import Metrics
+from scanplan.report.table import table_rows
 
 MAX_PLOT_POINTS = 120_000
 DISTANCE_CMAP = "RdBu_r"  # diverging: too far red, too close blue, W_d white
@@ -164,32 +165,6 @@ def plot_comparison(
     return path
 
 
-# Rows of the Markdown table: (label, key path in Metrics.to_json_dict(), format).
-TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
-    ("profiles", ("profiles",), "{:.0f}"),
-    ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
-    ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),
-    ("p95 |distance error| (mm)", ("distance_error_mm", "p95_abs"), "{:.3f}"),
-    ("mean per-profile |D − W_d| (mm)", ("distance_error_mm", "profile_mean_abs"), "{:.3f}"),
-    ("mean orientation error (°)", ("orientation_error_deg", "mean"), "{:.2f}"),
-    ("p95 orientation error (°)", ("orientation_error_deg", "p95"), "{:.2f}"),
-    ("points in range", ("in_range_fraction",), "{:.1%}"),
-    ("valid points", ("valid_fraction",), "{:.1%}"),
-    ("coverage", ("coverage_fraction",), "{:.1%}"),
-    ("mean spacing Δs (mm)", ("spacing_mm", "mean"), "{:.3f}"),
-    ("spacing CV", ("spacing_mm", "cv"), "{:.3f}"),
-    ("largest gap (mm)", ("spacing_mm", "max_gap"), "{:.2f}"),
-    ("backward steps", ("spacing_mm", "backward_steps"), "{:.0f}"),
-    ("path length (mm)", ("path_length_mm",), "{:.0f}"),
-    ("cycle time (s)", ("cycle_time_s",), "{:.1f}"),
-    ("plan time (s)", ("plan_time_s",), "{:.2f}"),
-    ("mean reward", ("reward", "mean"), "{:.4f}"),
-    ("R_D", ("reward", "r_d"), "{:.4f}"),
-    ("R_α", ("reward", "r_alpha"), "{:.4f}"),
-    ("R_Δs", ("reward", "r_delta_s"), "{:.4f}"),
-]
-
-
 def metrics_table_markdown(metrics: Sequence[Metrics], labels: Sequence[str] | None = None) -> str:
     """One column per trajectory, one row per metric."""
     if not metrics:
@@ -200,12 +175,6 @@ def metrics_table_markdown(metrics: Sequence[Metrics], labels: Sequence[str] | N
         "| metric | " + " | ".join(names) + " |",
         "|---|" + "---:|" * len(names),
     ]
-    for label, path, fmt in TABLE_ROWS:
-        cells = []
-        for d in dicts:
-            value = d
-            for key in path:
-                value = value[key]
-            cells.append(fmt.format(value))
+    for label, cells in table_rows(dicts):
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -1,0 +1,56 @@
+"""The metrics table, defined once: the CLI's printed table, the Markdown file and the HTML
+report all show these rows, formatted the same way, from `Metrics.to_json_dict()`."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+# (label, key path in Metrics.to_json_dict(), format)
+TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
+    ("profiles", ("profiles",), "{:.0f}"),
+    ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
+    ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),
+    ("p95 |distance error| (mm)", ("distance_error_mm", "p95_abs"), "{:.3f}"),
+    ("mean per-profile |D − W_d| (mm)", ("distance_error_mm", "profile_mean_abs"), "{:.3f}"),
+    ("mean orientation error (°)", ("orientation_error_deg", "mean"), "{:.2f}"),
+    ("p95 orientation error (°)", ("orientation_error_deg", "p95"), "{:.2f}"),
+    ("points in range", ("in_range_fraction",), "{:.1%}"),
+    ("valid points", ("valid_fraction",), "{:.1%}"),
+    ("coverage", ("coverage_fraction",), "{:.1%}"),
+    ("mean spacing Δs (mm)", ("spacing_mm", "mean"), "{:.3f}"),
+    ("spacing CV", ("spacing_mm", "cv"), "{:.3f}"),
+    ("largest gap (mm)", ("spacing_mm", "max_gap"), "{:.2f}"),
+    ("backward steps", ("spacing_mm", "backward_steps"), "{:.0f}"),
+    ("path length (mm)", ("path_length_mm",), "{:.0f}"),
+    ("cycle time (s)", ("cycle_time_s",), "{:.1f}"),
+    ("plan time (s)", ("plan_time_s",), "{:.2f}"),
+    ("mean reward", ("reward", "mean"), "{:.4f}"),
+    ("R_D", ("reward", "r_d"), "{:.4f}"),
+    ("R_α", ("reward", "r_alpha"), "{:.4f}"),
+    ("R_Δs", ("reward", "r_delta_s"), "{:.4f}"),
+]
+MISSING = "–"
+
+
+def lookup(metrics: dict[str, Any], path: tuple[str, ...]) -> Any:
+    """The value at `path`, or None where a dictionary lacks it."""
+    value: Any = metrics
+    for key in path:
+        if not isinstance(value, dict) or key not in value:
+            return None
+        value = value[key]
+    return value
+
+
+def table_rows(metrics: Sequence[dict[str, Any]]) -> list[tuple[str, list[str]]]:
+    """(label, formatted value per trajectory) for every row at least one trajectory has."""
+    rows = []
+    for label, path, fmt in TABLE_ROWS:
+        values = [lookup(m, path) for m in metrics]
+        if all(v is None for v in values):
+            continue
+        rows.append(
+            (label, [fmt.format(v) if isinstance(v, int | float) else MISSING for v in values])
+        )
+    return rows
