@@ -74,6 +74,8 @@ def load_mesh_file(path: str | Path, units: str = "mm") -> trimesh.Trimesh:
     path = Path(path)
     if units not in UNITS_TO_MM:
         raise ValueError(f"unknown units {units!r}: use one of {', '.join(UNITS_TO_MM)}")
+    if path.is_dir():
+        raise ValueError(f"part file {path} is a directory, not a mesh file")
     if not path.is_file():
         raise ValueError(f"part file {path} does not exist")
     if path.suffix.lower() not in MESH_SUFFIXES:
