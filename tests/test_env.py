@@ -84,6 +84,7 @@ def test_seeded_rollouts_are_identical():
         (390.0, -0.1, (1.0, -0.3, -0.9), (1.0, -0.3, -0.9)),
         (400.0, 0.0, (0.0, -1.0, -1.0), (0.0, 0.0, 0.0)),  # D−W_d ≥ 0 and α ≥ 0 at equality
         (400.0, 0.0, (0.0, 2.0, 2.0), (0.0, 1.0, 1.0)),  # outside [-1, 1]: clipped
+        (math.nan, math.nan, (0.3, 0.8, -0.8), (0.3, 0.0, 0.0)),  # no valid point: hold
     ],
 )
 def test_dynamic_action_limitation_is_the_papers(plate, d, alpha, action, expected):
@@ -129,7 +130,7 @@ def test_flat_plate_aligned_half_millimetre_step_has_zero_reward(plate):
 def test_reaching_the_pass_end_terminates(plate):
     env = plate_env(plate)
     env.reset(seed=0)
-    env.state[0] = env.s_end_mm - 0.3
+    env.state[0] = env.s_end_mm - 0.3  # pitch 0: the scan advance is the sensor s
     _, _, term, trunc, _ = env.step(np.array([0.5, 0.0, 0.0]))
     assert term and not trunc
 
@@ -145,7 +146,7 @@ def test_losing_the_surface_charges_the_remaining_nominal_steps(plate):
         if term or trunc:
             break
     assert term and not trunc and steps < 100
-    remaining = math.ceil((env.s_end_mm - env.state[0]) / 0.5)
+    remaining = math.ceil((env.s_end_mm - env.progress_mm) / 0.5)
     assert remaining > 1000
     assert info["lost_penalty"] == -min(remaining, env.step_limit - steps)
     # Never cheaper than finishing: at worst −1 per remaining step.

@@ -28,6 +28,7 @@ def tiny_config(out, **kw) -> TrainConfig:
         "progress_bar": False,
         "command": "pytest tiny",
         "env": {"fan_points": 64, "noise": False, "segment_mm": (20.0, 40.0)},
+        "bc_samples": 200,  # exercise the warm start too
     }
     return TrainConfig(**(base | kw))
 

@@ -256,6 +256,9 @@ def train_cmd(
     init_advance: Annotated[
         float | None, typer.Option(help="initial mean Δy action (0.5 = Δs_opt); default none")
     ] = None,
+    bc_samples: Annotated[
+        int, typer.Option(help="warm start: behaviour-clone a P-controller on N states first")
+    ] = 0,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
 ):
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
@@ -294,6 +297,7 @@ def train_cmd(
         n_steps=max(2048 // n_envs, 8),
         log_std_init=stds[0] if len(stds) == 1 else stds,
         init_advance=init_advance,
+        bc_samples=bc_samples,
         env={
             "fan_points": fan_points,
             "noise": False,

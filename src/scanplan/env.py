@@ -84,7 +84,8 @@ def random_part(rng: np.random.Generator) -> Part:
     z = np.clip(z - z.min() + 10.0, 10.0, None)
     ys = np.linspace(-width / 2, width / 2, 9)
     cross = math.tan(math.radians(rng.uniform(-10.0, 10.0)))
-    z_top = z[None, :] + cross * (ys[:, None] + width / 2)
+    z_top = z[None, :] + cross * ys[:, None]
+    z_top += 10.0 - z_top.min()
     return part_from_mesh(heightfield_solid(xs, ys, z_top), name="random")
 
 
@@ -104,7 +105,7 @@ class SwathScanEnv(gym.Env):
     | 1     | Δz     | along z_s, + = towards the part  | [0, max] if D ≥ W_d else [−max, 0]    |
     | 2     | Δθ     | pitch about x_s                  | [0, max] if α ≥ 0 else [−max, 0]      |
 
-    Where the profile has no valid point, D and α are unknown and the step is not limited.
+    Where the profile has no valid point, D and α are unknown: Δz and Δθ are held at 0.
 
     ## Observation space
 
@@ -144,8 +145,9 @@ class SwathScanEnv(gym.Env):
 
     ## Episode end
 
-    Terminated when the sensor's advance along u passes the segment's end P_fin, or when the
-    surface is lost for good; truncated after `max_episode_steps` (default 3 x nominal steps).
+    Terminated when the scan's advance along u (the beam at W_d, `progress_mm`) passes the
+    segment's end P_fin, or when the surface is lost for good; truncated after
+    `max_episode_steps` (default 3 x nominal steps).
 
     ## Version history
 
@@ -309,19 +311,28 @@ class SwathScanEnv(gym.Env):
         """Scale an action in [-1, 1]^3 to (Δy mm, Δz mm, Δθ rad) and apply the paper's
         dynamic action limitation from the current D and α (eqs. clipActionD/N)."""
         dy, dz, dth = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * self.limits
-        if np.isfinite(self.d_mm):
-            dz = (
-                np.clip(dz, 0.0, self.limits[1])
-                if self.d_mm >= self.sensor.working_distance_mm
-                else np.clip(dz, -self.limits[1], 0.0)
-            )
-        if np.isfinite(self.alpha_rad):
-            dth = (
-                np.clip(dth, 0.0, self.limits[2])
-                if self.alpha_rad >= 0
-                else np.clip(dth, -self.limits[2], 0.0)
-            )
+        wd = self.sensor.working_distance_mm
+        # No valid point: D and α are unknown, so neither sign is known to be safe: hold.
+        lo_z, hi_z = (
+            (0.0, 0.0)
+            if not np.isfinite(self.d_mm)
+            else ((0.0, self.limits[1]) if self.d_mm >= wd else (-self.limits[1], 0.0))
+        )
+        lo_t, hi_t = (
+            (0.0, 0.0)
+            if not np.isfinite(self.alpha_rad)
+            else ((0.0, self.limits[2]) if self.alpha_rad >= 0 else (-self.limits[2], 0.0))
+        )
+        dz, dth = float(np.clip(dz, lo_z, hi_z)), float(np.clip(dth, lo_t, hi_t))
         return np.array([dy, dz, dth])
+
+    @property
+    def progress_mm(self) -> float:
+        """Advance of the scan along u: where the beam meets the working distance (a pitched
+        sensor looks W_d·sinθ behind itself; ending on the sensor's own advance would leave
+        the end of the pass unscanned)."""
+        s, _, th = self.state
+        return float(s - self.sensor.working_distance_mm * math.sin(th))
 
     @staticmethod
     def apply_step(state: np.ndarray, step: np.ndarray) -> np.ndarray:
@@ -353,7 +364,7 @@ class SwathScanEnv(gym.Env):
         reward = float(terms["reward"])
         self.steps += 1
         self.invalid_run = 0 if valid.any() else self.invalid_run + 1
-        terminated = bool(self.state[0] >= self.s_end_mm)
+        terminated = bool(self.progress_mm >= self.s_end_mm)
         truncated = self.steps >= self.step_limit
         lost_penalty = 0.0
         if (
@@ -361,7 +372,7 @@ class SwathScanEnv(gym.Env):
             and self.lost_patience is not None
             and self.invalid_run >= self.lost_patience
         ):
-            remaining = (self.s_end_mm - self.state[0]) / self.reward_config.delta_s_opt_mm
+            remaining = (self.s_end_mm - self.progress_mm) / self.reward_config.delta_s_opt_mm
             lost_penalty = -float(min(max(math.ceil(remaining), 0), self.step_limit - self.steps))
             terminated, truncated = True, False
         info = {

@@ -58,6 +58,7 @@ class TrainConfig:
     activation: str = "relu"
     log_std_init: float | tuple[float, ...] = 0.0  # one per action: (Δy, Δz, Δθ)
     init_advance: float | None = None  # initial mean Δy action (0.5 = Δs_opt at Δy_max 1 mm)
+    bc_samples: int = 0  # > 0: behaviour-clone `expert_action` on this many states first
     env: dict[str, Any] = field(
         default_factory=lambda: {
             "fan_points": 128,
@@ -89,9 +90,9 @@ class TrainResult:
 # ---- environments -------------------------------------------------------------------------
 
 
-def _make_env(parts: tuple[str, ...], env_kwargs: dict[str, Any]):
+def _make_env(parts: tuple[Any, ...], env_kwargs: dict[str, Any]):
     """A picklable factory for one worker process: torch on one thread (SB3's default on
-    this machine runs several times slower), parts loaded in the worker."""
+    this machine runs several times slower), parts (names or `Part`s) loaded in the worker."""
 
     def factory():
         import torch
@@ -103,7 +104,8 @@ def _make_env(parts: tuple[str, ...], env_kwargs: dict[str, Any]):
         kwargs = dict(env_kwargs)
         if kwargs.get("segment_mm") is not None:
             kwargs["segment_mm"] = tuple(kwargs["segment_mm"])
-        return SwathScanEnv(parts=[load_part(p) for p in parts], **kwargs)
+        loaded = [load_part(p) if isinstance(p, str) else p for p in parts]
+        return SwathScanEnv(parts=loaded, **kwargs)
 
     return factory
 
@@ -142,7 +144,7 @@ def _batched_class():
             groups: dict[int, list[int]] = {}
             for i, (env, a) in enumerate(zip(self.envs, self._actions, strict=True)):
                 env.begin_step(a)
-                groups.setdefault(id(env.sim), []).append(i)
+                groups.setdefault(id(env.part), []).append(i)  # one sim per part
             profiles: list[Any] = [None] * self.num_envs
             for idx in groups.values():
                 first = self.envs[idx[0]]
@@ -198,7 +200,16 @@ def make_vec_env(config: TrainConfig):
     """`vec_env="batched"`: n_envs passes stepped together in this process (default, fastest
     here); `"subproc"`: one env per worker process (SB3 SubprocVecEnv, Monitor-wrapped)."""
     if config.vec_env == "batched":
-        envs = [_make_env(config.parts, config.env)() for _ in range(config.n_envs)]
+        # Procedural parts are drawn once and shared, so the batch still measures per part.
+        from scanplan.env import random_part
+
+        env_kwargs = dict(config.env)
+        n_random = int(env_kwargs.pop("procedural_parts", 0) or 0)
+        parts = (
+            *config.parts,
+            *(random_part(np.random.default_rng([config.seed, k])) for k in range(n_random)),
+        )
+        envs = [_make_env(parts, env_kwargs)() for _ in range(config.n_envs)]
         vec = _batched_class()(envs)
         vec.seed(config.seed)
         return vec
@@ -396,6 +407,58 @@ def save_policy(model, out_dir: Path, config: TrainConfig, training: dict[str, A
     return path
 
 
+# ---- behaviour-cloning warm start (beyond the paper) ---------------------------------------
+
+
+def expert_action(env, k_z: float = 0.3, k_theta: float = 0.1, theta_rate_deg: float = 0.08):
+    """A proportional controller in `env`'s action units, from its current D and α only:
+    Δz = k_z (D − W_d), Δθ = k_θ α (capped so the footprint, W_d·Δθ away, moves less than a
+    spacing), Δy = Δs_opt plus the footprint shift of that pitch (at least Δs_opt/2). It
+    obeys the paper's action limitation by construction; the teacher of the warm start."""
+    wd = env.sensor.working_distance_mm
+    d, a = env.d_mm, env.alpha_rad
+    known = np.isfinite(d) and np.isfinite(a)
+    dz = float(np.clip(k_z * (d - wd), -env.limits[1], env.limits[1])) if known else 0.0
+    cap = math.radians(theta_rate_deg)
+    dth = float(np.clip(k_theta * a, -cap, cap)) if known else 0.0
+    ds_opt = env.reward_config.delta_s_opt_mm
+    dy = max(ds_opt + (d if known else wd) * dth, 0.5 * ds_opt)  # always advance
+    return np.clip(np.array([dy, dz, dth]) / env.limits, -1.0, 1.0)
+
+
+def behaviour_clone(model, vec, samples: int, seed: int, epochs: int = 20) -> float:
+    """Fit the actor's mean to `expert_action` on states visited by the expert with a little
+    action noise (so the states around its path are seen too); returns the final MSE."""
+    import torch
+
+    rng = np.random.default_rng(seed)
+    obs = vec.reset()
+    xs, ys = [], []
+    noise = np.array([0.1, 0.1, 0.03])
+    while len(xs) * vec.num_envs < samples:
+        expert = np.stack([expert_action(env) for env in vec.envs])
+        xs.append(obs)
+        ys.append(expert)
+        act = np.clip(expert + rng.normal(0.0, 1.0, expert.shape) * noise, -1.0, 1.0)
+        obs, _, _, _ = vec.step(act.astype(np.float32))
+    x = torch.as_tensor(np.concatenate(xs), dtype=torch.float32)
+    y = torch.as_tensor(np.concatenate(ys), dtype=torch.float32)
+    policy = model.policy
+    params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
+    opt = torch.optim.Adam(params, lr=1e-3)
+    gen = torch.Generator().manual_seed(seed)
+    loss = torch.tensor(0.0)
+    for _ in range(epochs):
+        for idx in torch.randperm(len(x), generator=gen).split(256):
+            mean = policy.action_net(policy.mlp_extractor.forward_actor(x[idx]))
+            loss = torch.nn.functional.mse_loss(mean, y[idx])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    model._last_obs = None  # SB3 resets the envs at learn()
+    return float(loss.detach())
+
+
 # ---- training -----------------------------------------------------------------------------
 
 
@@ -424,6 +487,7 @@ def train(config: TrainConfig) -> TrainResult:
     (out / "checkpoints").mkdir(exist_ok=True)
     start = time.perf_counter()
     wall_offset = 0.0
+    bc_mse = math.nan
     vec = make_vec_env(config)
     try:
         if config.resume:
@@ -466,6 +530,10 @@ def train(config: TrainConfig) -> TrainResult:
                 # that standing still at a flat start beats meeting the ramps ahead.
                 if config.init_advance is not None:
                     model.policy.action_net.bias[0] = config.init_advance
+            if config.bc_samples > 0:
+                if config.vec_env != "batched":
+                    raise ValueError("behaviour cloning needs the batched vector env")
+                bc_mse = behaviour_clone(model, vec, config.bc_samples, config.seed)
         remaining = config.total_timesteps - model.num_timesteps
         if remaining > 0:
             callback = _callback_class()(out, config.checkpoint_every_updates, start, wall_offset)
@@ -492,6 +560,7 @@ def train(config: TrainConfig) -> TrainResult:
         "timesteps": int(model.num_timesteps),
         "wall_time_s": round(wall, 1),
         "final_metrics_last5_updates": final,
+        "behaviour_cloning_mse": bc_mse,
         "config": cfg,
         "machine_cores": __import__("os").cpu_count(),
     }
