@@ -8,6 +8,7 @@ never unpickles code. The packaged default lives in `scanplan/policies/default/`
 from __future__ import annotations
 
 import json
+import pickle
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,7 +73,14 @@ class RLPlanner:
             arch = config["architecture"]
             actor = build_actor(arch)
             actor.load_state_dict(load_weights(json_path.parent / config["weights"]))
-        except (OSError, KeyError, TypeError, ValueError, RuntimeError) as exc:
+        except (
+            OSError,
+            KeyError,
+            TypeError,
+            ValueError,
+            RuntimeError,
+            pickle.UnpicklingError,
+        ) as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise ValueError(f"policy {json_path} cannot be loaded: {first}") from None
         actor.eval()

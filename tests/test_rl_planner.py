@@ -1,0 +1,60 @@
+"""The rl planner: loads the shipped policy without unpickling code and plans sound passes."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
+from scanplan.quantities import advance, mean_distance, signed_alpha
+from scanplan.sensor import LineProfilometer, SensorSpec
+from test_env import plate, plate_swath  # noqa: F401  (fixture)
+
+
+def test_shipped_policy_files_are_weights_and_json():
+    meta = json.loads((DEFAULT_POLICY / "policy.json").read_text())
+    weights = DEFAULT_POLICY / meta["weights"]
+    assert weights.stat().st_size < 100_000  # a [64, 64] MLP: a few tens of KB at most
+    for key in ("command", "seed", "wall_time_s", "final_metrics_last5_updates"):
+        assert key in meta["training"]
+    assert meta["training"]["command"].startswith("scanplan train")
+    state = torch.load(weights, weights_only=True)
+    assert all(isinstance(v, torch.Tensor) for v in state.values())
+
+
+def test_default_policy_follows_a_flat_plate(plate):  # noqa: F811
+    """No backward step, spacing near Δs_opt, D near W_d, aligned, over a whole pass."""
+    sensor = SensorSpec().without_noise()
+    swath = plate_swath()
+    traj = RLPlanner.from_file(None).plan(plate, swath, sensor)
+    assert traj.scanning.all() and (traj.swath == swath.index).all()
+    assert np.all(np.diff(traj.positions_mm[:, 0]) > 0)
+    scan = LineProfilometer(plate, sensor.with_points(256)).measure_many(traj.poses)
+    d = mean_distance(scan.z_sensor, scan.valid)
+    a = signed_alpha(scan.normals_part, scan.valid, traj.poses)
+    ds = advance(
+        scan.points_part[:-1], scan.valid[:-1], scan.points_part[1:], scan.valid[1:], swath.u
+    )
+    assert np.isfinite(ds).mean() > 0.99  # the last station may look past the plate's end
+    ds, d, a = ds[np.isfinite(ds)], d[np.isfinite(d)], a[np.isfinite(a)]
+    assert np.all(ds > 0)
+    assert abs(ds.mean() - 0.5) < 0.1 and ds.std() / ds.mean() < 0.25
+    assert np.abs(d - 400.0).mean() < 2.0
+    assert np.degrees(np.abs(a)).mean() < 2.0
+    assert 500 < len(traj) < 2000  # the plate is ~600 mm long: ~1200 stations
+
+
+def test_missing_or_unsafe_policy_is_a_value_error(tmp_path):
+    with pytest.raises(ValueError, match="no policy.json"):
+        RLPlanner.from_file(tmp_path / "nowhere")
+    bad = tmp_path / "bad"
+    shutil.copytree(DEFAULT_POLICY, bad)
+    meta = json.loads((bad / "policy.json").read_text())
+    # A pickled object (not plain tensors) must be refused, never executed.
+    torch.save({"0.weight": np.dtype}, bad / meta["weights"])
+    with pytest.raises(ValueError, match="cannot be loaded"):
+        RLPlanner.from_file(bad)
