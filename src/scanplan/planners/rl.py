@@ -54,11 +54,17 @@ class RLPlanner:
 
     fan_points: columns of the planning sensor. More than training's 128: on narrow curved
     parts (the drone) 128 columns put D off by ~1 mm; 512 agree with the full fan to ~0.2 mm.
+    stall_window: stall guard. Out of its training range (e.g. pitched > 30° on a curling
+    sheet edge) a policy can pitch on while Δy only cancels the footprint's backward swing,
+    and the pass stalls until truncation. If the scan advanced less than a quarter spacing
+    per step over the last `stall_window` steps, that step holds the pitch and advances by
+    Δs_opt (counted in `Trajectory.meta["stall_overrides"]`); 0 switches it off.
     """
 
     actor: nn.Sequential
     config: dict[str, Any] = field(default_factory=dict)
     fan_points: int = 512
+    stall_window: int = 20
     name: str = "rl"
 
     @classmethod
@@ -117,10 +123,19 @@ class RLPlanner:
         env = self.make_env(part, swath, sensor)
         obs, _ = env.reset(seed=0, options={"swath": 0})
         poses = [swath.pose(*env.state)]
+        progress = [env.progress_mm]
+        ds_opt = env.reward_config.delta_s_opt_mm
+        overrides = 0
         done = False
         while not done:
-            obs, _, terminated, truncated, _ = env.step(self.act(obs))
+            action = self.act(obs)
+            w = self.stall_window
+            if w and len(progress) > w and progress[-1] - progress[-1 - w] < 0.25 * ds_opt * w:
+                action[0], action[2] = ds_opt / env.limits[0], 0.0
+                overrides += 1
+            obs, _, terminated, truncated, _ = env.step(action)
             poses.append(swath.pose(*env.state))
+            progress.append(env.progress_mm)
             done = terminated or truncated
         poses_arr = np.stack(poses)
         return Trajectory(
@@ -129,4 +144,5 @@ class RLPlanner:
             np.ones(len(poses_arr), bool),
             plan_time_s=time.perf_counter() - start,
             planner=self.name,
+            meta={"stall_overrides": overrides},
         )
