@@ -290,6 +290,8 @@ class SwathScanEnv(gym.Env):
         return self._align_at(s0)
 
     def _align_at(self, s0: float) -> np.ndarray:
+        """Pitch by α and put the sensor W_d from the surface along the new beam, keeping the
+        beam on the surface at advance s0 (so the scan starts at P_ini, not W_d·sinθ later)."""
         s, h, th = s0, 0.0, 0.0
         wd = self.sensor.working_distance_mm
         for _ in range(self.align_iterations):
@@ -300,10 +302,9 @@ class SwathScanEnv(gym.Env):
                 if not hit.any():
                     break
                 d, a = float(prof.true_z_sensor[hit].mean()), 0.0
+            surface_h = h - d * math.cos(th)
             th += a
-            err = d - wd
-            s -= err * math.sin(th)
-            h -= err * math.cos(th)
+            s, h = s0 + wd * math.sin(th), surface_h + wd * math.cos(th)
         return np.array([s, h, th])
 
     # ---- dynamics -------------------------------------------------------------------------
