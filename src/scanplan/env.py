@@ -179,6 +179,7 @@ class SwathScanEnv(gym.Env):
         lost_patience: int | None = 150,
         max_episode_steps: int | None = None,
         align_iterations: int = 4,
+        start_pitch_max_rad: float = math.radians(15.0),
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal)."""
@@ -202,6 +203,7 @@ class SwathScanEnv(gym.Env):
         self.lost_patience = lost_patience
         self.max_episode_steps = max_episode_steps
         self.align_iterations = align_iterations
+        self.start_pitch_max_rad = start_pitch_max_rad
         n_obs = (3 if use_position else 0) + 4 + (2 * len(LOOKAHEAD_MM) if lookahead else 0)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (n_obs,), np.float32)
@@ -303,7 +305,9 @@ class SwathScanEnv(gym.Env):
                     break
                 d, a = float(prof.true_z_sensor[hit].mean()), 0.0
             surface_h = h - d * math.cos(th)
-            th += a
+            # At a part's very end the mean normal is its end wall or nose: do not start
+            # facing it (the pass scans the top; the agent pitches on from there).
+            th = float(np.clip(th + a, -self.start_pitch_max_rad, self.start_pitch_max_rad))
             s, h = s0 + wd * math.sin(th), surface_h + wd * math.cos(th)
         return np.array([s, h, th])
 
