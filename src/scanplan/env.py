@@ -433,7 +433,7 @@ class SwathScanEnv(gym.Env):
         n *= np.where(n[:, 2:3] < 0, -1.0, 1.0)
         n_mean = n.reshape(*hit.shape, 3).sum(1)
         pitch = np.arctan2(n_mean @ sw.u, np.maximum(n_mean[:, 2], 1e-9))
-        seen = hit.any(1)
+        seen: np.ndarray = np.asarray(hit.any(axis=1))
         z = np.where(seen, z, z[0] if seen[0] else 0.0)
         pitch = np.where(seen, pitch, th)
         dh = (z[1:] - z[0]) / (self.sensor.z_range_mm / 2) if seen[0] else 0 * z[1:]

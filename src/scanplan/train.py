@@ -433,7 +433,8 @@ def behaviour_clone(model, vec, samples: int, seed: int, epochs: int = 20) -> fl
 
     rng = np.random.default_rng(seed)
     obs = vec.reset()
-    xs, ys = [], []
+    xs: list[np.ndarray] = []
+    ys: list[np.ndarray] = []
     noise = np.array([0.1, 0.1, 0.03])
     while len(xs) * vec.num_envs < samples:
         expert = np.stack([expert_action(env) for env in vec.envs])
@@ -529,7 +530,7 @@ def train(config: TrainConfig) -> TrainResult:
                 # Start from the nominal advance: a policy that starts at Δy ≈ 0 first learns
                 # that standing still at a flat start beats meeting the ramps ahead.
                 if config.init_advance is not None:
-                    model.policy.action_net.bias[0] = config.init_advance
+                    model.policy.action_net.bias[0] = config.init_advance  # type: ignore[operator]
             if config.bc_samples > 0:
                 if config.vec_env != "batched":
                     raise ValueError("behaviour cloning needs the batched vector env")
