@@ -58,3 +58,38 @@ def test_missing_or_unsafe_policy_is_a_value_error(tmp_path):
     torch.save({"0.weight": np.dtype}, bad / meta["weights"])
     with pytest.raises(ValueError, match="cannot be loaded"):
         RLPlanner.from_file(bad)
+
+
+class _PitchSwing(RLPlanner):
+    """Scripted actions: pitch the beam forward for 10 steps, then back at full rate with no
+    Δy — the back swing moves the footprint ~7 mm backwards per step."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        self.calls = getattr(self, "calls", 0) + 1
+        phase = (self.calls - 1) // 10 % 2
+        return np.array([0.5, 0.0, -1.0 if phase == 0 else 1.0])
+
+
+def _plate_advances(plate, swath, traj):  # noqa: F811
+    scan = LineProfilometer(plate, SensorSpec().without_noise().with_points(256)).measure_many(
+        traj.poses
+    )
+    ds = advance(
+        scan.points_part[:-1], scan.valid[:-1], scan.points_part[1:], scan.valid[1:], swath.u
+    )
+    return ds[np.isfinite(ds)]
+
+
+def test_forward_only_guard_removes_backward_steps(plate):  # noqa: F811
+    sensor = SensorSpec().without_noise()
+    swath = plate_swath()
+    shipped = RLPlanner.from_file(None)
+    unguarded = _PitchSwing(shipped.actor, shipped.config, min_advance=None, stall_window=0)
+    ds_free = _plate_advances(plate, swath, unguarded.plan(plate, swath, sensor))
+    assert (ds_free < 0).sum() > 10  # the scripted swing does go backwards
+
+    guarded = _PitchSwing(shipped.actor, shipped.config, stall_window=0)
+    traj = guarded.plan(plate, swath, sensor)
+    ds = _plate_advances(plate, swath, traj)
+    assert np.all(ds > 0)
+    assert traj.meta["backward_overrides"] > 10

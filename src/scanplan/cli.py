@@ -160,6 +160,9 @@ def plan_cmd(
         f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
         f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
     )
+    if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
+        # The rl planner's guards replaced some of the policy's steps: say how many.
+        typer.echo("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()))
 
 
 @app.command("evaluate")

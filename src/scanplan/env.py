@@ -267,14 +267,15 @@ class SwathScanEnv(gym.Env):
         self.step_limit = self.max_episode_steps or 3 * self.nominal_steps + 10
         self.state = self._aligned_start(s0)  # (s, h, theta)
         self.start_state = self.state.copy()
-        self.profile = self._measure(self.state)
+        self.profile = self.measure_at(self.state)
         self.d_mm, self.alpha_rad = self._d_alpha(self.profile)
         self.delta_s_mm = float("nan")
         self.steps = 0
         self.invalid_run = 0
         return self._observation(), {"d_mm": self.d_mm, "alpha_rad": self.alpha_rad}
 
-    def _measure(self, state: np.ndarray) -> Profile:
+    def measure_at(self, state: np.ndarray) -> Profile:
+        """The profile the sensor takes at (s, h, θ) on the current swath."""
         return self.sim.measure(self.swath.pose(*state), self.np_random)
 
     def _d_alpha(self, profile: Profile) -> tuple[float, float]:
@@ -287,7 +288,7 @@ class SwathScanEnv(gym.Env):
         station in a camera shadow (behind a step) is skipped: try `step_mm` further on."""
         for k in range(tries):
             state = self._align_at(s0 + k * step_mm)
-            if self._measure(state).valid.any():
+            if self.measure_at(state).valid.any():
                 return state
         return self._align_at(s0)
 
@@ -297,7 +298,7 @@ class SwathScanEnv(gym.Env):
         s, h, th = s0, 0.0, 0.0
         wd = self.sensor.working_distance_mm
         for _ in range(self.align_iterations):
-            prof = self._measure(np.array([s, h, th]))
+            prof = self.measure_at(np.array([s, h, th]))
             d, a = self._d_alpha(prof)
             if not np.isfinite(d):  # out of the depth window: use the first hits
                 hit = np.isfinite(prof.true_z_sensor)
@@ -348,7 +349,7 @@ class SwathScanEnv(gym.Env):
         return np.array([s + dy - dz * math.sin(th), h - dz * math.cos(th), th + dth])
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        return self.finish_step(self._measure(self.begin_step(action)))
+        return self.finish_step(self.measure_at(self.begin_step(action)))
 
     def begin_step(self, action: np.ndarray) -> np.ndarray:
         """First half of `step`: apply the limited action; returns the new (s, h, θ).

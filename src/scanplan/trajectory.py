@@ -89,7 +89,19 @@ class Trajectory:
             scanning=np.concatenate([t.scanning for t in parts]),
             plan_time_s=float(sum(t.plan_time_s for t in parts)),
             planner=planner or parts[0].planner,
+            meta=_sum_counters([t.meta for t in parts]),
         )
+
+
+def _sum_counters(metas: list[dict]) -> dict:
+    """The integer counters of per-pass metadata (e.g. the rl planner's guard overrides),
+    summed over the passes."""
+    total: dict[str, int] = {}
+    for meta in metas:
+        for key, value in meta.items():
+            if isinstance(value, int):
+                total[key] = total.get(key, 0) + value
+    return total
 
 
 def poses_from_xyz_quat(xyz: np.ndarray, quat_wxyz: np.ndarray) -> np.ndarray:

@@ -68,4 +68,5 @@ def plan_path(part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swa
         traj.scanning,
         plan_time_s=time.perf_counter() - start,
         planner=planner.name,
+        meta=traj.meta,
     )

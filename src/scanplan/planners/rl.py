@@ -59,12 +59,20 @@ class RLPlanner:
     and the pass stalls until truncation. If the scan advanced less than a quarter spacing
     per step over the last `stall_window` steps, that step holds the pitch and advances by
     Δs_opt (counted in `Trajectory.meta["stall_overrides"]`); 0 switches it off.
+    min_advance: forward-only guard. A fast backward pitch swings the footprint back by
+    ~W_d·Δθ (7 mm per degree), more than Δy can make up, and the scan re-measures what it
+    has already measured (a backward step). Each step's profile is measured before it is
+    accepted; if it advanced less than `min_advance` × Δs_opt over the previous one, the
+    step is replaced by: hold the pitch, advance Δs_opt (counted in
+    `Trajectory.meta["backward_overrides"]`); None switches it off. Costs nothing when the
+    policy's step is accepted (its profile is the one the episode goes on with).
     """
 
     actor: nn.Sequential
     config: dict[str, Any] = field(default_factory=dict)
     fan_points: int = 512
     stall_window: int = 20
+    min_advance: float | None = 0.25
     name: str = "rl"
 
     @classmethod
@@ -118,6 +126,16 @@ class RLPlanner:
             **kwargs,
         )
 
+    def _went_back(self, env: Any, profile: Any, ds_opt: float) -> bool:
+        """Did `profile` advance less than min_advance·Δs_opt over the episode's last one?
+        (Unknown — no column valid in both — counts as not.)"""
+        from scanplan.quantities import advance
+
+        prev = env.profile
+        ds = advance(prev.points_part, prev.valid, profile.points_part, profile.valid, env.swath.u)
+        assert self.min_advance is not None
+        return bool(np.isfinite(ds) and ds < self.min_advance * ds_opt)
+
     def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
         start = time.perf_counter()
         env = self.make_env(part, swath, sensor)
@@ -125,15 +143,22 @@ class RLPlanner:
         poses = [swath.pose(*env.state)]
         progress = [env.progress_mm]
         ds_opt = env.reward_config.delta_s_opt_mm
-        overrides = 0
+        stall_overrides = backward_overrides = 0
         done = False
         while not done:
             action = self.act(obs)
             w = self.stall_window
             if w and len(progress) > w and progress[-1] - progress[-1 - w] < 0.25 * ds_opt * w:
                 action[0], action[2] = ds_opt / env.limits[0], 0.0
-                overrides += 1
-            obs, _, terminated, truncated, _ = env.step(action)
+                stall_overrides += 1
+            before = env.state.copy()
+            profile = env.measure_at(env.begin_step(action))
+            if self.min_advance is not None and self._went_back(env, profile, ds_opt):
+                env.state = before
+                action[0], action[2] = ds_opt / env.limits[0], 0.0
+                profile = env.measure_at(env.begin_step(action))
+                backward_overrides += 1
+            obs, _, terminated, truncated, _ = env.finish_step(profile)
             poses.append(swath.pose(*env.state))
             progress.append(env.progress_mm)
             done = terminated or truncated
@@ -144,5 +169,8 @@ class RLPlanner:
             np.ones(len(poses_arr), bool),
             plan_time_s=time.perf_counter() - start,
             planner=self.name,
-            meta={"stall_overrides": overrides},
+            meta={
+                "stall_overrides": stall_overrides,
+                "backward_overrides": backward_overrides,
+            },
         )
