@@ -4,6 +4,7 @@ the rl planner loads (without unpickling) and plans with; resuming continues the
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 
 import numpy as np
@@ -47,6 +48,10 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     # Plain tensors only: loadable with weights_only=True (no code is unpickled).
     state = torch.load(result.weights, weights_only=True)
     assert state["0.weight"].shape == (64, 7) and state["4.weight"].shape == (3, 64)
+
+    # TensorBoard event files exactly when TensorBoard is installed (an optional extra).
+    events = list((result.output_dir / "tensorboard").glob("**/events.out.tfevents.*"))
+    assert bool(events) == (importlib.util.find_spec("tensorboard") is not None)
 
     planner = RLPlanner.from_file(result.output_dir)
     traj = planner.plan(plate, plate_swath(), SensorSpec())

@@ -288,12 +288,21 @@ def _callback_class():
                     )
                     + "\n"
                 )
+            for key in ("reward_per_step", "r_d", "r_alpha", "r_delta_s"):
+                self.logger.record(f"scanplan/{key}", row[key])  # TensorBoard, if installed
             self.sums[:] = 0
             self.count, self.lost = 0, 0
             if self.update % self.every == 0:
                 self.model.save(self.out / "checkpoints" / f"ppo_{self.num_timesteps}.zip")
 
     return TrainingLog
+
+
+def _tensorboard_dir(out: Path) -> str | None:
+    """`out/tensorboard` if TensorBoard is installed (optional: `pip install tensorboard`)."""
+    import importlib.util
+
+    return str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
 
 
 def read_log(path: str | Path) -> dict[str, np.ndarray]:
@@ -494,7 +503,7 @@ def train(config: TrainConfig) -> TrainResult:
         if config.resume:
             resume = Path(config.resume)
             ckpt = _latest_checkpoint(resume)
-            model = PPO.load(ckpt, env=vec, device="cpu")
+            model = PPO.load(ckpt, env=vec, device="cpu", tensorboard_log=_tensorboard_dir(out))
             if resume.resolve() != out.resolve() and (resume / LOG_CSV).exists():
                 (out / LOG_CSV).write_text((resume / LOG_CSV).read_text())
             if (out / LOG_CSV).exists():
@@ -522,6 +531,7 @@ def train(config: TrainConfig) -> TrainResult:
                 seed=config.seed,
                 device="cpu",
                 verbose=0,
+                tensorboard_log=_tensorboard_dir(out),
             )
             # Per-action initial spread: a 1° pitch jump moves the footprint by W_d·Δθ ≈ 7 mm,
             # so exploring Δθ as widely as Δy ruins every Δs reward (capped at −1, no gradient).
