@@ -1,9 +1,11 @@
 """Simulator throughput vs a bare Embree first-hit cast of the same rays, in one run.
 
-Mesh: a wavy heightfield of >= 300k triangles. Prints medians over repeats and their ratios:
-- full profile (4096 columns, occlusion, noise) vs the bare cast, single-pose calls;
-- the same in one batch call (threads over the cores) vs single calls;
-- the batch vs the bare cast of all its rays in one call.
+Mesh: a wavy heightfield of >= 300k triangles. Prints the cost per profile (median over rounds
+in which every variant runs once) and the ratios:
+- full profile (4096 columns, occlusion, noise) vs the bare cast of the same rays, single-pose
+  calls (both on one thread);
+- the same poses in one batch call (threads over the cores) vs single calls;
+- the batch vs the bare cast of all its rays in one call (and the batch on one thread).
 Run: .venv/bin/python benchmarks/bench_sensor.py
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from collections.abc import Callable
 
 import numpy as np
 import trimesh
@@ -33,13 +36,16 @@ def wavy_surface(n: int = 400) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices, faces, process=False)
 
 
-def median_time(fn, repeats: int) -> float:
-    times = []
+def median_times(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Median wall time of each fn; the fns take turns in every round, so a slow spell of a
+    noisy machine hits them all alike."""
+    times: dict[str, list[float]] = {name: [] for name in fns}
     for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - start)
+    return {name: statistics.median(t) for name, t in times.items()}
 
 
 def main() -> None:
@@ -47,43 +53,54 @@ def main() -> None:
     part = part_from_mesh(mesh, "wavy")
     spec = SensorSpec()
     sensor = LineProfilometer(part, spec, seed=0)
+    serial = LineProfilometer(part, spec, seed=0, threads=1)
     swath = Swath(0, np.array([-400.0, 0, 400]), np.array([400.0, 0, 400]),
                   np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))  # fmt: skip
     m = 64
     s = np.linspace(0, 600, m)
     poses = swath.poses(s, np.zeros(m), np.zeros(m))
     rays = spec.ray_directions()
+    # The same rays the simulator casts, in the part frame.
     dirs = np.matmul(rays, poses[:, :3, :3].transpose(0, 2, 1))
     origins = np.broadcast_to(poses[:, None, :3, 3], dirs.shape)
     engine = part.ray_engine
     sensor.measure_many(poses[:4])  # warm up
 
-    n_rays = m * len(rays)
-    t_bare_single = median_time(
-        lambda: [engine.first_hit_faces(origins[i], dirs[i]) for i in range(m)], 5
+    t = median_times(
+        {
+            "bare_single": lambda: [engine.first_hit_faces(origins[i], dirs[i]) for i in range(m)],
+            "full_single": lambda: [sensor.measure(p) for p in poses],
+            "bare_batch": lambda: engine.first_hit_faces(
+                origins.reshape(-1, 3), dirs.reshape(-1, 3)
+            ),
+            "full_batch": lambda: sensor.measure_many(poses),
+            "full_batch_serial": lambda: serial.measure_many(poses),
+        },
+        repeats=7,
     )
-    t_profile_single = median_time(lambda: [sensor.measure(p) for p in poses], 5)
-    t_bare_batch = median_time(
-        lambda: engine.first_hit_faces(origins.reshape(-1, 3), dirs.reshape(-1, 3)), 5
-    )
-    t_profile_batch = median_time(lambda: sensor.measure_many(poses), 5)
     valid = sensor.measure_many(poses).valid.mean()
 
     print(f"mesh: {len(mesh.faces)} triangles; {m} poses x {len(rays)} columns; "
-          f"valid fraction {valid:.3f}")  # fmt: skip
-    print(f"{'':34s}{'profiles/s':>12s}{'rays/s':>14s}")
-    for label, t in [
-        ("bare Embree first hit, per pose", t_bare_single),
-        ("full profile, per pose", t_profile_single),
-        ("bare Embree first hit, one call", t_bare_batch),
-        ("full profile, batch", t_profile_batch),
-    ]:
-        print(f"{label:34s}{m / t:12.0f}{n_rays / t:14.3g}")
-    print(f"ratio full profile / bare cast (single calls): {t_profile_single / t_bare_single:.2f}"
-          "  (target <= 2.5)")  # fmt: skip
-    print(f"ratio batch / single calls, per profile:       {t_profile_batch / t_profile_single:.2f}"
-          "  (target <= 1)")  # fmt: skip
-    print(f"ratio batch / bare cast in one call:           {t_profile_batch / t_bare_batch:.2f}")
+          f"valid fraction {valid:.3f}; occlusion + noise on")  # fmt: skip
+    print("median of 7 rounds, per profile:")
+    rows = [
+        ("bare Embree first hit, one call per pose", "bare_single"),
+        ("full profile, measure() per pose", "full_single"),
+        ("bare Embree first hit, all poses in one call", "bare_batch"),
+        (f"full profile, measure_many ({sensor.threads} threads)", "full_batch"),
+        ("full profile, measure_many (1 thread)", "full_batch_serial"),
+    ]
+    for label, key in rows:
+        print(f"  {label:48s}{t[key] / m * 1e3:8.3f} ms")
+    single = t["full_single"] / t["bare_single"]
+    batch = t["full_batch"] / t["full_single"]
+    print(f"ratio full profile / bare cast, single calls:  {single:5.2f}  (target <= 2.5)")
+    print(f"ratio batch / single calls, per profile:       {batch:5.2f}  (target <= 1)")
+    print(f"ratio batch / bare cast in one call:           "
+          f"{t['full_batch'] / t['bare_batch']:5.2f}  (batch on {sensor.threads} threads, "
+          f"bare cast on 1)")  # fmt: skip
+    print(f"ratio batch on 1 thread / bare cast in one call: "
+          f"{t['full_batch_serial'] / t['bare_batch']:5.2f}")  # fmt: skip
 
 
 if __name__ == "__main__":

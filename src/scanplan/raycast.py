@@ -31,6 +31,9 @@ class RayEngine:
         normals = np.cross(edge1, edge2)
         lengths = np.linalg.norm(normals, axis=1, keepdims=True)
         self.face_normals = normals / np.where(lengths > 0, lengths, 1.0)
+        # The same normals as three flat arrays with a trailing zero normal, so that indexing
+        # with a face index of -1 (a miss) gives 0 (flat arrays gather several times faster).
+        self.face_normals_by_axis = tuple(np.append(self.face_normals[:, k], 0.0) for k in range(3))
         self._scene = rtcore_scene.EmbreeScene()
         # The TriangleMesh registers itself with the scene; keep a reference alive.
         self._mesh = TriangleMesh(self._scene, (self.triangles - self.offset).astype(np.float32))
@@ -51,6 +54,15 @@ class RayEngine:
         t = np.where(face != _MISS, result["tfar"].astype(np.float64), np.inf)
         return t, face
 
+    def first_hit_float32(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`first_hit` without the conversions: origins already minus `offset`, both (n, 3)
+        C-contiguous float32. Returns Embree's t (n,) float32, undefined (finite) on a miss,
+        and face (n,) int32, -1 on a miss."""
+        result = self._scene.run(origins, directions, output=1)
+        return result["tfar"], result["primID"]
+
     def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """The bare Embree first-hit call (face index per ray), the benchmarks' reference."""
         o = np.ascontiguousarray(origins - self.offset, dtype=np.float32)
@@ -68,3 +80,15 @@ class RayEngine:
         dist = np.ascontiguousarray(max_distance, dtype=np.float32)
         result = np.asarray(self._scene.run(o, d, dists=dist, query="OCCLUDED"))
         return result != _MISS
+
+    def occluded_float32(
+        self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray
+    ) -> np.ndarray:
+        """`occluded` without the conversions: origins already minus `offset`, (n, 3)
+        C-contiguous float32 origins and directions, (n,) float32 max_distance."""
+        if len(origins) == 0:
+            return np.zeros(0, dtype=bool)
+        return (
+            np.asarray(self._scene.run(origins, directions, dists=max_distance, query="OCCLUDED"))
+            != _MISS
+        )
