@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -190,6 +191,7 @@ class LineProfilometer:
         self._ray_z = np.ascontiguousarray(self._rays_sensor[:, 2])  # cos to the laser axis
         self._ray_x_over_z = self._ray_x / self._ray_z
         self._cos_cutoff = math.cos(spec.incidence_cutoff_rad)
+        self._camera_y = spec.camera_side * spec.baseline_mm
 
     def measure(self, T_part_sensor: np.ndarray, rng: np.random.Generator | None = None):
         """One profile from one pose."""
@@ -243,69 +245,85 @@ class LineProfilometer:
         t32, face32 = engine.first_hit_float32(
             _pack_float32(o, engine.offset, (m, n)), _pack_float32(d, None, (m, n))
         )
-        t32, face32 = t32.reshape(m, n), face32.reshape(m, n)
-        hit = face32 >= 0
-        t = t32.astype(np.float64)
+        face = face32.astype(np.intp).reshape(m, n)
+        hit = face >= 0
+        t = t32.astype(np.float64).reshape(m, n)
         np.copyto(t, 0.0, where=~hit)  # any finite t; the misses are masked below
         true_z = t * cos_axis  # z_s = t * cos(angle of the column to the axis)
-        p = [o[k] + d[k] * t for k in range(3)]
+        dt = [c * t for c in d]
+        p = [o[k] + dt[k] for k in range(3)]
         # Face normals; a miss (face -1) picks the table's trailing zero normal.
-        normal = [table[face32] for table in engine.face_normals_by_axis]
+        normal = [table[face] for table in engine.face_normals_by_axis]
         # CAD exports often have inconsistent winding: face every normal towards its ray.
-        cos_incidence = -(normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2])
-        flip = cos_incidence < 0
-        for k in range(3):
-            np.negative(normal[k], out=normal[k], where=flip)
-        cos_incidence = np.abs(cos_incidence)
+        cos_incidence = normal[0] * d[0]
+        cos_incidence += normal[1] * d[1]
+        cos_incidence += normal[2] * d[2]
+        flip = cos_incidence > 0  # the normal points along the ray
+        if flip.any():
+            for c in normal:
+                np.negative(c, out=c, where=flip)
+        np.abs(cos_incidence, out=cos_incidence)
 
         z_lo, z_hi = spec.depth_window_mm
-        in_window = hit & (true_z >= z_lo) & (true_z <= z_hi)
+        in_window = (true_z >= z_lo) & (true_z <= z_hi) & hit
         lit = in_window & (cos_incidence > self._cos_cutoff)
 
         # Camera line of sight: a lit point must face the camera and see it unobstructed.
-        camera = rot @ spec.camera_sensor + origin  # (m, 3)
-        to_camera = [camera[:, k, None] - p[k] for k in range(3)]
-        dist_camera = np.sqrt(to_camera[0] ** 2 + to_camera[1] ** 2 + to_camera[2] ** 2)
-        for k in range(3):
-            to_camera[k] /= dist_camera
-        faces_camera = normal[0] * to_camera[0] + normal[1] * to_camera[1]
+        camera_from_origin = rot[:, :, 1] * self._camera_y  # (m, 3); the camera is on y_s
+        to_camera = [camera_from_origin[:, k, None] - dt[k] for k in range(3)]
+        faces_camera = normal[0] * to_camera[0]
+        faces_camera += normal[1] * to_camera[1]
         faces_camera += normal[2] * to_camera[2]
         cand = np.flatnonzero(lit & (faces_camera > 0))
+        pick = _picker(cand, m * n)
+        to_cam = [pick(c) for c in to_camera]
+        dist_camera = np.sqrt(to_cam[0] * to_cam[0] + to_cam[1] * to_cam[1] + to_cam[2] * to_cam[2])
         eps = self._SURFACE_EPS_MM
-        start = [(p[k] + normal[k] * eps).ravel()[cand] for k in range(3)]
-        blocked = engine.occluded_float32(
-            _pack_float32(start, engine.offset, (len(cand),)),
-            _pack_float32([u.ravel()[cand] for u in to_camera], None, (len(cand),)),
-            (dist_camera.ravel()[cand] - eps).astype(np.float32),
-        )
-        valid_idx = cand[~blocked]
+        k_cand = len(cand)
+        start = np.empty((k_cand, 3), dtype=np.float32)
+        unit = np.empty((k_cand, 3), dtype=np.float32)
+        for k in range(3):
+            lifted = pick(normal[k]) * eps
+            lifted += pick(p[k])
+            np.subtract(lifted, engine.offset[k], out=start[:, k], casting="same_kind")
+            np.divide(to_cam[k], dist_camera, out=unit[:, k], casting="same_kind")
+        dist_camera -= eps
+        blocked = engine.occluded_float32(start, unit, dist_camera.astype(np.float32))
+        valid_idx = cand if not blocked.any() else cand[~blocked]
+        pick = _picker(valid_idx, m * n)
 
         # Measured depth: true depth + noise, quantized to the Z resolution.
-        z_valid = true_z.ravel()[valid_idx]
+        z_valid = pick(true_z)
         if spec.noise is not None and len(valid_idx):
             z_valid = z_valid + spec.noise.depth_noise_xyz_mm(
                 z_valid,
-                cos_incidence.ravel()[valid_idx],
-                [c.ravel()[valid_idx] for c in p],
+                pick(cos_incidence),
+                [pick(c) for c in p],
                 spec.working_distance_mm,
                 rng,
             )
         if spec.z_resolution_mm > 0:
-            z_valid = np.round(z_valid / spec.z_resolution_mm) * spec.z_resolution_mm
-        z_meas = np.full((m, n), np.nan)
-        z_meas.ravel()[valid_idx] = z_valid
+            z_valid = z_valid / spec.z_resolution_mm  # (z_valid may be a view of true_z)
+            np.round(z_valid, out=z_valid)
+            z_valid *= spec.z_resolution_mm
+        if len(valid_idx) == m * n:
+            z_meas = z_valid.reshape(m, n)
+        else:
+            z_meas = np.full((m, n), np.nan)
+            z_meas.ravel()[valid_idx] = z_valid
         # The measured point lies on the same pixel column's ray, at the measured depth
         # (NaN wherever z_meas is).
         scale = z_meas / cos_axis
         points_meas = np.empty((m, n, 3))
         normals = np.empty((m, n, 3))
         for k in range(3):
-            points_meas[..., k] = o[k] + d[k] * scale
+            np.multiply(d[k], scale, out=points_meas[..., k])
+            points_meas[..., k] += o[k]
             normals[..., k] = normal[k]
-        status = np.full((m, n), PointStatus.NO_HIT, dtype=np.uint8)
-        status[hit] = PointStatus.OUT_OF_RANGE
-        status[in_window] = PointStatus.GRAZING
-        status[lit] = PointStatus.SHADOWED
+        # NO_HIT 1, OUT_OF_RANGE 2, GRAZING 3, SHADOWED 4: one step per nested test passed.
+        status = hit.view(np.uint8) + in_window.view(np.uint8)
+        status += lit.view(np.uint8)
+        status += np.uint8(PointStatus.NO_HIT)
         status.ravel()[valid_idx] = PointStatus.VALID
 
         return Scan(
@@ -315,9 +333,16 @@ class LineProfilometer:
             points_part=points_meas,
             true_z_sensor=np.where(hit, true_z, np.inf),
             normals_part=normals,
-            face=face32.astype(np.int64),
+            face=face.astype(np.int64, copy=False),
             status=status,
         )
+
+
+def _picker(idx: np.ndarray, size: int) -> Callable[[np.ndarray], np.ndarray]:
+    """Flat gather of idx from (m, n) arrays; no gather when idx is every column."""
+    if len(idx) == size:
+        return np.ravel
+    return lambda a: a.ravel()[idx]
 
 
 def _pack_float32(
