@@ -72,17 +72,23 @@ class NoiseModel:
 
 @functools.lru_cache(maxsize=16)
 def _lattice(seed: int) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
-    """Perlin's doubled permutation table, and the gradient components its hashes h select as
-    six tables: x at h, x at h + 1, y at h, y at h + 1, z at h, z at h + 1."""
+    """Perlin's hash and gradients as lookup tables.
+
+    hash_xy: flat (257 * 257,), perm[perm[i] + j] at i * 257 + j (i, j in 0..256), so that the
+    hash of lattice corner (i, j, k) is hash_xy[i * 257 + j] + k (perm: Perlin's doubled
+    permutation table). gradient: six (511,) float32 tables, for hash h the gradient's x at h,
+    x at h + 1, y at h, y at h + 1, z at h, z at h + 1 (h + 1: the corner one step up in z).
+    """
     perm = np.random.default_rng(seed).permutation(256)
     perm = np.concatenate([perm, perm]).astype(np.intp)
-    gradient = _GRADIENTS[perm % 12].astype(np.float32)
-    tables = tuple(
-        np.ascontiguousarray(gradient[shift : len(gradient) - 1 + shift, axis])
+    hash_xy = perm[perm[:257, None] + np.arange(257)].ravel()
+    g = _GRADIENTS[perm % 12].astype(np.float32)
+    gradient = tuple(
+        np.ascontiguousarray(g[shift : len(g) - 1 + shift, axis])
         for axis in range(3)
         for shift in (0, 1)
     )
-    return perm, tables
+    return hash_xy, gradient
 
 
 # The 12 edge-centre gradients of Ken Perlin's improved noise.
@@ -105,18 +111,21 @@ def perlin3(points: np.ndarray, seed: int = 0) -> np.ndarray:
     return perlin3_components(xyz, seed).astype(np.float64)
 
 
-_PAIR = np.array([[0], [1]])
+# Offsets of the lattice corners (cx, cy = 0, 1) in hash_xy, shaped (2, 1) over cy.
+_CORNERS_Y = np.array([[0], [1]])
 
 
 def perlin3_components(xyz: np.ndarray, seed: int = 0) -> np.ndarray:
     """`perlin3` on (3, n) float32 coordinates (one row per axis); returns (n,) float32.
 
     Vectorized over points (no maintained package evaluates Perlin/simplex noise at scattered
-    points without a Python loop) and over the lattice corners: the arrays are (2, n) over the
-    x corners, (2, 2, n) over x and y, and each gradient table serves both z corners. The
-    corners are blended by trilinear interpolation with the fade weights.
+    points without a Python loop) and over the lattice corners: for each x corner one gather
+    gives the hashes of both y corners, (2, n), and each gradient table serves both z corners.
+    The corners are blended by trilinear interpolation with the fade weights. Temporaries stay
+    small: arrays of 128 KiB and more come from mmap, and their page faults cost more than
+    the arithmetic.
     """
-    perm, grad = _lattice(seed)
+    hash_xy, (gx0, gx1, gy0, gy1, gz0, gz1) = _lattice(seed)
     cell = np.floor(xyz)
     index = cell.astype(np.intp)
     index &= 255
@@ -129,27 +138,28 @@ def perlin3_components(xyz: np.ndarray, seed: int = 0) -> np.ndarray:
     fade *= frac
     fade *= frac
     fade *= frac
-    hx = perm[index[0] + _PAIR]  # (2, n)
-    hx += index[1]
-    hy = perm[hx[:, None, :] + _PAIR]  # (2, 2, n): corner (cx, cy), z corner 0; +1 for 1
-    hy += index[2]
-    dx = np.stack([frac[0], frac1[0]])[:, None, :]
-    dy = np.stack([frac[1], frac1[1]])[None]
-    gx0, gx1, gy0, gy1, gz0, gz1 = (table[hy] for table in grad)
-    dot0 = gx0 * dx
-    dot0 += gy0 * dy
-    dot0 += gz0 * frac[2]
-    dot1 = gx1 * dx
-    dot1 += gy1 * dy
-    dot1 += gz1 * frac1[2]
-    # Blend along z, then y, then x: a + f * (b - a).
-    dot1 -= dot0
-    dot1 *= fade[2]
-    dot0 += dot1
-    a, b = dot0[:, 0], dot0[:, 1] - dot0[:, 0]
-    b *= fade[1]
-    a += b
-    r, b = a[0], a[1] - a[0]
+    base = index[0] * 257
+    base += index[1]
+    dy = np.stack([frac[1], frac1[1]])  # (2, n) over cy
+    along_y = []
+    for dx, cx in ((frac[0], 0), (frac1[0], 257)):
+        h = hash_xy[base + (_CORNERS_Y + cx)]  # (2, n) over cy
+        h += index[2]
+        dot0 = gx0[h] * dx  # z corner 0
+        dot0 += gy0[h] * dy
+        dot0 += gz0[h] * frac[2]
+        dot1 = gx1[h] * dx  # z corner 1
+        dot1 += gy1[h] * dy
+        dot1 += gz1[h] * frac1[2]
+        # Blend along z, then y: a + f * (b - a).
+        dot1 -= dot0
+        dot1 *= fade[2]
+        dot0 += dot1
+        a, b = dot0[0], dot0[1] - dot0[0]
+        b *= fade[1]
+        a += b
+        along_y.append(a)
+    r, b = along_y[0], along_y[1] - along_y[0]
     b *= fade[0]
     r += b
     return r

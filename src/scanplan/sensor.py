@@ -192,6 +192,7 @@ class LineProfilometer:
         self._ray_x_over_z = self._ray_x / self._ray_z
         self._cos_cutoff = math.cos(spec.incidence_cutoff_rad)
         self._camera_y = spec.camera_side * spec.baseline_mm
+        self._block_poses = max(1, 4096 // spec.points_per_profile)
 
     def measure(self, T_part_sensor: np.ndarray, rng: np.random.Generator | None = None):
         """One profile from one pose."""
@@ -208,30 +209,53 @@ class LineProfilometer:
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise ValueError(f"poses must be (m, 4, 4), got {poses.shape}")
         rng = rng if rng is not None else self.rng
-        if len(poses) <= self.chunk_poses:
-            return self._measure_chunk(poses, rng)
-        chunks = [poses[i : i + self.chunk_poses] for i in range(0, len(poses), self.chunk_poses)]
-        seeds = rng.integers(0, 2**63 - 1, size=len(chunks))
-        with ThreadPoolExecutor(max_workers=self.threads) as pool:
-            scans = list(
-                pool.map(
-                    lambda job: self._measure_chunk(job[0], np.random.default_rng(job[1])),
-                    zip(chunks, seeds, strict=True),
-                )
-            )
-        return Scan(
-            **{
-                name: np.concatenate([getattr(s, name) for s in scans])
-                for name in Scan.__dataclass_fields__
-            }
+        m, n = len(poses), len(self._rays_sensor)
+        scan = Scan(
+            poses=poses,
+            z_sensor=np.empty((m, n)),
+            x_sensor=np.empty((m, n)),
+            points_part=np.empty((m, n, 3)),
+            true_z_sensor=np.empty((m, n)),
+            normals_part=np.empty((m, n, 3)),
+            face=np.empty((m, n), dtype=np.int64),
+            status=np.empty((m, n), dtype=np.uint8),
         )
+        if m <= self.chunk_poses:
+            self._measure_chunk(scan, 0, m, rng)
+            return scan
+        starts = range(0, m, self.chunk_poses)
+        seeds = rng.integers(0, 2**63 - 1, size=len(starts))
+        with ThreadPoolExecutor(max_workers=self.threads) as pool:
+            jobs = [
+                pool.submit(
+                    self._measure_chunk,
+                    scan,
+                    lo,
+                    min(lo + self.chunk_poses, m),
+                    np.random.default_rng(seed),
+                )
+                for lo, seed in zip(starts, seeds, strict=True)
+            ]
+            for job in jobs:
+                job.result()
+        return scan
 
-    def _measure_chunk(self, poses: np.ndarray, rng: np.random.Generator) -> Scan:
+    def _measure_chunk(self, scan: Scan, lo: int, hi: int, rng: np.random.Generator) -> None:
+        """Fill poses lo:hi of scan, drawing the Gaussian noise from rng in pose order.
+
+        Measured in blocks of ~4k columns: numpy's temporaries then stay below 128 KiB, the
+        size from which malloc maps fresh pages (page faults cost more than the arithmetic).
+        """
+        for start in range(lo, hi, self._block_poses):
+            self._measure_block(scan, start, min(start + self._block_poses, hi), rng)
+
+    def _measure_block(self, scan: Scan, lo: int, hi: int, rng: np.random.Generator) -> None:
         """All columns of m poses as (m, n) arrays, one array per xyz component: numpy is
         several times slower on (k, 3) rows than on flat arrays, and working on every column
         (misses included) costs less than gathering the hits first. Results are the same as
         computing on the hit columns only."""
         spec = self.spec
+        poses = scan.poses[lo:hi]
         m, n = len(poses), len(self._rays_sensor)
         rot = poses[:, :3, :3]
         origin = poses[:, :3, 3]
@@ -306,36 +330,32 @@ class LineProfilometer:
             z_valid = z_valid / spec.z_resolution_mm  # (z_valid may be a view of true_z)
             np.round(z_valid, out=z_valid)
             z_valid *= spec.z_resolution_mm
+        z_meas = scan.z_sensor[lo:hi]
         if len(valid_idx) == m * n:
-            z_meas = z_valid.reshape(m, n)
+            z_meas[...] = z_valid.reshape(m, n)
         else:
-            z_meas = np.full((m, n), np.nan)
+            z_meas.fill(np.nan)
             z_meas.ravel()[valid_idx] = z_valid
         # The measured point lies on the same pixel column's ray, at the measured depth
         # (NaN wherever z_meas is).
+        np.multiply(self._ray_x_over_z, z_meas, out=scan.x_sensor[lo:hi])
         scale = z_meas / cos_axis
-        points_meas = np.empty((m, n, 3))
-        normals = np.empty((m, n, 3))
+        points_meas = scan.points_part[lo:hi]
+        normals = scan.normals_part[lo:hi]
         for k in range(3):
             np.multiply(d[k], scale, out=points_meas[..., k])
             points_meas[..., k] += o[k]
             normals[..., k] = normal[k]
+        true_z_out = scan.true_z_sensor[lo:hi]
+        true_z_out.fill(np.inf)
+        np.copyto(true_z_out, true_z, where=hit)
+        scan.face[lo:hi] = face
         # NO_HIT 1, OUT_OF_RANGE 2, GRAZING 3, SHADOWED 4: one step per nested test passed.
-        status = hit.view(np.uint8) + in_window.view(np.uint8)
+        status = scan.status[lo:hi]
+        np.add(hit.view(np.uint8), in_window.view(np.uint8), out=status)
         status += lit.view(np.uint8)
         status += np.uint8(PointStatus.NO_HIT)
         status.ravel()[valid_idx] = PointStatus.VALID
-
-        return Scan(
-            poses=poses,
-            z_sensor=z_meas,
-            x_sensor=self._ray_x_over_z * z_meas,
-            points_part=points_meas,
-            true_z_sensor=np.where(hit, true_z, np.inf),
-            normals_part=normals,
-            face=face.astype(np.int64, copy=False),
-            status=status,
-        )
 
 
 def _picker(idx: np.ndarray, size: int) -> Callable[[np.ndarray], np.ndarray]:
