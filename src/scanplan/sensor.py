@@ -361,7 +361,7 @@ class LineProfilometer:
 def _picker(idx: np.ndarray, size: int) -> Callable[[np.ndarray], np.ndarray]:
     """Flat gather of idx from (m, n) arrays; no gather when idx is every column."""
     if len(idx) == size:
-        return np.ravel
+        return lambda a: a.ravel()
     return lambda a: a.ravel()[idx]
 
 
