@@ -158,3 +158,18 @@ def test_malformed_trajectory_files(tmp_path, body, message):
     path.write_text(body)
     with pytest.raises(ValueError, match=message):
         read_csv(path)
+
+
+def test_atomic_write_leaves_no_temporary_and_a_readable_file(tmp_path):
+    import os
+
+    from scanplan.trajectory import atomic_write_text
+
+    old = os.umask(0o022)
+    try:
+        atomic_write_text(tmp_path / "out.txt", "hello\n")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "out.txt").read_text() == "hello\n"
+    assert (tmp_path / "out.txt").stat().st_mode & 0o777 == 0o644  # not mkstemp's 0600
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]

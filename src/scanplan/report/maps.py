@@ -146,7 +146,17 @@ def plot_comparison(
     d_lim, o_lim = _limits(clouds)
     limit = d_lim if quantity == "distance" else o_lim
     _, unit, label = _LABELS[quantity]
-    fig, axes = plt.subplots(1, len(sources), figsize=(6 * len(sources), 5.5), squeeze=False)
+    # Panels take the part's aspect (equal axes), so the figure height follows it: no empty band.
+    xy = np.concatenate([c.points_part[:, :2] for c in clouds])
+    extent = np.ptp(xy, axis=0) if len(xy) else np.ones(2)
+    aspect = float(np.clip(extent[1] / max(extent[0], 1e-9), 0.3, 3.0))
+    fig, axes = plt.subplots(
+        1,
+        len(sources),
+        figsize=(5.5 * len(sources) + 1.0, 5.5 * aspect + 1.2),
+        squeeze=False,
+        layout="compressed",
+    )
     artists = [
         _draw(ax, cloud, quantity, limit, name)
         for ax, (name, _), cloud in zip(axes[0], sources, clouds, strict=True)
