@@ -330,9 +330,11 @@ POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) 
 @user_errors
 def export_cmd(
     trajectory: Annotated[Path, typer.Argument(help="trajectory CSV or JSON")],
-    output: OutOpt,
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="output file (a directory for rosbag2)")
+    ],
     fmt: Annotated[
-        str, typer.Option("--format", help="urscript, rapid, krl, ros or csv")
+        str, typer.Option("--format", help="urscript, rapid, krl, ros, rosbag2 or csv")
     ] = "urscript",
     tcp: Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}")] = "0,0,0,0,0,0",
     part_pose: Annotated[
@@ -347,13 +349,23 @@ def export_cmd(
         str, typer.Option(help="check reach for ur3e, ur5e or ur10e; 'none' to skip")
     ] = "ur5e",
 ):
-    """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or CSV)."""
-    from scanplan.export import FORMATS, ExportOptions, export_program, flange_poses, parse_pose_arg
+    """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV)."""
+    from scanplan.export import (
+        DIRECTORY_FORMATS,
+        FORMATS,
+        ExportOptions,
+        export_program,
+        export_rosbag,
+        flange_poses,
+        parse_pose_arg,
+    )
+    from scanplan.export.common import plan_motion
     from scanplan.robot import check_reach
     from scanplan.trajectory import atomic_write_text, read_trajectory
 
-    if fmt not in FORMATS:
-        raise ValueError(f"unknown format {fmt!r}; use one of {', '.join(FORMATS)}")
+    if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
+        choices = ", ".join([*FORMATS, *DIRECTORY_FORMATS])
+        raise ValueError(f"unknown format {fmt!r}; use one of {choices}")
     # KUKA wants the .src file named after its DEF.
     name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
     options = ExportOptions(
@@ -365,14 +377,19 @@ def export_cmd(
         program_name=name if name and fmt == "krl" else "scanplan_path",
     )
     traj = read_trajectory(trajectory)
-    text = export_program(traj, fmt, options)
+    text = export_program(traj, fmt, options) if fmt in FORMATS else None
+    if text is None:
+        plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
     if robot.lower() != "none":
         report = check_reach(flange_poses(traj, options), robot)
         if not report.ok:
             typer.echo(f"warning: {report.summary()}", err=True)
         else:
             typer.echo(report.summary())
-    atomic_write_text(output, text)
+    if text is not None:
+        atomic_write_text(output, text)
+    else:
+        export_rosbag(traj, output, options)
     typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
 
 

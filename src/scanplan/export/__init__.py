@@ -1,4 +1,5 @@
-"""Robot programs from a trajectory: URScript, ABB RAPID, KUKA KRL, ROS 2 YAML, base-frame CSV.
+"""Robot programs from a trajectory: URScript, ABB RAPID, KUKA KRL, ROS 2 YAML, base-frame CSV,
+and a ROS 2 bag (`rosbag2`, a directory rather than a text file: `export_rosbag`).
 
 Every dialect writes the sensor poses in the robot base frame, `T_base_sensor = part_pose @
 T_part_sensor`, with the program's tool set to the sensor (`tcp` = `T_flange_sensor`).
@@ -6,12 +7,13 @@ T_part_sensor`, with the program's tool set to the sensor (`tcp` = `T_flange_sen
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.export import csv_export, krl, rapid, ros, urscript
+from scanplan.export import csv_export, krl, rapid, ros, rosbag, urscript
 from scanplan.export.common import (
     ExportOptions,
     Motion,
@@ -23,11 +25,13 @@ from scanplan.export.common import (
 from scanplan.trajectory import Trajectory
 
 __all__ = [
+    "DIRECTORY_FORMATS",
     "FORMATS",
     "Dialect",
     "ExportOptions",
     "Parsed",
     "export_program",
+    "export_rosbag",
     "flange_poses",
     "parse_pose_arg",
     "parse_program",
@@ -55,12 +59,17 @@ FORMATS: dict[str, Dialect] = {
 }
 
 
+# Formats written as a directory by their own writer, not as text by `export_program`.
+DIRECTORY_FORMATS = ("rosbag2",)
+
+
 def _dialect(fmt: str) -> Dialect:
     try:
         return FORMATS[fmt]
     except KeyError:
         raise ValueError(
             f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}"
+            + (f" (or export_rosbag for {fmt})" if fmt in DIRECTORY_FORMATS else "")
         ) from None
 
 
@@ -69,6 +78,14 @@ def export_program(traj: Trajectory, fmt: str, options: ExportOptions | None = N
     dialect = _dialect(fmt)
     options = options or ExportOptions()
     return dialect.write(plan_motion(traj, options), options)
+
+
+def export_rosbag(
+    traj: Trajectory, path: str | os.PathLike, options: ExportOptions | None = None
+) -> None:
+    """Write the ROS 2 YAML export's messages as the rosbag2 directory `path` (atomically)."""
+    options = options or ExportOptions()
+    rosbag.write_rosbag(plan_motion(traj, options), options, path)
 
 
 def parse_program_details(text: str, fmt: str) -> Parsed:

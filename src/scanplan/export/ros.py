@@ -3,8 +3,8 @@
 One YAML mapping with three keys: `pose_array` and `path` are the messages exactly as
 `ros2 topic pub` / rosidl YAML expects them, `scanplan` carries what no message holds (the
 scanning flags, swath indices and speeds). Path stamps are the planned arrival times from the
-start (distance / commanded speed, accelerations ignored). No rosbag2: writing one needs the
-`rosbags` package, which is not a dependency.
+start (distance / commanded speed, accelerations ignored). The same two messages as a rosbag2
+directory: `scanplan.export.rosbag`, built on `ros_poses` and `arrival_times` here.
 """
 
 from __future__ import annotations
@@ -18,17 +18,34 @@ from scanplan.export.common import ExportOptions, Motion, Parsed, poses_from_par
 SUFFIX = ".yaml"
 
 
+def split_stamp(t: float) -> tuple[int, int]:
+    """(sec, nanosec) of a `builtin_interfaces/Time` for `t` seconds (nanosec < 1e9)."""
+    sec, nanosec = divmod(int(round(t * 1e9)), 1_000_000_000)
+    return sec, nanosec
+
+
 def _stamp(t: float) -> str:
-    sec = int(np.floor(t))
-    return f"{{sec: {sec}, nanosec: {int(round((t - sec) * 1e9)) % 1_000_000_000}}}"
+    sec, nanosec = split_stamp(t)
+    return f"{{sec: {sec}, nanosec: {nanosec}}}"
+
+
+def ros_poses(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (n, 3) in metres, quaternions (n, 4) scalar *first*) of `T_base_sensor`;
+    ROS messages order the quaternion x, y, z, w."""
+    return motion.poses[:, :3, 3] / 1000.0, quat_wxyz(motion.poses[:, :3, :3])
+
+
+def arrival_times(motion: Motion) -> np.ndarray:
+    """(n,) planned arrival time at each pose from the start, s (distance / commanded speed,
+    accelerations ignored): the path stamps."""
+    seg = np.linalg.norm(np.diff(motion.poses[:, :3, 3], axis=0), axis=1)
+    return np.r_[0.0, np.cumsum(seg / motion.speed_mm_s[1:])]
 
 
 def write(motion: Motion, options: ExportOptions) -> str:
     frame = options.ros_frame_id
-    xyz = motion.poses[:, :3, 3] / 1000.0
-    q = quat_wxyz(motion.poses[:, :3, :3])
-    seg = np.linalg.norm(np.diff(motion.poses[:, :3, 3], axis=0), axis=1)
-    t = np.r_[0.0, np.cumsum(seg / motion.speed_mm_s[1:])]
+    xyz, q = ros_poses(motion)
+    t = arrival_times(motion)
     body = [
         f"position: {{x: {p[0]:.9f}, y: {p[1]:.9f}, z: {p[2]:.9f}}}\n"
         f"orientation: {{x: {r[1]:.9f}, y: {r[2]:.9f}, z: {r[3]:.9f}, w: {r[0]:.9f}}}"
