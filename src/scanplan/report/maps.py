@@ -148,6 +148,7 @@ def plot_comparison(
     _, unit, label = _LABELS[quantity]
     # Panels take the part's aspect (equal axes), so the figure height follows it: no empty band.
     xy = np.concatenate([c.points_part[:, :2] for c in clouds])
+    xy = xy[np.isfinite(xy).all(axis=1)]
     extent = np.ptp(xy, axis=0) if len(xy) else np.ones(2)
     aspect = float(np.clip(extent[1] / max(extent[0], 1e-9), 0.3, 3.0))
     fig, axes = plt.subplots(
