@@ -17,7 +17,8 @@ from scanplan.part import load_part
 from scanplan.planners import plan_path
 from scanplan.planners.fixed import FixedPlanner
 from scanplan.planners.geometric import GeometricPlanner
-from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.quantities import ScanSpec
+from scanplan.sensor import LineProfilometer
 from scanplan.swaths import plan_swaths
 
 
@@ -29,20 +30,20 @@ def main() -> None:
     args = parser.parse_args()
 
     part = load_part("door")
-    sensor = SensorSpec()
-    spec = sensor.with_points(args.points) if args.points else sensor
-    swaths = plan_swaths(part, sensor, args.direction)
+    spec = ScanSpec()
+    sensor = spec.sensor.with_points(args.points) if args.points else spec.sensor
+    swaths = plan_swaths(part, spec.sensor, args.direction)
     print(f"door: {len(part.mesh.faces)} triangles, {len(swaths)} passes, {os.cpu_count()} cores")
     for planner in (FixedPlanner(), GeometricPlanner()):
         t0 = time.perf_counter()
-        traj = plan_path(part, sensor, planner, swaths)
+        traj = plan_path(part, spec, planner, swaths)
         plan_s = time.perf_counter() - t0
         poses = traj.scan_poses
         t0 = time.perf_counter()
-        metrics = evaluate(part, sensor, traj, points_per_profile=args.points)
+        metrics = evaluate(part, spec, traj, points_per_profile=args.points)
         eval_s = time.perf_counter() - t0
         bare = poses[: args.bare_profiles]
-        profiler = LineProfilometer(part, spec)
+        profiler = LineProfilometer(part, sensor)
         t0 = time.perf_counter()
         for i in range(0, len(bare), 256):  # the same chunking as evaluate
             profiler.measure_many(bare[i : i + 256])
@@ -50,7 +51,7 @@ def main() -> None:
         eval_rate = len(poses) / eval_s
         print(
             f"{planner.name:>9}: plan {plan_s:6.2f} s | {len(poses)} profiles x "
-            f"{spec.points_per_profile} | evaluate {eval_s:6.2f} s = {eval_rate:6.0f} profiles/s "
+            f"{sensor.points_per_profile} | evaluate {eval_s:6.2f} s = {eval_rate:6.0f} profiles/s "
             f"| bare measure_many {bare_rate:6.0f} profiles/s | ratio {eval_rate / bare_rate:.2f} "
             f"| mean |dist err| {metrics.distance_error_mean_abs_mm:.2f} mm"
         )

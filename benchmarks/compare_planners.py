@@ -20,7 +20,7 @@ from pathlib import Path
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import load_part
 from scanplan.planners import make_planner, plan_path
-from scanplan.sensor import SensorSpec
+from scanplan.quantities import ScanSpec
 from scanplan.swaths import plan_swaths
 
 PLANNERS = ("fixed", "geometric", "rl")
@@ -40,20 +40,21 @@ def main() -> None:
     parser.add_argument("--direction", default="auto")
     args = parser.parse_args()
 
-    sensor = SensorSpec()
+    spec = ScanSpec()
+    sensor = spec.sensor
     print("per planner: mean |dist err| mm / mean orient. err ° / spacing CV / backward / coverage")
     print(f"| part | {' | '.join(PLANNERS)} | rl/fixed d, o | rl/geo d | geo/fixed d, o |")
     print("|---|---|---|---|---|---|---|")
-    for spec in args.parts:
-        path, _, units = spec.partition(":")
+    for arg in args.parts:
+        path, _, units = arg.partition(":")
         part = load_part(path, units or "mm")
         swaths = plan_swaths(part, sensor, args.direction)
         results: dict[str, Metrics] = {}
         seconds: dict[str, float] = {}
         for name in PLANNERS:
             t0 = time.perf_counter()
-            traj = plan_path(part, sensor, make_planner(name), swaths)
-            results[name] = evaluate(part, sensor, traj, points_per_profile=args.points)
+            traj = plan_path(part, spec, make_planner(name), swaths)
+            results[name] = evaluate(part, spec, traj, points_per_profile=args.points)
             seconds[name] = time.perf_counter() - t0
         f, g, r = (results[n] for n in PLANNERS)
 

@@ -12,6 +12,7 @@ import trimesh
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from scanplan.dynamics import limit_action
 from scanplan.env import ENV_ID, SwathScanEnv
 from scanplan.part import Part, load_part, part_from_mesh
 from scanplan.quantities import advance, mean_distance, signed_alpha
@@ -90,8 +91,7 @@ def test_seeded_rollouts_are_identical():
 def test_dynamic_action_limitation_is_the_papers(plate, d, alpha, action, expected):
     env = plate_env(plate)
     env.reset(seed=0)
-    env.d_mm, env.alpha_rad = d, alpha
-    got = env.limit_action(np.array(action))
+    got = limit_action(np.array(action), d, alpha, env.limits, WD)
     np.testing.assert_allclose(got, np.array(expected) * [1.0, 1.0, math.radians(1.0)])
 
 
@@ -100,13 +100,15 @@ def test_info_terms_are_reward_terms_of_the_steps_measurements():
     env.reset(seed=5)
     rng = np.random.default_rng(0)
     for _ in range(30):
-        prev = env.profile
+        prev = env.dynamics.profile
         _, r, _, _, info = env.step(rng.uniform(-1, 1, 3))
-        prof = env.profile
+        prof = env.dynamics.profile
         d = mean_distance(prof.z_sensor, prof.valid)
         a = signed_alpha(prof.normals_part, prof.valid, prof.T_part_sensor)
-        ds = advance(prev.points_part, prev.valid, prof.points_part, prof.valid, env.swath.u)
-        terms = reward_terms(d, a, ds, env.reward_config)
+        ds = advance(
+            prev.points_part, prev.valid, prof.points_part, prof.valid, env.dynamics.swath.u
+        )
+        terms = reward_terms(d, a, ds, env.scan_spec)
         assert info["d_mm"] == pytest.approx(float(d), nan_ok=True)
         assert info["delta_s_mm"] == pytest.approx(float(ds), nan_ok=True)
         for key in ("r_d", "r_alpha", "r_delta_s"):
@@ -130,7 +132,7 @@ def test_flat_plate_aligned_half_millimetre_step_has_zero_reward(plate):
 def test_reaching_the_pass_end_terminates(plate):
     env = plate_env(plate)
     env.reset(seed=0)
-    env.state[0] = env.s_end_mm - 0.3  # pitch 0: the scan advance is the sensor s
+    env.dynamics.state[0] = env.s_end_mm - 0.3  # pitch 0: the scan advance is the sensor s
     _, _, term, trunc, _ = env.step(np.array([0.5, 0.0, 0.0]))
     assert term and not trunc
 
@@ -146,7 +148,7 @@ def test_losing_the_surface_charges_the_remaining_nominal_steps(plate):
         if term or trunc:
             break
     assert term and not trunc and steps < 100
-    remaining = math.ceil((env.s_end_mm - env.progress_mm) / 0.5)
+    remaining = math.ceil((env.s_end_mm - env.dynamics.progress_mm) / 0.5)
     assert remaining > 1000
     assert info["lost_penalty"] == -min(remaining, env.step_limit - steps)
     # Never cheaper than finishing: at worst −1 per remaining step.

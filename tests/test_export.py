@@ -19,6 +19,7 @@ from scanplan.export import (
     parse_program_details,
 )
 from scanplan.export.common import plan_motion
+from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory
 
 
@@ -53,7 +54,7 @@ TRAJ = snake_trajectory()
 OPTIONS = ExportOptions(
     part_pose=parse_pose_arg("500,-200,100,30,5,-10"),
     tcp=parse_pose_arg("12,-3,180,0,-15,90"),
-    travel_speed_mm_s=300.0,
+    scan=ScanSpec(travel_speed_mm_s=300.0),
     blend_mm=0.2,
 )
 
@@ -223,7 +224,7 @@ def test_bad_options_and_format() -> None:
     with pytest.raises(ValueError, match="program name"):
         ExportOptions(program_name="1 bad")
     with pytest.raises(ValueError, match="travel_speed_mm_s"):
-        ExportOptions(travel_speed_mm_s=0)
+        ExportOptions(scan=ScanSpec(travel_speed_mm_s=0))
     with pytest.raises(ValueError, match="unknown export format"):
         export_program(TRAJ, "gcode", OPTIONS)
     with pytest.raises(ValueError, match="no movel"):

@@ -13,12 +13,14 @@ from typer.testing import CliRunner
 from scanplan.cli import app
 from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
+from scanplan.quantities import ScanSpec
 from scanplan.report.maps import metrics_table_markdown, plot_comparison, plot_error_maps
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
 SENSOR = SensorSpec()
+SPEC = ScanSpec(SENSOR)
 X, Y = np.eye(3)[0], np.eye(3)[1]
 
 
@@ -38,7 +40,7 @@ def straight(s_mm, h_mm=0.0, pitch=0.0, swath_index=0):
 
 def test_plate_at_working_distance_is_exact(plate):
     traj = straight(np.arange(20.25, 620.0, 0.5))  # the sensor stays over the plate
-    m = evaluate(plate, SENSOR, traj, points_per_profile=512)
+    m = evaluate(plate, SPEC, traj, points_per_profile=512)
     assert m.distance_error_mean_abs_mm < 0.02 and m.distance_error_p95_abs_mm < 0.04
     assert m.orientation_error_mean_deg < 1e-3
     assert m.in_range_fraction == 1.0
@@ -49,20 +51,20 @@ def test_plate_at_working_distance_is_exact(plate):
     assert m.backward_steps == 0 and m.coverage_fraction > 0.99
     assert m.reward_mean > -1e-3  # on every term's optimum
     # Off the plate a profile has no valid point: each such step is charged -1 on R_D.
-    off = evaluate(plate, SENSOR, straight(np.arange(0, 640.0, 0.5)), points_per_profile=128)
+    off = evaluate(plate, SPEC, straight(np.arange(0, 640.0, 0.5)), points_per_profile=128)
     assert off.r_d_mean == pytest.approx(-80 / 1279, abs=2e-3)
     assert m.cycle_time_s == pytest.approx(len(traj) / 200.0)
 
 
 def test_height_error_and_tilt_are_measured(plate):
     m = evaluate(
-        plate, SENSOR, straight(np.arange(100, 300.0, 0.5), h_mm=30.0), points_per_profile=256
+        plate, SPEC, straight(np.arange(100, 300.0, 0.5), h_mm=30.0), points_per_profile=256
     )
     assert m.distance_error_mean_mm == pytest.approx(30.0, abs=0.05)
     assert m.distance_error_rms_mm == pytest.approx(30.0, abs=0.05)
     tilt = math.radians(10)
     m = evaluate(
-        plate, SENSOR, straight(np.arange(100, 300.0, 0.5), pitch=tilt), points_per_profile=256
+        plate, SPEC, straight(np.arange(100, 300.0, 0.5), pitch=tilt), points_per_profile=256
     )
     assert m.orientation_error_mean_deg == pytest.approx(10.0, abs=0.01)
     assert m.r_alpha_mean == pytest.approx(-((10 / 30) ** 2), abs=1e-3)
@@ -70,14 +72,14 @@ def test_height_error_and_tilt_are_measured(plate):
 
 def test_spacing_gap_and_backward_steps(plate):
     s = np.concatenate([np.arange(0, 50, 0.5), [52.0, 51.5], np.arange(52.5, 80, 0.5)])
-    m = evaluate(plate, SENSOR, straight(s + 100.0), points_per_profile=256)
+    m = evaluate(plate, SPEC, straight(s + 100.0), points_per_profile=256)
     assert m.backward_steps == 1
     assert m.spacing_max_gap_mm == pytest.approx(2.5, abs=0.01)
 
 
 def test_half_the_plate_is_half_covered(plate):
     # One pass over x in [-320, 0] sees the half x < 0 of the top face.
-    m = evaluate(plate, SENSOR, straight(np.arange(0, 320.0, 0.5)), points_per_profile=512)
+    m = evaluate(plate, SPEC, straight(np.arange(0, 320.0, 0.5)), points_per_profile=512)
     assert m.coverage_fraction == pytest.approx(0.5, abs=0.02)
     assert m.visible_area_mm2 == pytest.approx(600 * 300, rel=0.01)
 
@@ -88,14 +90,14 @@ def test_coverage_ignores_what_a_top_down_raster_cannot_see():
     block = trimesh.creation.box((100.0, 100.0, 80.0))
     block.apply_translation((0, 0, 45.0))
     part = part_from_mesh(trimesh.util.concatenate([base, block]), "block")
-    m = evaluate(part, SENSOR, straight(np.arange(0, 640.0, 0.5), h_mm=5.0), points_per_profile=512)
+    m = evaluate(part, SPEC, straight(np.arange(0, 640.0, 0.5), h_mm=5.0), points_per_profile=512)
     assert m.visible_area_mm2 == pytest.approx(600 * 300, rel=0.02)
 
 
 def test_full_and_subsampled_fans_agree(plate):
     traj = straight(np.arange(200, 260.0, 0.5), h_mm=10.0)
-    full = evaluate(plate, SENSOR, traj)
-    sub = evaluate(plate, SENSOR, traj, points_per_profile=256)
+    full = evaluate(plate, SPEC, traj)
+    sub = evaluate(plate, SPEC, traj, points_per_profile=256)
     assert full.points_per_profile == 4096
     assert sub.distance_error_mean_abs_mm == pytest.approx(
         full.distance_error_mean_abs_mm, abs=0.02
@@ -103,7 +105,7 @@ def test_full_and_subsampled_fans_agree(plate):
 
 
 def test_json_has_the_spec_keys_and_no_nan(plate):
-    data = evaluate(plate, SENSOR, straight([300.0]), points_per_profile=64).to_json_dict()
+    data = evaluate(plate, SPEC, straight([300.0]), points_per_profile=64).to_json_dict()
     for key in (
         "profiles",
         "in_range_fraction",
@@ -122,16 +124,12 @@ def test_json_has_the_spec_keys_and_no_nan(plate):
 
 def test_out_of_reach_raises(plate):
     with pytest.raises(ValueError, match="outside the sensor's reach"):
-        evaluate(
-            plate, SENSOR, straight(np.arange(0, 20.0, 0.5), h_mm=500.0), points_per_profile=64
-        )
+        evaluate(plate, SPEC, straight(np.arange(0, 20.0, 0.5), h_mm=500.0), points_per_profile=64)
 
 
 def test_maps_and_table(plate, tmp_path):
-    a = evaluate(
-        plate, SENSOR, straight(np.arange(0, 640.0, 1.0), h_mm=5.0), points_per_profile=256
-    )
-    b = evaluate(plate, SENSOR, straight(np.arange(0, 640.0, 1.0)), points_per_profile=256)
+    a = evaluate(plate, SPEC, straight(np.arange(0, 640.0, 1.0), h_mm=5.0), points_per_profile=256)
+    b = evaluate(plate, SPEC, straight(np.arange(0, 640.0, 1.0)), points_per_profile=256)
     files = plot_error_maps(a, tmp_path / "maps")
     assert sorted(f.name for f in files) == ["distance_error.png", "orientation_error.png"]
     assert all(f.stat().st_size > 10_000 for f in files)

@@ -8,15 +8,18 @@ import numpy as np
 import pytest
 import trimesh
 
+from scanplan.dynamics import StepLimits, steps_between
 from scanplan.metrics import evaluate
 from scanplan.part import load_part, part_from_mesh
 from scanplan.planners import plan_path
 from scanplan.planners.fixed import FixedPlanner
-from scanplan.planners.geometric import GeometricPlanner, StepLimits, step_actions
+from scanplan.planners.geometric import GeometricPlanner
+from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths
 
 SENSOR = SensorSpec()
+SPEC = ScanSpec(SENSOR)
 FAN = 256  # sub-sampled evaluation fan: the same answers, 16x faster
 
 
@@ -36,8 +39,8 @@ def stepped_plate():
 
 
 def run(part, planner, direction="auto"):
-    traj = plan_path(part, SENSOR, planner, plan_swaths(part, SENSOR, direction))
-    return traj, evaluate(part, SENSOR, traj, points_per_profile=FAN)
+    traj = plan_path(part, SPEC, planner, plan_swaths(part, SENSOR, direction))
+    return traj, evaluate(part, SPEC, traj, points_per_profile=FAN)
 
 
 @pytest.mark.parametrize("planner", [FixedPlanner(), GeometricPlanner()], ids=lambda p: p.name)
@@ -67,9 +70,9 @@ def test_geometric_respects_the_step_limits_and_anticipates_a_step():
     part = stepped_plate()
     (swath,) = plan_swaths(part, SENSOR, "x")
     limits = StepLimits()
-    traj = GeometricPlanner(limits=limits).plan(part, swath, SENSOR)
+    traj = GeometricPlanner(limits=limits).plan(part, swath, SPEC)
     shf = np.array([swath.to_swath_frame(p) for p in traj.poses])
-    actions = step_actions(shf[:, 0], shf[:, 1], shf[:, 2])
+    actions = steps_between(shf[:, 0], shf[:, 1], shf[:, 2])
     bound = [limits.dy_max_mm, limits.dz_max_mm, limits.dtheta_max_rad]
     assert np.all(np.abs(actions) <= np.array(bound) + 1e-9)
     # The rise starts before the footprint reaches the step (x = 0): look-ahead, no lag.
@@ -77,8 +80,8 @@ def test_geometric_respects_the_step_limits_and_anticipates_a_step():
     footprint_x = traj.poses[:, 0, 3] + 400.0 * traj.poses[:, 0, 2]
     before = footprint_x < -1.0
     assert height[before].max() > height[0] + 5.0
-    m = evaluate(part, SENSOR, traj, points_per_profile=FAN)
-    f = evaluate(part, SENSOR, FixedPlanner().plan(part, swath, SENSOR), points_per_profile=FAN)
+    m = evaluate(part, SPEC, traj, points_per_profile=FAN)
+    f = evaluate(part, SPEC, FixedPlanner().plan(part, swath, SPEC), points_per_profile=FAN)
     assert m.profile_distance_error_mean_abs_mm < 0.25 * f.profile_distance_error_mean_abs_mm
     assert m.backward_steps == 0
 
@@ -86,13 +89,13 @@ def test_geometric_respects_the_step_limits_and_anticipates_a_step():
 def test_planner_takes_its_cost_as_a_strategy():
     calls = []
 
-    def cost(d, alpha, ds, sensor, ds_opt):
+    def cost(d, alpha, ds, spec):
         calls.append(len(d))
         return 0.0
 
     part = part_from_mesh(box(300.0, 100.0), "plate")
     (swath,) = plan_swaths(part, SENSOR)
-    GeometricPlanner(cost=cost, refinements=0).plan(part, swath, SENSOR)
+    GeometricPlanner(cost=cost, refinements=0).plan(part, swath, SPEC)
     assert len(calls) == 3  # one per look-ahead candidate
 
 
@@ -104,7 +107,7 @@ def test_pass_that_sees_nothing_is_a_clear_error():
     )
     for planner in (FixedPlanner(), GeometricPlanner()):
         with pytest.raises(ValueError, match="outside the sensor's reach"):
-            planner.plan(part, far, SENSOR)
+            planner.plan(part, far, SPEC)
 
 
 @pytest.fixture(scope="module")

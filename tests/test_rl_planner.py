@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
+from scanplan.planners.closed_loop import Guards
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
-from scanplan.quantities import advance, mean_distance, signed_alpha
+from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
 from scanplan.sensor import LineProfilometer, SensorSpec
 from test_env import plate, plate_swath  # noqa: F401  (fixture)
 
@@ -30,7 +31,7 @@ def test_default_policy_follows_a_flat_plate(plate):  # noqa: F811
     """No backward step, spacing near Δs_opt, D near W_d, aligned, over a whole pass."""
     sensor = SensorSpec().without_noise()
     swath = plate_swath()
-    traj = RLPlanner.from_file(None).plan(plate, swath, sensor)
+    traj = RLPlanner.from_file(None).plan(plate, swath, ScanSpec(sensor))
     assert traj.scanning.all() and (traj.swath == swath.index).all()
     assert np.all(np.diff(traj.positions_mm[:, 0]) > 0)
     scan = LineProfilometer(plate, sensor.with_points(256)).measure_many(traj.poses)
@@ -84,12 +85,13 @@ def test_forward_only_guard_removes_backward_steps(plate):  # noqa: F811
     sensor = SensorSpec().without_noise()
     swath = plate_swath()
     shipped = RLPlanner.from_file(None)
-    unguarded = _PitchSwing(shipped.actor, shipped.config, min_advance=None, stall_window=0)
-    ds_free = _plate_advances(plate, swath, unguarded.plan(plate, swath, sensor))
+    off = Guards(stall_window=0, min_advance=None)
+    unguarded = _PitchSwing(shipped.actor, shipped.config, guards=off)
+    ds_free = _plate_advances(plate, swath, unguarded.plan(plate, swath, ScanSpec(sensor)))
     assert (ds_free < 0).sum() > 10  # the scripted swing does go backwards
 
-    guarded = _PitchSwing(shipped.actor, shipped.config, stall_window=0)
-    traj = guarded.plan(plate, swath, sensor)
+    guarded = _PitchSwing(shipped.actor, shipped.config, guards=Guards(stall_window=0))
+    traj = guarded.plan(plate, swath, ScanSpec(sensor))
     ds = _plate_advances(plate, swath, traj)
     assert np.all(ds > 0)
     assert traj.meta["backward_overrides"] > 10

@@ -89,12 +89,13 @@ def test_auto_direction_scans_across_curvature_a_pitch_only_planner_cannot_follo
     from scanplan.part import load_part
     from scanplan.swaths import cross_line_residual_mm, scan_direction
 
-    width = SensorSpec().line_width_mm
+    sensor = SensorSpec()
+    width = sensor.line_width_mm
     door = load_part("door")
-    assert np.allclose(np.abs(scan_direction(door, "long")), [1, 0, 0], atol=1e-6)
-    assert np.allclose(np.abs(scan_direction(door, "auto", width)), [0, 1, 0], atol=1e-6)
+    assert np.allclose(np.abs(scan_direction(door, sensor, "long")), [1, 0, 0], atol=1e-6)
+    assert np.allclose(np.abs(scan_direction(door, sensor, "auto")), [0, 1, 0], atol=1e-6)
     along_x = cross_line_residual_mm(door, np.array([1.0, 0, 0]), width)
     along_y = cross_line_residual_mm(door, np.array([0.0, 1, 0]), width)
     assert along_y < 0.5 * along_x
     piece = load_part("training-piece")
-    assert np.allclose(np.abs(scan_direction(piece, "auto", width)), [1, 0, 0], atol=1e-6)
+    assert np.allclose(np.abs(scan_direction(piece, sensor, "auto")), [1, 0, 0], atol=1e-6)

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from scanplan.planners.rl import RLPlanner
-from scanplan.sensor import SensorSpec
+from scanplan.quantities import ScanSpec
 from scanplan.train import LOG_COLUMNS, TrainConfig, train
 from test_env import plate, plate_swath  # noqa: F401  (fixture)
 
@@ -54,7 +54,7 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     assert bool(events) == (importlib.util.find_spec("tensorboard") is not None)
 
     planner = RLPlanner.from_file(result.output_dir)
-    traj = planner.plan(plate, plate_swath(), SensorSpec())
+    traj = planner.plan(plate, plate_swath(), ScanSpec())
     assert len(traj) > 10 and traj.scanning.all() and (traj.swath == 0).all()
     assert np.isfinite(traj.poses).all() and traj.planner == "rl"
 

@@ -15,6 +15,8 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 
+from scanplan.quantities import ScanSpec
+
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
@@ -126,7 +128,7 @@ def scan_cmd(
 def plan_cmd(
     part: PartArg,
     output: OutOpt,
-    planner: Annotated[str, typer.Option(help="fixed, geometric or rl")] = "geometric",
+    planner: Annotated[str, typer.Option(help="fixed, feedback, geometric or rl")] = "geometric",
     sensor: SensorOpt = "at-c5-4090cs30-495",
     policy: Annotated[
         Path | None, typer.Option(help="trained policy file for --planner rl")
@@ -150,10 +152,10 @@ def plan_cmd(
 
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
-    spec = load_sensor(sensor)
+    spec = ScanSpec(load_sensor(sensor))
     the_part = load_part(part, units)
     the_planner = make_planner(planner, policy)
-    swaths = plan_swaths(the_part, spec, direction, overlap)
+    swaths = plan_swaths(the_part, spec.sensor, direction, overlap)
     traj = plan_path(the_part, spec, the_planner, swaths)
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     typer.echo(
@@ -191,7 +193,7 @@ def evaluate_cmd(
 
     if points is not None and points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")
-    spec = load_sensor(sensor)
+    spec = ScanSpec(load_sensor(sensor))
     the_part = load_part(part, units)
     traj = read_trajectory(trajectory)
     metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
@@ -207,7 +209,7 @@ def evaluate_cmd(
                 output / "report.html",
                 the_part,
                 [PlannerResult(label, traj, metrics.cloud, data)],
-                spec.name,
+                spec.sensor.name,
                 pictures=pictures,
             )
         atomic_write_text(output / "metrics.json", json.dumps(data, indent=1) + "\n")
@@ -342,9 +344,13 @@ def export_cmd(
     ] = "0,0,0,0,0,0",
     profile_rate: Annotated[
         float, typer.Option(help="sensor profile rate, Hz; scan speed = rate x spacing")
-    ] = 200.0,
-    spacing: Annotated[float, typer.Option(help="profile spacing on the part, mm")] = 0.5,
-    travel_speed: Annotated[float, typer.Option(help="speed between passes, mm/s")] = 250.0,
+    ] = ScanSpec.profile_rate_hz,
+    spacing: Annotated[
+        float, typer.Option(help="profile spacing on the part, mm")
+    ] = ScanSpec.delta_s_opt_mm,
+    travel_speed: Annotated[
+        float, typer.Option(help="speed between passes, mm/s")
+    ] = ScanSpec.travel_speed_mm_s,
     robot: Annotated[
         str, typer.Option(help="check reach for ur3e, ur5e or ur10e; 'none' to skip")
     ] = "ur5e",
@@ -371,9 +377,9 @@ def export_cmd(
     options = ExportOptions(
         part_pose=parse_pose_arg(part_pose),
         tcp=parse_pose_arg(tcp),
-        profile_rate_hz=profile_rate,
-        delta_s_opt_mm=spacing,
-        travel_speed_mm_s=travel_speed,
+        scan=ScanSpec(
+            delta_s_opt_mm=spacing, profile_rate_hz=profile_rate, travel_speed_mm_s=travel_speed
+        ),
         program_name=name if name and fmt == "krl" else "scanplan_path",
     )
     traj = read_trajectory(trajectory)
@@ -418,7 +424,7 @@ def demo_cmd(
     from scanplan.report.table import table_rows
 
     console = Console(log_path=False)
-    spec = load_sensor(sensor)
+    spec = ScanSpec(load_sensor(sensor))
     if points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")
     with console.status("starting") as status:
@@ -432,7 +438,7 @@ def demo_cmd(
             output,
             part_name=part,
             units=units,
-            sensor=spec,
+            spec=spec,
             points_per_profile=points,
             seed=seed,
             step=step,

@@ -19,8 +19,8 @@ import numpy as np
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
 from scanplan.planners import Planner, make_planner, plan_path
+from scanplan.quantities import ScanSpec
 from scanplan.report.html import PlannerResult, write_html_report
-from scanplan.sensor import PRESETS, SensorSpec
 from scanplan.swaths import plan_swaths
 from scanplan.trajectory import Trajectory, atomic_write_text, write_csv
 
@@ -42,7 +42,7 @@ def run_demo(
     out_dir: Path,
     part_name: str = "door",
     units: str = "mm",
-    sensor: SensorSpec | None = None,
+    spec: ScanSpec | None = None,
     points_per_profile: int | None = 1024,
     seed: int = 0,
     step: Callable[[str], None] = lambda message: None,
@@ -52,7 +52,8 @@ def run_demo(
     from scanplan.report.maps import plot_comparison, plot_error_maps
 
     start = time.perf_counter()
-    sensor = sensor or PRESETS["at-c5-4090cs30-495"]
+    spec = spec or ScanSpec()
+    sensor = spec.sensor
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     step(f"loading part {part_name}")
@@ -64,13 +65,11 @@ def run_demo(
     for name in PLANNER_ORDER:
         planner: Planner = make_planner(name)
         step(f"planning {name} ({len(swaths)} passes)")
-        traj = plan_path(part, sensor, planner, swaths)
+        traj = plan_path(part, spec, planner, swaths)
         trajectories[name] = traj
         write_csv(traj, out_dir / f"trajectory_{name}.csv")
         step(f"evaluating {name} ({int(traj.scanning.sum())} profiles)")
-        metrics[name] = evaluate(
-            part, sensor, traj, seed=seed, points_per_profile=points_per_profile
-        )
+        metrics[name] = evaluate(part, spec, traj, seed=seed, points_per_profile=points_per_profile)
         plot_error_maps(metrics[name], out_dir / name, planner=name, part=part.name)
 
     step("drawing maps")
@@ -109,7 +108,7 @@ def run_demo(
 
     step("writing the URScript program")
     best = trajectories["rl"]
-    options = ExportOptions()
+    options = ExportOptions(scan=spec)
     program = out_dir / "scan_rl.script"
     text = export_program(best, "urscript", options)
     atomic_write_text(program, text)

@@ -17,9 +17,15 @@ import numpy as np
 
 from scanplan.cloud import PointCloud
 from scanplan.part import Part
-from scanplan.quantities import advance, mean_distance, point_orientation_error, signed_alpha
-from scanplan.reward import RewardConfig, reward_terms
-from scanplan.sensor import LineProfilometer, PointStatus, SensorSpec
+from scanplan.quantities import (
+    ScanSpec,
+    advance,
+    mean_distance,
+    point_orientation_error,
+    signed_alpha,
+)
+from scanplan.reward import reward_terms
+from scanplan.sensor import LineProfilometer, PointStatus
 from scanplan.trajectory import Trajectory
 
 COVERAGE_MAX_SLOPE_DEG = 80.0
@@ -194,11 +200,10 @@ def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float
 
 def evaluate(
     part: Part,
-    sensor: SensorSpec,
+    scan_spec: ScanSpec,
     traj: Trajectory,
     seed: int = 0,
     points_per_profile: int | None = None,
-    reward_config: RewardConfig | None = None,
     profile_rate_hz: float = 200.0,
     travel_speed_mm_s: float = 250.0,
     chunk_poses: int = 256,
@@ -210,10 +215,10 @@ def evaluate(
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
+    sensor = scan_spec.sensor
     spec = sensor.with_points(points_per_profile) if points_per_profile else sensor
     n_cols = spec.points_per_profile
     wd = spec.working_distance_mm
-    cfg = reward_config or RewardConfig(working_distance_mm=wd, z_range_mm=spec.z_range_mm)
     if not traj.scanning.any():
         raise ValueError("trajectory has no scanning pose")
     scan_idx = np.flatnonzero(traj.scanning)
@@ -321,7 +326,7 @@ def evaluate(
     ds_prof[~has_prev] = np.nan
     steps = np.flatnonzero(has_prev)
     ds_ok = ds_prof[steps][np.isfinite(ds_prof[steps])]
-    terms = reward_terms(d_prof[steps], a_prof[steps], ds_prof[steps], cfg)
+    terms = reward_terms(d_prof[steps], a_prof[steps], ds_prof[steps], scan_spec)
     d_ok = d_prof[np.isfinite(d_prof)]
 
     spacing_mean = float(ds_ok.mean()) if len(ds_ok) else 0.0
@@ -332,7 +337,7 @@ def evaluate(
         ].sum()
     )
     path_len = traj.path_length_mm()
-    cycle = m / profile_rate_hz + (path_len - scan_len) / travel_speed_mm_s
+    cycle = m / scan_spec.profile_rate_hz + (path_len - scan_len) / scan_spec.travel_speed_mm_s
     cloud = PointCloud(**{k: np.concatenate(v) for k, v in sample.items()})
 
     def mean_or_zero(a: np.ndarray) -> float:
@@ -365,8 +370,8 @@ def evaluate(
         path_length_mm=path_len,
         scan_length_mm=scan_len,
         cycle_time_s=cycle,
-        profile_rate_hz=profile_rate_hz,
-        travel_speed_mm_s=travel_speed_mm_s,
+        profile_rate_hz=scan_spec.profile_rate_hz,
+        travel_speed_mm_s=scan_spec.travel_speed_mm_s,
         plan_time_s=float(traj.plan_time_s),
         eval_time_s=time.perf_counter() - start_time,
         reward_mean=mean_or_zero(terms["reward"]),

@@ -1,12 +1,86 @@
-"""Profile-level quantities of SPEC §2 — D, signed alpha, per-point alpha_i, delta-s.
+"""The scan's parameters (`ScanSpec`) and the profile-level quantities of SPEC §2 — D,
+signed alpha, per-point alpha_i, delta-s.
 
-The environment, the planners and the metrics all call these, so the agent's reward and the
-report's numbers can never disagree. Every function works on leading batch dimensions.
+The environment, the planners, the metrics and the export all take one `ScanSpec` and call
+these functions, so the agent's reward and the report's numbers can never disagree. Every
+function works on leading batch dimensions.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field, replace
+
 import numpy as np
+
+from scanplan.sensor import SensorSpec
+
+
+@dataclass(frozen=True)
+class ScanSpec:
+    """What a good scan is, in one place: the sensor (W_d, Z_r) plus the profile spacing
+    Δs_opt, α_max and the reward weights (SPEC §5), and the in-spec tolerances (SPEC §7).
+
+    tol_distance_mm: |z_s − W_d| a point may have and count as in spec; None = Z_r/20.
+    tol_angle_rad: orientation error α_i a point may have and count as in spec.
+    profile_rate_hz, travel_speed_mm_s: the cycle-time model of the metrics and the robot
+    programs: scan speed = profile rate × Δs_opt (profiles land Δs_opt apart), moves between
+    passes at the travel speed.
+    """
+
+    sensor: SensorSpec = field(default_factory=SensorSpec)
+    delta_s_opt_mm: float = 0.5
+    alpha_max_rad: float = math.radians(30.0)
+    w_d: float = 1.0 / 3.0
+    w_alpha: float = 1.0 / 3.0
+    w_delta_s: float = 1.0 / 3.0
+    tol_distance_mm: float | None = None
+    tol_angle_rad: float = math.radians(15.0)
+    profile_rate_hz: float = 200.0
+    travel_speed_mm_s: float = 250.0
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.delta_s_opt_mm, "profile spacing (delta_s_opt_mm)"),
+            (self.alpha_max_rad, "alpha_max_rad"),
+            (self.tolerance_mm, "distance tolerance"),
+            (self.tol_angle_rad, "angle tolerance"),
+            (self.profile_rate_hz, "profile rate (profile_rate_hz)"),
+            (self.travel_speed_mm_s, "travel speed (travel_speed_mm_s)"),
+        ]
+        for value, what in checks:
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"scan spec: {what} must be a finite number > 0, got {value}")
+        weights = (self.w_d, self.w_alpha, self.w_delta_s)
+        if not all(math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
+            raise ValueError(f"scan spec: reward weights must be >= 0, not all 0: {weights}")
+
+    @property
+    def working_distance_mm(self) -> float:
+        return self.sensor.working_distance_mm
+
+    @property
+    def z_range_mm(self) -> float:
+        return self.sensor.z_range_mm
+
+    @property
+    def half_range_mm(self) -> float:
+        """Z_r/2: the depth window's half width, the scale of D in the reward and state."""
+        return self.sensor.z_range_mm / 2
+
+    @property
+    def tolerance_mm(self) -> float:
+        """The in-spec distance tolerance (default Z_r/20: 12.5 mm for the AT preset)."""
+        return self.z_range_mm / 20 if self.tol_distance_mm is None else self.tol_distance_mm
+
+    @property
+    def scan_speed_mm_s(self) -> float:
+        """Speed while recording: the profiles land Δs_opt apart."""
+        return self.profile_rate_hz * self.delta_s_opt_mm
+
+    def with_sensor(self, sensor: SensorSpec) -> ScanSpec:
+        """The same scan parameters with another sensor (e.g. a sub-sampled, noiseless fan)."""
+        return replace(self, sensor=sensor)
 
 
 def mean_distance(z_sensor: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -52,6 +52,19 @@ class RayEngine:
         t = np.where(face != _MISS, t32.astype(np.float64), np.inf)
         return t, face
 
+    def cast_down(self, origins: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vertical rays (−Z) from `origins` (n, 3): the top-down CAD probe of the planners,
+        the environment's look-ahead and the direction rule. Returns t (n,) (inf on a miss),
+        face (n,) (−1 on a miss) and the hit face's normal turned to face up, (n, 3) (0 on a
+        miss): real CAD exports have inconsistent winding."""
+        # −(0, 0, 1), signed zeros and all: Embree traverses by 1/direction.
+        directions = np.tile(-np.array([0.0, 0.0, 1.0]), (len(origins), 1))
+        t, face = self.first_hit(origins, directions)
+        normals = np.zeros((len(origins), 3))
+        normals[face >= 0] = self.face_normals[face[face >= 0]]
+        normals *= np.where(normals[:, 2:3] < 0, -1.0, 1.0)
+        return t, face, normals
+
     def first_hit_float32(
         self, origins: np.ndarray, directions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:

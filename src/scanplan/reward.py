@@ -1,29 +1,19 @@
 """The paper's reward terms R_D, R_alpha, R_delta-s and their weighted sum (SPEC §5).
 
-Shared by the environment, the geometric planner's cost and the metrics. Each term lies in
+Shared by the environment, the geometric planner's cost and the metrics; the scale, α_max,
+Δs_opt and the weights come from the one `ScanSpec`. Each term lies in
 [-1, 0]; a missing measurement (NaN) is charged the full -1.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numpy.typing import ArrayLike
 
-
-@dataclass(frozen=True)
-class RewardConfig:
-    working_distance_mm: float = 400.0
-    z_range_mm: float = 250.0
-    alpha_max_rad: float = np.radians(30.0)
-    delta_s_opt_mm: float = 0.5
-    w_d: float = 1.0 / 3.0
-    w_alpha: float = 1.0 / 3.0
-    w_delta_s: float = 1.0 / 3.0
+from scanplan.quantities import ScanSpec
 
 
-def reward_distance(d_mm: ArrayLike, cfg: RewardConfig) -> np.ndarray:
+def reward_distance(d_mm: ArrayLike, cfg: ScanSpec) -> np.ndarray:
     """R_D = -(W_d - D)^2 / (Z_r/2)^2; -1 outside the range or with no valid point."""
     d = np.asarray(d_mm, dtype=np.float64)
     half = cfg.z_range_mm / 2
@@ -32,14 +22,14 @@ def reward_distance(d_mm: ArrayLike, cfg: RewardConfig) -> np.ndarray:
         return np.where(np.isfinite(d) & (r >= -1.0), r, -1.0)
 
 
-def reward_alpha(alpha_rad: ArrayLike, cfg: RewardConfig) -> np.ndarray:
+def reward_alpha(alpha_rad: ArrayLike, cfg: ScanSpec) -> np.ndarray:
     """R_alpha = max(-1, -alpha^2 / alpha_max^2)."""
     a = np.asarray(alpha_rad, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         return np.where(np.isfinite(a), np.maximum(-1.0, -(a**2) / cfg.alpha_max_rad**2), -1.0)
 
 
-def reward_advance(delta_s_mm: ArrayLike, cfg: RewardConfig) -> np.ndarray:
+def reward_advance(delta_s_mm: ArrayLike, cfg: ScanSpec) -> np.ndarray:
     """R_delta-s = max(-1, -(ds - ds_opt)^2 / ds_opt^2)."""
     s = np.asarray(delta_s_mm, dtype=np.float64)
     opt = cfg.delta_s_opt_mm
@@ -48,7 +38,7 @@ def reward_advance(delta_s_mm: ArrayLike, cfg: RewardConfig) -> np.ndarray:
 
 
 def reward_terms(
-    d_mm: ArrayLike, alpha_rad: ArrayLike, delta_s_mm: ArrayLike, cfg: RewardConfig
+    d_mm: ArrayLike, alpha_rad: ArrayLike, delta_s_mm: ArrayLike, cfg: ScanSpec
 ) -> dict[str, np.ndarray]:
     """The three terms and their weighted sum: keys r_d, r_alpha, r_delta_s, reward."""
     r_d = reward_distance(d_mm, cfg)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import trimesh
@@ -89,7 +90,7 @@ def cross_line_residual_mm(
     ys = np.arange(lo[1], hi[1] + grid_mm, grid_mm)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     origins = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, hi[2] + 10.0)], axis=1)
-    t, face = part.ray_engine.first_hit(origins, np.tile(-UP, (len(origins), 1)))
+    t, face, _ = part.ray_engine.cast_down(origins)
     hit = face >= 0
     if hit.sum() < 2:
         return 0.0
@@ -105,45 +106,84 @@ def cross_line_residual_mm(
     return float(np.mean(np.abs(points[:, 2] - mean[group])))
 
 
+class DirectionRule(Protocol):
+    """How a raster picks its scan direction u (unit, horizontal) for a part."""
+
+    def direction(self, part: Part, sensor: SensorSpec) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class GivenDirection:
+    """A direction given by the user ('x', 'y' or a vector); its vertical part is dropped."""
+
+    vector: tuple[float, float, float]
+
+    def direction(self, part: Part, sensor: SensorSpec) -> np.ndarray:
+        return np.array(self.vector, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class LongSide:
+    """The long side of the minimum-area rectangle around the part seen from above (SPEC §3)."""
+
+    def direction(self, part: Part, sensor: SensorSpec) -> np.ndarray:
+        return rectangle_axes(part)[0]
+
+
+@dataclass(frozen=True)
+class LeastCrossResidual:
+    """Of the rectangle's two sides, the one whose passes leave less surface variation across
+    the laser line (what height and pitch cannot follow); the long side unless the short one
+    is clearly (`margin`, 25 %) better — so a plate or a training piece scans along its
+    length, a car door across the tumblehome."""
+
+    overlap: float = 0.2
+    margin: float = 0.25
+
+    def direction(self, part: Part, sensor: SensorSpec) -> np.ndarray:
+        long_axis, short_axis = rectangle_axes(part)
+        width = sensor.line_width_mm
+        along_long = cross_line_residual_mm(part, long_axis, width, self.overlap)
+        along_short = cross_line_residual_mm(part, short_axis, width, self.overlap)
+        return short_axis if along_short < (1 - self.margin) * along_long else long_axis
+
+
+def direction_rule(direction: str | np.ndarray | DirectionRule, overlap: float = 0.2):
+    """The rule for a CLI-style direction: 'x', 'y', 'long', 'auto', a vector, or a rule."""
+    if isinstance(direction, str):
+        rules: dict[str, DirectionRule] = {
+            "x": GivenDirection((1.0, 0.0, 0.0)),
+            "y": GivenDirection((0.0, 1.0, 0.0)),
+            "long": LongSide(),
+            "auto": LeastCrossResidual(overlap),
+        }
+        try:
+            return rules[direction.lower()]
+        except KeyError:
+            raise ValueError(
+                f"unknown scan direction {direction!r}: use x, y, long or auto"
+            ) from None
+    if isinstance(direction, np.ndarray | list | tuple):
+        x, y, z = (float(c) for c in np.asarray(direction, dtype=np.float64).reshape(3))
+        return GivenDirection((x, y, z))
+    return direction
+
+
 def scan_direction(
     part: Part,
-    direction: str | np.ndarray = "auto",
-    line_width_mm: float | None = None,
+    sensor: SensorSpec,
+    direction: str | np.ndarray | DirectionRule = "auto",
     overlap: float = 0.2,
 ) -> np.ndarray:
-    """Unit horizontal scan direction.
-
-    'x', 'y' or a vector: as given. 'long': the long side of the minimum-area rectangle around
-    the part seen from above (SPEC §3). 'auto' (needs line_width_mm): of the rectangle's two
-    sides, the one whose passes leave less surface variation across the laser line (what
-    height and pitch cannot follow); the long side unless the short one is clearly (>25 %)
-    better — so a plate or a training piece scans along its length, a car door across the
-    tumblehome.
-    """
-    if isinstance(direction, str):
-        key = direction.lower()
-        if key == "x":
-            u = np.array([1.0, 0.0, 0.0])
-        elif key == "y":
-            u = np.array([0.0, 1.0, 0.0])
-        elif key in ("auto", "long"):
-            long_axis, short_axis = rectangle_axes(part)
-            u = long_axis
-            if key == "auto" and line_width_mm is not None:
-                along_long = cross_line_residual_mm(part, long_axis, line_width_mm, overlap)
-                along_short = cross_line_residual_mm(part, short_axis, line_width_mm, overlap)
-                if along_short < 0.75 * along_long:
-                    u = short_axis
-        else:
-            raise ValueError(f"unknown scan direction {direction!r}: use x, y, long or auto")
-    else:
-        u = np.asarray(direction, dtype=np.float64).copy()
-        u[2] = 0.0
+    """Unit horizontal scan direction from a direction rule (see `direction_rule`), with a
+    canonical sign (first non-zero component positive) so plans are reproducible."""
+    u = np.asarray(direction_rule(direction, overlap).direction(part, sensor), dtype=np.float64)
+    u = u.copy()
+    u[2] = 0.0
     norm = np.linalg.norm(u)
     if norm < 1e-9:
         raise ValueError("scan direction must have a horizontal component")
     u = u / norm
-    # A canonical sign (first non-zero component positive) keeps plans reproducible.
     if u[0] < -1e-9 or (abs(u[0]) <= 1e-9 and u[1] < 0):
         u = -u
     return u
@@ -152,7 +192,7 @@ def scan_direction(
 def plan_swaths(
     part: Part,
     sensor: SensorSpec,
-    direction: str | np.ndarray = "auto",
+    direction: str | np.ndarray | DirectionRule = "auto",
     overlap: float = 0.2,
     run_in_mm: float = 20.0,
 ) -> list[Swath]:
@@ -164,7 +204,7 @@ def plan_swaths(
     """
     if not 0.0 <= overlap < 1.0:
         raise ValueError(f"overlap must be in [0, 1), got {overlap}")
-    u = scan_direction(part, direction, sensor.line_width_mm, overlap)
+    u = scan_direction(part, sensor, direction, overlap)
     v = np.cross(UP, u)
     vertices = np.asarray(part.mesh.vertices)
     along, across = vertices @ u, vertices @ v

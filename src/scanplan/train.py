@@ -58,7 +58,7 @@ class TrainConfig:
     activation: str = "relu"
     log_std_init: float | tuple[float, ...] = 0.0  # one per action: (Δy, Δz, Δθ)
     init_advance: float | None = None  # initial mean Δy action (0.5 = Δs_opt at Δy_max 1 mm)
-    bc_samples: int = 0  # > 0: behaviour-clone `expert_action` on this many states first
+    bc_samples: int = 0  # > 0: behaviour-clone the feedback controller on this many states first
     env: dict[str, Any] = field(
         default_factory=lambda: {
             "fan_points": 128,
@@ -142,14 +142,15 @@ def _batched_class():
 
         def step_wait(self):
             groups: dict[int, list[int]] = {}
+            proposed = []
             for i, (env, a) in enumerate(zip(self.envs, self._actions, strict=True)):
-                env.begin_step(a)
-                groups.setdefault(id(env.part), []).append(i)  # one sim per part
+                proposed.append(env.dynamics.propose(a))
+                groups.setdefault(id(env.dynamics.part), []).append(i)  # one sim per part
             profiles: list[Any] = [None] * self.num_envs
             for idx in groups.values():
                 first = self.envs[idx[0]]
-                poses = np.stack([self.envs[i].swath.pose(*self.envs[i].state) for i in idx])
-                scan = first.sim.measure_many(poses, first.np_random)
+                poses = np.stack([self.envs[i].dynamics.pose(proposed[i].state) for i in idx])
+                scan = first.dynamics.sim.measure_many(poses, first.np_random)
                 for k, i in enumerate(idx):
                     profiles[i] = scan.profile(k)
             obs = np.zeros((self.num_envs, *self.observation_space.shape), np.float32)
@@ -157,7 +158,7 @@ def _batched_class():
             dones = np.zeros(self.num_envs, bool)
             infos = []
             for i, env in enumerate(self.envs):
-                o, r, term, trunc, info = env.finish_step(profiles[i])
+                o, r, term, trunc, info = env.step_measured(proposed[i], profiles[i])
                 self._ret[i] += r
                 self._len[i] += 1
                 if term or trunc:
@@ -419,26 +420,15 @@ def save_policy(model, out_dir: Path, config: TrainConfig, training: dict[str, A
 # ---- behaviour-cloning warm start (beyond the paper) ---------------------------------------
 
 
-def expert_action(env, k_z: float = 0.3, k_theta: float = 0.1, theta_rate_deg: float = 0.08):
-    """A proportional controller in `env`'s action units, from its current D and α only:
-    Δz = k_z (D − W_d), Δθ = k_θ α (capped so the footprint, W_d·Δθ away, moves less than a
-    spacing), Δy = Δs_opt plus the footprint shift of that pitch (at least Δs_opt/2). It
-    obeys the paper's action limitation by construction; the teacher of the warm start."""
-    wd = env.sensor.working_distance_mm
-    d, a = env.d_mm, env.alpha_rad
-    known = np.isfinite(d) and np.isfinite(a)
-    dz = float(np.clip(k_z * (d - wd), -env.limits[1], env.limits[1])) if known else 0.0
-    cap = math.radians(theta_rate_deg)
-    dth = float(np.clip(k_theta * a, -cap, cap)) if known else 0.0
-    ds_opt = env.reward_config.delta_s_opt_mm
-    dy = max(ds_opt + (d if known else wd) * dth, 0.5 * ds_opt)  # always advance
-    return np.clip(np.array([dy, dz, dth]) / env.limits, -1.0, 1.0)
-
-
 def behaviour_clone(model, vec, samples: int, seed: int, epochs: int = 20) -> float:
-    """Fit the actor's mean to `expert_action` on states visited by the expert with a little
-    action noise (so the states around its path are seen too); returns the final MSE."""
+    """Fit the actor's mean to the feedback controller (`planners.feedback`) on states visited
+    by it with a little action noise (so the states around its path are seen too); returns
+    the final MSE."""
     import torch
+
+    from scanplan.planners.feedback import FeedbackController
+
+    expert_action = FeedbackController()
 
     rng = np.random.default_rng(seed)
     obs = vec.reset()
@@ -446,7 +436,7 @@ def behaviour_clone(model, vec, samples: int, seed: int, epochs: int = 20) -> fl
     ys: list[np.ndarray] = []
     noise = np.array([0.1, 0.1, 0.03])
     while len(xs) * vec.num_envs < samples:
-        expert = np.stack([expert_action(env) for env in vec.envs])
+        expert = np.stack([expert_action(env.dynamics) for env in vec.envs])
         xs.append(obs)
         ys.append(expert)
         act = np.clip(expert + rng.normal(0.0, 1.0, expert.shape) * noise, -1.0, 1.0)

@@ -10,7 +10,7 @@ import numpy as np
 
 from scanplan.part import load_part
 from scanplan.planners import make_planner, plan_path
-from scanplan.sensor import SensorSpec
+from scanplan.quantities import ScanSpec
 from scanplan.swaths import plan_swaths
 
 STRIDE = 25
@@ -19,13 +19,13 @@ PLANNERS = ("fixed", "geometric", "rl")
 
 
 def golden_plans() -> dict[str, np.ndarray]:
-    sensor = SensorSpec()
+    spec = ScanSpec()
     out: dict[str, np.ndarray] = {}
     for part_name in PARTS:
         part = load_part(part_name)
-        swaths = plan_swaths(part, sensor)
+        swaths = plan_swaths(part, spec.sensor)
         for name in PLANNERS:
-            traj = plan_path(part, sensor, make_planner(name), swaths)
+            traj = plan_path(part, spec, make_planner(name), swaths)
             key = f"{part_name}/{name}"
             out[f"{key}/poses"] = traj.poses[::STRIDE]
             out[f"{key}/n"] = np.array([len(traj), int(traj.scanning.sum())])

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory
 
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, RAPID 32
@@ -40,16 +41,15 @@ class ExportOptions:
 
     part_pose: (4, 4) `T_base_part`, mm — where the part sits in the robot base frame.
     tcp:       (4, 4) `T_flange_sensor`, mm — the sensor mounted on the tool flange.
-    scan_speed_mm_s: speed while recording; None = profile_rate_hz * delta_s_opt_mm, the
-               speed at which profiles land Δs_opt apart.
+    scan:      the ScanSpec: scan speed = its profile rate × Δs_opt (the speed at which
+               profiles land Δs_opt apart) unless `scan_speed_mm_s` is given; its travel speed
+               between passes.
     """
 
     part_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
     tcp: np.ndarray = field(default_factory=lambda: np.eye(4))
+    scan: ScanSpec = field(default_factory=ScanSpec)
     scan_speed_mm_s: float | None = None
-    profile_rate_hz: float = 200.0
-    delta_s_opt_mm: float = 0.5
-    travel_speed_mm_s: float = 250.0
     accel_mm_s2: float = 1000.0
     blend_mm: float = 1.0
     program_name: str = "scanplan_path"
@@ -58,10 +58,8 @@ class ExportOptions:
     def __post_init__(self) -> None:
         object.__setattr__(self, "part_pose", _check_rigid("part pose", self.part_pose))
         object.__setattr__(self, "tcp", _check_rigid("tcp", self.tcp))
-        for name in ("profile_rate_hz", "delta_s_opt_mm", "travel_speed_mm_s", "accel_mm_s2"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"export option {name} must be > 0, got {value}")
+        if not np.isfinite(self.accel_mm_s2) or self.accel_mm_s2 <= 0:
+            raise ValueError(f"export option accel_mm_s2 must be > 0, got {self.accel_mm_s2}")
         if self.scan_speed_mm_s is not None and not (
             np.isfinite(self.scan_speed_mm_s) and self.scan_speed_mm_s > 0
         ):
@@ -81,7 +79,11 @@ class ExportOptions:
         """mm/s commanded while the sensor records."""
         if self.scan_speed_mm_s is not None:
             return float(self.scan_speed_mm_s)
-        return self.profile_rate_hz * self.delta_s_opt_mm
+        return self.scan.scan_speed_mm_s
+
+    @property
+    def travel_speed_mm_s(self) -> float:
+        return self.scan.travel_speed_mm_s
 
 
 @dataclass(frozen=True)

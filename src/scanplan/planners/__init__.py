@@ -1,6 +1,6 @@
 """Planners: each turns one Swath into the sensor poses of that pass.
 
-A planner is any object with a `name` and `plan(part, swath, sensor) -> Trajectory`;
+A planner is any object with a `name` and `plan(part, swath, spec) -> Trajectory`;
 `plan_path` runs one over a whole Boustrophedon base path and adds the lift-off transitions.
 """
 
@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.sensor import SensorSpec
+from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath, transition_poses
 from scanplan.trajectory import Trajectory
 
@@ -23,12 +23,12 @@ class Planner(Protocol):
     @property
     def name(self) -> str: ...
 
-    def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
+    def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         """The scanning poses of one pass (all flagged scanning, swath = swath.index)."""
         ...
 
 
-PLANNERS = ("fixed", "geometric", "rl")
+PLANNERS = ("fixed", "feedback", "geometric", "rl")
 
 
 def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
@@ -37,6 +37,10 @@ def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
         from scanplan.planners.fixed import FixedPlanner
 
         return FixedPlanner()
+    if name == "feedback":
+        from scanplan.planners.feedback import FeedbackPlanner
+
+        return FeedbackPlanner()
     if name == "geometric":
         from scanplan.planners.geometric import GeometricPlanner
 
@@ -48,7 +52,7 @@ def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
     raise ValueError(f"unknown planner {name!r}; use one of {', '.join(PLANNERS)}")
 
 
-def plan_path(part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swath]) -> Trajectory:
+def plan_path(part: Part, spec: ScanSpec, planner: Planner, swaths: list[Swath]) -> Trajectory:
     """All passes in snake order, joined by non-scanning lift-off transitions."""
     if not swaths:
         raise ValueError("no swath to plan")
@@ -60,7 +64,7 @@ def plan_path(part: Part, sensor: SensorSpec, planner: Planner, swaths: list[Swa
             pieces.append(
                 Trajectory(moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool))
             )
-        pieces.append(planner.plan(part, swath, sensor))
+        pieces.append(planner.plan(part, swath, spec))
     traj = Trajectory.concatenate(pieces, planner=planner.name)
     return Trajectory(
         traj.poses,

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.quantities import mean_distance
-from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.quantities import ScanSpec, mean_distance
+from scanplan.sensor import LineProfilometer
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
@@ -28,20 +28,20 @@ def station_advances(length_mm: float, delta_s_mm: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FixedPlanner:
-    """Straight passes at one height and pitch 0, a station every `delta_s_opt_mm` along u.
+    """Straight passes at one height and pitch 0, a station every Δs_opt along u.
 
     probe_step_mm / probe_points: spacing and fan size of the noiseless probe that sets the
     height; height_iterations: D re-measurements after the first guess (the depth window makes
     D depend on the height, so one shift is not always exact).
     """
 
-    delta_s_opt_mm: float = 0.5
     probe_step_mm: float = 5.0
     probe_points: int = 128
     height_iterations: int = 3
     name: str = "fixed"
 
-    def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
+    def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
+        sensor = spec.sensor
         s_probe = station_advances(swath.length_mm, self.probe_step_mm)
         probe = LineProfilometer(part, sensor.without_noise().with_points(self.probe_points))
 
@@ -74,7 +74,7 @@ class FixedPlanner:
             if abs(step) < 1e-3:
                 break
 
-        s = station_advances(swath.length_mm, self.delta_s_opt_mm)
+        s = station_advances(swath.length_mm, spec.delta_s_opt_mm)
         poses = swath.poses(s, np.full_like(s, h), np.zeros_like(s))
         return Trajectory(
             poses, np.full(len(s), swath.index), np.ones(len(s), bool), planner=self.name

@@ -19,11 +19,12 @@ from typing import Protocol
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from scanplan.dynamics import StepLimits, probe_line, track
 from scanplan.part import Part
-from scanplan.quantities import advance, mean_distance, signed_alpha
-from scanplan.reward import RewardConfig, reward_terms
-from scanplan.sensor import LineProfilometer, SensorSpec
-from scanplan.swaths import UP, Swath
+from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
+from scanplan.reward import reward_terms
+from scanplan.sensor import LineProfilometer
+from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
 # ---- strategies (passed in, DESIGN habit 6) ----------------------------------------------
@@ -33,35 +34,16 @@ class Cost(Protocol):
     """Mean cost of a pass from its per-profile D (mm), α (rad) and Δs (mm); lower is better."""
 
     def __call__(
-        self,
-        d_mm: np.ndarray,
-        alpha_rad: np.ndarray,
-        delta_s_mm: np.ndarray,
-        sensor: SensorSpec,
-        delta_s_opt_mm: float,
+        self, d_mm: np.ndarray, alpha_rad: np.ndarray, delta_s_mm: np.ndarray, spec: ScanSpec
     ) -> float: ...
 
 
 @dataclass(frozen=True)
 class RewardCost:
-    """−(mean reward): the agent's own objective, from `reward.reward_terms`."""
+    """−(mean reward): the agent's own objective, `reward.reward_terms` under the ScanSpec."""
 
-    alpha_max_rad: float = math.radians(30.0)
-    w_d: float = 1.0 / 3.0
-    w_alpha: float = 1.0 / 3.0
-    w_delta_s: float = 1.0 / 3.0
-
-    def __call__(self, d_mm, alpha_rad, delta_s_mm, sensor, delta_s_opt_mm) -> float:
-        cfg = RewardConfig(
-            working_distance_mm=sensor.working_distance_mm,
-            z_range_mm=sensor.z_range_mm,
-            alpha_max_rad=self.alpha_max_rad,
-            delta_s_opt_mm=delta_s_opt_mm,
-            w_d=self.w_d,
-            w_alpha=self.w_alpha,
-            w_delta_s=self.w_delta_s,
-        )
-        return -float(np.mean(reward_terms(d_mm, alpha_rad, delta_s_mm, cfg)["reward"]))
+    def __call__(self, d_mm, alpha_rad, delta_s_mm, spec: ScanSpec) -> float:
+        return -float(np.mean(reward_terms(d_mm, alpha_rad, delta_s_mm, spec)["reward"]))
 
 
 class Lookahead(Protocol):
@@ -123,7 +105,7 @@ class SurfaceProbe:
 def probe_swath(
     part: Part,
     swath: Swath,
-    sensor: SensorSpec,
+    spec: ScanSpec,
     step_mm: float = 2.0,
     columns: int = 48,
     max_slope_deg: float = 75.0,
@@ -133,26 +115,15 @@ def probe_swath(
     nearest hits. Raises ValueError if the pass sees nothing."""
     length = max(swath.length_mm, step_mm)
     grid = np.linspace(0.0, length, max(2, int(round(length / step_mm)) + 1))
-    half = sensor.line_width_mm / 2
-    lateral = np.linspace(-half, half, columns)
-    top = float(part.bounds[1, 2]) + 10.0
-    base = swath.start_mm + grid[:, None, None] * swath.u + lateral[None, :, None] * swath.v
-    origins = base.reshape(-1, 3).copy()
-    origins[:, 2] = top
-    dirs = np.tile(-UP, (len(origins), 1))
-    engine = part.ray_engine
-    t, face = engine.first_hit(origins, dirs)
-    hit = (face >= 0).reshape(len(grid), columns)
+    half = spec.sensor.line_width_mm / 2
+    line = probe_line(part, swath, grid, np.linspace(-half, half, columns))
+    hit, normals = line.hit, line.normals_up
     if not hit.any():
         raise ValueError(
             f"pass {swath.index} sees no surface of part {part.name}: "
             "the part is outside the sensor's reach"
         )
-    z = np.where(hit, (top - t).reshape(hit.shape) - swath.start_mm[2], np.nan)
-    flat_normals = np.zeros((len(origins), 3))
-    flat_normals[face >= 0] = engine.face_normals[face[face >= 0]]
-    flat_normals *= np.where(flat_normals[:, 2:3] < 0, -1.0, 1.0)  # face up, whatever winding
-    normals = flat_normals.reshape(*hit.shape, 3)
+    z = np.where(hit, line.z_mm - swath.start_mm[2], np.nan)
     # Walls steeper than max_pitch_slope return little to a sensor looking down, and the pitch
     # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
     facing = hit & (normals[..., 2] > math.cos(math.radians(max_pitch_slope_deg)))
@@ -186,54 +157,6 @@ def probe_swath(
     return SurfaceProbe(grid[keep], height[keep], pitch[keep], arc[keep] - arc[keep][0])
 
 
-# ---- per-step actions ---------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class StepLimits:
-    """The agent's per-step limits (SPEC §5): Δy along u, Δz along z_s, Δθ about x_s.
-
-    Magnitudes only: the agent's dynamic sign clipping (paper eqs. clipActionD/N) is a
-    training aid that forbids anticipation, which is the point of this planner."""
-
-    dy_max_mm: float = 1.0
-    dz_max_mm: float = 1.0
-    dtheta_max_rad: float = math.radians(1.0)
-
-
-def step_actions(s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
-    """(Δy, Δz, Δθ) of each step between consecutive stations (s, h, θ) of a pass, (n-1, 3).
-
-    A step moves Δy along u and Δz along the beam z_s = -sinθ u - cosθ w of the pose it
-    starts from, then pitches by Δθ."""
-    ds, dh, dth = np.diff(s_mm), np.diff(h_mm), np.diff(pitch_rad)
-    th = pitch_rad[:-1]
-    dz = -dh / np.cos(th)
-    dy = ds + dz * np.sin(th)
-    return np.stack([dy, dz, dth], axis=1)
-
-
-def enforce_limits(
-    s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray, limits: StepLimits
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Track the stations with steps clipped to the limits (a safety net: the look-ahead
-    already shapes the targets so that clipping is rare and the tracker does not lag)."""
-    acts = step_actions(s_mm, h_mm, pitch_rad)
-    lim = np.array([limits.dy_max_mm, limits.dz_max_mm, limits.dtheta_max_rad]) * (1 - 1e-9)
-    if np.all(np.abs(acts) <= lim):
-        return s_mm, h_mm, pitch_rad
-    s, h, th = s_mm.copy(), h_mm.copy(), pitch_rad.copy()
-    for i in range(1, len(s)):  # a recurrence over stations: each step starts where the last ended
-        c, sn = math.cos(th[i - 1]), math.sin(th[i - 1])
-        dz = min(max(-(h_mm[i] - h[i - 1]) / c, -lim[1]), lim[1])
-        dy = min(max(s_mm[i] - s[i - 1] + dz * sn, -lim[0]), lim[0])
-        dth = min(max(pitch_rad[i] - th[i - 1], -lim[2]), lim[2])
-        s[i] = s[i - 1] + dy - dz * sn
-        h[i] = h[i - 1] - dz * c
-        th[i] = th[i - 1] + dth
-    return s, h, th
-
-
 # ---- the planner --------------------------------------------------------------------------
 
 
@@ -245,12 +168,13 @@ class GeometricPlanner:
     lookaheads: candidate pitch shapers; each is planned, refined and costed, the best kept.
     height_lookahead: shaper of the height (no smoothing by default: heights need only the
     rate limit, and smoothing a ramp would bend it at its ends).
-    limits: per-step limits. pitch_lever: pitch rate as a fraction of 1/W_d rad per mm of
+    limits: per-step limits (magnitudes only: the agent's dynamic sign clipping, paper eqs.
+    clipActionD/N, is a training aid that forbids anticipation, which is the point of this
+    planner). pitch_lever: pitch rate as a fraction of 1/W_d rad per mm of
     footprint, so that the sensor's swing (W_d·Δθ) stays within a step's translation.
     refinements: sensor-measured corrections of each candidate.
     """
 
-    delta_s_opt_mm: float = 0.5
     cost: Cost = field(default_factory=RewardCost)
     lookaheads: tuple[Lookahead, ...] = (
         CentredLookahead(0.0),
@@ -266,15 +190,15 @@ class GeometricPlanner:
     refinements: int = 2
     name: str = "geometric"
 
-    def plan(self, part: Part, swath: Swath, sensor: SensorSpec) -> Trajectory:
-        probe = probe_swath(part, swath, sensor, self.probe_step_mm, self.probe_columns)
-        fan = LineProfilometer(part, sensor.without_noise().with_points(self.sensor_points))
+    def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
+        probe = probe_swath(part, swath, spec, self.probe_step_mm, self.probe_columns)
+        fan = LineProfilometer(part, spec.sensor.without_noise().with_points(self.sensor_points))
         best: tuple[float, np.ndarray] | None = None
         for lookahead in self.lookaheads:
             pitch_t, height_t, arc = probe.pitch_rad, probe.height_mm, probe.arc_mm
             for it in range(self.refinements + 1):
                 s, h, th, sigma = self._stations(
-                    probe.grid_mm, pitch_t, height_t, arc, lookahead, sensor
+                    probe.grid_mm, pitch_t, height_t, arc, lookahead, spec
                 )
                 poses = swath.poses(s, h, th)
                 scan = fan.measure_many(poses)
@@ -287,13 +211,13 @@ class GeometricPlanner:
                     scan.valid[1:],
                     swath.u,
                 )
-                cost = self.cost(d[1:], alpha[1:], ds, sensor, self.delta_s_opt_mm)
+                cost = self.cost(d[1:], alpha[1:], ds, spec)
                 if best is None or cost < best[0]:
                     best = (cost, poses)
                 if it == self.refinements:
                     break
                 pitch_t, height_t, arc = self._refine(
-                    probe.grid_mm, sigma, th, h, d, alpha, ds, (pitch_t, height_t, arc)
+                    probe.grid_mm, sigma, th, h, d, alpha, ds, (pitch_t, height_t, arc), spec
                 )
         assert best is not None
         poses = best[1]
@@ -301,26 +225,27 @@ class GeometricPlanner:
             poses, np.full(len(poses), swath.index), np.ones(len(poses), bool), planner=self.name
         )
 
-    def _stations(self, grid, pitch_t, height_t, arc, lookahead: Lookahead, sensor: SensorSpec):
+    def _stations(self, grid, pitch_t, height_t, arc, lookahead: Lookahead, spec: ScanSpec):
         """Shaped targets on the grid -> stations every Δs_opt of footprint arc."""
-        wd = sensor.working_distance_mm
+        wd = spec.working_distance_mm
+        ds_opt = spec.delta_s_opt_mm
         lim = self.limits
         pitch = lookahead.shape(grid, pitch_t, self.pitch_lever / wd)
         pitch = np.clip(pitch, -math.radians(80), math.radians(80))
         # Sensor on the beam through the footprint, W_d away: D = W_d whatever the tilt.
         s_grid = grid + wd * np.sin(pitch)
         h_grid = height_t + wd * np.cos(pitch)
-        h_rate = 0.8 * lim.dz_max_mm * float(np.cos(pitch).min()) / self.delta_s_opt_mm
+        h_rate = 0.8 * lim.dz_max_mm * float(np.cos(pitch).min()) / ds_opt
         h_grid = self.height_lookahead.shape(grid, h_grid, h_rate)
-        n = int(math.floor(arc[-1] / self.delta_s_opt_mm + 1e-9)) + 1
-        sigma = np.interp(np.arange(n) * self.delta_s_opt_mm, arc, grid)
+        n = int(math.floor(arc[-1] / ds_opt + 1e-9)) + 1
+        sigma = np.interp(np.arange(n) * ds_opt, arc, grid)
         s = np.interp(sigma, grid, s_grid)
         h = np.interp(sigma, grid, h_grid)
         th = np.interp(sigma, grid, pitch)
-        s, h, th = enforce_limits(s, h, th, lim)
+        s, h, th = track(s, h, th, lim)
         return s, h, th, sigma
 
-    def _refine(self, grid, sigma, th, h, d, alpha, ds, targets):
+    def _refine(self, grid, sigma, th, h, d, alpha, ds, targets, spec: ScanSpec):
         """Targets corrected by what the sensor measured at the stations: the pitch that
         aligns (θ + α), the height that puts D at W_d, the arc that gives Δs = Δs_opt."""
         arc = targets[2]
@@ -331,7 +256,7 @@ class GeometricPlanner:
         # Move along the beam by D - W_d: the vertical part of that, as a surface height.
         surface_h = h - d * np.cos(th)
         height_t = np.interp(grid, sigma[ok], surface_h[ok])
-        ratio = ds / self.delta_s_opt_mm
+        ratio = ds / spec.delta_s_opt_mm
         good = np.isfinite(ratio) & (ratio > 0.05) & (ratio < 20)
         if good.sum() >= 2:
             mid = 0.5 * (sigma[1:] + sigma[:-1])

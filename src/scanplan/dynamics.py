@@ -1,0 +1,294 @@
+"""The pass step model (SPEC §4, §5): a sensor on a Swath, and how an action becomes its next
+pose under the per-step limits and the paper's action limitation.
+
+State (s, h, θ): advance along u and height above the swath's start (mm), pitch about x_s
+(rad). A step (Δy, Δz, Δθ) moves Δy along u and Δz along the beam z_s = −sinθ·u − cosθ·w of
+the pose it starts from, then pitches by Δθ. The Gymnasium environment is a thin wrapper over
+`PassDynamics`; the rl and feedback planners drive the same object with a controller, and the
+geometric planner uses the inverse (`steps_between`) and the tracker (`track`) to choose
+poses directly. `probe_line` is the one top-down CAD probe of "the surface under the line".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanplan.part import Part
+from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
+from scanplan.sensor import LineProfilometer, Profile
+from scanplan.swaths import Swath
+
+
+@dataclass(frozen=True)
+class StepLimits:
+    """The per-step limits (SPEC §5): Δy along u (mm), Δz along z_s (mm), Δθ about x_s (rad)."""
+
+    dy_max_mm: float = 1.0
+    dz_max_mm: float = 1.0
+    dtheta_max_rad: float = math.radians(1.0)
+
+    def __post_init__(self) -> None:
+        for name in ("dy_max_mm", "dz_max_mm", "dtheta_max_rad"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"step limit {name} must be a finite number > 0, got {value!r}")
+
+    @property
+    def array(self) -> np.ndarray:
+        """(Δy_max, Δz_max, Δθ_max), the scale of an action in [−1, 1]³."""
+        return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad])
+
+
+def limit_action(
+    action: np.ndarray, d_mm: float, alpha_rad: float, limits: StepLimits, wd_mm: float
+) -> np.ndarray:
+    """An action in [−1, 1]³ scaled to (Δy mm, Δz mm, Δθ rad), with the paper's dynamic action
+    limitation from the current D and α (eqs. clipActionD/N): Δz only towards W_d, Δθ only
+    towards alignment. With no valid point D and α are unknown: Δz and Δθ are held at 0."""
+    lim = limits.array
+    dy, dz, dth = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * lim
+    lo_z, hi_z = (
+        (0.0, 0.0)
+        if not np.isfinite(d_mm)
+        else ((0.0, lim[1]) if d_mm >= wd_mm else (-lim[1], 0.0))
+    )
+    lo_t, hi_t = (
+        (0.0, 0.0)
+        if not np.isfinite(alpha_rad)
+        else ((0.0, lim[2]) if alpha_rad >= 0 else (-lim[2], 0.0))
+    )
+    dz, dth = float(np.clip(dz, lo_z, hi_z)), float(np.clip(dth, lo_t, hi_t))
+    return np.array([dy, dz, dth])
+
+
+def apply_step(state: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad."""
+    s, h, th = state
+    dy, dz, dth = step
+    return np.array([s + dy - dz * math.sin(th), h - dz * math.cos(th), th + dth])
+
+
+def steps_between(s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
+    """The inverse of `apply_step`: (Δy, Δz, Δθ) of each step between consecutive stations
+    (s, h, θ) of a pass, (n−1, 3)."""
+    ds, dh, dth = np.diff(s_mm), np.diff(h_mm), np.diff(pitch_rad)
+    th = pitch_rad[:-1]
+    dz = -dh / np.cos(th)
+    dy = ds + dz * np.sin(th)
+    return np.stack([dy, dz, dth], axis=1)
+
+
+def track(
+    s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray, limits: StepLimits
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Follow the stations with steps clipped to the limits' magnitudes (for planners that
+    choose poses directly; the sign limitation is a training aid that forbids anticipation)."""
+    acts = steps_between(s_mm, h_mm, pitch_rad)
+    lim = limits.array * (1 - 1e-9)
+    if np.all(np.abs(acts) <= lim):
+        return s_mm, h_mm, pitch_rad
+    s, h, th = s_mm.copy(), h_mm.copy(), pitch_rad.copy()
+    for i in range(1, len(s)):  # a recurrence over stations: each step starts where the last ended
+        c, sn = math.cos(th[i - 1]), math.sin(th[i - 1])
+        dz = min(max(-(h_mm[i] - h[i - 1]) / c, -lim[1]), lim[1])
+        dy = min(max(s_mm[i] - s[i - 1] + dz * sn, -lim[0]), lim[0])
+        dth = min(max(pitch_rad[i] - th[i - 1], -lim[2]), lim[2])
+        s[i] = s[i - 1] + dy - dz * sn
+        h[i] = h[i - 1] - dz * c
+        th[i] = th[i - 1] + dth
+    return s, h, th
+
+
+def progress_mm(state: np.ndarray, wd_mm: float) -> float:
+    """Advance of the scan along u: where the beam meets the working distance (a pitched sensor
+    looks W_d·sinθ behind itself; ending on the sensor's own advance would leave the end of the
+    pass unscanned)."""
+    return float(state[0] - wd_mm * math.sin(state[2]))
+
+
+# ---- the CAD under a pass -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LineProbe:
+    """The CAD surface under a pass by vertical rays: k advances x c lateral columns.
+
+    hit: (k, c) bool; z_mm: (k, c) surface height (part frame; meaningless where no hit);
+    normals_up: (k, c, 3) face normals turned up (0 where no hit).
+    """
+
+    hit: np.ndarray
+    z_mm: np.ndarray
+    normals_up: np.ndarray
+
+
+def probe_line(
+    part: Part, swath: Swath, advances_mm: np.ndarray, lateral_mm: np.ndarray
+) -> LineProbe:
+    """Cast vertical rays at the given advances along u (from `swath.start_mm`) and lateral
+    offsets along v, from 10 mm above the part, in one batch."""
+    top = float(part.bounds[1, 2]) + 10.0
+    base = (
+        swath.start_mm
+        + np.asarray(advances_mm)[:, None, None] * swath.u
+        + np.asarray(lateral_mm)[None, :, None] * swath.v
+    )
+    origins = base.reshape(-1, 3).copy()
+    origins[:, 2] = top
+    t, face, normals = part.ray_engine.cast_down(origins)
+    shape = (len(advances_mm), len(lateral_mm))
+    return LineProbe((face >= 0).reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
+
+
+@dataclass(frozen=True)
+class PassGeometry:
+    """Where a pass sees the part: advances along u (mm, from `swath.start_mm`) of the first
+    and last stations whose fan hits it."""
+
+    s_first_mm: float
+    s_last_mm: float
+
+
+def pass_geometry(
+    part: Part, swath: Swath, spec: ScanSpec, step_mm: float = 2.0, min_hits: float = 0.1
+) -> PassGeometry:
+    """First/last stations of a pass at its nominal height, pitch 0, where the fan hits the
+    part with at least `min_hits` x the most columns any station hits (the run-in over empty
+    space has nothing to align to). Raises ValueError if the pass never sees the part."""
+    s = np.arange(0.0, max(swath.length_mm, step_mm) + 1e-9, step_mm)
+    probe = LineProfilometer(part, spec.sensor.without_noise().with_points(64))
+    scan = probe.measure_many(swath.poses(s, 0 * s, 0 * s))
+    hits = np.isfinite(scan.true_z_sensor).sum(axis=1)
+    if hits.max() == 0:
+        raise ValueError(
+            f"pass {swath.index} sees no surface of part {part.name}: "
+            "the part is outside the sensor's reach"
+        )
+    seen = np.flatnonzero(hits >= max(1, min_hits * hits.max()))
+    return PassGeometry(float(s[seen[0]]), float(s[seen[-1]]))
+
+
+def step_budget(length_mm: float, spec: ScanSpec) -> tuple[int, int]:
+    """(nominal steps, step limit) of a pass of `length_mm`: one step per Δs_opt, and three
+    times that (+10) before an episode is truncated."""
+    nominal = int(math.ceil(length_mm / spec.delta_s_opt_mm))
+    return nominal, 3 * nominal + 10
+
+
+# ---- the sensor on a pass -------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Step:
+    """A proposed step: the limited action (Δy mm, Δz mm, Δθ rad) and the state it leads to."""
+
+    action_mm_rad: np.ndarray
+    state: np.ndarray
+
+
+class PassDynamics:
+    """A sensor on one Swath: its state (s, h, θ), the profile it measured there, and D, α,
+    Δs of that profile (`quantities`). `propose` an action (nothing changes), measure the
+    proposed pose (`measure`, or many dynamics' poses in one batch), then `accept` it.
+
+    rng: the Generator the simulator's noise draws from (an env's `np_random`).
+    align_iterations, start_pitch_max_rad: see `aligned_start`.
+    """
+
+    def __init__(
+        self,
+        part: Part,
+        swath: Swath,
+        spec: ScanSpec,
+        sim: LineProfilometer,
+        limits: StepLimits | None = None,
+        rng: np.random.Generator | None = None,
+        align_iterations: int = 4,
+        start_pitch_max_rad: float = math.radians(15.0),
+    ) -> None:
+        self.part, self.swath, self.spec, self.sim = part, swath, spec, sim
+        self.limits = limits or StepLimits()
+        self.rng = rng
+        self.align_iterations = align_iterations
+        self.start_pitch_max_rad = start_pitch_max_rad
+
+    # ---- measuring ----------------------------------------------------------------------
+    def pose(self, state: np.ndarray | None = None) -> np.ndarray:
+        """T_part_sensor at `state` (default: the current one)."""
+        return self.swath.pose(*(self.state if state is None else state))
+
+    def measure(self, state: np.ndarray) -> Profile:
+        """The profile the sensor takes at (s, h, θ) on this swath."""
+        return self.sim.measure(self.swath.pose(*state), self.rng)
+
+    @staticmethod
+    def d_alpha(profile: Profile) -> tuple[float, float]:
+        """D and signed α of a profile (NaN with no valid point)."""
+        d = float(mean_distance(profile.z_sensor, profile.valid))
+        a = float(signed_alpha(profile.normals_part, profile.valid, profile.T_part_sensor))
+        return d, a
+
+    def advance_to(self, profile: Profile) -> float:
+        """Δs from the current profile to `profile` (NaN if no column is valid in both)."""
+        prev = self.profile
+        return float(
+            advance(prev.points_part, prev.valid, profile.points_part, profile.valid, self.swath.u)
+        )
+
+    # ---- the pass -------------------------------------------------------------------------
+    def start(self, state: np.ndarray) -> None:
+        """Put the sensor at `state` and measure there."""
+        self.state = np.asarray(state, dtype=np.float64)
+        self.profile = self.measure(self.state)
+        self.d_mm, self.alpha_rad = self.d_alpha(self.profile)
+        self.delta_s_mm = float("nan")
+
+    def propose(self, action: np.ndarray) -> Step:
+        """The limited step of `action` in [−1, 1]³ and the state it leads to."""
+        limited = limit_action(
+            action, self.d_mm, self.alpha_rad, self.limits, self.spec.working_distance_mm
+        )
+        return Step(limited, apply_step(self.state, limited))
+
+    def accept(self, step: Step, profile: Profile) -> None:
+        """Move to `step.state`, where `profile` was measured."""
+        self.delta_s_mm = self.advance_to(profile)
+        self.state, self.profile = step.state, profile
+        self.d_mm, self.alpha_rad = self.d_alpha(profile)
+
+    @property
+    def progress_mm(self) -> float:
+        return progress_mm(self.state, self.spec.working_distance_mm)
+
+    def aligned_start(self, s0: float, tries: int = 30, step_mm: float = 2.0) -> np.ndarray:
+        """A start at advance s0 with D = W_d and α = 0: pitch by α, then move along the beam by
+        D − W_d, a few times. A station in a camera shadow (behind a step) is skipped: try
+        `step_mm` further on."""
+        for k in range(tries):
+            state = self._align_at(s0 + k * step_mm)
+            if self.measure(state).valid.any():
+                return state
+        return self._align_at(s0)
+
+    def _align_at(self, s0: float) -> np.ndarray:
+        """Pitch by α and put the sensor W_d from the surface along the new beam, keeping the
+        beam on the surface at advance s0 (so the scan starts at P_ini, not W_d·sinθ later)."""
+        s, h, th = s0, 0.0, 0.0
+        wd = self.spec.working_distance_mm
+        for _ in range(self.align_iterations):
+            prof = self.measure(np.array([s, h, th]))
+            d, a = self.d_alpha(prof)
+            if not np.isfinite(d):  # out of the depth window: use the first hits
+                hit = np.isfinite(prof.true_z_sensor)
+                if not hit.any():
+                    break
+                d, a = float(prof.true_z_sensor[hit].mean()), 0.0
+            surface_h = h - d * math.cos(th)
+            # At a part's very end the mean normal is its end wall or nose: do not start
+            # facing it (the pass scans the top; the controller pitches on from there).
+            th = float(np.clip(th + a, -self.start_pitch_max_rad, self.start_pitch_max_rad))
+            s, h = s0 + wd * math.sin(th), surface_h + wd * math.cos(th)
+        return np.array([s, h, th])

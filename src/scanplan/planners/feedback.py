@@ -1,0 +1,64 @@
+"""The `feedback` planner (SPEC §4): a proportional controller on the measured D and α, the
+teacher a policy may be warm-started from — a planner of its own, so every policy is measured
+against the controller it learned from.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scanplan.dynamics import PassDynamics
+from scanplan.part import Part
+from scanplan.planners.closed_loop import Guards, drive_pass
+from scanplan.quantities import ScanSpec
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class FeedbackController:
+    """From the current D and α only, in action units: Δz = k_z (D − W_d), Δθ = k_θ α
+    (capped at `theta_rate_deg` per step so the footprint, W_d·Δθ away, moves less than a
+    spacing), Δy = Δs_opt plus the footprint shift of that pitch (at least Δs_opt/2). It obeys
+    the paper's action limitation by construction."""
+
+    k_z: float = 0.3
+    k_theta: float = 0.1
+    theta_rate_deg: float = 0.08
+
+    def __call__(self, dyn: PassDynamics, start_state: np.ndarray | None = None) -> np.ndarray:
+        lim = dyn.limits.array
+        wd = dyn.spec.working_distance_mm
+        d, a = dyn.d_mm, dyn.alpha_rad
+        known = np.isfinite(d) and np.isfinite(a)
+        dz = float(np.clip(self.k_z * (d - wd), -lim[1], lim[1])) if known else 0.0
+        cap = math.radians(self.theta_rate_deg)
+        dth = float(np.clip(self.k_theta * a, -cap, cap)) if known else 0.0
+        ds_opt = dyn.spec.delta_s_opt_mm
+        dy = max(ds_opt + (d if known else wd) * dth, 0.5 * ds_opt)  # always advance
+        return np.clip(np.array([dy, dz, dth]) / lim, -1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class FeedbackPlanner:
+    """`FeedbackController` in the loop of `closed_loop.drive_pass`, with the rl planner's
+    guards and planning fan, so the two are compared like for like."""
+
+    controller: FeedbackController = field(default_factory=FeedbackController)
+    fan_points: int = 512
+    guards: Guards = field(default_factory=Guards)
+    name: str = "feedback"
+
+    def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
+        return drive_pass(
+            part,
+            swath,
+            spec,
+            self.controller,
+            self.name,
+            fan_points=self.fan_points,
+            guards=self.guards,
+        )
