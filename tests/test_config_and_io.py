@@ -147,7 +147,7 @@ def test_trajectory_csv_and_json_round_trip(tmp_path):
         ("a,b,c\n1,2,3\n", "line 1: header"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n", "no poses"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,400,1,0,0\n", "line 2: expected 9"),
-        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,x,1,0,0,0\n", "line 2: not a number"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,x,1,0,0,0\n", "z_mm: not a number"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,nan,1,0,0,0\n", "non-finite"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,4,0,0,0,0\n", "zero length"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,3,0,0,4,1,0,0,0\n", "scanning column"),
