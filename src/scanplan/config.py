@@ -134,9 +134,12 @@ class SensorFile(BaseModel):
             return spec
         default = spec.body_bounds_mm
         given = [self.body.x_mm, self.body.y_mm, self.body.z_mm]
-        lo = tuple(float(g[0]) if g else float(d) for g, d in zip(given, default[0], strict=True))
-        hi = tuple(float(g[1]) if g else float(d) for g, d in zip(given, default[1], strict=True))
-        return replace(spec, body_min_mm=lo, body_max_mm=hi)
+        box = default.copy()
+        for axis, interval in enumerate(given):
+            if interval is not None:
+                box[:, axis] = interval
+        (x0, y0, z0), (x1, y1, z1) = box.tolist()
+        return replace(spec, body_min_mm=(x0, y0, z0), body_max_mm=(x1, y1, z1))
 
 
 def _first_error(path: Path, exc: ValidationError) -> str:

@@ -114,7 +114,7 @@ class SensorSpec:
     def _check_noise(self, noise: NoiseModel) -> None:
         for name in ("sigma0_mm", "speckle_amplitude_mm", "speckle_scale_mm"):
             value = getattr(noise, name)
-            if not (isinstance(value, numbers.Real) and math.isfinite(value) and value >= 0):
+            if not (isinstance(value, numbers.Real) and math.isfinite(value) and float(value) >= 0):
                 raise ValueError(f"sensor {self.name}: noise {name} must be finite and >= 0")
         if not noise.speckle_scale_mm > 0:
             raise ValueError(f"sensor {self.name}: noise speckle_scale_mm must be > 0")
