@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -147,7 +148,7 @@ def test_trajectory_csv_and_json_round_trip(tmp_path):
         ("a,b,c\n1,2,3\n", "line 1: header"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n", "no poses"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,400,1,0,0\n", "line 2: expected 9"),
-        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,x,1,0,0,0\n", "line 2: not a number"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,x,1,0,0,0\n", "z_mm: not a number"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,nan,1,0,0,0\n", "non-finite"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,4,0,0,0,0\n", "zero length"),
         ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,3,0,0,4,1,0,0,0\n", "scanning column"),
@@ -173,3 +174,171 @@ def test_atomic_write_leaves_no_temporary_and_a_readable_file(tmp_path):
     assert (tmp_path / "out.txt").read_text() == "hello\n"
     assert (tmp_path / "out.txt").stat().st_mode & 0o777 == 0o644  # not mkstemp's 0600
     assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_sensor_body_default_from_the_datasheet(tmp_path):
+    lo, hi = PRESETS["at-c5-4090cs30-495"].body_bounds_mm
+    assert lo == pytest.approx([-50, -40, -90])
+    assert hi == pytest.approx([50, 400 * math.tan(math.radians(30)) + 40, 0])
+    assert hi[1] == pytest.approx(271, abs=0.1)  # camera on +y
+    path = tmp_path / "s.toml"
+    path.write_text(GOOD_TOML + "[body]\nx_mm = [-70, 70]\n")
+    spec = load_sensor(path)  # camera on -y: the body reaches towards -y
+    lo, hi = spec.body_bounds_mm
+    assert lo[0] == -70 and hi[0] == 70
+    assert lo[1] == pytest.approx(-(300 * math.tan(math.radians(25)) + 40)) and hi[1] == 40
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (("working_distance_mm = 300", "working_distance_mm = 0.3"), "metres"),
+        (("working_distance_mm = 300", "working_distance_mm = 6000"), "working_distance_mm"),
+        (("working_distance_mm = 300", "working_distance_mm = inf"), "finite"),
+        (("fov_deg = 45", "fov_deg = nan"), "fov_deg: Input should be a finite"),
+        (("fov_deg = 45", "fov_deg = 175"), "fov_deg"),
+        (("points_per_profile = 2048", "points_per_profile = 200000"), "points_per_profile"),
+        (("points_per_profile = 2048", "points_per_profile = 20.5"), "points_per_profile"),
+        (("sigma0_um = 3", "sigma0_um = -3"), "noise.sigma0_um"),
+        (("sigma0_um = 3", "seed = -1"), "noise.seed"),
+        (("sigma0_um = 3", "seed = 1.5"), "noise.seed"),
+        (("sigma0_um = 3", "seed = true"), "noise.seed"),
+        (("sigma0_um = 3", "sigma0_um = '3'"), "noise.sigma0_um"),
+        (("[noise]", "[body]\nx_mm = [50, -50]\n[noise]"), "body: x_mm: min must be < max"),
+        (("[noise]", "[body]\nz_mm = [-inf, 0]\n[noise]"), "body.z_mm"),
+    ],
+)
+def test_implausible_sensor_values_name_the_field(tmp_path, edit, message):
+    path = tmp_path / "bad.toml"
+    assert edit[0] in GOOD_TOML
+    path.write_text(GOOD_TOML.replace(*edit))
+    with pytest.raises(ValueError, match=message) as err:
+        load_sensor(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_yaml_python_tags_run_nothing(tmp_path):
+    marker = tmp_path / "PWNED"
+    for text in (
+        f"!!python/object/apply:os.system ['touch {marker}']\n",
+        f"working_distance_mm: !!python/object/apply:os.system ['touch {marker}']\n",
+    ):
+        path = tmp_path / "evil.yaml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match="cannot be parsed") as err:
+            load_sensor(path)
+        assert "\n" not in str(err.value)
+    assert not marker.exists()
+
+
+def test_sensor_spec_refuses_non_finite_and_implausible_values():
+    import dataclasses
+
+    base = PRESETS["at-c5-4090cs30-495"]
+    for change in (
+        {"working_distance_mm": math.nan},
+        {"fov_rad": math.inf},
+        {"working_distance_mm": 0.4},
+        {"points_per_profile": 100_001},
+        {"body_min_mm": (0, 0, 0), "body_max_mm": (1, -1, 1)},
+        {"body_min_mm": (0, 0, 0)},
+    ):
+        with pytest.raises(ValueError, match="sensor"):
+            dataclasses.replace(base, **change)
+
+
+def test_a_single_triangle_plate_loads_and_plans(tmp_path):
+    from scanplan.planners import make_planner, plan_path
+    from scanplan.swaths import plan_swaths
+
+    path = tmp_path / "tri.stl"
+    trimesh.Trimesh([[0, 0, 0], [200, 0, 0], [0, 100, 0]], [[0, 1, 2]]).export(path)
+    part = load_part(path)
+    spec = PRESETS["at-c5-4090cs30-495"].without_noise().with_points(64)
+    traj = plan_path(part, spec, make_planner("fixed"), plan_swaths(part, spec))
+    assert traj.scanning.sum() > 10
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("empty.stl", b"", "empty"),
+        ("lying.stl", b"\0" * 80 + (1000).to_bytes(4, "little") + b"\0" * 100, "announces 1000"),
+        ("short.stl", b"\1\2\3", "not an STL"),
+        ("line.stl", None, "degenerate"),
+        ("missing.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "OBJ"),
+        ("noise.glb", b"glTF\2\0\0\0" + b"\0" * 40, "GLB"),
+        ("latin1.obj", b"# caf\xe9\nv 0 0 0\nv 100 0 0\nv 0 100 0\nf 1 2 3\n", None),
+    ],
+)
+def test_corrupt_mesh_files_say_what(tmp_path, name, content, message):
+    path = tmp_path / name
+    if content is None:  # three collinear points
+        trimesh.Trimesh([[0, 0, 0], [50, 0, 0], [100, 0, 0]], [[0, 1, 2]], process=False).export(
+            path
+        )
+    else:
+        path.write_bytes(content)
+    if message is None:
+        assert len(load_part(path).mesh.faces) == 1
+        return
+    with pytest.raises(ValueError, match=message) as err:
+        load_part(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_huge_mesh_file_is_refused_before_reading(tmp_path):
+    path = tmp_path / "huge.stl"
+    with open(path, "wb") as f:  # sparse: no disk used
+        f.truncate(3 * 1024**3)
+    with pytest.raises(ValueError, match="GiB"):
+        load_part(path)
+
+
+def test_trajectory_json_fields_are_checked(tmp_path):
+    traj = _trajectory()
+    write_json(traj, tmp_path / "t.json")
+    good = json.loads((tmp_path / "t.json").read_text())
+    cases = [
+        ({"planner": 3}, "planner"),
+        ({"plan_time_s": "fast"}, "plan_time_s"),
+        ({"poses": [{**good["poses"][0], "position_mm": [0, 0]}]}, r"poses\[0\].position_mm"),
+        ({"poses": [{**good["poses"][0], "swath": 10**20}]}, r"poses\[0\].swath"),
+        ({"poses": [{**good["poses"][0], "scanning": "yes"}]}, r"poses\[0\].scanning"),
+        ({"poses": [{**good["poses"][0], "quaternion_wxyz": [0, 0, 0, 0]}]}, "zero length"),
+        ({"poses": []}, "poses"),
+    ]
+    for change, message in cases:
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps({**good, **change}))
+        with pytest.raises(ValueError, match=message) as err:
+            read_json(path)
+        assert str(path) in str(err.value) and "\n" not in str(err.value)
+    path.write_text(json.dumps({**good, "plan_time_s": math.nan}))  # Python's json writes NaN
+    with pytest.raises(ValueError, match="plan_time_s"):
+        read_json(path)
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ValueError, match="nested too deeply"):
+        read_json(path)
+
+
+def test_json_writer_never_writes_nan(tmp_path):
+    traj = _trajectory()
+    write_json(Trajectory(traj.poses, traj.swath, traj.scanning, planner="p"), tmp_path / "t.json")
+    text = (tmp_path / "t.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+
+
+def test_trajectory_csv_with_bom_and_swath_overflow(tmp_path):
+    traj = _trajectory()
+    write_csv(traj, tmp_path / "t.csv")
+    text = (tmp_path / "t.csv").read_text()
+    (tmp_path / "bom.csv").write_text("\ufeff" + text)
+    assert len(read_csv(tmp_path / "bom.csv")) == len(traj)
+    lines = text.splitlines()
+    lines[3] = "1e20" + lines[3][lines[3].index(",") :]
+    (tmp_path / "big.csv").write_text("\n".join(lines))
+    with pytest.raises(ValueError, match="line 4, column swath"):
+        read_csv(tmp_path / "big.csv")
+    with pytest.raises(ValueError, match="32-bit"):
+        Trajectory(traj.poses, np.full(len(traj), 1e20), traj.scanning)

@@ -46,7 +46,7 @@ def user_errors(fn: F) -> F:
 
 
 PartArg = Annotated[
-    str, typer.Argument(help="built-in part name or mesh file (STL/OBJ/PLY/OFF/GLB)")
+    str, typer.Argument(help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB) or STEP file")
 ]
 UnitsOpt = Annotated[str, typer.Option("--units", help="units of a mesh file: mm, m or in")]
 SensorOpt = Annotated[

@@ -17,42 +17,88 @@ A sensor file gives datasheet values in the units an engineer reads off the data
     speckle_amplitude_um = 15
     speckle_scale_mm = 0.5
     seed = 0
+    [body]                       # optional; the sensor body box in the sensor frame, mm
+    x_mm = [-50, 50]             # default; y_mm from -40 to b + 40 on the camera side
+    z_mm = [-90, 0]              # (b = W_d tan(gamma)); an axis left out keeps its default
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from scanplan.noise import NoiseModel
 from scanplan.sensor import PRESETS, SensorSpec
 
+# Strict: "300" or true where a number belongs is a mistake in the file, not a value to coerce.
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+_STRICT = ConfigDict(extra="forbid", strict=True)
+MAX_SENSOR_FILE_BYTES = 1024**2
+
 
 class NoiseFile(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    sigma0_um: float = Field(4.0, ge=0)
-    speckle_amplitude_um: float = Field(15.0, ge=0)
-    speckle_scale_mm: float = Field(0.5, gt=0)
-    seed: int = 0
+    model_config = _STRICT
+    sigma0_um: FiniteFloat = Field(4.0, ge=0)
+    speckle_amplitude_um: FiniteFloat = Field(15.0, ge=0)
+    speckle_scale_mm: FiniteFloat = Field(0.5, gt=0)
+    seed: int = Field(0, ge=0)
+
+
+Interval = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+
+
+class BodyFile(BaseModel):
+    """The sensor body box in the sensor frame, mm; an axis left out keeps the default."""
+
+    model_config = _STRICT
+    x_mm: Interval | None = None
+    y_mm: Interval | None = None
+    z_mm: Interval | None = None
+
+    @model_validator(mode="after")
+    def _min_below_max(self) -> BodyFile:
+        for axis in ("x_mm", "y_mm", "z_mm"):
+            interval = getattr(self, axis)
+            if interval is not None and not interval[0] < interval[1]:
+                raise ValueError(f"{axis}: min must be < max, got {interval}")
+        return self
 
 
 class SensorFile(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = _STRICT
     name: str = "custom"
-    working_distance_mm: float = Field(gt=0)
-    z_range_mm: float = Field(gt=0)
-    fov_deg: float = Field(gt=0, lt=180)
-    points_per_profile: int = Field(ge=2, le=100_000)
-    z_resolution_um: float = Field(ge=0)
-    triangulation_angle_deg: float = Field(gt=0, lt=90)
+    working_distance_mm: FiniteFloat
+    z_range_mm: FiniteFloat = Field(gt=0)
+    fov_deg: FiniteFloat = Field(gt=0, lt=170)
+    points_per_profile: int = Field(ge=2, le=SensorSpec.MAX_POINTS)
+    z_resolution_um: FiniteFloat = Field(ge=0)
+    triangulation_angle_deg: FiniteFloat = Field(gt=0, lt=90)
     camera_side: Literal["+y", "-y"] = "+y"
-    incidence_cutoff_deg: float = Field(80.0, gt=0, le=90)
+    incidence_cutoff_deg: FiniteFloat = Field(80.0, gt=0, le=90)
     noise: NoiseFile | bool = True
+    body: BodyFile | None = None
+
+    @field_validator("working_distance_mm")
+    @classmethod
+    def _plausible_distance(cls, value: float) -> float:
+        lo, hi = SensorSpec.MIN_WORKING_DISTANCE_MM, SensorSpec.MAX_WORKING_DISTANCE_MM
+        if not lo <= value <= hi:
+            hint = " (a value in metres? give millimetres)" if value < lo else ""
+            raise ValueError(f"{value:g} mm is outside {lo:g}–{hi:g} mm{hint}")
+        return value
 
     @model_validator(mode="after")
     def _range_within_distance(self) -> SensorFile:
@@ -72,7 +118,7 @@ class SensorFile(BaseModel):
                 speckle_scale_mm=nf.speckle_scale_mm,
                 seed=nf.seed,
             )
-        return SensorSpec(
+        spec = SensorSpec(
             name=self.name,
             working_distance_mm=self.working_distance_mm,
             z_range_mm=self.z_range_mm,
@@ -84,32 +130,49 @@ class SensorFile(BaseModel):
             incidence_cutoff_rad=math.radians(self.incidence_cutoff_deg),
             noise=noise,
         )
+        if self.body is None:
+            return spec
+        default = spec.body_bounds_mm
+        given = [self.body.x_mm, self.body.y_mm, self.body.z_mm]
+        box = default.copy()
+        for axis, interval in enumerate(given):
+            if interval is not None:
+                box[:, axis] = interval
+        (x0, y0, z0), (x1, y1, z1) = box.tolist()
+        return replace(spec, body_min_mm=(x0, y0, z0), body_max_mm=(x1, y1, z1))
 
 
 def _first_error(path: Path, exc: ValidationError) -> str:
     err = exc.errors()[0]
-    where = ".".join(str(p) for p in err["loc"]) or "file"
-    return f"sensor file {path}: {where}: {err['msg']}"
+    # A union (noise: table | bool) names its branch in the location: drop those.
+    parts = [str(p) for p in err["loc"] if p not in ("NoiseFile", "bool", "BodyFile")]
+    where = ".".join(parts) or "file"
+    return f"sensor file {path}: {where}: {err['msg'].removeprefix('Value error, ')}"
 
 
 def load_sensor(spec: str | Path) -> SensorSpec:
-    """A preset name or a TOML/YAML sensor file -> SensorSpec; ValueError saying what/where."""
+    """A preset name or a TOML/YAML sensor file -> SensorSpec; ValueError saying what/where.
+
+    YAML is read with `yaml.safe_load`: tags such as !!python/object never run code.
+    """
     text = str(spec)
     if text in PRESETS:
         return PRESETS[text]
     path = Path(text)
     if not path.is_file():
         raise ValueError(f"sensor {text!r} is neither a file nor a preset ({', '.join(PRESETS)})")
+    suffix = path.suffix.lower()
+    if suffix not in (".toml", ".yaml", ".yml"):
+        raise ValueError(f"sensor file {path}: use a .toml, .yaml or .yml file")
+    if path.stat().st_size > MAX_SENSOR_FILE_BYTES:
+        raise ValueError(f"sensor file {path} is larger than 1 MiB: not a sensor datasheet")
     try:
-        raw = path.read_text()
-        if path.suffix.lower() == ".toml":
-            data = tomllib.loads(raw)
-        elif path.suffix.lower() in (".yaml", ".yml"):
-            data = yaml.safe_load(raw)
-        else:
-            raise ValueError(f"sensor file {path}: use a .toml, .yaml or .yml file")
+        raw = path.read_bytes().decode("utf-8-sig")
+        data = tomllib.loads(raw) if suffix == ".toml" else yaml.safe_load(raw)
+    except RecursionError:
+        raise ValueError(f"sensor file {path} cannot be parsed: nested too deeply") from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, yaml.YAMLError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(f"sensor file {path} cannot be parsed: {first}") from None
     if not isinstance(data, dict):
         raise ValueError(f"sensor file {path}: expected a table of datasheet values")
@@ -117,3 +180,5 @@ def load_sensor(spec: str | Path) -> SensorSpec:
         return SensorFile.model_validate(data).to_spec()
     except ValidationError as exc:
         raise ValueError(_first_error(path, exc)) from None
+    except ValueError as exc:  # SensorSpec's own checks
+        raise ValueError(f"sensor file {path}: {exc}") from None

@@ -6,7 +6,14 @@ come from `scanplan.parts`.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
+import os
+import re
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,8 +24,16 @@ from scanplan.raycast import RayEngine
 
 UNITS_TO_MM = {"mm": 1.0, "m": 1000.0, "in": 25.4}
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+STEP_SUFFIXES = (".step", ".stp")
 # Parts outside this size (largest extent, mm) are almost surely in the wrong unit.
 _MIN_EXTENT_MM, _MAX_EXTENT_MM = 1.0, 20_000.0
+# A mesh file larger than this would not fit a planning run in memory: decimate it first.
+MAX_MESH_FILE_BYTES = 2 * 1024**3
+# STEP tessellation: chord error bounded by the part's size (a fixed 0.01 mm on a 1 m part
+# takes >14 GB), angular deflection tight enough for fillets (volume within ~0.05 %).
+STEP_MIN_DEFLECTION_MM = 0.01
+STEP_RELATIVE_DEFLECTION = 1e-3
+STEP_ANGULAR_DEFLECTION_RAD = 0.2
 
 
 @dataclass(eq=False)
@@ -48,11 +63,27 @@ class Part:
 
 def validate_mesh(mesh: trimesh.Trimesh, where: str) -> trimesh.Trimesh:
     """Return a cleaned copy, or raise ValueError saying what is wrong with `where`."""
-    if len(mesh.vertices) == 0 or len(mesh.faces) == 0:
+    vertices = np.asarray(mesh.vertices)
+    faces = np.asarray(mesh.faces)
+    if len(vertices) == 0 or len(faces) == 0:
         raise ValueError(f"mesh {where} is empty (no triangles)")
-    bad = ~np.isfinite(mesh.vertices).all(axis=1)
+    if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer):
+        raise ValueError(f"mesh {where}: faces must be triangles of vertex indices")
+    out_of_range = (faces < 0) | (faces >= len(vertices))
+    if out_of_range.any():
+        raise ValueError(
+            f"mesh {where}: {int(out_of_range.any(axis=1).sum())} faces reference vertex "
+            f"indices outside 0..{len(vertices) - 1} (e.g. {int(faces[out_of_range][0])})"
+        )
+    bad = ~np.isfinite(vertices).all(axis=1)
     if bad.any():
         raise ValueError(f"mesh {where} has {int(bad.sum())} non-finite vertices")
+    # Size before any processing: 1e30 coordinates would overflow merge_vertices' rounding.
+    used = vertices[np.unique(faces)]
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.max(used.max(axis=0) - used.min(axis=0)))
+    if not extent <= _MAX_EXTENT_MM * 10:
+        _raise_size(where, extent)
     mesh = mesh.copy()
     mesh.merge_vertices()
     good_faces = mesh.nondegenerate_faces(height=1e-9)
@@ -62,15 +93,70 @@ def validate_mesh(mesh: trimesh.Trimesh, where: str) -> trimesh.Trimesh:
     mesh.remove_unreferenced_vertices()
     extent = float(mesh.extents.max())
     if not _MIN_EXTENT_MM <= extent <= _MAX_EXTENT_MM:
-        raise ValueError(
-            f"mesh {where} is {extent:.4g} mm across: outside {_MIN_EXTENT_MM:g}–"
-            f"{_MAX_EXTENT_MM:g} mm; check --units (mm|m|in)"
-        )
+        _raise_size(where, extent)
     return mesh
 
 
+def _raise_size(where: str, extent: float) -> None:
+    raise ValueError(
+        f"mesh {where} is {extent:.4g} mm across: outside {_MIN_EXTENT_MM:g}–"
+        f"{_MAX_EXTENT_MM:g} mm; check --units (mm|m|in)"
+    )
+
+
+def _decode_text(data: bytes) -> bytes:
+    """Text formats as UTF-8: trimesh's own fallback for other encodings needs a package we
+    don't ship; Latin-1 maps every byte, so old exporters' comments still load."""
+    try:
+        data.decode("utf-8")
+        return data
+    except UnicodeDecodeError:
+        return data.decode("latin-1").encode("utf-8")
+
+
+def _binary_stl(data: bytes, path: Path) -> trimesh.Trimesh | None:
+    """A binary STL read here (header count checked against the size), None if ASCII."""
+    if len(data) >= 84:
+        count = int(np.frombuffer(data, "<u4", 1, 80)[0])
+        if 84 + 50 * count == len(data):
+            record = np.dtype([("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+            tris = np.frombuffer(data, record, count, 84)["tri"].astype(np.float64)
+            return trimesh.Trimesh(
+                tris.reshape(-1, 3), np.arange(3 * count).reshape(-1, 3), process=False
+            )
+    if data.lstrip()[:5].lower() == b"solid":
+        return None
+    if len(data) < 84:
+        raise ValueError(f"part file {path} is not an STL file: {len(data)} bytes, no header")
+    raise ValueError(
+        f"part file {path} is a corrupt binary STL: its header announces {count} triangles "
+        f"({84 + 50 * count} bytes) but the file has {len(data)} bytes"
+    )
+
+
+def _check_glb(data: bytes, path: Path) -> None:
+    """The GLB container (magic, declared length, a UTF-8 JSON chunk) before trimesh."""
+    if len(data) < 20 or data[:4] != b"glTF":
+        raise ValueError(f"part file {path} is not a GLB file (no glTF header)")
+    length, chunk_len, chunk_type = np.frombuffer(data, "<u4", 3, 8)
+    if length != len(data) or chunk_type != 0x4E4F534A or 20 + chunk_len > len(data):
+        raise ValueError(f"part file {path} is a truncated or corrupt GLB file")
+    try:
+        data[20 : 20 + int(chunk_len)].decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"part file {path}: the GLB's JSON chunk is not UTF-8") from None
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def load_mesh_file(path: str | Path, units: str = "mm") -> trimesh.Trimesh:
-    """Read STL/OBJ/PLY/OFF/GLB; a scene (several bodies) is merged into one mesh."""
+    """Read STL/OBJ/PLY/OFF/GLB or STEP; a scene (several bodies) is merged into one mesh.
+
+    `units` scales mesh files; a STEP file carries its own unit and ignores it.
+    """
     path = Path(path)
     if units not in UNITS_TO_MM:
         raise ValueError(f"unknown units {units!r}: use one of {', '.join(UNITS_TO_MM)}")
@@ -78,19 +164,108 @@ def load_mesh_file(path: str | Path, units: str = "mm") -> trimesh.Trimesh:
         raise ValueError(f"part file {path} is a directory, not a mesh file")
     if not path.is_file():
         raise ValueError(f"part file {path} does not exist")
-    if path.suffix.lower() not in MESH_SUFFIXES:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES + STEP_SUFFIXES:
+        formats = ", ".join(MESH_SUFFIXES + STEP_SUFFIXES)
+        raise ValueError(f"part file {path}: unsupported format {path.suffix!r} (use {formats})")
+    size = path.stat().st_size
+    if size == 0:
+        raise ValueError(f"part file {path} is empty (0 bytes)")
+    if size > MAX_MESH_FILE_BYTES:
         raise ValueError(
-            f"part file {path}: unsupported format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})"
+            f"part file {path} is {size / 1024**3:.1f} GiB, more than the "
+            f"{MAX_MESH_FILE_BYTES / 1024**3:.0f} GiB a part may have: decimate it first"
         )
     try:
-        # process=False: merging would silently drop non-finite vertices we must report.
-        loaded = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types on corrupt files
-        raise ValueError(f"part file {path} cannot be read as a mesh: {exc}") from None
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"part file {path} cannot be read: {exc.strerror or exc}") from None
+    if suffix in STEP_SUFFIXES:
+        return _load_step(data, path)
+    loaded: object = None
+    if suffix == ".stl":
+        loaded = _binary_stl(data, path)
+    if suffix == ".glb":
+        _check_glb(data, path)
+    elif suffix in (".stl", ".obj", ".off"):
+        data = _decode_text(data)
+    if loaded is None:
+        try:
+            # process=False: merging would silently drop non-finite vertices we must report.
+            with np.errstate(all="ignore"):
+                # .gltf may refer to buffers beside it: only the path resolves them.
+                source = path if suffix == ".gltf" else io.BytesIO(data)
+                loaded = trimesh.load(source, file_type=suffix[1:], force="mesh", process=False)
+        except Exception as exc:  # trimesh's parsers raise many types on corrupt files
+            raise ValueError(
+                f"part file {path} cannot be read as {suffix[1:].upper()}: {_first_line(exc)}"
+            ) from None
     if not isinstance(loaded, trimesh.Trimesh):
         raise ValueError(f"part file {path} holds no triangle mesh")
     loaded.apply_scale(UNITS_TO_MM[units])
     return loaded
+
+
+@contextlib.contextmanager
+def _captured_fds() -> Iterator[Callable[[], str]]:
+    """Capture what C++ code prints on file descriptors 1 and 2 (OpenCASCADE reports parse
+    errors there), so a bad file gives one line instead of a screenful."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    sink = tempfile.TemporaryFile()
+    try:
+        os.dup2(sink.fileno(), 1)
+        os.dup2(sink.fileno(), 2)
+
+        def text() -> str:
+            sink.seek(0)
+            return sink.read().decode("utf-8", "replace")
+
+        yield text
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved:
+            os.close(fd)
+        sink.close()
+
+
+def _step_to_glb(data: bytes, path: Path, deflection_mm: float) -> trimesh.Trimesh:
+    import cascadio
+
+    with _captured_fds() as printed:
+        # cascadio tessellates in OpenCASCADE's session unit (mm) and writes metres.
+        glb = cascadio.load(
+            data,
+            file_type="step",
+            tol_linear=deflection_mm,
+            tol_angular=STEP_ANGULAR_DEFLECTION_RAD,
+            merge_primitives=True,
+        )
+        log = printed()
+    if not glb:
+        errors = [ln for ln in re.sub(r"\x1b\[[0-9;]*m", "", log).splitlines() if "ERR" in ln]
+        reason = errors[0].strip(" *").split(":", 2)[-1].strip() if errors else "no shape in it"
+        raise ValueError(f"part file {path} cannot be read as STEP: {reason}")
+    try:
+        with np.errstate(all="ignore"):
+            mesh = trimesh.load(io.BytesIO(glb), file_type="glb", force="mesh", process=False)
+    except Exception as exc:  # an empty scene, no triangles
+        raise ValueError(f"part file {path}: STEP gave no surface ({_first_line(exc)})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError(f"part file {path}: STEP holds no surface to tessellate")
+    mesh.apply_scale(1000.0)
+    return mesh
+
+
+def _load_step(data: bytes, path: Path) -> trimesh.Trimesh:
+    """STEP through OpenCASCADE (cascadio): a coarse pass measures the part, the real one
+    tessellates with a chord error of max(0.01 mm, 1e-3 x bounding diagonal)."""
+    coarse = _step_to_glb(data, path, deflection_mm=1e9)
+    diagonal = float(np.linalg.norm(coarse.extents))
+    deflection = max(STEP_MIN_DEFLECTION_MM, STEP_RELATIVE_DEFLECTION * diagonal)
+    return _step_to_glb(data, path, deflection_mm=deflection)
 
 
 @functools.lru_cache(maxsize=8)

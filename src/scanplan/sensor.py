@@ -9,12 +9,13 @@ the line, y_s = z_s x x_s = scan direction; the camera sits at baseline W_d*tan(
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -48,13 +49,46 @@ class SensorSpec:
     camera_side: int = 1  # +1: camera on +y_s (ahead), -1: behind
     incidence_cutoff_rad: float = math.radians(80.0)
     noise: NoiseModel | None = field(default_factory=NoiseModel)
+    # The sensor body, a box in the sensor frame (mm) for collision checks; None: the SPEC §2
+    # default from the datasheet (see `body_bounds_mm`).
+    body_min_mm: tuple[float, float, float] | None = None
+    body_max_mm: tuple[float, float, float] | None = None
+
+    # Datasheet values no real line profilometer has (SPEC §2).
+    MIN_WORKING_DISTANCE_MM: ClassVar[float] = 10.0
+    MAX_WORKING_DISTANCE_MM: ClassVar[float] = 5000.0
+    MAX_FOV_RAD: ClassVar[float] = math.radians(170.0)
+    MAX_POINTS: ClassVar[int] = 100_000
 
     def __post_init__(self) -> None:
+        fields = {
+            "working distance": self.working_distance_mm,
+            "Z range": self.z_range_mm,
+            "fan angle": self.fov_rad,
+            "Z resolution": self.z_resolution_mm,
+            "triangulation angle": self.triangulation_angle_rad,
+            "incidence cutoff": self.incidence_cutoff_rad,
+        }
+        for what, value in fields.items():
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise ValueError(f"sensor {self.name}: {what} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"sensor {self.name}: {what} must be finite, got {value}")
+        wd = self.working_distance_mm
+        ppp = self.points_per_profile
         checks = [
-            (self.working_distance_mm > 0, "working distance must be > 0 mm"),
-            (0 < self.z_range_mm < 2 * self.working_distance_mm, "Z range must be in (0, 2*W_d)"),
-            (0 < self.fov_rad < math.pi, "fan angle must be in (0, 180) degrees"),
-            (self.points_per_profile >= 2, "points per profile must be >= 2"),
+            (
+                self.MIN_WORKING_DISTANCE_MM <= wd <= self.MAX_WORKING_DISTANCE_MM,
+                f"working distance {wd:g} mm is outside {self.MIN_WORKING_DISTANCE_MM:g}–"
+                f"{self.MAX_WORKING_DISTANCE_MM:g} mm (lengths are in millimetres, not metres)",
+            ),
+            (0 < self.z_range_mm < 2 * wd, "Z range must be in (0, 2*W_d)"),
+            (0 < self.fov_rad < self.MAX_FOV_RAD, "fan angle must be in (0, 170) degrees"),
+            (
+                isinstance(ppp, int | np.integer) and not isinstance(ppp, bool),
+                "points per profile must be an integer",
+            ),
+            (2 <= ppp <= self.MAX_POINTS, f"points per profile must be in 2..{self.MAX_POINTS}"),
             (self.z_resolution_mm >= 0, "Z resolution must be >= 0"),
             (0 < self.triangulation_angle_rad < math.pi / 2, "triangulation angle in (0, 90) deg"),
             (self.camera_side in (-1, 1), "camera side must be +1 or -1"),
@@ -63,6 +97,41 @@ class SensorSpec:
         for ok, message in checks:
             if not ok:
                 raise ValueError(f"sensor {self.name}: {message}")
+        if self.noise is not None:
+            self._check_noise(self.noise)
+        if (self.body_min_mm is None) != (self.body_max_mm is None):
+            raise ValueError(f"sensor {self.name}: give both corners of the body box or neither")
+        if self.body_min_mm is not None:
+            lo, hi = np.asarray(self.body_min_mm, float), np.asarray(self.body_max_mm, float)
+            if lo.shape != (3,) or hi.shape != (3,):
+                raise ValueError(f"sensor {self.name}: body box corners must be (x, y, z) in mm")
+            if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+                raise ValueError(f"sensor {self.name}: body box must be finite")
+            if not (lo < hi).all():
+                axis = "xyz"[int(np.flatnonzero(lo >= hi)[0])]
+                raise ValueError(f"sensor {self.name}: body box {axis}: min must be < max")
+
+    def _check_noise(self, noise: NoiseModel) -> None:
+        for name in ("sigma0_mm", "speckle_amplitude_mm", "speckle_scale_mm"):
+            value = getattr(noise, name)
+            if not (isinstance(value, numbers.Real) and math.isfinite(value) and float(value) >= 0):
+                raise ValueError(f"sensor {self.name}: noise {name} must be finite and >= 0")
+        if not noise.speckle_scale_mm > 0:
+            raise ValueError(f"sensor {self.name}: noise speckle_scale_mm must be > 0")
+        seed = noise.seed
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ValueError(f"sensor {self.name}: noise seed must be an integer >= 0")
+
+    @property
+    def body_bounds_mm(self) -> np.ndarray:
+        """(2, 3) min and max corners of the sensor body in the sensor frame. Default (SPEC
+        §2): x_s in [-50, 50], y_s from -40 to b + 40 on the camera side, z_s in [-90, 0]."""
+        if self.body_min_mm is not None and self.body_max_mm is not None:
+            return np.array([self.body_min_mm, self.body_max_mm], dtype=np.float64)
+        y = np.array([-40.0, self.baseline_mm + 40.0])
+        if self.camera_side < 0:
+            y = -y[::-1]
+        return np.array([[-50.0, y[0], -90.0], [50.0, y[1], 0.0]])
 
     @property
     def line_width_mm(self) -> float:

@@ -7,12 +7,15 @@ contract of SPEC §8: `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`.
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.spatial.transform import Rotation
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
@@ -42,7 +45,7 @@ class Trajectory:
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise ValueError(f"trajectory poses must be (n, 4, 4), got {poses.shape}")
         n = len(poses)
-        swath = np.asarray(self.swath, dtype=np.int64).reshape(-1)
+        swath = _swath_indices(self.swath)
         scanning = np.asarray(self.scanning, dtype=bool).reshape(-1)
         if len(swath) != n or len(scanning) != n:
             raise ValueError(
@@ -50,6 +53,8 @@ class Trajectory:
             )
         if not np.isfinite(poses).all():
             raise ValueError("trajectory has non-finite poses")
+        if not math.isfinite(self.plan_time_s):
+            raise ValueError(f"trajectory plan_time_s must be finite, got {self.plan_time_s}")
         object.__setattr__(self, "poses", poses)
         object.__setattr__(self, "swath", swath)
         object.__setattr__(self, "scanning", scanning)
@@ -91,6 +96,45 @@ class Trajectory:
             planner=planner or parts[0].planner,
             meta=_sum_counters([t.meta for t in parts]),
         )
+
+
+_INT32 = np.iinfo(np.int32)
+
+
+def _swath_indices(values: object) -> np.ndarray:
+    """(n,) int64 pass indices; refuses what would wrap or round silently (1e20, 0.5)."""
+    raw = np.asarray(values).reshape(-1)
+    if raw.dtype == bool or not np.issubdtype(raw.dtype, np.number):
+        raise ValueError(f"trajectory swath indices must be integers, got {raw.dtype}")
+    if not np.issubdtype(raw.dtype, np.integer):
+        with np.errstate(invalid="ignore"):
+            integral = np.isfinite(raw) & (raw == np.round(raw))
+        if not integral.all():
+            raise ValueError("trajectory swath indices must be integers")
+    if len(raw) and (raw.min() < _INT32.min or raw.max() > _INT32.max):
+        raise ValueError("trajectory swath indices must fit a 32-bit integer")
+    return raw.astype(np.int64)
+
+
+def json_safe(value: Any) -> Any:
+    """`value` with numpy scalars/arrays as Python values and non-finite floats as None, so
+    `json.dumps(..., allow_nan=False)` writes valid JSON (no NaN/Infinity literals)."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def dumps_json(value: Any, **kwargs: Any) -> str:
+    """json.dumps of `json_safe(value)`: always valid JSON."""
+    return json.dumps(json_safe(value), allow_nan=False, **kwargs)
 
 
 def _sum_counters(metas: list[dict]) -> dict:
@@ -158,50 +202,109 @@ def write_csv(traj: Trajectory, path: str | os.PathLike) -> None:
     atomic_write_text(path, to_csv_text(traj))
 
 
-def read_csv(path: str | os.PathLike) -> Trajectory:
-    """Read a trajectory CSV; every malformation raises ValueError naming the file and line."""
-    path = Path(path)
+MAX_TRAJECTORY_FILE_BYTES = 1024**3
+
+
+def _read_text(path: Path) -> str:
+    """The file's text (UTF-8, a byte-order mark allowed), or ValueError naming it."""
+    if path.is_dir():
+        raise ValueError(f"trajectory file {path} is a directory")
     if not path.is_file():
         raise ValueError(f"trajectory file {path} does not exist")
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"trajectory file {path} cannot be read: {exc}") from None
-    rows = [r for r in text.splitlines() if r.strip()]
-    if not rows:
-        raise ValueError(f"trajectory file {path} is empty")
-    header = [h.strip() for h in rows[0].split(",")]
-    if tuple(header) != CSV_COLUMNS:
+    size = path.stat().st_size
+    if size > MAX_TRAJECTORY_FILE_BYTES:
         raise ValueError(
-            f"trajectory file {path} line 1: header must be {','.join(CSV_COLUMNS)}, "
-            f"got {rows[0][:80]!r}"
+            f"trajectory file {path} is {size / 1024**3:.1f} GiB: more than "
+            f"{MAX_TRAJECTORY_FILE_BYTES / 1024**3:.0f} GiB, not a trajectory"
         )
-    if len(rows) < 2:
+    try:
+        return path.read_bytes().decode("utf-8-sig")
+    except OSError as exc:
+        raise ValueError(f"trajectory file {path} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"trajectory file {path} is not UTF-8 text (byte {exc.start})") from None
+
+
+def read_csv(path: str | os.PathLike) -> Trajectory:
+    """Read a trajectory CSV; every malformation raises ValueError naming the file, line and
+    column."""
+    path = Path(path)
+    text = _read_text(path)
+    lines = text.splitlines()
+    numbers = [i for i, r in enumerate(lines, start=1) if r.strip()]
+    if not numbers:
+        raise ValueError(f"trajectory file {path} is empty")
+    first = numbers[0]
+    header = [h.strip() for h in lines[first - 1].split(",")]
+    if tuple(header) != CSV_COLUMNS:
+        missing = [c for c in CSV_COLUMNS if c not in header]
+        extra = [c for c in header if c not in CSV_COLUMNS]
+        detail = (f"missing {', '.join(missing)}; " if missing else "") + (
+            f"unknown {', '.join(repr(c[:20]) for c in extra)}; " if extra else ""
+        )
+        raise ValueError(
+            f"trajectory file {path} line {first}: header must be {','.join(CSV_COLUMNS)} "
+            f"({detail or 'wrong order; '}got {lines[first - 1][:60]!r})"
+        )
+    numbers = numbers[1:]
+    if not numbers:
         raise ValueError(f"trajectory file {path} has a header but no poses")
-    values = np.empty((len(rows) - 1, len(CSV_COLUMNS)))
-    for i, row in enumerate(rows[1:], start=2):
-        cells = row.split(",")
-        if len(cells) != len(CSV_COLUMNS):
-            raise ValueError(
-                f"trajectory file {path} line {i}: expected {len(CSV_COLUMNS)} values, "
-                f"got {len(cells)}"
-            )
-        try:
-            values[i - 2] = [float(c) for c in cells]
-        except ValueError:
-            raise ValueError(
-                f"trajectory file {path} line {i}: not a number in {row[:80]!r}"
-            ) from None
-        if not np.isfinite(values[i - 2]).all():
-            raise ValueError(f"trajectory file {path} line {i}: non-finite value")
-        if np.linalg.norm(values[i - 2, 5:]) < 1e-9:
-            raise ValueError(f"trajectory file {path} line {i}: quaternion of zero length")
-    if np.any(values[:, 0] != np.round(values[:, 0])):
-        raise ValueError(f"trajectory file {path}: swath column must hold integers")
-    if not np.isin(values[:, 1], (0.0, 1.0)).all():
-        raise ValueError(f"trajectory file {path}: scanning column must be 0 or 1")
+    cells = [lines[i - 1].split(",") for i in numbers]
+    counts = np.array([len(c) for c in cells])
+    wrong = np.flatnonzero(counts != len(CSV_COLUMNS))
+    if len(wrong):
+        raise ValueError(
+            f"trajectory file {path} line {numbers[wrong[0]]}: expected {len(CSV_COLUMNS)} "
+            f"values, got {counts[wrong[0]]}"
+        )
+    try:
+        values = np.array(cells, dtype=np.float64)
+    except ValueError:
+        values = _locate_bad_number(path, cells, numbers)
+    line = np.asarray(numbers)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise ValueError(
+            f"trajectory file {path} line {line[row]}, column {CSV_COLUMNS[col]}: non-finite value"
+        )
+    swath = values[:, 0]
+    bad_swath = (swath != np.round(swath)) | (np.abs(swath) > _INT32.max)
+    if bad_swath.any():
+        row = np.flatnonzero(bad_swath)[0]
+        raise ValueError(
+            f"trajectory file {path} line {line[row]}, column swath: must be an integer "
+            f"that fits 32 bits, got {swath[row]:g}"
+        )
+    bad_flag = ~np.isin(values[:, 1], (0.0, 1.0))
+    if bad_flag.any():
+        row = np.flatnonzero(bad_flag)[0]
+        raise ValueError(
+            f"trajectory file {path} line {line[row]}: scanning column must be 0 or 1, "
+            f"got {cells[row][1].strip()[:20]!r}"
+        )
+    zero_q = np.linalg.norm(values[:, 5:], axis=1) < 1e-9
+    if zero_q.any():
+        raise ValueError(
+            f"trajectory file {path} line {line[np.flatnonzero(zero_q)[0]]}: "
+            "quaternion of zero length"
+        )
     poses = poses_from_xyz_quat(values[:, 2:5], values[:, 5:9])
-    return Trajectory(poses=poses, swath=values[:, 0].astype(int), scanning=values[:, 1] > 0.5)
+    return Trajectory(poses=poses, swath=swath.astype(np.int64), scanning=values[:, 1] > 0.5)
+
+
+def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -> np.ndarray:
+    """Only on the error path: find the first cell that is not a number, to name it."""
+    for row, line in zip(cells, numbers, strict=True):
+        for col, cell in enumerate(row):
+            try:
+                float(cell)
+            except ValueError:
+                raise ValueError(
+                    f"trajectory file {path} line {line}, column {CSV_COLUMNS[col]}: "
+                    f"not a number: {cell.strip()[:20]!r}"
+                ) from None
+    raise AssertionError("unreachable: numpy refused a table float() accepts")
 
 
 def to_json_dict(traj: Trajectory) -> dict:
@@ -224,30 +327,66 @@ def to_json_dict(traj: Trajectory) -> dict:
 
 
 def write_json(traj: Trajectory, path: str | os.PathLike) -> None:
-    atomic_write_text(path, json.dumps(to_json_dict(traj), indent=1))
+    atomic_write_text(path, dumps_json(to_json_dict(traj), indent=1))
+
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _PoseJson(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+    swath: int = Field(ge=int(_INT32.min), le=int(_INT32.max))
+    scanning: bool
+    position_mm: list[FiniteFloat] = Field(min_length=3, max_length=3)
+    quaternion_wxyz: list[FiniteFloat] = Field(min_length=4, max_length=4)
+
+
+class _TrajectoryJson(BaseModel):
+    # Strict: a planner of 3 or a plan time of "fast" is a broken file, not a value to coerce.
+    model_config = ConfigDict(extra="ignore", strict=True)
+    planner: str = ""
+    plan_time_s: float = Field(0.0, ge=0, allow_inf_nan=False)
+    poses: list[_PoseJson] = Field(min_length=1)
+
+
+def _pydantic_where(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    where = ""
+    for part in err["loc"]:
+        where += f"[{part}]" if isinstance(part, int) else f".{part}"
+    return f"{where.lstrip('.') or 'file'}: {err['msg']}"
 
 
 def read_json(path: str | os.PathLike) -> Trajectory:
+    """Read a trajectory JSON (as `write_json` writes it); ValueError naming file and field."""
     path = Path(path)
+    text = _read_text(path)
     try:
-        data = json.loads(path.read_text())
-        poses_in = data["poses"]
-        xyz = np.array([p["position_mm"] for p in poses_in], dtype=float)
-        q = np.array([p["quaternion_wxyz"] for p in poses_in], dtype=float)
-        swath = [int(p["swath"]) for p in poses_in]
-        scanning = [bool(p["scanning"]) for p in poses_in]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        data = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"trajectory file {path}: JSON nested too deeply") from None
+    except ValueError as exc:  # JSONDecodeError, and ints too long to convert
+        raise ValueError(f"trajectory file {path} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"trajectory file {path}: expected a JSON object with 'poses'")
+    try:
+        model = _TrajectoryJson.model_validate(data)
+    except ValidationError as exc:
+        raise ValueError(f"trajectory file {path}: {_pydantic_where(exc)}") from None
+    xyz = np.array([p.position_mm for p in model.poses], dtype=np.float64)
+    q = np.array([p.quaternion_wxyz for p in model.poses], dtype=np.float64)
+    zero_q = np.linalg.norm(q, axis=1) < 1e-9
+    if zero_q.any():
         raise ValueError(
-            f"trajectory file {path} is not a scanplan JSON trajectory: {exc}"
-        ) from None
-    if len(xyz) == 0:
-        raise ValueError(f"trajectory file {path} has no poses")
+            f"trajectory file {path}: poses[{np.flatnonzero(zero_q)[0]}].quaternion_wxyz: "
+            "quaternion of zero length"
+        )
     return Trajectory(
         poses_from_xyz_quat(xyz, q),
-        np.asarray(swath),
-        np.asarray(scanning),
-        plan_time_s=float(data.get("plan_time_s", 0.0)),
-        planner=data.get("planner", ""),
+        np.array([p.swath for p in model.poses], dtype=np.int64),
+        np.array([p.scanning for p in model.poses], dtype=bool),
+        plan_time_s=model.plan_time_s,
+        planner=model.planner,
     )
 
 
