@@ -18,7 +18,8 @@ class Robot(Protocol):
     joint_limits: (6, 2) rad, [lower, upper] per joint (±inf where a joint turns freely).
     """
 
-    name: str
+    @property
+    def name(self) -> str: ...
 
     @property
     def joint_limits(self) -> np.ndarray: ...

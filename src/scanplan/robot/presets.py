@@ -116,9 +116,7 @@ class RobotFile(BaseModel):
     c3: float
     c4: float = Field(ge=0)
     offsets_deg: Six = Field(default_factory=lambda: [0.0] * 6)
-    sign: Annotated[list[Literal[-1, 1]], Field(min_length=6, max_length=6)] = Field(
-        default_factory=lambda: [1] * 6
-    )
+    sign: Annotated[list[Literal[-1, 1]], Field(min_length=6, max_length=6)] = [1, 1, 1, 1, 1, 1]
     limits_deg: Annotated[
         list[Annotated[list[float], Field(min_length=2, max_length=2)]],
         Field(min_length=6, max_length=6),

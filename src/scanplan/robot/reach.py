@@ -25,7 +25,7 @@ def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarra
     q = np.where(q > hi, q - TWO_PI, np.where(q < lo, q + TWO_PI, q))
     q = np.where(q > hi, q - TWO_PI, np.where(q < lo, q + TWO_PI, q))
     inside = ((q >= lo - 1e-12) & (q <= hi + 1e-12)).all(axis=-1)
-    return q, inside
+    return q, np.asarray(inside)
 
 
 def limit_margin(q: np.ndarray, limits: np.ndarray) -> np.ndarray:
