@@ -326,6 +326,10 @@ def train_cmd(
 
 # ---- export (robot programs) --------------------------------------------------------------
 POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
+ROBOT_HELP = (
+    "arm to check reach on: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
+    "file of OPW parameters; 'none' to skip"
+)
 
 
 @app.command("export")
@@ -351,9 +355,7 @@ def export_cmd(
     travel_speed: Annotated[
         float, typer.Option(help="speed between passes, mm/s")
     ] = ScanSpec.travel_speed_mm_s,
-    robot: Annotated[
-        str, typer.Option(help="check reach for ur3e, ur5e or ur10e; 'none' to skip")
-    ] = "ur5e",
+    robot: Annotated[str, typer.Option(help=ROBOT_HELP)] = "ur5e",
 ):
     """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV)."""
     from scanplan.export import (
@@ -366,7 +368,7 @@ def export_cmd(
         parse_pose_arg,
     )
     from scanplan.export.common import plan_motion
-    from scanplan.robot import check_reach
+    from scanplan.robot import check_reach, get_robot
     from scanplan.trajectory import atomic_write_text, read_trajectory
 
     if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
@@ -387,7 +389,9 @@ def export_cmd(
     if text is None:
         plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
     if robot.lower() != "none":
-        report = check_reach(flange_poses(traj, options), robot)
+        report = check_reach(
+            flange_poses(traj, options), get_robot(robot), swath=traj.swath, scanning=traj.scanning
+        )
         if not report.ok:
             typer.echo(f"warning: {report.summary()}", err=True)
         else:
@@ -397,6 +401,50 @@ def export_cmd(
     else:
         export_rosbag(traj, output, options)
     typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
+
+
+# ---- place (part pose for an arm) ---------------------------------------------------------
+@app.command("place")
+@user_errors
+def place_cmd(
+    trajectory: Annotated[Path, typer.Argument(help="trajectory CSV or JSON")],
+    robot: Annotated[
+        str,
+        typer.Option(help="ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file"),
+    ],
+    tcp: Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}")] = "0,0,0,0,0,0",
+    height_range: Annotated[
+        str | None,
+        typer.Option("--height-range", help="LO,HI mm: the part origin's z in the base frame"),
+    ] = None,
+    yaw_step: Annotated[float, typer.Option("--yaw-step", help="coarse yaw grid, deg")] = 30.0,
+):
+    """Search the part's pose on the table (x, y, z, yaw) from which the arm reaches every
+    pose with no configuration flip in a pass; print it as --part-pose. Exit 2 if none does."""
+    from scanplan.export import parse_pose_arg
+    from scanplan.robot.place import place
+    from scanplan.trajectory import read_trajectory
+
+    heights: tuple[float, float] | None = None
+    if height_range is not None:
+        try:
+            lo, hi = (float(v) for v in height_range.split(","))
+        except ValueError:
+            raise ValueError(f"--height-range {height_range!r}: expected LO,HI in mm") from None
+        heights = (lo, hi)
+    traj = read_trajectory(trajectory)
+    result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
+    m = result.report.worst_margins()
+    typer.echo(f"--part-pose {result.pose_arg()}")
+    typer.echo(result.report.summary())
+    typer.echo(
+        f"worst margins: joint limit {m['limit_deg']:.1f} deg, wrist {m['wrist_deg']:.1f} deg, "
+        f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm "
+        f"({result.evaluated} placements in {result.seconds:.1f} s)"
+    )
+    if not result.reachable:
+        typer.echo("error: no placement reaches every pose; the best found is above", err=True)
+        raise typer.Exit(2)
 
 
 # ---- demo ---------------------------------------------------------------------------------

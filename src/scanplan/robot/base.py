@@ -1,0 +1,67 @@
+"""The `Robot` interface every arm model implements, and the frame maths they share.
+
+Frames: `T_base_flange` is the tool flange in the robot's base frame as its controller shows
+it (mm); joint vectors `q` are the controller's joint angles in rad.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class Robot(Protocol):
+    """A 6-axis arm with a closed-form inverse kinematics.
+
+    joint_limits: (6, 2) rad, [lower, upper] per joint (±inf where a joint turns freely).
+    """
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def joint_limits(self) -> np.ndarray: ...
+
+    def forward(self, q: np.ndarray) -> np.ndarray:
+        """(…, 4, 4) `T_base_flange` in mm from joint angles (…, 6) in rad."""
+        ...
+
+    def inverse(self, T_base_flange: np.ndarray) -> np.ndarray:
+        """(n, 8, 6) joint solutions in (-π, π] for (n, 4, 4) poses; NaN rows where a branch
+        does not exist. A branch index is one arm configuration (shoulder, elbow, wrist)."""
+        ...
+
+    def singularity_terms(self, q: np.ndarray) -> np.ndarray:
+        """(…, 3) signed distances from the wrist, elbow and shoulder singularities:
+        wrist and elbow as sines (unitless), shoulder in mm. |terms| are the margins; their
+        signs are the arm configuration, so a sign change along a pass is a flip."""
+        ...
+
+
+def wrap(q: np.ndarray) -> np.ndarray:
+    """Angles to [-π, π)."""
+    return (q + np.pi) % (2 * np.pi) - np.pi
+
+
+def inv_rigid(T: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(T)
+    R = np.swapaxes(T[..., :3, :3], -1, -2)
+    out[..., :3, :3] = R
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", R, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def acos_or_nan(c: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """acos where |c| <= 1 (rounding at the boundary forgiven), NaN where out of reach."""
+    ok = np.abs(c) <= 1.0 + tol
+    return np.where(ok, np.arccos(np.clip(c, -1.0, 1.0)), np.nan)
+
+
+def as_poses(T: np.ndarray) -> np.ndarray:
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape[-2:] != (4, 4):
+        raise ValueError(f"flange poses must be (n, 4, 4), got {T.shape}")
+    return T.reshape(-1, 4, 4)

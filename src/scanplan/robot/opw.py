@@ -1,0 +1,160 @@
+"""Closed-form kinematics of 6-axis arms with an ortho-parallel basis and a spherical wrist.
+
+The geometry and the eight-branch inverse are those of Brandstötter, Angerer & Hofbaur (2014),
+"An analytical solution of the inverse kinematics problem of industrial serial manipulators
+with an ortho-parallel basis and a spherical wrist" (Austrian Robotics Workshop): seven
+lengths a1, a2, b, c1, c2, c3, c4 (mm here) describe KUKA, ABB, Fanuc, Stäubli... arms.
+Controller joints relate to the paper's angles by q_ctrl = sign · (q_opw + offset).
+The paper's tool frame is turned into the controller's flange frame by `flange`, and its
+base frame sits at `base` in the controller's base frame, so `T_base_flange` is what the
+pendant shows. Fanuc's J3 is measured from the horizontal (the J2/J3 interaction):
+`j3_from_horizontal` converts it to the serial joint the geometry needs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scanplan.robot.base import acos_or_nan, as_poses, inv_rigid, wrap
+
+
+def _rz(t: np.ndarray) -> np.ndarray:
+    c, s = np.cos(t), np.sin(t)
+    R = np.zeros((*np.shape(t), 3, 3))
+    R[..., 0, 0], R[..., 0, 1], R[..., 1, 0], R[..., 1, 1] = c, -s, s, c
+    R[..., 2, 2] = 1.0
+    return R
+
+
+def _ry(t: np.ndarray) -> np.ndarray:
+    c, s = np.cos(t), np.sin(t)
+    R = np.zeros((*np.shape(t), 3, 3))
+    R[..., 0, 0], R[..., 0, 2], R[..., 2, 0], R[..., 2, 2] = c, s, -s, c
+    R[..., 1, 1] = 1.0
+    return R
+
+
+@dataclass(frozen=True, eq=False)  # array fields: == would be ambiguous
+class OPWRobot:
+    """An OPW arm. Lengths in mm; offsets, limits in rad; `sign` ±1 per joint.
+
+    joint_limits: (6, 2) rad, the controller's software limits per joint.
+    base:   (4, 4) the paper's base frame in the controller's base frame (mm).
+    flange: (4, 4) the controller's flange frame in the paper's tool frame.
+    """
+
+    name: str
+    a1: float
+    a2: float
+    b: float
+    c1: float
+    c2: float
+    c3: float
+    c4: float
+    offsets: tuple[float, ...] = (0.0,) * 6
+    sign: tuple[int, ...] = (1,) * 6
+    limits: tuple[tuple[float, float], ...] = ((-np.pi, np.pi),) * 6
+    base: np.ndarray = field(default_factory=lambda: np.eye(4))
+    flange: np.ndarray = field(default_factory=lambda: np.eye(4))
+    j3_from_horizontal: bool = False
+
+    def __post_init__(self) -> None:
+        if self.c2 <= 0 or np.hypot(self.a2, self.c3) <= 0:
+            raise ValueError(f"robot {self.name}: c2 and hypot(a2, c3) must be > 0")
+        if len(self.offsets) != 6 or len(self.sign) != 6 or len(self.limits) != 6:
+            raise ValueError(f"robot {self.name}: offsets, sign and limits need 6 entries")
+
+    @property
+    def joint_limits(self) -> np.ndarray:
+        return np.asarray(self.limits, dtype=np.float64)
+
+    # --- joint conventions -----------------------------------------------------------------
+    def _to_opw(self, q: np.ndarray) -> np.ndarray:
+        q = np.array(q, dtype=np.float64)
+        if self.j3_from_horizontal:
+            q[..., 2] = q[..., 2] + q[..., 1]
+        return q * np.asarray(self.sign, dtype=np.float64) - np.asarray(self.offsets)
+
+    def _from_opw(self, q_opw: np.ndarray) -> np.ndarray:
+        q = (q_opw + np.asarray(self.offsets)) * np.asarray(self.sign, dtype=np.float64)
+        if self.j3_from_horizontal:
+            q[..., 2] = q[..., 2] - q[..., 1]
+        return wrap(q)
+
+    # --- kinematics --------------------------------------------------------------------------
+    def forward(self, q: np.ndarray) -> np.ndarray:
+        t = self._to_opw(q)
+        t1, t2, t3, t4, t5, t6 = np.moveaxis(t, -1, 0)
+        psi3, k = np.arctan2(self.a2, self.c3), np.hypot(self.a2, self.c3)
+        # Wrist centre in the arm's plane (frame 1), then turned by joint 1.
+        cx1 = self.c2 * np.sin(t2) + k * np.sin(t2 + t3 + psi3) + self.a1
+        cz1 = self.c2 * np.cos(t2) + k * np.cos(t2 + t3 + psi3)
+        c1, s1 = np.cos(t1), np.sin(t1)
+        centre = np.stack([cx1 * c1 - self.b * s1, cx1 * s1 + self.b * c1, cz1 + self.c1], -1)
+        R = _rz(t1) @ _ry(t2 + t3) @ _rz(t4) @ _ry(t5) @ _rz(t6)
+        T = np.zeros((*t1.shape, 4, 4))
+        T[..., :3, :3] = R
+        T[..., :3, 3] = centre + self.c4 * R[..., :, 2]
+        T[..., 3, 3] = 1.0
+        return self.base @ T @ self.flange
+
+    def inverse(self, T_base_flange: np.ndarray) -> np.ndarray:
+        """(n, 8, 6); index = 4·wrist + 2·shoulder + elbow (the paper's i…viii)."""
+        T = inv_rigid(self.base) @ as_poses(T_base_flange) @ inv_rigid(self.flange)
+        n = len(T)
+        R = T[:, :3, :3]
+        c = T[:, :3, 3] - self.c4 * R[:, :, 2]
+        # Shoulder: joint 1 points the arm's plane at the wrist centre, or away from it.
+        rho = c[:, 0] ** 2 + c[:, 1] ** 2 - self.b**2
+        nx1 = np.sqrt(np.where(rho >= 0, rho, np.nan)) - self.a1
+        phi = np.arctan2(c[:, 1], c[:, 0])
+        lean = np.arctan2(self.b, nx1 + self.a1)
+        t1 = np.stack([phi - lean, phi + lean - np.pi], axis=1)  # (n, 2)
+        # Elbow: the triangle joint 2 - joint 3 - wrist centre, in the arm's plane.
+        dz = c[:, 2] - self.c1
+        reach_x = np.stack([nx1, nx1 + 2 * self.a1], axis=1)  # (n, 2): front, back
+        s_sq = reach_x**2 + dz[:, None] ** 2
+        s = np.sqrt(s_sq)
+        k_sq = self.a2**2 + self.c3**2
+        k = np.sqrt(k_sq)
+        psi3 = np.arctan2(self.a2, self.c3)
+        g2 = acos_or_nan((s_sq + self.c2**2 - k_sq) / (2 * s * self.c2))
+        g3 = acos_or_nan((s_sq - self.c2**2 - k_sq) / (2 * self.c2 * k))
+        sgn = np.array([-1.0, 1.0])  # elbow branch
+        aim = np.stack([np.arctan2(nx1, dz), -np.arctan2(nx1 + 2 * self.a1, dz)], axis=1)
+        t2 = sgn * g2[..., None] + aim[..., None]  # (n, 2 shoulder, 2 elbow)
+        t3 = -sgn * g3[..., None] - psi3
+        t1b = np.broadcast_to(t1[..., None], t2.shape)
+        # Wrist: R_ce = Rz(q4) Ry(q5) Rz(q6) is what joints 1-3 leave to the wrist.
+        R_ce = np.swapaxes(_rz(t1b) @ _ry(t2 + t3), -1, -2) @ R[:, None, None]
+        t5 = np.arctan2(np.hypot(R_ce[..., 0, 2], R_ce[..., 1, 2]), R_ce[..., 2, 2])
+        t4 = np.arctan2(R_ce[..., 1, 2], R_ce[..., 0, 2])
+        t6 = np.arctan2(R_ce[..., 2, 1], -R_ce[..., 2, 0])
+        # On the wrist singularity only q4 ± q6 is defined: put it all on q6.
+        singular = np.sin(t5) < 1e-12
+        phi46 = np.arctan2(-R_ce[..., 0, 1], R_ce[..., 1, 1])
+        t4 = np.where(singular, 0.0, t4)
+        t6 = np.where(singular, np.where(R_ce[..., 2, 2] > 0, phi46, -phi46), t6)
+        arm = np.stack([t1b, t2, t3], axis=-1).reshape(n, 4, 3)
+        wrist = np.stack([t4, t5, t6], axis=-1).reshape(n, 4, 3)
+        flipped = wrist + np.array([np.pi, 0.0, -np.pi])
+        flipped[..., 1] *= -1
+        q_opw = np.concatenate(
+            [np.concatenate([arm, wrist], axis=-1), np.concatenate([arm, flipped], axis=-1)],
+            axis=1,
+        )
+        q = self._from_opw(q_opw)
+        q[np.isnan(q).any(axis=2)] = np.nan
+        return q
+
+    def singularity_terms(self, q: np.ndarray) -> np.ndarray:
+        """(…, 3): sin q5 (wrist: axes 4 and 6 align), sin(q3 + ψ3) (elbow: arm stretched
+        or folded) and, in mm, the wrist centre's distance from the joint-1 axis in the
+        arm's plane (shoulder). For b = 0 their product is det J up to c2·√(a2²+c3²)."""
+        t = self._to_opw(q)
+        t2, t3 = t[..., 1], t[..., 2]
+        psi3, k = np.arctan2(self.a2, self.c3), np.hypot(self.a2, self.c3)
+        shoulder = self.c2 * np.sin(t2) + k * np.sin(t2 + t3 + psi3) + self.a1
+        return np.stack([np.sin(t[..., 4]), np.sin(t3 + psi3), shoulder], axis=-1)

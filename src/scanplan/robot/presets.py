@@ -1,0 +1,193 @@
+"""The arms `--robot` knows by name, and user TOML files for any other OPW arm.
+
+Each preset is the controller's own frames: `T_base_flange` as its pendant shows it.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from scipy.spatial.transform import Rotation
+
+from scanplan.robot.base import Robot
+from scanplan.robot.opw import OPWRobot
+from scanplan.robot.ur import UR_MODELS
+
+
+def _pose(x: float, y: float, z: float, a: float, b: float, c: float) -> np.ndarray:
+    """4x4 from mm and KUKA A, B, C degrees (intrinsic ZYX), as `--part-pose` reads them."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("ZYX", [a, b, c], degrees=True).as_matrix()
+    T[:3, 3] = x, y, z
+    return T
+
+
+def _limits(*pairs: tuple[float, float]) -> tuple[tuple[float, float], ...]:
+    return tuple((float(np.radians(lo)), float(np.radians(hi))) for lo, hi in pairs)
+
+
+_DEG90 = np.pi / 2
+
+OPW_PRESETS: dict[str, OPWRobot] = {
+    # KUKA KR 6 R900 sixx (KR AGILUS). Lengths from ROS-Industrial kuka_experimental,
+    # kuka_kr6_support/urdf/kr6r900sixx_macro.xacro (joint origins 400, 25, 455, 35, 420,
+    # 80 mm), which match KUKA's dimension drawing; offsets and signs as ROS-Industrial's
+    # opw_kinematics files for the KR 6 family (A2 = -90° is the upper arm upright).
+    # Limits: KUKA data sheet KR 6 R900 sixx, A1 ±170°, A2 -190/+45°, A3 -120/+156°,
+    # A4 ±185°, A5 ±120°, A6 ±350°. $FLANGE has X out of the flange: the paper's tool
+    # frame turned -90° about Y.
+    "kr6-r900": OPWRobot(
+        "kr6-r900",
+        a1=25.0,
+        a2=-35.0,
+        b=0.0,
+        c1=400.0,
+        c2=455.0,
+        c3=420.0,
+        c4=80.0,
+        offsets=(0.0, -_DEG90, 0.0, 0.0, 0.0, 0.0),
+        sign=(-1, 1, 1, -1, 1, -1),
+        limits=_limits((-170, 170), (-190, 45), (-120, 156), (-185, 185), (-120, 120), (-350, 350)),
+        flange=_pose(0, 0, 0, 0, -90, 0),
+    ),
+    # ABB IRB 2400/16 (the /10 has the same axes). Parameters as Brandstötter et al. (2014)
+    # list them and ROS-Industrial's opw_kinematics `makeIrb2400_10`: a1 100, a2 -135,
+    # c1 615, c2 705, c3 755, c4 85 mm. Limits: ABB product specification IRB 2400, axis 1
+    # ±180°, 2 -100/+110°, 3 -60/+65°, 4 ±200°, 5 ±120°, 6 ±400°. tool0 has Z out of the
+    # flange, as the paper's tool frame.
+    "irb2400": OPWRobot(
+        "irb2400",
+        a1=100.0,
+        a2=-135.0,
+        b=0.0,
+        c1=615.0,
+        c2=705.0,
+        c3=755.0,
+        c4=85.0,
+        offsets=(0.0, 0.0, -_DEG90, 0.0, 0.0, 0.0),
+        limits=_limits((-180, 180), (-100, 110), (-60, 65), (-200, 200), (-120, 120), (-400, 400)),
+    ),
+    # FANUC LR Mate 200iD (717 mm reach). Lengths from ROS-Industrial fanuc,
+    # fanuc_lrmate200id_support/urdf/lrmate200id_macro.xacro (330, 50, 330, 35, 335, 80 mm).
+    # Base = Fanuc's World frame, whose origin is on J1 at the height of J2 (330 mm above
+    # the mounting face); the faceplate frame has Z out of the flange. J3 is Fanuc's,
+    # measured from the horizontal. Limits: FANUC LR Mate 200iD data sheet (J1 340°, J2
+    # 245°, J3 420°, J4 380°, J5 250°, J6 720°), split into lower/upper as in that URDF:
+    # J1 ±170°, J2 -100/+145°, J3 -140/+280°, J4 ±190°, J5 ±125°, J6 ±360°.
+    "lrmate200id": OPWRobot(
+        "lrmate200id",
+        a1=50.0,
+        a2=-35.0,
+        b=0.0,
+        c1=330.0,
+        c2=330.0,
+        c3=335.0,
+        c4=80.0,
+        offsets=(0.0, 0.0, -_DEG90, 0.0, 0.0, 0.0),
+        sign=(1, 1, -1, -1, -1, -1),
+        limits=_limits(
+            (-170, 170), (-100, 145), (-140, 280), (-190, 190), (-125, 125), (-360, 360)
+        ),
+        base=_pose(0, 0, -330, 0, 0, 0),
+        flange=_pose(0, 0, 0, 180, 0, 0),
+        j3_from_horizontal=True,
+    ),
+}
+
+ROBOT_NAMES: tuple[str, ...] = (*UR_MODELS, *OPW_PRESETS)
+
+Six = Annotated[list[float], Field(min_length=6, max_length=6)]
+
+
+class RobotFile(BaseModel):
+    """A user's OPW arm: lengths in mm (the paper's names), angles in degrees."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = "custom"
+    a1: float
+    a2: float
+    b: float = 0.0
+    c1: float
+    c2: float = Field(gt=0)
+    c3: float
+    c4: float = Field(ge=0)
+    offsets_deg: Six = Field(default_factory=lambda: [0.0] * 6)
+    sign: Annotated[list[Literal[-1, 1]], Field(min_length=6, max_length=6)] = [1, 1, 1, 1, 1, 1]
+    limits_deg: Annotated[
+        list[Annotated[list[float], Field(min_length=2, max_length=2)]],
+        Field(min_length=6, max_length=6),
+    ]
+    base: Six = Field(default_factory=lambda: [0.0] * 6)  # x,y,z mm, A,B,C deg
+    flange: Six = Field(default_factory=lambda: [0.0] * 6)
+    j3_from_horizontal: bool = False
+
+    @model_validator(mode="after")
+    def _finite_and_ordered(self) -> RobotFile:
+        for name in ("a1", "a2", "b", "c1", "c3", "c4"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite")
+        for i, (lo, hi) in enumerate(self.limits_deg):
+            if not lo < hi:
+                raise ValueError(f"limits_deg joint {i + 1}: lower {lo} must be < upper {hi}")
+        for name in ("offsets_deg", "base", "flange"):
+            if not np.isfinite(getattr(self, name)).all():
+                raise ValueError(f"{name} must be finite")
+        return self
+
+    def to_robot(self) -> OPWRobot:
+        return OPWRobot(
+            self.name,
+            a1=self.a1,
+            a2=self.a2,
+            b=self.b,
+            c1=self.c1,
+            c2=self.c2,
+            c3=self.c3,
+            c4=self.c4,
+            offsets=tuple(float(np.radians(v)) for v in self.offsets_deg),
+            sign=tuple(self.sign),
+            limits=_limits(*((lo, hi) for lo, hi in self.limits_deg)),
+            base=_pose(*self.base),
+            flange=_pose(*self.flange),
+            j3_from_horizontal=self.j3_from_horizontal,
+        )
+
+
+def load_robot_file(path: str | Path) -> OPWRobot:
+    """A TOML file of OPW parameters -> OPWRobot; ValueError naming the file and field."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"robot file {path} cannot be parsed: {first}") from None
+    try:
+        return RobotFile.model_validate(data).to_robot()
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "file"
+        msg = str(err["msg"]).removeprefix("Value error, ")
+        raise ValueError(f"robot file {path}: {where}: {msg}") from None
+
+
+def get_robot(robot: str | Path | Robot) -> Robot:
+    """A preset name (ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id), a TOML file of
+    OPW parameters, or a Robot (returned as is)."""
+    if not isinstance(robot, str | Path):
+        return robot
+    key = str(robot).lower()
+    if key in UR_MODELS:
+        return UR_MODELS[key]
+    if key in OPW_PRESETS:
+        return OPW_PRESETS[key]
+    if key.endswith(".toml"):
+        if not Path(robot).is_file():
+            raise ValueError(f"robot file {robot} does not exist")
+        return load_robot_file(robot)
+    raise ValueError(
+        f"unknown robot {str(robot)!r}; choose one of {', '.join(ROBOT_NAMES)} or a .toml file"
+    )

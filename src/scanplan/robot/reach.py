@@ -1,0 +1,186 @@
+"""Can an arm follow a flange path? Unreachable poses, joint limits, singularities, flips.
+
+Works for any `Robot`; the path is `T_base_flange` (n, 4, 4) in mm, e.g. from
+`scanplan.export.flange_poses`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scanplan.robot.base import Robot, wrap
+from scanplan.robot.presets import get_robot
+
+TWO_PI = 2 * np.pi
+
+
+def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(q shifted by whole turns into the limits where it can be, (…,) all joints inside).
+    Ranges wider than ±180° (KUKA A6 ±350°, UR ±360°) make several turns legal: the one
+    closest to the given q is kept."""
+    lo, hi = limits[:, 0], limits[:, 1]
+    q = np.where(q > hi, q - TWO_PI, np.where(q < lo, q + TWO_PI, q))
+    q = np.where(q > hi, q - TWO_PI, np.where(q < lo, q + TWO_PI, q))
+    inside = ((q >= lo - 1e-12) & (q <= hi + 1e-12)).all(axis=-1)
+    return q, np.asarray(inside)
+
+
+def limit_margin(q: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """(…,) rad to the nearest joint limit (negative beyond it)."""
+    return np.minimum(q - limits[:, 0], limits[:, 1] - q).min(axis=-1)
+
+
+def same_pass(n: int, swath: np.ndarray | None, scanning: np.ndarray | None) -> np.ndarray:
+    """(n - 1,) True where poses i and i+1 belong to one scanning pass (all, without info)."""
+    if swath is None or scanning is None:
+        return np.ones(max(n - 1, 0), dtype=bool)
+    swath, scanning = np.asarray(swath), np.asarray(scanning, dtype=bool)
+    if len(swath) != n or len(scanning) != n:
+        raise ValueError(f"{n} poses but {len(swath)} swath and {len(scanning)} scanning flags")
+    return scanning[1:] & scanning[:-1] & (swath[1:] == swath[:-1])
+
+
+@dataclass(frozen=True)
+class ReachReport:
+    """Whether an arm can follow a flange path, branch by branch.
+
+    joints: (n, 6) rad along the followed IK branch (closest solution to the previous pose),
+            NaN where unreachable or beyond the joint limits. Index arrays are pose indices;
+            a jump or flip at i is between poses i-1 and i.
+    margins: (n, 3) |wrist|, |elbow| (sines) and shoulder (mm) singularity distances;
+    limit_margin_rad: (n,) to the nearest joint limit. NaN where `joints` is.
+    """
+
+    model: str
+    joints: np.ndarray
+    unreachable: np.ndarray
+    limit_violations: np.ndarray
+    wrist_singular: np.ndarray
+    elbow_singular: np.ndarray
+    shoulder_singular: np.ndarray
+    wrist_flips: np.ndarray
+    config_flips: np.ndarray
+    joint_jumps: np.ndarray
+    jump_deg: float
+    margins: np.ndarray
+    limit_margin_rad: np.ndarray
+
+    @property
+    def near_singular(self) -> np.ndarray:
+        return np.union1d(
+            np.union1d(self.wrist_singular, self.elbow_singular), self.shoulder_singular
+        )
+
+    @property
+    def reachable(self) -> bool:
+        """Every pose reachable inside the joint limits, no configuration flip in a pass."""
+        return not (len(self.unreachable) or len(self.limit_violations) or len(self.config_flips))
+
+    @property
+    def ok(self) -> bool:
+        return self.reachable and not (len(self.near_singular) or len(self.joint_jumps))
+
+    def worst_margins(self) -> dict[str, float]:
+        """The smallest margin along the path: joint limit (deg), wrist and elbow (deg from
+        the singular configuration), shoulder (mm); NaN where no pose is reachable."""
+        if np.isnan(self.limit_margin_rad).all():
+            return dict.fromkeys(("limit_deg", "wrist_deg", "elbow_deg", "shoulder_mm"), np.nan)
+        m = np.nanmin(self.margins, axis=0)
+        return {
+            "limit_deg": float(np.degrees(np.nanmin(self.limit_margin_rad))),
+            "wrist_deg": float(np.degrees(np.arcsin(min(m[0], 1.0)))),
+            "elbow_deg": float(np.degrees(np.arcsin(min(m[1], 1.0)))),
+            "shoulder_mm": float(m[2]),
+        }
+
+    def summary(self) -> str:
+        return (
+            f"{self.model}: {len(self.joints)} poses, {len(self.unreachable)} unreachable, "
+            f"{len(self.limit_violations)} beyond joint limits, "
+            f"{len(self.near_singular)} near-singular (wrist {len(self.wrist_singular)}, "
+            f"elbow {len(self.elbow_singular)}, shoulder {len(self.shoulder_singular)}), "
+            f"{len(self.config_flips)} configuration flips in a pass "
+            f"({len(self.wrist_flips)} wrist), {len(self.joint_jumps)} joint jumps "
+            f"> {self.jump_deg:g}°"
+        )
+
+
+def check_reach(
+    T_base_flange: np.ndarray,
+    robot: str | Path | Robot = "ur5e",
+    q_start: np.ndarray | None = None,
+    swath: np.ndarray | None = None,
+    scanning: np.ndarray | None = None,
+    wrist_tol: float = np.sin(np.radians(5.0)),
+    elbow_tol: float = np.sin(np.radians(5.0)),
+    shoulder_tol_mm: float = 20.0,
+    jump_deg: float = 30.0,
+) -> ReachReport:
+    """Follow the path through IK and report what would stop or upset a real arm.
+
+    The first reachable pose takes the solution closest to `q_start` if given, else the one
+    farthest from every singularity and limit; each next pose takes the in-limit solution
+    closest to the previous one, as a controller executing linear moves would. A
+    configuration flip is a sign change of a singularity term (wrist, elbow, shoulder)
+    between consecutive poses of one pass (`swath`, `scanning`; without them the whole
+    path is one pass): the path went through that singularity. A jump is any joint
+    turning more than `jump_deg` between consecutive poses.
+    """
+    arm = get_robot(robot)
+    poses = np.asarray(T_base_flange, dtype=np.float64)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise ValueError(f"flange poses must be (n, 4, 4), got {poses.shape}")
+    n = len(poses)
+    linked = same_pass(n, swath, scanning)
+    limits = arm.joint_limits
+    solutions = arm.inverse(poses)
+    exists = ~np.isnan(solutions).any(axis=2)
+    tol = np.array([wrist_tol, elbow_tol, shoulder_tol_mm])
+    joints = np.full((n, 6), np.nan)
+    prev: np.ndarray | None = None if q_start is None else np.asarray(q_start, dtype=float)
+    # Sequential by nature: each pose's branch depends on the previous choice.
+    for i in range(n):
+        if not exists[i].any():
+            continue
+        cand = solutions[i][exists[i]]
+        if prev is None:
+            cand, inside = fit_limits(cand, limits)
+            if not inside.any():
+                continue
+            cand = cand[inside]
+            terms = np.abs(arm.singularity_terms(cand)) / tol
+            score = np.minimum(terms.min(axis=1), limit_margin(cand, limits) / np.radians(5))
+            prev = cand[np.argmax(score)]
+        else:
+            cand, inside = fit_limits(prev + wrap(cand - prev), limits)
+            if not inside.any():
+                continue
+            cand = cand[inside]
+            prev = cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
+        joints[i] = prev
+    reachable = ~np.isnan(joints).any(axis=1)
+    terms = arm.singularity_terms(joints)
+    margins = np.abs(terms)
+    idx = np.flatnonzero
+    step = np.abs(np.diff(joints, axis=0))  # NaN across unreachable poses: never flagged
+    jumps = np.nanmax(np.where(np.isnan(step), 0.0, step), axis=1) > np.radians(jump_deg)
+    config = np.where(reachable[:, None], terms >= 0, np.nan)
+    flips = (np.abs(np.diff(config, axis=0)) == 1) & linked[:, None]  # NaN: never a flip
+    return ReachReport(
+        model=arm.name,
+        joints=joints,
+        unreachable=idx(~exists.any(axis=1)),
+        limit_violations=idx(exists.any(axis=1) & ~reachable),
+        wrist_singular=idx(reachable & (margins[:, 0] < wrist_tol)),
+        elbow_singular=idx(reachable & (margins[:, 1] < elbow_tol)),
+        shoulder_singular=idx(reachable & (margins[:, 2] < shoulder_tol_mm)),
+        wrist_flips=idx(flips[:, 0]) + 1,
+        config_flips=idx(flips.any(axis=1)) + 1,
+        joint_jumps=idx(jumps) + 1,
+        jump_deg=jump_deg,
+        margins=margins,
+        limit_margin_rad=limit_margin(joints, limits),
+    )

@@ -1,0 +1,162 @@
+"""Universal Robots e-Series kinematics (UR3e, UR5e, UR10e).
+
+Standard DH parameters as published by Universal Robots ("Parameters for calculations of
+kinematics and dynamics"), in mm. Frame 0 is the controller's base frame and frame 6 the
+tool flange, so poses here are `T_base_flange` as the teach pendant shows them (not ROS
+`base_link`, which is turned 180° about Z). The inverse kinematics is the closed form of
+Hawkins (2013): up to 8 solutions, shoulder left/right × wrist up/down × elbow up/down.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanplan.robot.base import acos_or_nan as _acos_or_nan
+from scanplan.robot.base import as_poses
+from scanplan.robot.base import inv_rigid as _inv
+from scanplan.robot.base import wrap as _wrap
+
+
+@dataclass(frozen=True)
+class URModel:
+    name: str
+    d1: float
+    a2: float
+    a3: float
+    d4: float
+    d5: float
+    d6: float
+    # Working range per joint, degrees (e-Series datasheets: ±360° on every joint; the
+    # UR3e's wrist 3 turns without limit).
+    range_deg: tuple[float, ...] = (360.0,) * 6
+
+    @property
+    def joint_limits(self) -> np.ndarray:
+        r = np.radians(np.asarray(self.range_deg, dtype=np.float64))
+        return np.stack([-r, r], axis=1)
+
+    def forward(self, q: np.ndarray) -> np.ndarray:
+        return forward_kinematics(q, self)
+
+    def inverse(self, T_base_flange: np.ndarray) -> np.ndarray:
+        return inverse_kinematics(T_base_flange, self)
+
+    def singularity_terms(self, q: np.ndarray) -> np.ndarray:
+        return _singularity_terms(q, self)
+
+    @property
+    def dh(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(a, d, alpha) per joint, mm and rad."""
+        a = np.array([0.0, self.a2, self.a3, 0.0, 0.0, 0.0])
+        d = np.array([self.d1, 0.0, 0.0, self.d4, self.d5, self.d6])
+        alpha = np.array([np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0])
+        return a, d, alpha
+
+
+UR_MODELS: dict[str, URModel] = {
+    "ur3e": URModel("ur3e", 151.85, -243.55, -213.2, 131.05, 85.35, 92.1, (360.0,) * 5 + (np.inf,)),
+    "ur5e": URModel("ur5e", 162.5, -425.0, -392.2, 133.3, 99.7, 99.6),
+    "ur10e": URModel("ur10e", 180.7, -612.7, -571.55, 174.15, 119.85, 116.55),
+}
+
+
+def get_model(model: str | URModel) -> URModel:
+    if isinstance(model, URModel):
+        return model
+    try:
+        return UR_MODELS[model.lower()]
+    except KeyError:
+        raise ValueError(f"unknown robot {model!r}; choose one of {', '.join(UR_MODELS)}") from None
+
+
+def _dh(theta: np.ndarray, d: float, a: float, alpha: float) -> np.ndarray:
+    """(…, 4, 4) Rz(θ) Tz(d) Tx(a) Rx(α)."""
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    T = np.zeros((*np.shape(theta), 4, 4))
+    T[..., 0, :] = np.stack([ct, -st * ca, st * sa, a * ct], axis=-1)
+    T[..., 1, :] = np.stack([st, ct * ca, -ct * sa, a * st], axis=-1)
+    T[..., 2, 1], T[..., 2, 2], T[..., 2, 3] = sa, ca, d
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def forward_kinematics(q: np.ndarray, model: str | URModel = "ur5e") -> np.ndarray:
+    """(…, 4, 4) `T_base_flange` in mm from joint angles q (…, 6) in rad."""
+    a, d, alpha = get_model(model).dh
+    q = np.asarray(q, dtype=np.float64)
+    T = _dh(q[..., 0], d[0], a[0], alpha[0])
+    for j in range(1, 6):
+        T = T @ _dh(q[..., j], d[j], a[j], alpha[j])
+    return T
+
+
+def inverse_kinematics(T_base_flange: np.ndarray, model: str | URModel = "ur5e") -> np.ndarray:
+    """(n, 8, 6) joint solutions in (-π, π] for (n, 4, 4) flange poses in mm; NaN rows where
+    a branch does not exist. Order: index = 4·shoulder + 2·wrist + elbow."""
+    m = get_model(model)
+    T06 = as_poses(T_base_flange)
+    n = len(T06)
+    # θ1: the wrist centre p05 must lie at distance d4 from the plane of the arm.
+    p05 = T06[:, :3, 3] - m.d6 * T06[:, :3, 2]
+    r = np.hypot(p05[:, 0], p05[:, 1])
+    psi = np.arctan2(p05[:, 1], p05[:, 0])
+    phi = np.arcsin(np.clip(m.d4 / np.maximum(r, 1e-12), -1.0, 1.0))
+    phi = np.where(r >= m.d4 * (1 - 1e-12), phi, np.nan)
+    t1 = np.stack([psi + phi, psi + np.pi - phi], axis=1)  # (n, 2)
+    s1, c1 = np.sin(t1), np.cos(t1)
+    # θ5: height of the flange above that plane.
+    p = T06[:, None, :3, 3]
+    c5 = (p[..., 0] * s1 - p[..., 1] * c1 - m.d4) / m.d6
+    t5a = _acos_or_nan(c5)
+    t5 = np.stack([t5a, -t5a], axis=2)  # (n, 2, 2)
+    t1b = np.broadcast_to(t1[:, :, None], t5.shape)
+    # In frame 1, R16 = Rz(θ234) Ry(-θ5) Rz(θ6): its last row is [s5 c6, -s5 s6, c5].
+    T16 = _inv(_dh(t1b, m.d1, 0.0, np.pi / 2)) @ T06[:, None, None]
+    s5 = np.sin(t5)
+    sgn = np.where(s5 < 0, -1.0, 1.0)
+    singular = np.abs(s5) < 1e-10
+    t6 = np.where(singular, 0.0, np.arctan2(-T16[..., 2, 1] * sgn, T16[..., 2, 0] * sgn))
+    # The remaining three parallel joints form a planar 2-link arm plus a wrist angle.
+    T14 = T16 @ _inv(_dh(t5, m.d5, 0.0, -np.pi / 2) @ _dh(t6, m.d6, 0.0, 0.0))
+    x, y = T14[..., 0, 3], T14[..., 1, 3]
+    c3 = (x**2 + y**2 - m.a2**2 - m.a3**2) / (2 * m.a2 * m.a3)
+    t3a = _acos_or_nan(c3)
+    t3 = np.stack([t3a, -t3a], axis=3)  # (n, 2, 2, 2)
+    x, y = x[..., None], y[..., None]
+    t2 = np.arctan2(y, x) - np.arctan2(m.a3 * np.sin(t3), m.a2 + m.a3 * np.cos(t3))
+    t234 = np.arctan2(T14[..., 1, 0], T14[..., 0, 0])[..., None]
+    t4 = t234 - t2 - t3
+    shape = t3.shape
+    q = np.stack(
+        [
+            np.broadcast_to(t1[:, :, None, None], shape),
+            t2,
+            t3,
+            t4,
+            np.broadcast_to(t5[..., None], shape),
+            np.broadcast_to(t6[..., None], shape),
+        ],
+        axis=-1,
+    ).reshape(n, 8, 6)
+    q = _wrap(q)
+    q[np.isnan(q).any(axis=2)] = np.nan
+    return q
+
+
+def singularity_margins(q: np.ndarray, model: str | URModel = "ur5e") -> np.ndarray:
+    """(…, 3) |singularity terms|: see `_singularity_terms`."""
+    return np.abs(_singularity_terms(q, get_model(model)))
+
+
+def _singularity_terms(q: np.ndarray, m: URModel) -> np.ndarray:
+    """(…, 3) signed distances from the three UR singularities, whose product is det J up to a
+    constant: |sin q5| (wrist: axes 4 and 6 align), |sin q3| (elbow: arm stretched or
+    folded), and, in mm, the distance of the wrist centre from the plane through the
+    joint-1 axis parallel to axis 2 (shoulder)."""
+    q = np.asarray(q, dtype=np.float64)
+    q2, q3, q234 = q[..., 1], q[..., 2], q[..., 1] + q[..., 2] + q[..., 3]
+    shoulder = m.a2 * np.cos(q2) + m.a3 * np.cos(q2 + q3) + m.d5 * np.sin(q234)
+    return np.stack([np.sin(q[..., 4]), np.sin(q3), shoulder], axis=-1)

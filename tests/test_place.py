@@ -1,0 +1,142 @@
+"""Part placement: a small raster on a UR3e is placed fully reachable; a 3 m pass is not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from scanplan.cli import app
+from scanplan.export import ExportOptions, flange_poses, parse_pose_arg
+from scanplan.robot import check_reach
+from scanplan.robot.place import place
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory, write_csv
+
+TCP = "0,0,90,0,0,0"
+
+
+def _raster(length_mm: float, passes: int, n: int = 60, height_mm: float = 150.0) -> Trajectory:
+    """Boustrophedon passes along x over a part of `length_mm`, 60 mm apart, sensor down."""
+    poses, swath = [], []
+    for k in range(passes):
+        y = (k - (passes - 1) / 2) * 60.0
+        a, b = np.array([-length_mm / 2, y, height_mm]), np.array([length_mm / 2, y, height_mm])
+        if k % 2:
+            a, b = b, a
+        u = (b - a) / np.linalg.norm(b - a)
+        sw = Swath(k, a, b, u, np.cross([0, 0, 1.0], u))
+        poses.append(sw.poses(np.linspace(0, length_mm, n), np.zeros(n), np.zeros(n)))
+        swath.append(np.full(n, k))
+    return Trajectory(np.concatenate(poses), np.concatenate(swath), np.ones(passes * n, bool))
+
+
+def test_small_raster_on_a_ur3e_is_placed_fully_reachable() -> None:
+    traj = _raster(300.0, 4)
+    result = place(traj, "ur3e", tcp=parse_pose_arg(TCP), height_range_mm=(-300, 100))
+    assert result.reachable, result.report.summary()
+    # The printed pose is the one checked: export's own reach check agrees.
+    options = ExportOptions(part_pose=parse_pose_arg(result.pose_arg()), tcp=parse_pose_arg(TCP))
+    report = check_reach(
+        flange_poses(traj, options), "ur3e", swath=traj.swath, scanning=traj.scanning
+    )
+    assert report.reachable and len(report.unreachable) == 0
+    assert -300 <= result.T_base_part[2, 3] <= 100
+    m = report.worst_margins()
+    assert m["limit_deg"] > 0 and m["wrist_deg"] > 0
+
+
+def test_three_metre_pass_on_a_ur3e_is_not_placeable() -> None:
+    result = place(_raster(3000.0, 1, n=100), "ur3e", tcp=parse_pose_arg(TCP))
+    assert not result.reachable
+    assert len(result.report.unreachable) > 0
+    assert result.score < 0
+
+
+def test_bad_arguments_are_value_errors() -> None:
+    with pytest.raises(ValueError, match="yaw step"):
+        place(_raster(100.0, 1), "ur3e", yaw_step_deg=0)
+    with pytest.raises(ValueError, match="height range"):
+        place(_raster(100.0, 1), "ur3e", height_range_mm=(100, -100))
+    with pytest.raises(ValueError, match="unknown robot"):
+        place(_raster(100.0, 1), "ur4e")
+
+
+def test_cli_place_then_export(tmp_path) -> None:
+    runner = CliRunner()
+    path = tmp_path / "t.csv"
+    write_csv(_raster(300.0, 3, n=40), path)
+    result = runner.invoke(
+        app,
+        [
+            "place",
+            str(path),
+            "--robot",
+            "kr6-r900",
+            "--tcp",
+            TCP,
+            "--height-range",
+            "-200,200",
+            "--yaw-step",
+            "45",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    line = result.output.splitlines()[0]
+    assert line.startswith("--part-pose ")
+    pose = line.split()[1]
+    assert "0 unreachable" in result.output and "worst margins" in result.output
+    out = tmp_path / "scan.src"
+    result = runner.invoke(
+        app,
+        [
+            "export",
+            str(path),
+            "--format",
+            "krl",
+            "--robot",
+            "kr6-r900",
+            "--tcp",
+            TCP,
+            "--part-pose",
+            pose,
+            "-o",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert "kr6-r900: 120 poses, 0 unreachable, 0 beyond joint limits" in result.output
+    assert "DEF scan( )" in out.read_text()
+
+    # Unplaceable: exit 2, the best pose still printed; bad input: one line, exit 2.
+    far = tmp_path / "far.csv"
+    write_csv(_raster(3000.0, 1, n=50), far)
+    result = runner.invoke(app, ["place", str(far), "--robot", "ur3e"])
+    assert result.exit_code == 2 and result.output.startswith("--part-pose ")
+    for extra in (["--height-range", "1,x"], ["--robot", "ur4e"]):
+        result = runner.invoke(app, ["place", str(path), "--robot", "ur3e", *extra])
+        assert result.exit_code == 2 and result.output.startswith("error:")
+        assert result.output.strip().count("\n") == 0
+
+
+def test_cli_export_krl_warns_on_its_own_arm(tmp_path) -> None:
+    # The KRL program is checked on the KR 6: a part 2 m away is out of its reach.
+    path = tmp_path / "t.csv"
+    write_csv(_raster(300.0, 2, n=20), path)
+    result = CliRunner().invoke(
+        app,
+        [
+            "export",
+            str(path),
+            "--format",
+            "krl",
+            "--robot",
+            "kr6-r900",
+            "--part-pose",
+            "2000,0,0,0,0,0",
+            "-o",
+            str(tmp_path / "p.src"),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert "warning: kr6-r900: 40 poses, 40 unreachable" in result.output
