@@ -8,7 +8,6 @@ import shutil
 import numpy as np
 import pytest
 import torch
-
 from safetensors.torch import load_file
 
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner

@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-import torch
+from safetensors.torch import load_file
 
 from scanplan.planners.rl import RLPlanner
 from scanplan.sensor import SensorSpec
@@ -45,8 +45,9 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
         assert png.stat().st_size > 5_000 and png.read_bytes()[:4] == b"\x89PNG"
     meta = json.loads(result.policy_json.read_text())
     assert meta["architecture"]["hidden"] == [64, 64] and meta["training"]["seed"] == 0
-    # Plain tensors only: loadable with weights_only=True (no code is unpickled).
-    state = torch.load(result.weights, weights_only=True)
+    # Plain tensors in a safetensors file (no code is unpickled).
+    assert result.weights.name == "policy.safetensors"
+    state = load_file(result.weights)
     assert state["0.weight"].shape == (64, 7) and state["4.weight"].shape == (3, 64)
 
     # TensorBoard event files exactly when TensorBoard is installed (an optional extra).

@@ -17,10 +17,12 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic import model_validator as _model_validator
 from torch import nn
 
-FORMAT = "scanplan-policy/2"
+FORMAT: Literal["scanplan-policy/2"] = "scanplan-policy/2"
 POLICY_JSON = "policy.json"
 WEIGHTS = "policy.safetensors"
-OUTPUT = "deterministic action = clip(mean, -1, 1)"
+OUTPUT: Literal["deterministic action = clip(mean, -1, 1)"] = (
+    "deterministic action = clip(mean, -1, 1)"
+)
 OBSERVATION = (
     "SwathScanEnv observation (see scanplan.env docstring): normalized P (if use_position), "
     "theta, D, alpha, delta-s (+ look-ahead if lookahead)"
