@@ -335,6 +335,24 @@ def test_the_exploit_is_live(tmp_path):
     assert marker.exists()
 
 
+def test_loading_reads_no_pickle(monkeypatch, tmp_path):
+    """Policy and checkpoint loading with every unpickling entry point booby-trapped."""
+    from scanplan.learn.checkpoint import load_checkpoint, save_checkpoint
+    from test_train import _ppo, tiny_config
+
+    path = save_checkpoint(_ppo(0), tiny_config(tmp_path), tmp_path)
+
+    def trap(*args, **kwargs):
+        raise AssertionError("unpickling attempted")
+
+    for target in (pickle, torch):
+        monkeypatch.setattr(target, "load", trap)
+        monkeypatch.setattr(target, "loads", trap, raising=False)
+    monkeypatch.setattr(pickle, "Unpickler", trap)
+    assert load_policy(DEFAULT_POLICY).meta.architecture.obs_dim == 4
+    assert load_checkpoint(path).meta.num_timesteps == 0
+
+
 def test_cli_plan_never_unpickles_a_policy(tmp_path):
     marker = tmp_path / "pwned"
     runner = CliRunner()

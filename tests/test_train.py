@@ -148,6 +148,8 @@ def test_resume_continues_from_the_saved_parameters(tmp_path):
 
 
 def test_resume_takes_the_recorded_config(tmp_path):
+    from dataclasses import asdict
+
     from scanplan.learn.checkpoint import Checkpoint, CheckpointMeta, resumed_config
 
     recorded = tiny_config(tmp_path, seed=7, env={"fan_points": 32, "use_position": False})
@@ -156,7 +158,7 @@ def test_resume_takes_the_recorded_config(tmp_path):
             "format": "scanplan-checkpoint/1",
             "num_timesteps": 128,
             "n_updates": 2,
-            "config": __import__("dataclasses").asdict(recorded),
+            "config": asdict(recorded),
             "optimizer": {"type": "Adam", "param_groups": [{"params": [0]}], "steps": [2.0]},
             "log_std": [0.0, 0.0, 0.0],
             "sb3_version": "x",
