@@ -8,9 +8,11 @@ import shutil
 import numpy as np
 import pytest
 import torch
+from safetensors.torch import load_file
 
 from scanplan.planners.closed_loop import Guards
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
+from scanplan.policy import load_policy
 from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
 from scanplan.sensor import LineProfilometer, SensorSpec
 from test_env import plate, plate_swath  # noqa: F401  (fixture)
@@ -18,13 +20,20 @@ from test_env import plate, plate_swath  # noqa: F401  (fixture)
 
 def test_shipped_policy_files_are_weights_and_json():
     meta = json.loads((DEFAULT_POLICY / "policy.json").read_text())
+    assert meta["format"] == "scanplan-policy/2" and meta["weights"] == "policy.safetensors"
     weights = DEFAULT_POLICY / meta["weights"]
     assert weights.stat().st_size < 100_000  # a [64, 64] MLP: a few tens of KB at most
     for key in ("command", "seed", "wall_time_s", "final_metrics_last5_updates"):
         assert key in meta["training"]
     assert meta["training"]["command"].startswith("scanplan train")
-    state = torch.load(weights, weights_only=True)
+    assert "--seed 0" in meta["training"]["command"] and meta["training"]["seed"] == 0
+    # Plain tensors in a safetensors file, no pickle anywhere in the directory.
+    state = load_file(weights)
     assert all(isinstance(v, torch.Tensor) for v in state.values())
+    assert not list(DEFAULT_POLICY.glob("*.pt")) and not list(DEFAULT_POLICY.glob("*.pkl"))
+    policy = load_policy(DEFAULT_POLICY)
+    for name, tensor in policy.actor.state_dict().items():
+        assert torch.equal(tensor, state[name])
 
 
 def test_default_policy_follows_a_flat_plate(plate):  # noqa: F811
@@ -57,7 +66,7 @@ def test_missing_or_unsafe_policy_is_a_value_error(tmp_path):
     meta = json.loads((bad / "policy.json").read_text())
     # A pickled object (not plain tensors) must be refused, never executed.
     torch.save({"0.weight": np.dtype}, bad / meta["weights"])
-    with pytest.raises(ValueError, match="cannot be loaded"):
+    with pytest.raises(ValueError, match="not a safetensors file"):
         RLPlanner.from_file(bad)
 
 

@@ -10,7 +10,9 @@ import json
 import numpy as np
 import pytest
 import torch
+from safetensors.torch import load_file
 
+from scanplan.learn.checkpoint import save_checkpoint
 from scanplan.planners.rl import RLPlanner
 from scanplan.quantities import ScanSpec
 from scanplan.train import LOG_COLUMNS, TrainConfig, train
@@ -45,8 +47,9 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
         assert png.stat().st_size > 5_000 and png.read_bytes()[:4] == b"\x89PNG"
     meta = json.loads(result.policy_json.read_text())
     assert meta["architecture"]["hidden"] == [64, 64] and meta["training"]["seed"] == 0
-    # Plain tensors only: loadable with weights_only=True (no code is unpickled).
-    state = torch.load(result.weights, weights_only=True)
+    # Plain tensors in a safetensors file (no code is unpickled).
+    assert result.weights.name == "policy.safetensors"
+    state = load_file(result.weights)
     assert state["0.weight"].shape == (64, 7) and state["4.weight"].shape == (3, 64)
 
     # TensorBoard event files exactly when TensorBoard is installed (an optional extra).
@@ -69,3 +72,185 @@ def test_bad_training_config_is_a_value_error(tmp_path):
         train(tiny_config(tmp_path, total_timesteps=0))
     with pytest.raises(ValueError, match="no checkpoint"):
         train(tiny_config(tmp_path / "x", resume=str(tmp_path / "empty")))
+
+
+# ---- checkpoints: exact, and never unpickled ---------------------------------------------
+
+
+def _ppo(seed: int):
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    return PPO(
+        "MlpPolicy",
+        gym.make("Pendulum-v1"),
+        n_steps=64,
+        batch_size=32,
+        n_epochs=2,
+        seed=seed,
+        device="cpu",
+    )
+
+
+def test_checkpoint_restores_parameters_and_optimizer_exactly(tmp_path):
+    from scanplan.learn.checkpoint import latest_checkpoint, load_checkpoint, restore
+
+    trained = _ppo(0)
+    trained.learn(128)
+    path = save_checkpoint(trained, tiny_config(tmp_path), tmp_path)
+    assert path == latest_checkpoint(tmp_path) and path.name == "ppo_128.json"
+    assert path.with_suffix(".safetensors").is_file()
+    fresh = _ppo(1)  # other initial weights: everything must come from the checkpoint
+    restore(fresh, load_checkpoint(path))
+    assert fresh.num_timesteps == 128 and fresh._n_updates == trained._n_updates
+    for key, value in trained.policy.state_dict().items():
+        assert torch.equal(fresh.policy.state_dict()[key], value), key
+    want, got = trained.policy.optimizer.state_dict(), fresh.policy.optimizer.state_dict()
+    assert want["param_groups"] == got["param_groups"]
+    for index, state in want["state"].items():
+        for key, value in state.items():
+            assert torch.equal(got["state"][index][key], value), (index, key)
+    meta = json.loads(path.read_text())
+    assert meta["config"]["n_steps"] == 64
+    assert meta["log_std"] == trained.policy.log_std.tolist()
+    assert meta["optimizer"]["type"] == "Adam" and len(meta["optimizer"]["steps"]) == len(
+        want["state"]
+    )
+
+
+@pytest.mark.slow
+def test_resume_continues_from_the_saved_parameters(tmp_path):
+    first = train(tiny_config(tmp_path / "run"))
+    ckpts = sorted(p.name for p in (first.output_dir / "checkpoints").iterdir())
+    assert ckpts == [
+        "ppo_128.json",
+        "ppo_128.safetensors",
+        "ppo_256.json",
+        "ppo_256.safetensors",
+    ]  # no pickle-based .zip
+    saved = load_file(first.output_dir / "checkpoints" / "ppo_256.safetensors")
+
+    # Resume without new steps: the policy written is exactly the checkpoint's actor.
+    same = train(tiny_config(tmp_path / "same", resume=str(first.output_dir)))
+    actor = load_file(same.weights)
+    assert same.timesteps == 256
+    assert torch.equal(actor["0.weight"], saved["policy.mlp_extractor.policy_net.0.weight"])
+    assert torch.equal(actor["4.bias"], saved["policy.action_net.bias"])
+
+    # Resume to more steps: the count, the log and the checkpoints continue.
+    more = train(tiny_config(tmp_path / "run", total_timesteps=512, resume=str(first.output_dir)))
+    assert more.timesteps == 512
+    rows = list(csv.DictReader(more.log_csv.open()))
+    assert [int(r["update"]) for r in rows] == [1, 2, 3, 4]
+    assert [int(r["timesteps"]) for r in rows] == [128, 256, 384, 512]
+    assert (more.output_dir / "checkpoints" / "ppo_512.json").is_file()
+    assert json.loads(more.policy_json.read_text())["training"]["timesteps"] == 512
+
+
+def test_resume_takes_the_recorded_config(tmp_path):
+    from dataclasses import asdict
+
+    from scanplan.learn.checkpoint import Checkpoint, CheckpointMeta, resumed_config
+
+    recorded = tiny_config(tmp_path, seed=7, env={"fan_points": 32, "use_position": False})
+    meta = CheckpointMeta.model_validate(
+        {
+            "format": "scanplan-checkpoint/1",
+            "num_timesteps": 128,
+            "n_updates": 2,
+            "config": asdict(recorded),
+            "optimizer": {"type": "Adam", "param_groups": [{"params": [0]}], "steps": [2.0]},
+            "log_std": [0.0, 0.0, 0.0],
+            "sb3_version": "x",
+            "torch_version": "y",
+        }
+    )
+    now = tiny_config(tmp_path / "new", total_timesteps=999, command="scanplan train --resume")
+    config = resumed_config(Checkpoint(tmp_path / "ppo_128.json", meta, {}), now)
+    assert config.seed == 7 and config.env == {"fan_points": 32, "use_position": False}
+    assert config.total_timesteps == 999 and config.output_dir == str(tmp_path / "new")
+    assert config.command == "scanplan train --resume" and config.parts == ("training-piece",)
+
+
+class _Exploit:
+    """Unpickling this creates `marker` (stands in for arbitrary code)."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def _sb3_style_zip(path, marker) -> None:
+    """What `PPO.load` reads: `data` JSON whose ':serialized:' entries it cloudpickle-loads,
+    and torch pickles (policy.pth) — here each carrying the payload."""
+    import base64
+    import pickle
+    import zipfile
+
+    payload = base64.b64encode(pickle.dumps(_Exploit(marker))).decode()
+    data = {"policy_class": {":type:": "<class 'abc.ABCMeta'>", ":serialized:": payload}}
+    buffer = path.parent / "policy.pth"
+    torch.save({"x": _Exploit(marker)}, buffer)
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("data", json.dumps(data))
+        z.write(buffer, "policy.pth")
+        z.writestr("_stable_baselines3_version", "2.3.0")
+    buffer.unlink()
+
+
+def test_cli_resume_never_unpickles_a_checkpoint(tmp_path):
+    import pickle
+
+    from typer.testing import CliRunner
+
+    from scanplan.cli import app
+
+    marker = tmp_path / "pwned"
+    pickle.loads(pickle.dumps(_Exploit(tmp_path / "control")))  # the payload is live
+    assert (tmp_path / "control").exists()
+
+    old = tmp_path / "old" / "checkpoints"
+    old.mkdir(parents=True)
+    _sb3_style_zip(old / "ppo_2048.zip", marker)
+    # A new-format checkpoint whose tensor file is a torch pickle instead of safetensors.
+    disguised = tmp_path / "disguised"
+    path = save_checkpoint(_ppo(0), tiny_config(disguised), disguised)
+    torch.save({"x": _Exploit(marker)}, path.with_suffix(".safetensors"))
+    runner = CliRunner()
+    for resume, expected in [
+        (old.parent, "old checkpoint format (SB3 .zip), not loaded: it would unpickle code"),
+        (disguised, "ppo_0.safetensors: not a safetensors file"),
+    ]:
+        out = tmp_path / "out"
+        result = runner.invoke(
+            app,
+            [
+                "train",
+                "--resume",
+                str(resume),
+                "-o",
+                str(out),
+                "--timesteps",
+                "256",
+                "--n-envs",
+                "2",
+                "--no-progress",
+            ],
+        )
+        assert result.exit_code == 2, result.output
+        assert result.stderr.strip().count("\n") == 0 and expected in result.stderr, result.stderr
+        assert not marker.exists()
+
+
+def test_checkpoint_with_pickled_tensors_is_refused(tmp_path):
+    from scanplan.learn.checkpoint import load_checkpoint
+
+    marker = tmp_path / "pwned"
+    trained = _ppo(0)
+    path = save_checkpoint(trained, tiny_config(tmp_path), tmp_path)
+    torch.save({"x": _Exploit(marker)}, path.with_suffix(".safetensors"))
+    with pytest.raises(ValueError, match="checkpoint .*ppo_0.safetensors: not a safetensors file"):
+        load_checkpoint(path)
+    assert not marker.exists()

@@ -2,14 +2,13 @@
 
 `train(TrainConfig)` runs PPO over vectorized `SwathScanEnv`s (one process per core, torch on
 one thread each), logs the paper's training curves per update (CSV + PNG), checkpoints, can
-resume, and exports the actor as plain weights + JSON (`save_policy`) that load without
-unpickling anything.
+resume (`scanplan.learn.checkpoint`, no pickle), and exports the actor as a policy file
+(`scanplan.policy.save_policy`: safetensors + JSON) that loads without unpickling anything.
 """
 
 from __future__ import annotations
 
 import csv
-import json
 import math
 import time
 from collections import deque
@@ -19,7 +18,23 @@ from typing import Any
 
 import numpy as np
 
-POLICY_JSON = "policy.json"
+from scanplan.learn.checkpoint import (
+    latest_checkpoint,
+    load_checkpoint,
+    restore,
+    resumed_config,
+    save_checkpoint,
+)
+from scanplan.policy import FORMAT as POLICY_FORMAT
+from scanplan.policy import (
+    WEIGHTS,
+    Architecture,
+    EnvOptions,
+    PolicyMeta,
+    TrainingRecord,
+    save_policy,
+)
+
 LOG_CSV = "training_log.csv"
 LOG_COLUMNS = (
     "update",
@@ -234,9 +249,11 @@ def _callback_class():
     class TrainingLog(BaseCallback):
         """Per update: the paper's curves (CSV); every k updates: a checkpoint."""
 
-        def __init__(self, out: Path, every: int, start_time: float, wall_offset: float):
+        def __init__(
+            self, out: Path, every: int, start_time: float, wall_offset: float, config: TrainConfig
+        ):
             super().__init__()
-            self.out, self.every = out, every
+            self.out, self.every, self.config = out, every, config
             self.start_time, self.wall_offset = start_time, wall_offset
             self.episodes: deque[tuple[float, int]] = deque(maxlen=50)
             self.n_episodes, self.lost = 0, 0
@@ -294,7 +311,7 @@ def _callback_class():
             self.sums[:] = 0
             self.count, self.lost = 0, 0
             if self.update % self.every == 0:
-                self.model.save(self.out / "checkpoints" / f"ppo_{self.num_timesteps}.zip")
+                save_checkpoint(self.model, self.config, self.out)
 
     return TrainingLog
 
@@ -357,15 +374,6 @@ def plot_training_curves(log_csv: str | Path, out_dir: str | Path) -> tuple[Path
 # ---- policy files -------------------------------------------------------------------------
 
 
-def _weights_format() -> str:
-    try:
-        import safetensors.torch  # noqa: F401
-
-        return "safetensors"
-    except ImportError:
-        return "pt"
-
-
 def actor_state_dict(model) -> dict[str, Any]:
     """The deterministic actor of an SB3 PPO MlpPolicy as `nn.Sequential` weights:
     hidden Linear layers (keys `<2i>.weight/bias`) then the action head."""
@@ -378,43 +386,20 @@ def actor_state_dict(model) -> dict[str, Any]:
     return state
 
 
-def save_policy(model, out_dir: Path, config: TrainConfig, training: dict[str, Any]) -> Path:
-    """Write the actor weights (.safetensors if available, else .pt for
-    `torch.load(weights_only=True)`) and policy.json; returns the JSON path."""
-    import torch
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    state = actor_state_dict(model)
-    fmt = _weights_format()
-    weights = out_dir / f"policy.{fmt}"
-    if fmt == "safetensors":
-        from safetensors.torch import save_file
-
-        save_file(state, str(weights))
-    else:
-        torch.save(state, weights)
-    env = dict(config.env)
-    if env.get("segment_mm") is not None:
-        env["segment_mm"] = list(env["segment_mm"])
-    data = {
-        "format": "scanplan-policy/1",
-        "weights": weights.name,
-        "architecture": {
-            "type": "mlp",
-            "obs_dim": int(model.observation_space.shape[0]),
-            "hidden": list(config.net_arch),
-            "activation": config.activation,
-            "action_dim": int(model.action_space.shape[0]),
-            "output": "deterministic action = clip(mean, -1, 1)",
-        },
-        "observation": "SwathScanEnv observation (see scanplan.env docstring): normalized "
-        "P (if use_position), theta, D, alpha, delta-s (+ look-ahead if lookahead)",
-        "env": env,
-        "training": training,
-    }
-    path = out_dir / POLICY_JSON
-    path.write_text(json.dumps(data, indent=1) + "\n")
-    return path
+def policy_meta(model, config: TrainConfig, training: dict[str, Any]) -> PolicyMeta:
+    """The policy.json of a trained model (validated: see `scanplan.policy`)."""
+    return PolicyMeta(
+        format=POLICY_FORMAT,
+        weights=WEIGHTS,
+        architecture=Architecture(
+            obs_dim=int(model.observation_space.shape[0]),
+            hidden=tuple(config.net_arch),
+            activation=config.activation,  # type: ignore[arg-type]
+            action_dim=int(model.action_space.shape[0]),
+        ),
+        env=EnvOptions.from_env_kwargs(config.env),
+        training=TrainingRecord.model_validate(training),
+    )
 
 
 # ---- behaviour-cloning warm start (beyond the paper) ---------------------------------------
@@ -462,18 +447,10 @@ def behaviour_clone(model, vec, samples: int, seed: int, epochs: int = 20) -> fl
 # ---- training -----------------------------------------------------------------------------
 
 
-def _latest_checkpoint(resume_dir: Path) -> Path:
-    ckpts = sorted(
-        (resume_dir / "checkpoints").glob("ppo_*.zip"), key=lambda p: int(p.stem.split("_")[1])
-    )
-    if not ckpts:
-        raise ValueError(f"cannot resume: no checkpoint in {resume_dir / 'checkpoints'}")
-    return ckpts[-1]
-
-
 def train(config: TrainConfig) -> TrainResult:
     """Train PPO and write: policy.json + weights, training_log.csv, the curve PNGs,
-    checkpoints/ (SB3 zips, for resuming only) in `config.output_dir`."""
+    checkpoints/ (safetensors + JSON, for resuming only) in `config.output_dir`. Resuming
+    takes the model's and envs' config from the checkpoint (`resumed_config`)."""
     import torch
     from stable_baselines3 import PPO
 
@@ -481,6 +458,11 @@ def train(config: TrainConfig) -> TrainResult:
         raise ValueError(f"total timesteps must be > 0, got {config.total_timesteps}")
     if config.n_envs < 1:
         raise ValueError(f"n_envs must be >= 1, got {config.n_envs}")
+    ckpt = None
+    if config.resume:
+        ckpt = load_checkpoint(latest_checkpoint(config.resume))
+        config = resumed_config(ckpt, config)
+    EnvOptions.from_env_kwargs(config.env)  # fail before training, not when saving
     torch.set_num_threads(1)
     out = Path(config.output_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -490,10 +472,29 @@ def train(config: TrainConfig) -> TrainResult:
     bc_mse = math.nan
     vec = make_vec_env(config)
     try:
-        if config.resume:
+        # A resumed run builds PPO exactly as a new one does, then loads the checkpoint.
+        model = PPO(
+            "MlpPolicy",
+            vec,
+            learning_rate=config.learning_rate,
+            n_steps=config.n_steps,
+            batch_size=config.batch_size,
+            gamma=config.gamma,
+            clip_range=config.clip_range,
+            n_epochs=config.n_epochs,
+            policy_kwargs={
+                "net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)},
+                "activation_fn": {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh}[config.activation],
+            },
+            seed=config.seed,
+            device="cpu",
+            verbose=0,
+            tensorboard_log=_tensorboard_dir(out),
+        )
+        if ckpt is not None:
+            assert config.resume is not None
             resume = Path(config.resume)
-            ckpt = _latest_checkpoint(resume)
-            model = PPO.load(ckpt, env=vec, device="cpu", tensorboard_log=_tensorboard_dir(out))
+            restore(model, ckpt)
             if resume.resolve() != out.resolve() and (resume / LOG_CSV).exists():
                 (out / LOG_CSV).write_text((resume / LOG_CSV).read_text())
             if (out / LOG_CSV).exists():
@@ -503,26 +504,6 @@ def train(config: TrainConfig) -> TrainResult:
             vec.seed(config.seed + model.num_timesteps)
         else:
             (out / LOG_CSV).unlink(missing_ok=True)
-            model = PPO(
-                "MlpPolicy",
-                vec,
-                learning_rate=config.learning_rate,
-                n_steps=config.n_steps,
-                batch_size=config.batch_size,
-                gamma=config.gamma,
-                clip_range=config.clip_range,
-                n_epochs=config.n_epochs,
-                policy_kwargs={
-                    "net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)},
-                    "activation_fn": {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh}[
-                        config.activation
-                    ],
-                },
-                seed=config.seed,
-                device="cpu",
-                verbose=0,
-                tensorboard_log=_tensorboard_dir(out),
-            )
             # Per-action initial spread: a 1° pitch jump moves the footprint by W_d·Δθ ≈ 7 mm,
             # so exploring Δθ as widely as Δy ruins every Δs reward (capped at −1, no gradient).
             with torch.no_grad():
@@ -537,14 +518,16 @@ def train(config: TrainConfig) -> TrainResult:
                 bc_mse = behaviour_clone(model, vec, config.bc_samples, config.seed)
         remaining = config.total_timesteps - model.num_timesteps
         if remaining > 0:
-            callback = _callback_class()(out, config.checkpoint_every_updates, start, wall_offset)
+            callback = _callback_class()(
+                out, config.checkpoint_every_updates, start, wall_offset, config
+            )
             model.learn(
                 remaining,
                 callback=callback,
                 progress_bar=config.progress_bar,
                 reset_num_timesteps=False,
             )
-            model.save(out / "checkpoints" / f"ppo_{model.num_timesteps}.zip")
+            save_checkpoint(model, config, out)
     finally:
         vec.close()
     wall = time.perf_counter() - start + wall_offset
@@ -565,13 +548,13 @@ def train(config: TrainConfig) -> TrainResult:
         "config": cfg,
         "machine_cores": __import__("os").cpu_count(),
     }
-    policy_json = save_policy(model, out, config, training)
+    meta = policy_meta(model, config, training)
+    policy_json = save_policy(actor_state_dict(model), meta, out)
     plots = plot_training_curves(out / LOG_CSV, out)
-    data = json.loads(policy_json.read_text())
     return TrainResult(
         output_dir=out,
         policy_json=policy_json,
-        weights=out / data["weights"],
+        weights=out / meta.weights,
         log_csv=out / LOG_CSV,
         plots=plots,
         timesteps=int(model.num_timesteps),

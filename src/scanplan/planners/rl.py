@@ -1,14 +1,12 @@
 """The `rl` planner (SPEC §4): a trained PPO actor run pass by pass, deterministic actions.
 
-A policy is a directory (or its `policy.json`) written by `scanplan.train.save_policy`: plain
-weights (`.safetensors` or `.pt` read with `weights_only=True`) and JSON, so loading a policy
-never unpickles code. The packaged default lives in `scanplan/policies/default/`.
+A policy is a directory (or its `policy.json`) read by `scanplan.policy.load_policy`:
+safetensors weights and validated JSON, so loading a policy never unpickles code. The
+packaged default lives in `scanplan/policies/default/`.
 """
 
 from __future__ import annotations
 
-import json
-import pickle
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +19,7 @@ from scanplan.dynamics import PassDynamics, StepLimits
 from scanplan.env import observe
 from scanplan.part import Part
 from scanplan.planners.closed_loop import Guards, drive_pass
+from scanplan.policy import load_policy
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -28,25 +27,6 @@ from scanplan.trajectory import Trajectory
 DEFAULT_POLICY = Path(__file__).resolve().parent.parent / "policies" / "default"
 # Step limits a planning run takes from the policy file's env options.
 _LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad")
-
-
-def build_actor(arch: dict[str, Any]) -> nn.Sequential:
-    """The MLP of `architecture` in policy.json: Linear/activation pairs, then the head."""
-    act = {"relu": nn.ReLU, "tanh": nn.Tanh}[arch["activation"]]
-    sizes = [int(arch["obs_dim"]), *map(int, arch["hidden"])]
-    layers: list[nn.Module] = []
-    for a, b in zip(sizes[:-1], sizes[1:], strict=True):
-        layers += [nn.Linear(a, b), act()]
-    layers.append(nn.Linear(sizes[-1], int(arch["action_dim"])))
-    return nn.Sequential(*layers)
-
-
-def load_weights(path: Path) -> dict[str, torch.Tensor]:
-    if path.suffix == ".safetensors":
-        from safetensors.torch import load_file
-
-        return load_file(str(path))
-    return torch.load(path, map_location="cpu", weights_only=True)
 
 
 @dataclass
@@ -69,27 +49,12 @@ class RLPlanner:
     @classmethod
     def from_file(cls, path: str | Path | None = None) -> RLPlanner:
         """A policy directory or its policy.json; None = the packaged default policy."""
-        path = Path(path) if path is not None else DEFAULT_POLICY
-        json_path = path / "policy.json" if path.is_dir() else path
-        if not json_path.is_file():
-            raise ValueError(f"policy {path}: no policy.json found")
-        try:
-            config = json.loads(json_path.read_text())
-            arch = config["architecture"]
-            actor = build_actor(arch)
-            actor.load_state_dict(load_weights(json_path.parent / config["weights"]))
-        except (
-            OSError,
-            KeyError,
-            TypeError,
-            ValueError,
-            RuntimeError,
-            pickle.UnpicklingError,
-        ) as exc:
-            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise ValueError(f"policy {json_path} cannot be loaded: {first}") from None
-        actor.eval()
-        return cls(actor=actor, config=config)
+        policy = load_policy(path if path is not None else DEFAULT_POLICY)
+        # `config` is policy.json as a dict; env holds only the options it sets, as
+        # `SwathScanEnv` keyword arguments.
+        config = policy.meta.model_dump(mode="json")
+        config["env"] = policy.meta.env.env_kwargs()
+        return cls(actor=policy.actor, config=config)
 
     @classmethod
     def default(cls) -> RLPlanner:
