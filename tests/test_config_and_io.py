@@ -249,13 +249,14 @@ def test_sensor_spec_refuses_non_finite_and_implausible_values():
 
 def test_a_single_triangle_plate_loads_and_plans(tmp_path):
     from scanplan.planners import make_planner, plan_path
+    from scanplan.quantities import ScanSpec
     from scanplan.swaths import plan_swaths
 
     path = tmp_path / "tri.stl"
     trimesh.Trimesh([[0, 0, 0], [200, 0, 0], [0, 100, 0]], [[0, 1, 2]]).export(path)
     part = load_part(path)
     spec = PRESETS["at-c5-4090cs30-495"].without_noise().with_points(64)
-    traj = plan_path(part, spec, make_planner("fixed"), plan_swaths(part, spec))
+    traj = plan_path(part, ScanSpec(spec), make_planner("fixed"), plan_swaths(part, spec))
     assert traj.scanning.sum() > 10
 
 

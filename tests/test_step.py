@@ -14,6 +14,7 @@ import pytest
 
 from scanplan.part import load_part
 from scanplan.planners import make_planner, plan_path
+from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths
 
@@ -80,7 +81,7 @@ def test_a_step_part_can_be_planned():
     part = load_part(DATA / "plate_with_holes.step")
     spec = SensorSpec().without_noise().with_points(64)
     swaths = plan_swaths(part, spec)
-    traj = plan_path(part, spec, make_planner("fixed"), swaths)
+    traj = plan_path(part, ScanSpec(spec), make_planner("fixed"), swaths)
     assert len(swaths) == 1 and traj.scanning.sum() > 100
     assert np.isfinite(traj.poses).all()
     # the fixed planner flies at W_d above the plate's top face (z = 10 mm)

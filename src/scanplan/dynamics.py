@@ -3,10 +3,16 @@ pose under the per-step limits and the paper's action limitation.
 
 State (s, h, θ): advance along u and height above the swath's start (mm), pitch about x_s
 (rad). A step (Δy, Δz, Δθ) moves Δy along u and Δz along the beam z_s = −sinθ·u − cosθ·w of
-the pose it starts from, then pitches by Δθ. The Gymnasium environment is a thin wrapper over
-`PassDynamics`; the rl and feedback planners drive the same object with a controller, and the
-geometric planner uses the inverse (`steps_between`) and the tracker (`track`) to choose
-poses directly. `probe_line` is the one top-down CAD probe of "the surface under the line".
+the pose it starts from, then pitches by Δθ. With roll (beyond the paper, env v1) the state is
+(s, h, θ, φ, l) — roll about y_s and the lateral offset along v of the sensor — and a step
+(Δy, Δz, Δθ, Δφ) also rolls by Δφ, about the point W_d along the beam (the line's centre at
+the working distance, where a robot's TCP would be set), so the footprint stays on the pass
+while the line tilts; pitch keeps the paper's pivot, the sensor origin.
+
+The Gymnasium environment is a thin wrapper over `PassDynamics`; the rl and feedback planners
+drive the same object with a controller, and the geometric planner uses the inverse
+(`steps_between`) and the tracker (`track`) to choose poses directly. `probe_line` is the
+one top-down CAD probe of "the surface under the line".
 """
 
 from __future__ import annotations
@@ -17,21 +23,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
+from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha, signed_beta
 from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath
 
 
 @dataclass(frozen=True)
 class StepLimits:
-    """The per-step limits (SPEC §5): Δy along u (mm), Δz along z_s (mm), Δθ about x_s (rad)."""
+    """The per-step limits (SPEC §4, §5): Δy along u (mm), Δz along z_s (mm), Δθ about x_s
+    (rad) and, with roll, Δφ about y_s (rad)."""
 
     dy_max_mm: float = 1.0
     dz_max_mm: float = 1.0
     dtheta_max_rad: float = math.radians(1.0)
+    dphi_max_rad: float = math.radians(1.0)
 
     def __post_init__(self) -> None:
-        for name in ("dy_max_mm", "dz_max_mm", "dtheta_max_rad"):
+        for name in ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"step limit {name} must be a finite number > 0, got {value!r}")
@@ -41,13 +49,38 @@ class StepLimits:
         """(Δy_max, Δz_max, Δθ_max), the scale of an action in [−1, 1]³."""
         return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad])
 
+    @property
+    def array_roll(self) -> np.ndarray:
+        """(Δy_max, Δz_max, Δθ_max, Δφ_max), the scale of an action in [−1, 1]⁴."""
+        return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad, self.dphi_max_rad])
+
+
+def _towards(value: float, limit: float) -> tuple[float, float]:
+    """The paper's sign limitation: only towards the target (0 width when it is unknown)."""
+    if not np.isfinite(value):
+        return 0.0, 0.0
+    return (0.0, limit) if value >= 0 else (-limit, 0.0)
+
 
 def limit_action(
-    action: np.ndarray, d_mm: float, alpha_rad: float, limits: StepLimits, wd_mm: float
+    action: np.ndarray,
+    d_mm: float,
+    alpha_rad: float,
+    limits: StepLimits,
+    wd_mm: float,
+    beta_rad: float = math.nan,
 ) -> np.ndarray:
     """An action in [−1, 1]³ scaled to (Δy mm, Δz mm, Δθ rad), with the paper's dynamic action
     limitation from the current D and α (eqs. clipActionD/N): Δz only towards W_d, Δθ only
-    towards alignment. With no valid point D and α are unknown: Δz and Δθ are held at 0."""
+    towards alignment. With no valid point D and α are unknown: Δz and Δθ are held at 0.
+    An action in [−1, 1]⁴ (roll) adds Δφ, limited by the sign of β as Δθ is by α's."""
+    if len(action) == 4:
+        lim4 = limits.array_roll
+        dy, dz, dth, dphi = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * lim4
+        dz = float(np.clip(dz, *_towards(d_mm - wd_mm, lim4[1])))
+        dth = float(np.clip(dth, *_towards(alpha_rad, lim4[2])))
+        dphi = float(np.clip(dphi, *_towards(beta_rad, lim4[3])))
+        return np.array([dy, dz, dth, dphi])
     lim = limits.array
     dy, dz, dth = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * lim
     lo_z, hi_z = (
@@ -64,8 +97,25 @@ def limit_action(
     return np.array([dy, dz, dth])
 
 
-def apply_step(state: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad."""
+def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float = 400.0) -> np.ndarray:
+    """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad; (s, h, θ, φ, l) after
+    (Δy, Δz, Δθ, Δφ), the roll about the point `pivot_mm` (W_d) along the beam. The beam is
+    z_s = sinφ·v + cosφ·(−sinθ·u − cosθ·w)."""
+    if len(state) == 5:
+        s, h, th, phi, lat = state
+        dy, dz, dth, dphi = step
+        cp = math.cos(phi)
+        s, h, lat = (
+            s + dy - dz * cp * math.sin(th),
+            h - dz * cp * math.cos(th),
+            lat + dz * math.sin(phi),
+        )
+        th, phi2 = th + dth, phi + dphi
+        # Rolling about the pivot moves the sensor by W_d (z_s(φ) − z_s(φ')).
+        dc = pivot_mm * (math.cos(phi) - math.cos(phi2))
+        s, h = s - dc * math.sin(th), h - dc * math.cos(th)
+        lat += pivot_mm * (math.sin(phi) - math.sin(phi2))
+        return np.array([s, h, th, phi2, lat])
     s, h, th = state
     dy, dz, dth = step
     return np.array([s + dy - dz * math.sin(th), h - dz * math.cos(th), th + dth])
@@ -100,6 +150,35 @@ def track(
         h[i] = h[i - 1] - dz * c
         th[i] = th[i - 1] + dth
     return s, h, th
+
+
+def track_rolled(
+    s_mm: np.ndarray,
+    h_mm: np.ndarray,
+    pitch_rad: np.ndarray,
+    roll_rad: np.ndarray,
+    lateral0_mm: float,
+    limits: StepLimits,
+    pivot_mm: float,
+) -> np.ndarray:
+    """`track` with roll: follow the stations' (s, h, θ, φ) with steps (Δy, Δz, Δθ, Δφ)
+    clipped to the limits' magnitudes, through `apply_step` (so every pose is one the step
+    model can reach); the lateral offset l follows. Returns the states, (n, 5)."""
+    lim = limits.array_roll * (1 - 1e-9)
+    states = np.zeros((len(s_mm), 5))
+    states[0] = (s_mm[0], h_mm[0], pitch_rad[0], roll_rad[0], lateral0_mm)
+    for i in range(1, len(s_mm)):  # a recurrence: each step starts where the last ended
+        s, h, th, phi, _ = states[i - 1]
+        dphi = min(max(roll_rad[i] - phi, -lim[3]), lim[3])
+        dth = min(max(pitch_rad[i] - th, -lim[2]), lim[2])
+        th2, cp = th + dth, math.cos(phi)
+        dc = pivot_mm * (cp - math.cos(phi + dphi))  # the roll pivot's share of the motion
+        dz = -(h_mm[i] - h + dc * math.cos(th2)) / (cp * math.cos(th))
+        dz = min(max(dz, -lim[1]), lim[1])
+        dy = s_mm[i] - s + dz * cp * math.sin(th) + dc * math.sin(th2)
+        dy = min(max(dy, -lim[0]), lim[0])
+        states[i] = apply_step(states[i - 1], np.array([dy, dz, dth, dphi]), pivot_mm)
+    return states
 
 
 def progress_mm(state: np.ndarray, wd_mm: float) -> float:
@@ -195,6 +274,7 @@ class PassDynamics:
     proposed pose (`measure`, or many dynamics' poses in one batch), then `accept` it.
 
     rng: the Generator the simulator's noise draws from (an env's `np_random`).
+    roll: the state is (s, h, θ, φ, l) and actions are 4-D (env v1); β is tracked too.
     align_iterations, start_pitch_max_rad: see `aligned_start`.
     """
 
@@ -206,10 +286,13 @@ class PassDynamics:
         sim: LineProfilometer,
         limits: StepLimits | None = None,
         rng: np.random.Generator | None = None,
+        roll: bool = False,
         align_iterations: int = 4,
         start_pitch_max_rad: float = math.radians(15.0),
     ) -> None:
         self.part, self.swath, self.spec, self.sim = part, swath, spec, sim
+        self.roll = roll
+        self.beta_rad = math.nan
         self.limits = limits or StepLimits()
         self.rng = rng
         self.align_iterations = align_iterations
@@ -231,6 +314,11 @@ class PassDynamics:
         a = float(signed_alpha(profile.normals_part, profile.valid, profile.T_part_sensor))
         return d, a
 
+    @staticmethod
+    def beta(profile: Profile) -> float:
+        """Signed cross angle β of a profile (the roll that aligns; NaN with no valid point)."""
+        return float(signed_beta(profile.normals_part, profile.valid, profile.T_part_sensor))
+
     def advance_to(self, profile: Profile) -> float:
         """Δs from the current profile to `profile` (NaN if no column is valid in both)."""
         prev = self.profile
@@ -244,20 +332,29 @@ class PassDynamics:
         self.state = np.asarray(state, dtype=np.float64)
         self.profile = self.measure(self.state)
         self.d_mm, self.alpha_rad = self.d_alpha(self.profile)
+        if self.roll:
+            self.beta_rad = self.beta(self.profile)
         self.delta_s_mm = float("nan")
 
     def propose(self, action: np.ndarray) -> Step:
         """The limited step of `action` in [−1, 1]³ and the state it leads to."""
         limited = limit_action(
-            action, self.d_mm, self.alpha_rad, self.limits, self.spec.working_distance_mm
+            action,
+            self.d_mm,
+            self.alpha_rad,
+            self.limits,
+            self.spec.working_distance_mm,
+            self.beta_rad,
         )
-        return Step(limited, apply_step(self.state, limited))
+        return Step(limited, apply_step(self.state, limited, self.spec.working_distance_mm))
 
     def accept(self, step: Step, profile: Profile) -> None:
         """Move to `step.state`, where `profile` was measured."""
         self.delta_s_mm = self.advance_to(profile)
         self.state, self.profile = step.state, profile
         self.d_mm, self.alpha_rad = self.d_alpha(profile)
+        if self.roll:
+            self.beta_rad = self.beta(profile)
 
     @property
     def progress_mm(self) -> float:
@@ -276,6 +373,8 @@ class PassDynamics:
     def _align_at(self, s0: float) -> np.ndarray:
         """Pitch by α and put the sensor W_d from the surface along the new beam, keeping the
         beam on the surface at advance s0 (so the scan starts at P_ini, not W_d·sinθ later)."""
+        if self.roll:
+            return self._align_rolled_at(s0)
         s, h, th = s0, 0.0, 0.0
         wd = self.spec.working_distance_mm
         for _ in range(self.align_iterations):
@@ -292,3 +391,25 @@ class PassDynamics:
             th = float(np.clip(th + a, -self.start_pitch_max_rad, self.start_pitch_max_rad))
             s, h = s0 + wd * math.sin(th), surface_h + wd * math.cos(th)
         return np.array([s, h, th])
+
+    def _align_rolled_at(self, s0: float) -> np.ndarray:
+        """`_align_at` with roll: pitch by α, roll by β, the beam through the footprint at
+        advance s0 on the swath's centre line, W_d away."""
+        s, h, th, phi, lat = s0, 0.0, 0.0, 0.0, 0.0
+        wd = self.spec.working_distance_mm
+        for _ in range(self.align_iterations):
+            prof = self.measure(np.array([s, h, th, phi, lat]))
+            d, a = self.d_alpha(prof)
+            b = self.beta(prof)
+            if not np.isfinite(d):
+                hit = np.isfinite(prof.true_z_sensor)
+                if not hit.any():
+                    break
+                d, a, b = float(prof.true_z_sensor[hit].mean()), 0.0, 0.0
+            surface_h = h - d * math.cos(phi) * math.cos(th)
+            th = float(np.clip(th + a, -self.start_pitch_max_rad, self.start_pitch_max_rad))
+            phi = float(np.clip(phi + b, -self.start_pitch_max_rad, self.start_pitch_max_rad))
+            s = s0 + wd * math.cos(phi) * math.sin(th)
+            h = surface_h + wd * math.cos(phi) * math.cos(th)
+            lat = -wd * math.sin(phi)
+        return np.array([s, h, th, phi, lat])

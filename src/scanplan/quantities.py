@@ -107,6 +107,24 @@ def signed_alpha(normals_part: np.ndarray, valid: np.ndarray, poses: np.ndarray)
     return np.arctan2(np.sum(n * y_s, axis=-1), -np.sum(n * z_s, axis=-1))
 
 
+def signed_beta(normals_part: np.ndarray, valid: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """β: the roll increment about +y_s that would align the beam with the mean valid normal
+    across the line, atan2(−n·x_s, −n·z_s) (SPEC §5's cross angle, signed so that it is to
+    roll what α is to pitch). (..., N, 3), (..., N), (..., 4, 4) -> (...), NaN if none valid."""
+    n = mean_normal(normals_part, valid)
+    x_s = poses[..., :3, 0]
+    z_s = poses[..., :3, 2]
+    return np.arctan2(-np.sum(n * x_s, axis=-1), -np.sum(n * z_s, axis=-1))
+
+
+def beam_angle(normals_part: np.ndarray, valid: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """The full angle between the beam and the mean valid normal, acos(−n·z_s): what pitch
+    and roll together can correct (env v1's orientation term). (...) radians, NaN if none."""
+    n = mean_normal(normals_part, valid)
+    z_s = poses[..., :3, 2]
+    return np.arccos(np.clip(-np.sum(n * z_s, axis=-1), -1.0, 1.0))
+
+
 def point_orientation_error(normals_part: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """alpha_i = acos(-z_s . n_i) per point, radians; includes what pitch cannot correct.
     (..., N, 3), (..., 4, 4) -> (..., N)."""

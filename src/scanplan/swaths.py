@@ -16,6 +16,7 @@ import trimesh
 from scipy.spatial import QhullError
 
 from scanplan.part import Part
+from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -27,6 +28,8 @@ class Swath:
     nominal height: the top of the part under the pass + W_d).
 
     index: order in the snake; u, v: (3,) unit scan and lateral directions (u x v = up).
+    band_mm: the lateral band (along v, from the centre line) of the line expected in spec
+    on this pass (adaptive passes), None = the whole line.
     """
 
     index: int
@@ -34,18 +37,40 @@ class Swath:
     end_mm: np.ndarray
     u: np.ndarray
     v: np.ndarray
+    band_mm: tuple[float, float] | None = None
 
     @property
     def length_mm(self) -> float:
         return float(np.dot(self.end_mm - self.start_mm, self.u))
 
-    def pose(self, s_mm: float, h_mm: float, pitch_rad: float) -> np.ndarray:
-        """T_part_sensor at advance s along u and height h above `start_mm`, pitched by theta
-        about x_s (theta > 0 tilts the beam backwards, towards -u)."""
-        return self.poses(np.array([s_mm]), np.array([h_mm]), np.array([pitch_rad]))[0]
+    def pose(
+        self,
+        s_mm: float,
+        h_mm: float,
+        pitch_rad: float,
+        roll_rad: float = 0.0,
+        lateral_mm: float = 0.0,
+    ) -> np.ndarray:
+        """T_part_sensor at advance s along u, lateral offset l along v and height h above
+        `start_mm`, pitched by θ about x_s (θ > 0 tilts the beam backwards, towards −u), then
+        rolled by φ about the new y_s (φ > 0 tilts the beam towards +x_s)."""
+        return self.poses(
+            np.array([s_mm]),
+            np.array([h_mm]),
+            np.array([pitch_rad]),
+            np.array([roll_rad]),
+            np.array([lateral_mm]),
+        )[0]
 
-    def poses(self, s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
-        """Vectorized `pose`: (k,) x3 -> (k, 4, 4)."""
+    def poses(
+        self,
+        s_mm: np.ndarray,
+        h_mm: np.ndarray,
+        pitch_rad: np.ndarray,
+        roll_rad: np.ndarray | None = None,
+        lateral_mm: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Vectorized `pose`: (k,) x3 (+ roll, lateral) -> (k, 4, 4)."""
         s, h, th = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (s_mm, h_mm, pitch_rad))
         c, sn = np.cos(th), np.sin(th)
         poses = np.zeros((len(s), 4, 4))
@@ -54,6 +79,15 @@ class Swath:
         poses[:, :3, 1] = c[:, None] * self.u - sn[:, None] * UP  # y_s: forward
         poses[:, :3, 2] = -sn[:, None] * self.u - c[:, None] * UP  # z_s: the beam
         poses[:, :3, 3] = self.start_mm + s[:, None] * self.u + h[:, None] * UP
+        if roll_rad is not None and np.any(np.asarray(roll_rad) != 0):
+            phi = np.broadcast_to(np.asarray(roll_rad, dtype=np.float64).reshape(-1), s.shape)
+            cp, sp = np.cos(phi)[:, None], np.sin(phi)[:, None]
+            x1, z1 = poses[:, :3, 0].copy(), poses[:, :3, 2].copy()
+            poses[:, :3, 0] = cp * x1 - sp * z1
+            poses[:, :3, 2] = sp * x1 + cp * z1
+        if lateral_mm is not None and np.any(np.asarray(lateral_mm) != 0):
+            lat = np.broadcast_to(np.asarray(lateral_mm, dtype=np.float64).reshape(-1), s.shape)
+            poses[:, :3, 3] += lat[:, None] * self.v
         return poses
 
     def to_swath_frame(self, T_part_sensor: np.ndarray) -> tuple[float, float, float]:
@@ -214,26 +248,79 @@ def plan_swaths(
     u = scan_direction(part, sensor, direction, overlap)
     v = np.cross(UP, u)
     vertices = np.asarray(part.mesh.vertices)
-    along, across = vertices @ u, vertices @ v
+    across = vertices @ v
     width = sensor.line_width_mm
     step = width * (1.0 - overlap)
     span = float(across.max() - across.min())
     n_pass = 1 if span <= width else 1 + math.ceil((span - width) / step - 1e-9)
     centre = 0.5 * (across.max() + across.min())
     offsets = centre + (np.arange(n_pass) - (n_pass - 1) / 2) * step
-    s0, s1 = float(along.min()) - run_in_mm, float(along.max()) + run_in_mm
+    return _swaths_at(part, sensor, u, offsets, [(-width / 2, width / 2)] * n_pass, run_in_mm)
 
+
+def _swaths_at(
+    part: Part,
+    sensor: SensorSpec,
+    u: np.ndarray,
+    offsets: np.ndarray | list[float],
+    bands: list[tuple[float, float]],
+    run_in_mm: float,
+    adaptive: bool = False,
+) -> list[Swath]:
+    """Passes along u at the lateral `offsets`, each at (highest point under its band) + W_d,
+    spanning the part's extent along u plus `run_in_mm` at each end, in snake order."""
+    v = np.cross(UP, u)
+    vertices = np.asarray(part.mesh.vertices)
+    along, across = vertices @ u, vertices @ v
+    s0, s1 = float(along.min()) - run_in_mm, float(along.max()) + run_in_mm
     swaths = []
-    for i, offset in enumerate(offsets):
-        under = np.abs(across - offset) <= width / 2
+    for i, (offset, (lo, hi)) in enumerate(zip(offsets, bands, strict=True)):
+        under = (across >= offset + lo) & (across <= offset + hi)
         top = float(vertices[under, 2].max()) if under.any() else float(vertices[:, 2].max())
         a = s0 * u + offset * v + (top + sensor.working_distance_mm) * UP
         b = s1 * u + offset * v + (top + sensor.working_distance_mm) * UP
-        if i % 2 == 1:  # snake order: every other pass runs backwards
-            swaths.append(Swath(i, b, a, -u, -v))
+        band = (lo, hi) if adaptive else None
+        if i % 2 == 1:  # snake order: every other pass runs backwards (v flips with u)
+            flipped = (-hi, -lo) if band is not None else None
+            swaths.append(Swath(i, b, a, -u, -v, flipped))
         else:
-            swaths.append(Swath(i, a, b, u, v))
+            swaths.append(Swath(i, a, b, u, v, band))
     return swaths
+
+
+def plan_adaptive_swaths(
+    part: Part,
+    spec: ScanSpec,
+    direction: str | np.ndarray | DirectionRule = "auto",
+    band_overlap: float = 0.1,
+    run_in_mm: float = 20.0,
+) -> list[Swath]:
+    """Passes that adapt to the surface (SPEC §3b): each pass centred so that its predicted
+    in-spec band (`bands.in_spec_band`) overlaps the previous one's by `band_overlap`; the
+    band goes with the swath (`Swath.band_mm`) so planners align the line to it. 'auto'
+    direction: of the footprint rectangle's two sides, the one whose passes are predicted to
+    put more of the surface in spec (fewer passes on a tie within 2 %)."""
+    from scanplan.bands import adaptive_offsets, predicted_in_spec, top_surface
+
+    if not 0.0 <= band_overlap < 1.0:
+        raise ValueError(f"band overlap must be in [0, 1), got {band_overlap}")
+    if isinstance(direction, str) and direction.lower() == "auto":
+        candidates = list(rectangle_axes(part))
+    else:
+        candidates = [scan_direction(part, spec.sensor, direction)]
+    best = None
+    for axis in candidates:
+        u = scan_direction(part, spec.sensor, axis)
+        surface = top_surface(part, u, np.cross(UP, u))
+        bands = adaptive_offsets(surface, spec, band_overlap)
+        score = (round(predicted_in_spec(surface, bands) / 0.02), -len(bands))
+        if best is None or score > best[0]:
+            best = (score, u, bands)
+    assert best is not None
+    _, u, bands = best
+    offsets = [b.centre_mm for b in bands]
+    rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
+    return _swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, adaptive=True)
 
 
 def transition_poses(prev: Swath, nxt: Swath, clearance_mm: float = 50.0) -> np.ndarray:

@@ -19,9 +19,16 @@ from typing import Protocol
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from scanplan.dynamics import StepLimits, probe_line, track
+from scanplan.dynamics import StepLimits, probe_line, track, track_rolled
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
+from scanplan.quantities import (
+    ScanSpec,
+    advance,
+    beam_angle,
+    mean_distance,
+    signed_alpha,
+    signed_beta,
+)
 from scanplan.reward import reward_terms
 from scanplan.sensor import LineProfilometer
 from scanplan.swaths import Swath
@@ -94,12 +101,14 @@ class SurfaceProbe:
     height_mm: (k,) mean surface height over the hit columns, relative to `start_mm[2]`.
     pitch_rad: (k,) the pitch that aligns the beam with the mean normal (in the u-w plane).
     arc_mm: (k,) cumulative mean per-column 3-D advance of the surface points.
+    roll_rad: (k,) the roll that then aligns the beam with the mean normal across the line.
     """
 
     grid_mm: np.ndarray
     height_mm: np.ndarray
     pitch_rad: np.ndarray
     arc_mm: np.ndarray
+    roll_rad: np.ndarray
 
 
 def probe_swath(
@@ -111,12 +120,13 @@ def probe_swath(
     max_slope_deg: float = 75.0,
     max_pitch_slope_deg: float = 60.0,
 ) -> SurfaceProbe:
-    """Cast a vertical raster under the laser line; holes and run-in are filled from the
-    nearest hits. Raises ValueError if the pass sees nothing."""
+    """Cast a vertical raster under the laser line (or the swath's in-spec band of it); holes
+    and run-in are filled from the nearest hits. Raises ValueError if the pass sees nothing."""
     length = max(swath.length_mm, step_mm)
     grid = np.linspace(0.0, length, max(2, int(round(length / step_mm)) + 1))
     half = spec.sensor.line_width_mm / 2
-    line = probe_line(part, swath, grid, np.linspace(-half, half, columns))
+    lo, hi = swath.band_mm if swath.band_mm is not None else (-half, half)
+    line = probe_line(part, swath, grid, np.linspace(lo, hi, columns))
     hit, normals = line.hit, line.normals_up
     if not hit.any():
         raise ValueError(
@@ -128,15 +138,28 @@ def probe_swath(
     # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
     facing = hit & (normals[..., 2] > math.cos(math.radians(max_pitch_slope_deg)))
     n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
-    n_u, n_w = n_mean @ swath.u, n_mean[:, 2]
+    n_u, n_v, n_w = n_mean @ swath.u, n_mean @ swath.v, n_mean[:, 2]
 
+    hit_h = hit  # the columns the height comes from
+    if swath.band_mm is not None:
+        # An adaptive pass is aligned to the surface at its centre line (the band was
+        # predicted that way, `bands.in_spec_band`): height and normal from there.
+        centre = np.abs(np.linspace(lo, hi, columns)) <= max(15.0, (hi - lo) / columns)
+        if (hit & centre[None, :]).any():
+            hit_h, facing = hit & centre[None, :], facing & centre[None, :]
+            n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
+            n_u, n_v, n_w = n_mean @ swath.u, n_mean @ swath.v, n_mean[:, 2]
     rows = hit.any(axis=1)
-    count = np.maximum(hit.sum(axis=1), 1)
-    height = np.where(hit, z, 0.0).sum(axis=1) / count
+    rows_h = hit_h.any(axis=1)
+    count = np.maximum(hit_h.sum(axis=1), 1)
+    height = np.where(hit_h, z, 0.0).sum(axis=1) / count
     pitch = np.arctan2(n_u, np.maximum(n_w, 1e-9))  # beam = -normal: sin = n_u, cos = n_w
-    height = np.interp(grid, grid[rows], height[rows])
+    height = np.interp(grid, grid[rows_h], height[rows_h])
     flat_rows = facing.any(axis=1)
     pitch = np.interp(grid, grid[flat_rows], pitch[flat_rows]) if flat_rows.any() else 0 * grid
+    # Beam = −normal after the pitch: sinφ = −n_v (φ about y_s, towards +x_s = +v).
+    roll = np.arctan2(-n_v, np.hypot(n_u, n_w))
+    roll = np.interp(grid, grid[flat_rows], roll[flat_rows]) if flat_rows.any() else 0 * grid
 
     # Per-column 3-D advance; a wall counts as flat: the sensor sees (almost) none of it.
     dz = np.abs(np.diff(z, axis=0))
@@ -154,7 +177,7 @@ def probe_swath(
     keep = slice(first, last + 1)
     if last - first < 1:
         keep = slice(max(first - 1, 0), max(first - 1, 0) + 2)
-    return SurfaceProbe(grid[keep], height[keep], pitch[keep], arc[keep] - arc[keep][0])
+    return SurfaceProbe(grid[keep], height[keep], pitch[keep], arc[keep] - arc[keep][0], roll[keep])
 
 
 # ---- the planner --------------------------------------------------------------------------
@@ -173,6 +196,8 @@ class GeometricPlanner:
     planner). pitch_lever: pitch rate as a fraction of 1/W_d rad per mm of
     footprint, so that the sensor's swing (W_d·Δθ) stays within a step's translation.
     refinements: sensor-measured corrections of each candidate.
+    roll: also roll the line (φ about y_s, beyond the paper) to the surface across it, under
+    Δφ_max; the cost then charges the full angle between beam and mean normal (env v1).
     """
 
     cost: Cost = field(default_factory=RewardCost)
@@ -188,6 +213,7 @@ class GeometricPlanner:
     probe_columns: int = 48
     sensor_points: int = 64
     refinements: int = 2
+    roll: bool = False
     name: str = "geometric"
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
@@ -196,14 +222,25 @@ class GeometricPlanner:
         best: tuple[float, np.ndarray] | None = None
         for lookahead in self.lookaheads:
             pitch_t, height_t, arc = probe.pitch_rad, probe.height_mm, probe.arc_mm
+            roll_t = probe.roll_rad
             for it in range(self.refinements + 1):
-                s, h, th, sigma = self._stations(
-                    probe.grid_mm, pitch_t, height_t, arc, lookahead, spec
-                )
-                poses = swath.poses(s, h, th)
+                if self.roll:
+                    states, sigma = self._rolled_stations(
+                        probe.grid_mm, pitch_t, height_t, arc, roll_t, lookahead, spec
+                    )
+                    s, h, th, phi = states[:, 0], states[:, 1], states[:, 2], states[:, 3]
+                    poses = swath.poses(s, h, th, phi, states[:, 4])
+                else:
+                    s, h, th, sigma = self._stations(
+                        probe.grid_mm, pitch_t, height_t, arc, lookahead, spec
+                    )
+                    poses = swath.poses(s, h, th)
                 scan = fan.measure_many(poses)
                 d = mean_distance(scan.z_sensor, scan.valid)
                 alpha = signed_alpha(scan.normals_part, scan.valid, poses)
+                if self.roll:
+                    tilt = beam_angle(scan.normals_part, scan.valid, poses)
+                    beta = signed_beta(scan.normals_part, scan.valid, poses)
                 ds = advance(
                     scan.points_part[:-1],
                     scan.valid[:-1],
@@ -211,13 +248,22 @@ class GeometricPlanner:
                     scan.valid[1:],
                     swath.u,
                 )
-                cost = self.cost(d[1:], alpha[1:], ds, spec)
+                cost = self.cost(d[1:], (tilt if self.roll else alpha)[1:], ds, spec)
                 if best is None or cost < best[0]:
                     best = (cost, poses)
                 if it == self.refinements:
                     break
+                if self.roll:
+                    # As `_refine` for pitch: the roll that aligns is φ + β; the height along
+                    # the rolled beam has the extra cosφ.
+                    ok = np.isfinite(beta)
+                    if ok.sum() >= 2:
+                        roll_t = np.interp(probe.grid_mm, sigma[ok], (phi + beta)[ok])
+                    h_eff = h - d * (np.cos(phi) - 1.0) * np.cos(th)
+                else:
+                    h_eff = h
                 pitch_t, height_t, arc = self._refine(
-                    probe.grid_mm, sigma, th, h, d, alpha, ds, (pitch_t, height_t, arc), spec
+                    probe.grid_mm, sigma, th, h_eff, d, alpha, ds, (pitch_t, height_t, arc), spec
                 )
         assert best is not None
         poses = best[1]
@@ -244,6 +290,30 @@ class GeometricPlanner:
         th = np.interp(sigma, grid, pitch)
         s, h, th = track(s, h, th, lim)
         return s, h, th, sigma
+
+    def _rolled_stations(
+        self, grid, pitch_t, height_t, arc, roll_t, lookahead: Lookahead, spec: ScanSpec
+    ):
+        """`_stations` with roll: the sensor W_d from the footprint along the rolled beam;
+        tracked through the step model (`dynamics.track_rolled`). Returns (n, 5) states."""
+        wd = spec.working_distance_mm
+        ds_opt = spec.delta_s_opt_mm
+        lim = self.limits
+        pitch = np.clip(lookahead.shape(grid, pitch_t, self.pitch_lever / wd), -1.4, 1.4)
+        roll = np.clip(lookahead.shape(grid, roll_t, 0.8 * lim.dphi_max_rad / ds_opt), -1.4, 1.4)
+        cr = np.cos(roll)
+        s_grid = grid + wd * cr * np.sin(pitch)
+        h_grid = height_t + wd * cr * np.cos(pitch)
+        h_rate = 0.8 * lim.dz_max_mm * float((cr * np.cos(pitch)).min()) / ds_opt
+        h_grid = self.height_lookahead.shape(grid, h_grid, h_rate)
+        n = int(math.floor(arc[-1] / ds_opt + 1e-9)) + 1
+        sigma = np.interp(np.arange(n) * ds_opt, arc, grid)
+        s = np.interp(sigma, grid, s_grid)
+        h = np.interp(sigma, grid, h_grid)
+        th = np.interp(sigma, grid, pitch)
+        phi = np.interp(sigma, grid, roll)
+        states = track_rolled(s, h, th, phi, -wd * math.sin(phi[0]), lim, wd)
+        return states, sigma
 
     def _refine(self, grid, sigma, th, h, d, alpha, ds, targets, spec: ScanSpec):
         """Targets corrected by what the sensor measured at the stations: the pitch that
