@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scanplan.dynamics import StepLimits
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
 
@@ -26,9 +27,11 @@ class TopSurface:
     """The part's top surface seen from above on a grid in the raster's (u, v) frame.
 
     along_mm: (k,) and across_mm: (c,) grid coordinates; hit: (k, c); points: (k, c, 3) part
-    frame; normals: (k, c, 3) unit, facing up (0 where no hit).
+    frame; normals: (k, c, 3) unit, facing up (0 where no hit); u, v: (3,) the raster's axes.
     """
 
+    u: np.ndarray
+    v: np.ndarray
     along_mm: np.ndarray
     across_mm: np.ndarray
     hit: np.ndarray
@@ -59,7 +62,7 @@ def top_surface(
     hit = (face >= 0).reshape(shape)
     points = origins.reshape(*shape, 3).copy()
     points[..., 2] = top - np.where(hit, t.reshape(shape), 0.0)
-    return TopSurface(along, across, hit, points, normals.reshape(*shape, 3))
+    return TopSurface(u, v, along, across, hit, points, normals.reshape(*shape, 3))
 
 
 @dataclass(frozen=True)
@@ -81,16 +84,22 @@ def in_spec_band(
     margin: float = 0.7,
     centre_halfwidth_mm: float = 15.0,
     row_quantile: float = 0.15,
+    pitch_lever: float = 0.6,
 ) -> Band:
-    """The band around `centre_mm` where the surface would be in spec with the beam aligned to
-    the mean normal near the centre, W_d from the centre point, per grid row; the pass's band
-    is a robust envelope over the rows (`row_quantile` of the rows may be narrower: a local
-    feature must not shrink a whole pass). `margin` scales both tolerances: tracking under
-    the step limits and the one pitch per station leave less than the full tolerance.
-    Columns without surface count as in spec (nothing there to measure)."""
+    """The band around `centre_mm` where the surface would be in spec, per grid row, with the
+    beam W_d from the centre point and aligned to the mean normal near it as far as the step
+    limits allow: the pitch follows that normal along the pass only at `pitch_lever`/W_d rad
+    per mm (the geometric planner's rate, a centred ramp), the roll at Δφ_max per Δs_opt.
+    The pass's band is a robust envelope over the rows (`row_quantile` of the rows may be
+    narrower: a local feature must not shrink a whole pass). `margin` scales both
+    tolerances: tracking and noise leave less than the full tolerance. Columns without
+    surface count as in spec (nothing there to measure)."""
+    from scanplan.planners.geometric import CentredLookahead
+
     tol_d = margin * spec.tolerance_mm
     cos_tol = math.cos(margin * spec.tol_angle_rad)
     half_line = spec.sensor.line_width_mm / 2
+    wd = spec.working_distance_mm
     across = surface.across_mm
     near = np.abs(across - centre_mm) <= centre_halfwidth_mm
     hit_c = surface.hit[:, near]
@@ -100,13 +109,35 @@ def in_spec_band(
     n_c = n_c / np.where(norm > 0, norm, 1.0)[:, None]
     count = np.maximum(hit_c.sum(axis=1), 1)
     p_c = np.where(hit_c[..., None], surface.points[:, near], 0.0).sum(axis=1) / count[:, None]
+    # The beam the step limits let the planner reach: pitch (in the u-w plane) and roll (the
+    # rest) from the centre normal, each rate-limited along the pass.
+    u, v = surface.u, surface.v
+    n_u, n_v, n_w = n_c @ u, n_c @ v, n_c[:, 2]
+    if rows.sum() >= 2:
+        grid = surface.along_mm[rows]
+        shaper = CentredLookahead()
+        pitch = np.interp(surface.along_mm, grid, np.arctan2(n_u, np.maximum(n_w, 1e-9))[rows])
+        roll = np.interp(surface.along_mm, grid, np.arctan2(-n_v, np.hypot(n_u, n_w))[rows])
+        pitch = shaper.shape(surface.along_mm, pitch, pitch_lever / wd)
+        lim = StepLimits()
+        roll = shaper.shape(surface.along_mm, roll, 0.8 * lim.dphi_max_rad / spec.delta_s_opt_mm)
+        cr = np.cos(roll)
+        beam = (  # −z_s: from the surface towards the sensor (the normal, when aligned)
+            -np.sin(roll)[:, None] * v
+            + (cr * np.sin(pitch))[:, None] * u
+            + (cr * np.cos(pitch))[:, None] * UP
+        )
+    else:
+        beam = n_c
     offset = surface.points - p_c[:, None, :]
-    depth = np.abs(np.einsum("kcj,kj->kc", offset, n_c))
-    angle_ok = np.einsum("kcj,kj->kc", surface.normals, n_c) >= cos_tol
+    depth = np.abs(np.einsum("kcj,kj->kc", offset, beam))
+    angle_ok = np.einsum("kcj,kj->kc", surface.normals, beam) >= cos_tol
     ok = ~surface.hit | ((depth <= tol_d) & angle_ok)
     ok &= (np.abs(across - centre_mm) <= half_line)[None, :]
-    # Walk out from the centre column: the first failing column bounds the band.
+    # The centre itself must be in spec, else the row holds no band.
     ic = int(np.argmin(np.abs(across - centre_mm)))
+    rows &= ok[:, ic] | ~surface.hit[:, ic]
+    # Walk out from the centre column: the first failing column bounds the band.
     bad_left = ~ok[:, : ic + 1][:, ::-1]
     bad_right = ~ok[:, ic:]
     first_left = np.where(bad_left.any(axis=1), bad_left.argmax(axis=1), bad_left.shape[1])
@@ -126,36 +157,52 @@ def in_spec_band(
     return Band(centre_mm, lo, hi, row_lo, row_hi)
 
 
+def _covered_cells(surface: TopSurface, band: Band) -> np.ndarray:
+    """(k, c) bool: the surface cells inside the band's per-row edges."""
+    across = surface.across_mm[None, :]
+    lo, hi = band.row_lo_mm[:, None], band.row_hi_mm[:, None]
+    with np.errstate(invalid="ignore"):
+        return surface.hit & (across >= lo) & (across <= hi)
+
+
 def adaptive_offsets(
-    surface: TopSurface, spec: ScanSpec, overlap: float = 0.1, max_passes: int = 60
+    surface: TopSurface,
+    spec: ScanSpec,
+    candidate_step_mm: float = 10.0,
+    min_gain: float = 0.01,
+    max_passes: int = 60,
 ) -> list[Band]:
-    """Pass centres across the footprint, each as far on as its band allows while its lower
-    edge still overlaps the previous band's upper edge by `overlap` of the band width; the
-    first band reaches the footprint's near edge, the last its far edge."""
+    """Pass centres chosen greedily, set-cover style: among candidate centres every
+    `candidate_step_mm` across the footprint, take the one whose predicted in-spec band
+    covers the most surface not yet covered, until the next one would add less than
+    `min_gain` of the surface. Curved parts get closer passes, flat ones fewer, and a strip
+    no pass can hold in spec (a steep flange) does not pull in passes that add nothing.
+    Returned in order across the part (for the snake)."""
     cols = surface.hit.any(axis=0)
     if not cols.any():
         raise ValueError("the part has no surface a top-down raster can see")
     across = surface.across_mm
     first, last = float(across[cols][0]), float(across[cols][-1])
-    half_line = spec.sensor.line_width_mm / 2
-    step = max(float(across[1] - across[0]) if len(across) > 1 else 1.0, 2.0)
-    bands: list[Band] = []
-    reach = first  # the band's lower edge must reach here
-    while len(bands) < max_passes:
-        candidates = np.arange(reach, min(reach + half_line, last + half_line) + step, step)
-        best: Band | None = None
-        for c in candidates:
-            band = in_spec_band(surface, float(c), spec)
-            if band.lo_mm <= reach + 1e-9:
-                best = band  # the furthest centre whose band still reaches back
-        if best is None:  # even a band centred on the edge does not reach it: advance anyway
-            best = in_spec_band(surface, float(reach), spec)
-        bands.append(best)
-        if best.hi_mm >= last - 1e-9:
+    centres = np.arange(first, last + candidate_step_mm / 2, candidate_step_mm)
+    if len(centres) == 0:
+        centres = np.array([0.5 * (first + last)])
+    bands = [in_spec_band(surface, float(c), spec) for c in centres]
+    cells = np.stack([_covered_cells(surface, b).ravel() for b in bands])
+    total = max(int(surface.hit.sum()), 1)
+    covered = np.zeros(cells.shape[1], bool)
+    chosen: list[int] = []
+    while len(chosen) < max_passes:
+        gain = (cells & ~covered).sum(axis=1)
+        best = int(np.argmax(gain))
+        if chosen and gain[best] < min_gain * total:
             break
-        width = best.hi_mm - best.lo_mm
-        reach = max(best.hi_mm - overlap * width, best.centre_mm + step)
-    return bands
+        if gain[best] == 0:  # nothing can be held in spec: one pass over the middle
+            best = len(centres) // 2 if not chosen else best
+            if chosen:
+                break
+        chosen.append(best)
+        covered |= cells[best]
+    return [bands[i] for i in sorted(chosen)]
 
 
 def predicted_in_spec(surface: TopSurface, bands: list[Band]) -> float:

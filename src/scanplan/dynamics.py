@@ -23,7 +23,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha, signed_beta
+from scanplan.quantities import (
+    ScanSpec,
+    advance,
+    beam_angle,
+    mean_distance,
+    signed_alpha,
+    signed_beta,
+)
 from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath
 
@@ -185,6 +192,8 @@ def progress_mm(state: np.ndarray, wd_mm: float) -> float:
     """Advance of the scan along u: where the beam meets the working distance (a pitched sensor
     looks W_d·sinθ behind itself; ending on the sensor's own advance would leave the end of the
     pass unscanned)."""
+    if len(state) == 5:
+        return float(state[0] - wd_mm * math.cos(state[3]) * math.sin(state[2]))
     return float(state[0] - wd_mm * math.sin(state[2]))
 
 
@@ -292,7 +301,7 @@ class PassDynamics:
     ) -> None:
         self.part, self.swath, self.spec, self.sim = part, swath, spec, sim
         self.roll = roll
-        self.beta_rad = math.nan
+        self.beta_rad = self.tilt_rad = math.nan
         self.limits = limits or StepLimits()
         self.rng = rng
         self.align_iterations = align_iterations
@@ -319,6 +328,12 @@ class PassDynamics:
         """Signed cross angle β of a profile (the roll that aligns; NaN with no valid point)."""
         return float(signed_beta(profile.normals_part, profile.valid, profile.T_part_sensor))
 
+    def _roll_terms(self, profile: Profile) -> None:
+        self.beta_rad = self.beta(profile)
+        self.tilt_rad = float(
+            beam_angle(profile.normals_part, profile.valid, profile.T_part_sensor)
+        )
+
     def advance_to(self, profile: Profile) -> float:
         """Δs from the current profile to `profile` (NaN if no column is valid in both)."""
         prev = self.profile
@@ -333,7 +348,7 @@ class PassDynamics:
         self.profile = self.measure(self.state)
         self.d_mm, self.alpha_rad = self.d_alpha(self.profile)
         if self.roll:
-            self.beta_rad = self.beta(self.profile)
+            self._roll_terms(self.profile)
         self.delta_s_mm = float("nan")
 
     def propose(self, action: np.ndarray) -> Step:
@@ -354,7 +369,7 @@ class PassDynamics:
         self.state, self.profile = step.state, profile
         self.d_mm, self.alpha_rad = self.d_alpha(profile)
         if self.roll:
-            self.beta_rad = self.beta(profile)
+            self._roll_terms(profile)
 
     @property
     def progress_mm(self) -> float:

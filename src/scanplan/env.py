@@ -32,27 +32,33 @@ from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, plan_swaths
 
 ENV_ID = "scanplan/SwathScan-v0"
+ENV_ID_ROLL = "scanplan/SwathScan-v1"
 OBS_LIMIT = 10.0  # every normalized observation is clipped to [-OBS_LIMIT, OBS_LIMIT]
 LOOKAHEAD_MM = (10.0, 30.0, 60.0, 120.0, 200.0)
 _LOOKAHEAD_COLUMNS = 16
 
 
-def observation_size(use_position: bool, lookahead: bool) -> int:
-    """Entries of the observation (see `SwathScanEnv`): P, then θ, D, α, Δs, then look-ahead."""
-    return (3 if use_position else 0) + 4 + (2 * len(LOOKAHEAD_MM) if lookahead else 0)
+def observation_size(use_position: bool, lookahead: bool, roll: bool = False) -> int:
+    """Entries of the observation (see `SwathScanEnv`): P, then θ, D, α, Δs, then φ, β with
+    roll, then look-ahead."""
+    return (3 if use_position else 0) + 4 + 2 * roll + (2 * len(LOOKAHEAD_MM) if lookahead else 0)
 
 
 def observe(
     dyn: PassDynamics, start_state: np.ndarray, use_position: bool, lookahead: bool
 ) -> np.ndarray:
-    """The normalized observation of a sensor on a pass (table in `SwathScanEnv`)."""
+    """The normalized observation of a sensor on a pass (table in `SwathScanEnv`); φ and β
+    are added when `dyn.roll`."""
     spec = dyn.spec
     half = spec.half_range_mm
-    s, h, th = dyn.state
+    s, h, th = dyn.state[:3]
     d = (dyn.d_mm - spec.working_distance_mm) / half if np.isfinite(dyn.d_mm) else 0.0
     a = dyn.alpha_rad / spec.alpha_max_rad if np.isfinite(dyn.alpha_rad) else 0.0
     ds = dyn.delta_s_mm / spec.delta_s_opt_mm if np.isfinite(dyn.delta_s_mm) else 1.0
     obs = [th / spec.alpha_max_rad, d, a, ds]
+    if dyn.roll:
+        b = dyn.beta_rad / spec.alpha_max_rad if np.isfinite(dyn.beta_rad) else 0.0
+        obs += [dyn.state[3] / spec.alpha_max_rad, b]
     if use_position:
         # The paper's P; its lateral entry is 0 by construction (a pass moves in the u-w plane).
         obs = [(s - start_state[0]) / 1000.0, 0.0, (h - start_state[1]) / half, *obs]
@@ -65,7 +71,7 @@ def _lookahead_features(dyn: PassDynamics) -> np.ndarray:
     """From the CAD (planning is offline): mean surface height and the pitch that faces its
     mean normal under the line at the footprint and at `LOOKAHEAD_MM` ahead; returned
     relative to the footprint's height and to θ."""
-    s, _, th = dyn.state
+    s, _, th = dyn.state[:3]
     sw, spec = dyn.swath, dyn.spec
     half_line = spec.sensor.line_width_mm / 2
     foot = s - spec.working_distance_mm * math.sin(th)
@@ -203,12 +209,14 @@ class SwathScanEnv(gym.Env):
         procedural_parts: int = 0,
         lost_patience: int | None = 150,
         max_episode_steps: int | None = None,
+        roll: bool = False,
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal).
         scan_spec: the scan's parameters (sensor, Δs_opt, α_max, weights; `env.spec` is
         Gymnasium's); its sensor is sub-sampled to `fan_points` columns (0 = all) and made
-        noiseless unless `noise`."""
+        noiseless unless `noise`. roll: env v1 (4-D action with Δφ, φ and β observed,
+        the orientation reward on the full angle between beam and mean normal)."""
         super().__init__()
         spec = scan_spec or ScanSpec()
         sensor = spec.sensor.with_points(fan_points) if fan_points else spec.sensor
@@ -224,8 +232,9 @@ class SwathScanEnv(gym.Env):
         self.procedural_parts = procedural_parts
         self.lost_patience = lost_patience
         self.max_episode_steps = max_episode_steps
-        n_obs = observation_size(use_position, lookahead)
-        self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.roll = roll
+        n_obs = observation_size(use_position, lookahead, roll)
+        self.action_space = spaces.Box(-1.0, 1.0, (4 if roll else 3,), np.float32)
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (n_obs,), np.float32)
         self._pool: list[tuple[Part, list[Swath], LineProfilometer]] | None = None
 
@@ -277,7 +286,7 @@ class SwathScanEnv(gym.Env):
         else:
             part, swath, sim = self._draw_swath()
         self.dynamics = dyn = PassDynamics(
-            part, swath, self.scan_spec, sim, self.limits, self.np_random
+            part, swath, self.scan_spec, sim, self.limits, self.np_random, roll=self.roll
         )
         geo = pass_geometry(part, swath, self.scan_spec)
         s0, s1 = geo.s_first_mm, geo.s_last_mm
@@ -306,7 +315,9 @@ class SwathScanEnv(gym.Env):
         vector env measures many envs' proposed poses (`dynamics.propose`) in one call."""
         dyn = self.dynamics
         dyn.accept(proposed, profile)
-        terms = reward_terms(dyn.d_mm, dyn.alpha_rad, dyn.delta_s_mm, self.scan_spec)
+        # v1 charges the full angle between beam and mean normal (what pitch and roll fix).
+        orientation = dyn.tilt_rad if self.roll else dyn.alpha_rad
+        terms = reward_terms(dyn.d_mm, orientation, dyn.delta_s_mm, self.scan_spec)
         reward = float(terms["reward"])
         self.steps += 1
         self.invalid_run = 0 if profile.valid.any() else self.invalid_run + 1
@@ -331,6 +342,8 @@ class SwathScanEnv(gym.Env):
             "lost_penalty": lost_penalty,
             "action_mm_rad": proposed.action_mm_rad,
         }
+        if self.roll:
+            info["beta_rad"], info["tilt_rad"] = dyn.beta_rad, dyn.tilt_rad
         return self._observation(), reward + lost_penalty, terminated, truncated, info
 
     def _observation(self) -> np.ndarray:
@@ -340,6 +353,8 @@ class SwathScanEnv(gym.Env):
 def register() -> None:
     if ENV_ID not in gym.registry:
         gym.register(id=ENV_ID, entry_point="scanplan.env:SwathScanEnv")
+    if ENV_ID_ROLL not in gym.registry:
+        gym.register(id=ENV_ID_ROLL, entry_point="scanplan.env:SwathScanEnv", kwargs={"roll": True})
 
 
 register()

@@ -292,18 +292,16 @@ def plan_adaptive_swaths(
     part: Part,
     spec: ScanSpec,
     direction: str | np.ndarray | DirectionRule = "auto",
-    band_overlap: float = 0.1,
     run_in_mm: float = 20.0,
 ) -> list[Swath]:
-    """Passes that adapt to the surface (SPEC §3b): each pass centred so that its predicted
-    in-spec band (`bands.in_spec_band`) overlaps the previous one's by `band_overlap`; the
-    band goes with the swath (`Swath.band_mm`) so planners align the line to it. 'auto'
-    direction: of the footprint rectangle's two sides, the one whose passes are predicted to
-    put more of the surface in spec (fewer passes on a tie within 2 %)."""
+    """Passes that adapt to the surface (SPEC §3b): pass centres chosen so that their
+    predicted in-spec bands (`bands.in_spec_band`) cover the surface (a greedy set cover,
+    `bands.adaptive_offsets`); the band goes with the swath (`Swath.band_mm`) so planners
+    align the line to it. 'auto' direction: of the footprint rectangle's two sides, the one
+    whose passes are predicted to put more of the surface in spec (fewer passes on a tie
+    within 2 %)."""
     from scanplan.bands import adaptive_offsets, predicted_in_spec, top_surface
 
-    if not 0.0 <= band_overlap < 1.0:
-        raise ValueError(f"band overlap must be in [0, 1), got {band_overlap}")
     if isinstance(direction, str) and direction.lower() == "auto":
         candidates = list(rectangle_axes(part))
     else:
@@ -312,7 +310,7 @@ def plan_adaptive_swaths(
     for axis in candidates:
         u = scan_direction(part, spec.sensor, axis)
         surface = top_surface(part, u, np.cross(UP, u))
-        bands = adaptive_offsets(surface, spec, band_overlap)
+        bands = adaptive_offsets(surface, spec)
         score = (round(predicted_in_spec(surface, bands) / 0.02), -len(bands))
         if best is None or score > best[0]:
             best = (score, u, bands)

@@ -18,7 +18,7 @@ from scanplan.sensor import LineProfilometer
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
-# (the sensor on the pass, the state it started the pass at) -> action in [-1, 1]^3
+# (the sensor on the pass, the state it started the pass at) -> action in [-1, 1]^3 (^4 with roll)
 Controller = Callable[[PassDynamics, np.ndarray], np.ndarray]
 
 
@@ -53,16 +53,18 @@ def drive_pass(
     limits: StepLimits | None = None,
     fan_points: int = 512,
     guards: Guards | None = None,
+    roll: bool = False,
 ) -> Trajectory:
     """Run `controller` over the whole pass on a noiseless sensor of `fan_points` columns,
     from an aligned start at the first station that sees the part to the last (SPEC §5's
-    episode, planning form); every station becomes a scanning pose."""
+    episode, planning form); every station becomes a scanning pose. roll: the controller
+    gives 4-D actions (env v1's step model)."""
     start_time = time.perf_counter()
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
     plan_spec = spec.with_sensor(sensor)
-    dyn = PassDynamics(part, swath, plan_spec, LineProfilometer(part, sensor), limits)
+    dyn = PassDynamics(part, swath, plan_spec, LineProfilometer(part, sensor), limits, roll=roll)
     geo = pass_geometry(part, swath, plan_spec)
     _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
     dyn.start(dyn.aligned_start(geo.s_first_mm))

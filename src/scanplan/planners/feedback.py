@@ -22,12 +22,14 @@ from scanplan.trajectory import Trajectory
 class FeedbackController:
     """From the current D and α only, in action units: Δz = k_z (D − W_d), Δθ = k_θ α
     (capped at `theta_rate_deg` per step so the footprint, W_d·Δθ away, moves less than a
-    spacing), Δy = Δs_opt plus the footprint shift of that pitch (at least Δs_opt/2). It obeys
-    the paper's action limitation by construction."""
+    spacing), Δy = Δs_opt plus the footprint shift of that pitch (at least Δs_opt/2); with
+    roll, Δφ = k_φ β (rolling about the working-distance point does not move the footprint,
+    so it may use the full Δφ_max). It obeys the paper's action limitation by construction."""
 
     k_z: float = 0.3
     k_theta: float = 0.1
     theta_rate_deg: float = 0.08
+    k_phi: float = 0.3
 
     def __call__(self, dyn: PassDynamics, start_state: np.ndarray | None = None) -> np.ndarray:
         lim = dyn.limits.array
@@ -39,6 +41,11 @@ class FeedbackController:
         dth = float(np.clip(self.k_theta * a, -cap, cap)) if known else 0.0
         ds_opt = dyn.spec.delta_s_opt_mm
         dy = max(ds_opt + (d if known else wd) * dth, 0.5 * ds_opt)  # always advance
+        if dyn.roll:
+            lim4 = dyn.limits.array_roll
+            b = dyn.beta_rad
+            dphi = float(np.clip(self.k_phi * b, -lim4[3], lim4[3])) if np.isfinite(b) else 0.0
+            return np.clip(np.array([dy, dz, dth, dphi]) / lim4, -1.0, 1.0)
         return np.clip(np.array([dy, dz, dth]) / lim, -1.0, 1.0)
 
 
@@ -50,6 +57,7 @@ class FeedbackPlanner:
     controller: FeedbackController = field(default_factory=FeedbackController)
     fan_points: int = 512
     guards: Guards = field(default_factory=Guards)
+    roll: bool = False
     name: str = "feedback"
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
@@ -61,4 +69,5 @@ class FeedbackPlanner:
             self.name,
             fan_points=self.fan_points,
             guards=self.guards,
+            roll=self.roll,
         )

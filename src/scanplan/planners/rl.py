@@ -26,7 +26,7 @@ from scanplan.trajectory import Trajectory
 
 DEFAULT_POLICY = Path(__file__).resolve().parent.parent / "policies" / "default"
 # Step limits a planning run takes from the policy file's env options.
-_LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad")
+_LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad")
 
 
 @dataclass
@@ -67,6 +67,11 @@ class RLPlanner:
         return np.clip(out, -1.0, 1.0)
 
     @property
+    def roll(self) -> bool:
+        """A v1 policy (4-D actions) rolls the line."""
+        return int(self.config.get("architecture", {}).get("action_dim", 3)) == 4
+
+    @property
     def limits(self) -> StepLimits:
         """The step limits the policy was trained with (policy.json `env`), else the defaults."""
         env_cfg = self.config.get("env", {})
@@ -89,4 +94,5 @@ class RLPlanner:
             limits=self.limits,
             fan_points=self.fan_points,
             guards=self.guards,
+            roll=self.roll,
         )
