@@ -92,7 +92,8 @@ class Metrics:
     `pairs_without_overlap` pairs share no valid column and are left out of the spacing stats.
     Rewards: per step (a profile and its predecessor in the pass), `reward.reward_terms`.
     Coverage: see `COVERAGE_DEFINITION`; in-spec coverage (the headline figure): see
-    `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg`.
+    `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg` and at
+    least one point per `in_spec_cell_mm`² (2·Δs_opt).
     Cycle time: see `CYCLE_TIME_ASSUMPTIONS`.
     `cloud`: a bounded sample of the valid points with their errors, for the maps;
     `coverage_map`: the surface samples and their `SurfaceState`, for the in-spec map.
@@ -123,6 +124,7 @@ class Metrics:
     visible_area_mm2: float
     in_spec_coverage: float
     in_spec_radius_mm: float
+    in_spec_cell_mm: float
     tolerance_mm: float
     tolerance_deg: float
     path_length_mm: float
@@ -153,6 +155,7 @@ class Metrics:
                 "tolerance": {"mm": self.tolerance_mm, "deg": self.tolerance_deg},
                 "in_spec_definition": IN_SPEC_COVERAGE_DEFINITION,
                 "in_spec_radius_mm": self.in_spec_radius_mm,
+                "in_spec_cell_mm": self.in_spec_cell_mm,
                 "distance_error_mm": {
                     "mean_abs": self.distance_error_mean_abs_mm,
                     "rms": self.distance_error_rms_mm,
@@ -317,11 +320,9 @@ class _PointErrors:
 
     @staticmethod
     def _bincount(bins: np.ndarray, hist: np.ndarray) -> np.ndarray:
-        return np.bincount(
-            np.minimum(bins.astype(np.int64), len(hist) - 1), minlength=len(hist)
-        )
+        return np.bincount(np.minimum(bins.astype(np.int64), len(hist) - 1), minlength=len(hist))
 
-    def summary(self) -> dict[str, float]:
+    def summary(self) -> dict[str, Any]:
         n = self.n_valid
         return {
             "valid_fraction": n / self.n_points,
@@ -519,7 +520,7 @@ class _CloudSample:
 # ---- evaluation ---------------------------------------------------------------------------
 
 
-def _path_summary(traj: Trajectory, profiles: int, scan_spec: ScanSpec) -> dict[str, float]:
+def _path_summary(traj: Trajectory, profiles: int, scan_spec: ScanSpec) -> dict[str, Any]:
     scan_len = float(
         np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)[
             traj.scanning[1:] & traj.scanning[:-1] & (traj.swath[1:] == traj.swath[:-1])
@@ -527,8 +528,7 @@ def _path_summary(traj: Trajectory, profiles: int, scan_spec: ScanSpec) -> dict[
     )
     path_len = traj.path_length_mm()
     cycle = (
-        profiles / scan_spec.profile_rate_hz
-        + (path_len - scan_len) / scan_spec.travel_speed_mm_s
+        profiles / scan_spec.profile_rate_hz + (path_len - scan_len) / scan_spec.travel_speed_mm_s
     )
     return {
         "path_length_mm": path_len,
@@ -623,6 +623,7 @@ def evaluate(
         visible_area_mm2=surface.area_mm2,
         in_spec_coverage=in_spec_fraction,
         in_spec_radius_mm=in_spec_radius,
+        in_spec_cell_mm=2.0 * scan_spec.delta_s_opt_mm,
         tolerance_mm=scan_spec.tolerance_mm,
         tolerance_deg=math.degrees(scan_spec.tol_angle_rad),
         eval_time_s=time.perf_counter() - start_time,
