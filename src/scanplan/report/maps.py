@@ -197,29 +197,40 @@ def _coverage_of(source: Metrics) -> CoverageMap:
 def _coverage_image(
     cmap: CoverageMap, lo: np.ndarray, cell: float, shape: tuple[int, int]
 ) -> np.ndarray:
-    """RGBA image (rows = y, cols = x) of the majority state of the samples in each cell;
-    cells without a sample (no surface to inspect there) are transparent."""
+    """RGBA image (rows = y, cols = x) of the majority state of the samples in each cell.
+    A cell that drew no sample takes the majority of its 3 x 3 neighbourhood (random samples
+    leave a few such holes); one with none around it is off the part and stays transparent."""
     from matplotlib.colors import to_rgba
 
     ij = np.floor((cmap.points_part[:, :2] - lo) / cell).astype(np.int64)
     ij = np.clip(ij, 0, np.array(shape[::-1]) - 1)
     flat = ij[:, 1] * shape[1] + ij[:, 0]
     counts = np.stack(
-        [np.bincount(flat[cmap.state == s], minlength=shape[0] * shape[1]) for s in SurfaceState]
+        [
+            np.bincount(flat[cmap.state == s], minlength=shape[0] * shape[1]).reshape(shape)
+            for s in SurfaceState
+        ]
     )
-    majority = counts.argmax(axis=0)
+    padded = np.pad(counts, ((0, 0), (1, 1), (1, 1)))
+    around = sum(
+        padded[:, 1 + di : 1 + di + shape[0], 1 + dj : 1 + dj + shape[1]]
+        for di in (-1, 0, 1)
+        for dj in (-1, 0, 1)
+    )
+    empty = counts.sum(axis=0) == 0
+    counts = np.where(empty[None], around, counts)
     palette = np.array([to_rgba(COVERAGE_COLOURS[s][0]) for s in SurfaceState])
-    image = palette[majority]
+    image = palette[counts.argmax(axis=0)]
     image[counts.sum(axis=0) == 0] = 0.0
-    return image.reshape(shape[0], shape[1], 4)
+    return image
 
 
 def _draw_coverage(ax, cmap: CoverageMap, lo: np.ndarray, hi: np.ndarray, title: str) -> None:
     cell = float(max(hi - lo)) / _MAP_PIXELS
     # Coarse enough that a cell holds a few samples: a solid picture, not speckle.
     span = np.maximum(hi - lo, 1e-9)
-    per_cell = len(cmap.state) / (span[0] * span[1])
-    cell = max(cell, math.sqrt(3.0 / max(per_cell, 1e-12)))
+    per_mm2 = len(cmap.state) / (span[0] * span[1])
+    cell = max(cell, math.sqrt(4.0 / max(per_mm2, 1e-12)))
     shape = (max(1, int(math.ceil(span[1] / cell))), max(1, int(math.ceil(span[0] / cell))))
     image = _coverage_image(cmap, lo, cell, shape)
     ax.imshow(
