@@ -196,6 +196,14 @@ def _png_data_uri(path: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode()
 
 
+def _figure(path: Path) -> str:
+    name = html.escape(path.name)
+    return (
+        f"<figure><img src='{_png_data_uri(path)}' alt='{name}'>"
+        f"<figcaption>{name}</figcaption></figure>"
+    )
+
+
 _STYLE = """
 body{font-family:system-ui,sans-serif;margin:24px auto;max-width:1400px;color:#222}
 table{border-collapse:collapse;margin:12px 0}th,td{border:1px solid #ccc;padding:4px 10px}
@@ -250,6 +258,12 @@ def write_html_report(
             sections.append(f"<p class='note'>{what}: {html.escape(str(definition))}</p>")
     for note in notes or []:
         sections.append(f"<p class='note'>{html.escape(note)}</p>")
+    # The in-spec maps belong with the headline figure; the error maps come at the end.
+    in_spec_maps = [p for p in pictures or [] if Path(p).name.startswith("in_spec")]
+    pictures = [p for p in pictures or [] if p not in in_spec_maps]
+    if in_spec_maps:
+        sections.append("<h2>Where the surface is in spec</h2>")
+        sections.extend(_figure(Path(p)) for p in in_spec_maps)
     sections.append("<h2>Trajectories and simulated scans</h2>")
     sections.append(
         "<p class='note'>Drag to rotate. Buttons switch the point colours between distance "
@@ -265,13 +279,8 @@ def write_html_report(
                 pio.to_html(_training_figure(log), full_html=False, include_plotlyjs=False)
             )
     if pictures:
-        sections.append("<h2>Maps</h2><div class='grid'>")
-        for pic in pictures:
-            name = html.escape(Path(pic).name)
-            sections.append(
-                f"<figure><img src='{_png_data_uri(Path(pic))}' alt='{name}'>"
-                f"<figcaption>{name}</figcaption></figure>"
-            )
+        sections.append("<h2>Error maps and training curves</h2><div class='grid'>")
+        sections.extend(_figure(Path(pic)) for pic in pictures)
         sections.append("</div>")
     page = (
         "<!DOCTYPE html><html><head><meta charset='utf-8'>"
