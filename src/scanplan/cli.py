@@ -7,6 +7,7 @@ Every user mistake ends as one line on stderr and exit code 2, with no partial o
 from __future__ import annotations
 
 import functools
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -53,6 +54,38 @@ SensorOpt = Annotated[
     str, typer.Option("--sensor", help="sensor preset name or TOML/YAML datasheet file")
 ]
 OutOpt = Annotated[Path, typer.Option("-o", "--output", help="output file")]
+ToleranceOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--tolerance",
+        help="in-spec tolerance MM,DEG: |z_s - W_d| in mm and orientation error in degrees "
+        "(default Z_r/20 and 15)",
+    ),
+]
+
+
+def parse_tolerance(text: str | None) -> dict[str, float]:
+    """--tolerance MM,DEG as ScanSpec keyword arguments (none when not given)."""
+    if text is None:
+        return {}
+    parts = text.split(",")
+    try:
+        mm, deg = (float(p) for p in parts) if len(parts) == 2 else (math.nan, math.nan)
+    except ValueError:
+        mm = deg = math.nan
+    if not (math.isfinite(mm) and math.isfinite(deg) and mm > 0 and 0 < deg <= 90):
+        raise ValueError(
+            f"--tolerance {text!r}: expected MM,DEG with MM > 0 and 0 < DEG <= 90, e.g. 12.5,15"
+        )
+    return {"tol_distance_mm": mm, "tol_angle_rad": math.radians(deg)}
+
+
+def scan_spec(sensor: str, tolerance: str | None = None) -> ScanSpec:
+    """The ScanSpec of the --sensor and --tolerance options."""
+    from scanplan.config import load_sensor
+
+    tol = parse_tolerance(tolerance)  # before the sensor file: the cheaper check first
+    return ScanSpec(load_sensor(sensor), **tol)
 
 
 # ---- part -------------------------------------------------------------------------------
@@ -142,9 +175,9 @@ def plan_cmd(
     ] = "auto",
     overlap: Annotated[float, typer.Option(help="overlap of adjacent passes, [0, 1)")] = 0.2,
     units: UnitsOpt = "mm",
+    tolerance: ToleranceOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
-    from scanplan.config import load_sensor
     from scanplan.part import load_part
     from scanplan.planners import make_planner, plan_path
     from scanplan.swaths import plan_swaths
@@ -152,7 +185,7 @@ def plan_cmd(
 
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
-    spec = ScanSpec(load_sensor(sensor))
+    spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units)
     the_planner = make_planner(planner, policy)
     swaths = plan_swaths(the_part, spec.sensor, direction, overlap)
@@ -174,7 +207,8 @@ def evaluate_cmd(
     trajectory: Annotated[Path, typer.Argument(help="trajectory CSV or JSON")],
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="report directory (PNG maps, metrics)")
+        Path | None,
+        typer.Option("-o", "--output", help="report directory (maps, metrics, report.html)"),
     ] = None,
     sensor: SensorOpt = "at-c5-4090cs30-495",
     units: UnitsOpt = "mm",
@@ -182,51 +216,45 @@ def evaluate_cmd(
         int | None, typer.Option("--points", help="sub-sample the fan to N points (faster)")
     ] = None,
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+    tolerance: ToleranceOpt = None,
 ):
     """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
     import json
 
-    from scanplan.config import load_sensor
     from scanplan.metrics import evaluate
     from scanplan.part import load_part
-    from scanplan.trajectory import atomic_write_text, read_trajectory
+    from scanplan.trajectory import read_trajectory
 
     if points is not None and points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")
-    spec = ScanSpec(load_sensor(sensor))
+    spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units)
     traj = read_trajectory(trajectory)
     metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
-    data = metrics.to_json_dict()
     if output is not None:
-        from scanplan.report.html import PlannerResult, write_html_report
-        from scanplan.report.maps import metrics_table_markdown, plot_error_maps
+        from scanplan.report import Evaluated, write_report
 
         label = traj.planner or trajectory.stem
-        pictures = plot_error_maps(metrics, output, planner=label)
-        if metrics.cloud is not None:
-            write_html_report(
-                output / "report.html",
-                the_part,
-                [PlannerResult(label, traj, metrics.cloud, data)],
-                spec.sensor.name,
-                pictures=pictures,
-            )
-        atomic_write_text(output / "metrics.json", json.dumps(data, indent=1) + "\n")
-        atomic_write_text(
-            output / "metrics.md",
-            f"# {the_part.name}: {trajectory.name}\n\n"
-            + metrics_table_markdown([metrics], [traj.planner or trajectory.stem]),
+        write_report(
+            output,
+            the_part,
+            [Evaluated(label, traj, metrics)],
+            spec,
+            title=f"{the_part.name}: {trajectory.name}",
         )
+    data = metrics.to_json_dict()
     if as_json:
-        typer.echo(json.dumps(data))
+        typer.echo(json.dumps(data, allow_nan=False))
         return
-    d, o, s = data["distance_error_mm"], data["orientation_error_deg"], data["spacing_mm"]
+    tol = data["tolerance"]
     typer.echo(
-        f"{data['profiles']} profiles | |distance error| mean {d['mean_abs']:.3f} "
-        f"p95 {d['p95_abs']:.3f} mm | orientation mean {o['mean']:.2f} p95 {o['p95']:.2f} deg | "
-        f"coverage {data['coverage_fraction']:.1%} | spacing {s['mean']:.3f} mm "
-        f"(cv {s['cv']:.3f}, {s['backward_steps']} backward) | reward {data['reward']['mean']:.4f}"
+        f"in-spec coverage {metrics.in_spec_coverage:.1%} (±{tol['mm']:g} mm, {tol['deg']:g}°) | "
+        f"coverage {metrics.coverage_fraction:.1%} | {data['profiles']} profiles | "
+        f"|distance error| mean {metrics.distance_error_mean_abs_mm:.3f} "
+        f"p95 {metrics.distance_error_p95_abs_mm:.3f} mm | orientation mean "
+        f"{metrics.orientation_error_mean_deg:.2f} p95 {metrics.orientation_error_p95_deg:.2f} deg"
+        f" | spacing {metrics.spacing_mean_mm:.3f} mm (cv {metrics.spacing_cv:.3f}, "
+        f"{metrics.backward_steps} backward) | reward {metrics.reward_mean:.4f}"
         + (f" -> {output}" if output is not None else "")
     )
 
@@ -461,18 +489,18 @@ def demo_cmd(
         int, typer.Option("--points", help="pixel columns per profile in the evaluation")
     ] = 1024,
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+    tolerance: ToleranceOpt = None,
 ):
     """The main job: three planners on a part (the door by default), the table, maps, an
     HTML report and a URScript program."""
     from rich.console import Console
     from rich.table import Table
 
-    from scanplan.config import load_sensor
     from scanplan.demo import run_demo
     from scanplan.report.table import table_rows
 
     console = Console(log_path=False)
-    spec = ScanSpec(load_sensor(sensor))
+    spec = scan_spec(sensor, tolerance)
     if points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")
     with console.status("starting") as status:

@@ -1,9 +1,10 @@
 """Scan-quality metrics of a trajectory (SPEC §7): simulate its scan, summarize the errors.
 
-`evaluate` measures every scanning pose in chunks and keeps only running sums, fixed-bin
-histograms (for the percentiles) and a bounded sample of points for the maps, so a full
-4096-column scan of the door fits in memory. D, α, Δs and the rewards come from
-`quantities` and `reward`, the same functions as the environment's.
+`evaluate` measures every scanning pose in chunks and streams them through small
+accumulators — per-point errors (running sums, fixed-bin histograms for the percentiles),
+spacing (per-profile D, α, Δs), coverage (plain and in-spec, on area samples of the surface)
+and a bounded sample of points for the maps — so a full 4096-column scan of the door fits in
+memory. D, α, Δs, the in-spec test and the rewards come from `quantities` and `reward`.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -20,12 +22,13 @@ from scanplan.part import Part
 from scanplan.quantities import (
     ScanSpec,
     advance,
+    in_spec,
     mean_distance,
     point_orientation_error,
     signed_alpha,
 )
 from scanplan.reward import reward_terms
-from scanplan.sensor import LineProfilometer, PointStatus
+from scanplan.sensor import LineProfilometer, PointStatus, Scan, SensorSpec
 from scanplan.trajectory import Trajectory
 
 COVERAGE_MAX_SLOPE_DEG = 80.0
@@ -35,6 +38,18 @@ COVERAGE_DEFINITION = (
     f"{COVERAGE_MAX_SLOPE_DEG:.0f} deg of horizontal and a vertical ray from it escapes the part "
     "(what a top-down raster can possibly see); it is covered if a valid measured point lies "
     "within `coverage_radius_mm` of it (about the spacing of the measured columns)"
+)
+IN_SPEC_COVERAGE_DEFINITION = (
+    "fraction of the same upward-visible area samples that have, within `in_spec_radius_mm`, "
+    "a measured point that is valid, has |z_s - W_d| <= tol_d and alpha_i <= tol_alpha "
+    "(`tolerance`), and lies where the real scan samples the surface at least once per "
+    "(2 delta_s_opt)^2: on the surface, at the point's distance, the real sensor's spacing is "
+    "<= 2 delta_s_opt both along the pass (the column's displacement to its neighbouring "
+    "profiles of the pass, the larger of the two) and across it (the real sensor's column "
+    "pitch, not the evaluation's sub-sampled fan). The radius is half the diagonal of a cell "
+    "2 delta_s_opt long and one evaluated column pitch wide (at the far tolerance depth and "
+    "tilt), so a sub-sampled fan still reaches every sample between its columns, while "
+    "profiles sparser than 2 delta_s_opt fail however wide the radius"
 )
 CYCLE_TIME_ASSUMPTIONS = (
     "one profile per station at the sensor's profile rate (scan speed = rate x spacing); "
@@ -46,6 +61,28 @@ _DIST_BIN_MM = 1e-3
 _ORI_BIN_DEG = 1e-3
 
 
+class SurfaceState(IntEnum):
+    """What the scan did to one sample of the surface to inspect."""
+
+    UNSEEN = 0  # no valid point near it
+    OUT_OF_SPEC = 1  # seen, but by no in-spec point (distance, angle or density)
+    IN_SPEC = 2
+
+
+@dataclass(frozen=True)
+class CoverageMap:
+    """The in-spec map: area-uniform samples of the surface to inspect and their state.
+
+    points_part: (k, 3) float64, mm.  state: (k,) int8, a `SurfaceState` per sample.
+    """
+
+    points_part: np.ndarray
+    state: np.ndarray
+
+    def fraction(self, state: SurfaceState) -> float:
+        return float((self.state == state).mean()) if len(self.state) else 0.0
+
+
 @dataclass(frozen=True)
 class Metrics:
     """SPEC §7 summary of one trajectory's simulated scan. Lengths mm, angles degrees.
@@ -54,8 +91,12 @@ class Metrics:
     Spacing: Δs (`quantities.advance`) between consecutive profiles of the same pass;
     `pairs_without_overlap` pairs share no valid column and are left out of the spacing stats.
     Rewards: per step (a profile and its predecessor in the pass), `reward.reward_terms`.
-    Coverage: see `COVERAGE_DEFINITION`. Cycle time: see `CYCLE_TIME_ASSUMPTIONS`.
-    `cloud`: a bounded sample of the valid points with their errors, for the maps.
+    Coverage: see `COVERAGE_DEFINITION`; in-spec coverage (the headline figure): see
+    `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg` and at
+    least one point per `in_spec_cell_mm`² (2·Δs_opt).
+    Cycle time: see `CYCLE_TIME_ASSUMPTIONS`.
+    `cloud`: a bounded sample of the valid points with their errors, for the maps;
+    `coverage_map`: the surface samples and their `SurfaceState`, for the in-spec map.
     """
 
     part: str
@@ -81,6 +122,11 @@ class Metrics:
     coverage_fraction: float
     coverage_radius_mm: float
     visible_area_mm2: float
+    in_spec_coverage: float
+    in_spec_radius_mm: float
+    in_spec_cell_mm: float
+    tolerance_mm: float
+    tolerance_deg: float
     path_length_mm: float
     scan_length_mm: float
     cycle_time_s: float
@@ -93,57 +139,81 @@ class Metrics:
     r_alpha_mean: float
     r_delta_s_mean: float
     cloud: PointCloud | None = field(default=None, repr=False, compare=False)
+    coverage_map: CoverageMap | None = field(default=None, repr=False, compare=False)
 
     def to_json_dict(self) -> dict[str, Any]:
-        """The SPEC §8 keys (and more), plain floats and ints, no NaN."""
-        return {
-            "part": self.part,
-            "planner": self.planner,
-            "sensor": self.sensor,
-            "profiles": self.profiles,
-            "points_per_profile": self.points_per_profile,
-            "distance_error_mm": {
-                "mean_abs": self.distance_error_mean_abs_mm,
-                "rms": self.distance_error_rms_mm,
-                "p95_abs": self.distance_error_p95_abs_mm,
-                "mean": self.distance_error_mean_mm,
-                "profile_mean_abs": self.profile_distance_error_mean_abs_mm,
-            },
-            "orientation_error_deg": {
-                "mean": self.orientation_error_mean_deg,
-                "p95": self.orientation_error_p95_deg,
-            },
-            "in_range_fraction": self.in_range_fraction,
-            "valid_fraction": self.valid_fraction,
-            "coverage_fraction": self.coverage_fraction,
-            "coverage_definition": COVERAGE_DEFINITION,
-            "coverage_radius_mm": self.coverage_radius_mm,
-            "visible_area_mm2": self.visible_area_mm2,
-            "spacing_mm": {
-                "mean": self.spacing_mean_mm,
-                "cv": self.spacing_cv,
-                "max_gap": self.spacing_max_gap_mm,
-                "backward_steps": self.backward_steps,
-                "pairs": self.spacing_pairs,
-                "pairs_without_overlap": self.pairs_without_overlap,
-            },
-            "path_length_mm": self.path_length_mm,
-            "scan_length_mm": self.scan_length_mm,
-            "cycle_time_s": self.cycle_time_s,
-            "cycle_time_assumptions": {
-                "profile_rate_hz": self.profile_rate_hz,
-                "travel_speed_mm_s": self.travel_speed_mm_s,
-                "model": CYCLE_TIME_ASSUMPTIONS,
-            },
-            "plan_time_s": self.plan_time_s,
-            "eval_time_s": self.eval_time_s,
-            "reward": {
-                "mean": self.reward_mean,
-                "r_d": self.r_d_mean,
-                "r_alpha": self.r_alpha_mean,
-                "r_delta_s": self.r_delta_s_mean,
-            },
-        }
+        """The SPEC §8 keys (and more): plain floats and ints, None where a number is not
+        finite, so `json.dumps(..., allow_nan=False)` always succeeds."""
+        return _finite_or_none(
+            {
+                "part": self.part,
+                "planner": self.planner,
+                "sensor": self.sensor,
+                "profiles": self.profiles,
+                "points_per_profile": self.points_per_profile,
+                "in_spec_coverage": self.in_spec_coverage,
+                "tolerance": {"mm": self.tolerance_mm, "deg": self.tolerance_deg},
+                "in_spec_definition": IN_SPEC_COVERAGE_DEFINITION,
+                "in_spec_radius_mm": self.in_spec_radius_mm,
+                "in_spec_cell_mm": self.in_spec_cell_mm,
+                "distance_error_mm": {
+                    "mean_abs": self.distance_error_mean_abs_mm,
+                    "rms": self.distance_error_rms_mm,
+                    "p95_abs": self.distance_error_p95_abs_mm,
+                    "mean": self.distance_error_mean_mm,
+                    "profile_mean_abs": self.profile_distance_error_mean_abs_mm,
+                },
+                "orientation_error_deg": {
+                    "mean": self.orientation_error_mean_deg,
+                    "p95": self.orientation_error_p95_deg,
+                },
+                "in_range_fraction": self.in_range_fraction,
+                "valid_fraction": self.valid_fraction,
+                "coverage_fraction": self.coverage_fraction,
+                "coverage_definition": COVERAGE_DEFINITION,
+                "coverage_radius_mm": self.coverage_radius_mm,
+                "visible_area_mm2": self.visible_area_mm2,
+                "spacing_mm": {
+                    "mean": self.spacing_mean_mm,
+                    "cv": self.spacing_cv,
+                    "max_gap": self.spacing_max_gap_mm,
+                    "backward_steps": self.backward_steps,
+                    "pairs": self.spacing_pairs,
+                    "pairs_without_overlap": self.pairs_without_overlap,
+                },
+                "path_length_mm": self.path_length_mm,
+                "scan_length_mm": self.scan_length_mm,
+                "cycle_time_s": self.cycle_time_s,
+                "cycle_time_assumptions": {
+                    "profile_rate_hz": self.profile_rate_hz,
+                    "travel_speed_mm_s": self.travel_speed_mm_s,
+                    "model": CYCLE_TIME_ASSUMPTIONS,
+                },
+                "plan_time_s": self.plan_time_s,
+                "eval_time_s": self.eval_time_s,
+                "reward": {
+                    "mean": self.reward_mean,
+                    "r_d": self.r_d_mean,
+                    "r_alpha": self.r_alpha_mean,
+                    "r_delta_s": self.r_delta_s_mean,
+                },
+            }
+        )
+
+
+def _finite_or_none(value: Any) -> Any:
+    """Plain Python numbers in nested dicts and lists, NaN and ±inf as None."""
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    return value
 
 
 # ---- coverage -----------------------------------------------------------------------------
@@ -187,7 +257,30 @@ def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> Visi
     return VisibleSurface(points[visible], cand_area * float(visible.mean()))
 
 
-# ---- evaluation ---------------------------------------------------------------------------
+def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None)) -> np.ndarray:
+    """The real sensor's spacing between adjacent pixel columns on the surface, where each
+    point lies, mm: (m, n) for the columns `cols` of the scan; NaN where the point is invalid.
+
+    The columns are evenly spaced in x at z = W_d (pitch δ = line width / (N − 1)), so at depth
+    z a column step sweeps the arc δ·z²/(ρ·W_d) across the beam, ρ the point's distance from
+    the emitter; on the surface that arc grows by 1/cos β, β the angle between the beam and
+    the surface's normal within the laser plane."""
+    delta = sensor.line_width_mm / max(sensor.points_per_profile - 1, 1)
+    points = scan.points_part[:, cols]
+    normals = scan.normals_part[:, cols]
+    ray = points - scan.poses[:, None, :3, 3]
+    rho = np.linalg.norm(ray, axis=-1)
+    y_s = scan.poses[:, None, :3, 1]
+    n_plane = normals - np.sum(normals * y_s, axis=-1, keepdims=True) * y_s
+    cos_beta = np.abs(np.sum(n_plane * ray, axis=-1)) / np.maximum(
+        np.linalg.norm(n_plane, axis=-1) * rho, 1e-12
+    )
+    z = scan.z_sensor[:, cols]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
+
+
+# ---- the accumulators `evaluate` streams the chunks through ---------------------------------
 
 
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:
@@ -198,20 +291,279 @@ def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float
     return (k + 0.5) * bin_width
 
 
+class _PointErrors:
+    """Per-point distance and orientation errors: counts, running sums, fixed-bin histograms."""
+
+    def __init__(self, working_distance_mm: float, z_range_mm: float) -> None:
+        self.wd = working_distance_mm
+        self.n_points = self.n_valid = self.n_hit = self.n_in_range = 0
+        self.sum_abs = self.sum_sq = self.sum_signed = self.sum_ori = 0.0
+        self.dist_hist = np.zeros(int(math.ceil(z_range_mm / 2 / _DIST_BIN_MM)) + 2, np.int64)
+        self.ori_hist = np.zeros(int(math.ceil(90.0 / _ORI_BIN_DEG)) + 2, np.int64)
+
+    def add(self, scan: Scan, ori_rad: np.ndarray) -> None:
+        valid = scan.valid
+        hit = scan.face >= 0
+        self.n_points += valid.size
+        self.n_valid += int(valid.sum())
+        self.n_hit += int(hit.sum())
+        self.n_in_range += int((hit & (scan.status != PointStatus.OUT_OF_RANGE)).sum())
+        err = scan.z_sensor[valid] - self.wd
+        abs_err = np.abs(err)
+        self.sum_abs += float(abs_err.sum())
+        self.sum_sq += float((err**2).sum())
+        self.sum_signed += float(err.sum())
+        self.dist_hist += self._bincount(abs_err / _DIST_BIN_MM, self.dist_hist)
+        ori = np.degrees(ori_rad[valid])
+        self.sum_ori += float(ori.sum())
+        self.ori_hist += self._bincount(ori / _ORI_BIN_DEG, self.ori_hist)
+
+    @staticmethod
+    def _bincount(bins: np.ndarray, hist: np.ndarray) -> np.ndarray:
+        return np.bincount(np.minimum(bins.astype(np.int64), len(hist) - 1), minlength=len(hist))
+
+    def summary(self) -> dict[str, Any]:
+        n = self.n_valid
+        return {
+            "valid_fraction": n / self.n_points,
+            "in_range_fraction": self.n_in_range / self.n_hit if self.n_hit else 0.0,
+            "distance_error_mean_abs_mm": self.sum_abs / n,
+            "distance_error_rms_mm": math.sqrt(self.sum_sq / n),
+            "distance_error_p95_abs_mm": _percentile_from_hist(self.dist_hist, _DIST_BIN_MM, 0.95),
+            "distance_error_mean_mm": self.sum_signed / n,
+            "orientation_error_mean_deg": self.sum_ori / n,
+            "orientation_error_p95_deg": _percentile_from_hist(self.ori_hist, _ORI_BIN_DEG, 0.95),
+        }
+
+
+def _mean_or_zero(a: np.ndarray) -> float:
+    return float(a.mean()) if len(a) else 0.0
+
+
+class _Spacing:
+    """Per-profile D, α and Δs (to the previous profile, carried across chunks); at the end,
+    the spacing statistics and the reward terms of the steps (a profile and its predecessor
+    in the same pass)."""
+
+    def __init__(self, u_dir: np.ndarray, has_prev: np.ndarray) -> None:
+        m = len(u_dir)
+        self.u_dir, self.has_prev = u_dir, has_prev
+        self.d_prof = np.full(m, np.nan)
+        self.a_prof = np.full(m, np.nan)
+        self.ds_prof = np.full(m, np.nan)
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None
+
+    def add(self, lo: int, scan: Scan) -> None:
+        hi = lo + len(scan)
+        valid, pts = scan.valid, scan.points_part
+        self.d_prof[lo:hi] = mean_distance(scan.z_sensor, valid)
+        self.a_prof[lo:hi] = signed_alpha(scan.normals_part, valid, scan.poses)
+        if self._prev is not None:
+            pts_prev = np.concatenate([self._prev[0][None], pts[:-1]])
+            val_prev = np.concatenate([self._prev[1][None], valid[:-1]])
+        else:
+            pts_prev = np.concatenate([pts[:1], pts[:-1]])
+            val_prev = np.concatenate([np.zeros_like(valid[:1]), valid[:-1]])
+        self.ds_prof[lo:hi] = advance(pts_prev, val_prev, pts, valid, self.u_dir[lo:hi])
+        self._prev = (pts[-1], valid[-1])
+
+    def summary(self, working_distance_mm: float, scan_spec: ScanSpec) -> dict[str, Any]:
+        ds_prof = self.ds_prof.copy()
+        ds_prof[~self.has_prev] = np.nan
+        steps = np.flatnonzero(self.has_prev)
+        ds_ok = ds_prof[steps][np.isfinite(ds_prof[steps])]
+        terms = reward_terms(self.d_prof[steps], self.a_prof[steps], ds_prof[steps], scan_spec)
+        d_ok = self.d_prof[np.isfinite(self.d_prof)]
+        spacing_mean = float(ds_ok.mean()) if len(ds_ok) else 0.0
+        return {
+            "profile_distance_error_mean_abs_mm": _mean_or_zero(np.abs(d_ok - working_distance_mm)),
+            "spacing_mean_mm": spacing_mean,
+            "spacing_cv": (
+                float(ds_ok.std() / abs(spacing_mean)) if len(ds_ok) and spacing_mean else 0.0
+            ),
+            "spacing_max_gap_mm": float(ds_ok.max()) if len(ds_ok) else 0.0,
+            "backward_steps": int((ds_ok < 0).sum()),
+            "spacing_pairs": len(ds_ok),
+            "pairs_without_overlap": int(len(steps) - len(ds_ok)),
+            "reward_mean": _mean_or_zero(terms["reward"]),
+            "r_d_mean": _mean_or_zero(terms["r_d"]),
+            "r_alpha_mean": _mean_or_zero(terms["r_alpha"]),
+            "r_delta_s_mean": _mean_or_zero(terms["r_delta_s"]),
+        }
+
+
+class _Coverage:
+    """Plain and in-spec coverage of the surface samples (see the two definitions).
+
+    Plain: a sample is covered if a valid point lies within `cover_radius`. In-spec: a point
+    qualifies if it passes `quantities.in_spec` and the real scan is dense enough where it
+    lies (across: `real_column_pitch`; along: the column's displacement to its neighbouring
+    profiles of the pass); a sample is in spec if a qualifying point lies within
+    `in_spec_radius`. The gap to the next profile is only known once the next profile is
+    measured, so the last profile of each chunk waits for the next chunk.
+    """
+
+    def __init__(
+        self,
+        surface: VisibleSurface,
+        scan_spec: ScanSpec,
+        col_stride: int,
+        cover_radius: float,
+        in_spec_radius: float,
+    ) -> None:
+        self.surface, self.spec = surface, scan_spec
+        self.cols = slice(None, None, col_stride)
+        self.cover_radius, self.in_spec_radius = cover_radius, in_spec_radius
+        self.limit_mm = 2.0 * scan_spec.delta_s_opt_mm
+        k = len(surface.points)
+        self.covered = np.zeros(k, bool)
+        self.in_spec = np.zeros(k, bool)
+        self.tree = None
+        if k:
+            from scipy.spatial import cKDTree
+
+            self.tree = cKDTree(surface.points)
+            # Enough neighbours that every sample within the radius of a point is returned.
+            per_mm2 = k / max(surface.area_mm2, 1e-9)
+            expected = per_mm2 * math.pi * in_spec_radius**2
+            self.k_in_spec = int(np.clip(math.ceil(2 * expected + 4), 4, 64))
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous profile's columns
+        # The held-back last profile: points, qualifies-but-for-the-along-gap, gap to previous.
+        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def add(self, scan: Scan, ori_rad: np.ndarray, has_prev: np.ndarray) -> None:
+        if self.tree is None:
+            return
+        c = self.cols
+        valid = scan.valid[:, c]
+        pts = scan.points_part[:, c]
+        near = pts[valid]
+        if len(near):
+            # k nearest: a sample with a small Voronoi cell is still marked.
+            dist, which = self.tree.query(
+                near, k=8, distance_upper_bound=self.cover_radius, workers=-1
+            )
+            self.covered[which[np.isfinite(dist)]] = True
+
+        ok = in_spec(scan.z_sensor[:, c], ori_rad[:, c], valid, self.spec)
+        ok &= real_column_pitch(scan, self.spec.sensor, c) <= self.limit_mm
+        if self._last is not None:
+            pts_prev = np.concatenate([self._last[0][None], pts[:-1]])
+            val_prev = np.concatenate([self._last[1][None], valid[:-1]])
+        else:
+            pts_prev = np.concatenate([pts[:1], pts[:-1]])
+            val_prev = np.concatenate([np.zeros_like(valid[:1]), valid[:-1]])
+        self._last = (pts[-1], valid[-1])
+        both = valid & val_prev & has_prev[:, None]
+        gap_prev = np.where(both, np.linalg.norm(pts - pts_prev, axis=-1), np.nan)
+        if self._pending is not None:
+            pts = np.concatenate([self._pending[0][None], pts])
+            ok = np.concatenate([self._pending[1][None], ok])
+            gap_prev = np.concatenate([self._pending[2][None], gap_prev])
+        gap_next = np.full_like(gap_prev, np.nan)
+        gap_next[:-1] = gap_prev[1:]
+        self._pending = (pts[-1], ok[-1], gap_prev[-1])
+        self._mark_in_spec(pts[:-1], ok[:-1], gap_prev[:-1], gap_next[:-1])
+
+    def _mark_in_spec(
+        self, pts: np.ndarray, ok: np.ndarray, gap_prev: np.ndarray, gap_next: np.ndarray
+    ) -> None:
+        # The larger of the two gaps, or the one there is; none (an isolated profile) fails.
+        along = np.fmax(gap_prev, gap_next)
+        with np.errstate(invalid="ignore"):
+            good = pts[ok & (along <= self.limit_mm)]
+        if len(good) and self.tree is not None:
+            dist, which = self.tree.query(
+                good, k=self.k_in_spec, distance_upper_bound=self.in_spec_radius, workers=-1
+            )
+            self.in_spec[which[np.isfinite(dist)]] = True
+
+    def finish(self) -> tuple[float, float, CoverageMap]:
+        """(coverage fraction, in-spec fraction, the map)."""
+        if self._pending is not None:
+            p, ok, gap = self._pending
+            self._mark_in_spec(p[None], ok[None], gap[None], np.full_like(gap[None], np.nan))
+            self._pending = None
+        state = np.where(
+            self.in_spec,
+            SurfaceState.IN_SPEC,
+            np.where(self.covered, SurfaceState.OUT_OF_SPEC, SurfaceState.UNSEEN),
+        ).astype(np.int8)
+        coverage_map = CoverageMap(self.surface.points, state)
+        covered = float(self.covered.mean()) if len(self.covered) else 0.0
+        return covered, coverage_map.fraction(SurfaceState.IN_SPEC), coverage_map
+
+
+class _CloudSample:
+    """A bounded, seeded random sample of the valid points with their errors, for the maps."""
+
+    def __init__(self, n_points: int, max_points: int, seed: int) -> None:
+        self.stride = max(1.0, n_points / (2 * max_points))
+        self.rng = np.random.default_rng(seed)
+        self.parts: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
+
+    def add(self, lo: int, scan: Scan, ori_rad: np.ndarray, swath: np.ndarray, wd: float) -> None:
+        rows, cols = np.nonzero(scan.valid)
+        # Seeded random pick: a stride over row-major points would draw moire on the maps.
+        pick = np.flatnonzero(self.rng.random(len(rows)) * self.stride < 1.0)
+        r, c = rows[pick], cols[pick]
+        self.parts["points_part"].append(scan.points_part[r, c])
+        self.parts["distance_error_mm"].append(scan.z_sensor[r, c] - wd)
+        self.parts["orientation_error_rad"].append(ori_rad[r, c])
+        self.parts["profile"].append(lo + r)
+        self.parts["swath"].append(swath[r])
+
+    def cloud(self) -> PointCloud:
+        return PointCloud(**{k: np.concatenate(v) for k, v in self.parts.items()})
+
+
+# ---- evaluation ---------------------------------------------------------------------------
+
+
+def _path_summary(traj: Trajectory, profiles: int, scan_spec: ScanSpec) -> dict[str, Any]:
+    scan_len = float(
+        np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)[
+            traj.scanning[1:] & traj.scanning[:-1] & (traj.swath[1:] == traj.swath[:-1])
+        ].sum()
+    )
+    path_len = traj.path_length_mm()
+    cycle = (
+        profiles / scan_spec.profile_rate_hz + (path_len - scan_len) / scan_spec.travel_speed_mm_s
+    )
+    return {
+        "path_length_mm": path_len,
+        "scan_length_mm": scan_len,
+        "cycle_time_s": cycle,
+        "profile_rate_hz": scan_spec.profile_rate_hz,
+        "travel_speed_mm_s": scan_spec.travel_speed_mm_s,
+        "plan_time_s": float(traj.plan_time_s),
+    }
+
+
+def in_spec_radius_mm(scan_spec: ScanSpec, evaluated_pitch_mm: float) -> float:
+    """Search radius of the in-spec coverage: half the diagonal of a cell 2·Δs_opt long and
+    one evaluated column pitch wide, that pitch taken at the far end of the distance
+    tolerance and at the angle tolerance (capped at 60°) — the farthest a sample between two
+    qualifying points can be from both."""
+    tilt = min(scan_spec.tol_angle_rad, math.radians(60.0))
+    far = 1.0 + scan_spec.tolerance_mm / scan_spec.working_distance_mm
+    across = evaluated_pitch_mm * far / math.cos(tilt)
+    return 0.5 * math.hypot(2.0 * scan_spec.delta_s_opt_mm, across)
+
+
 def evaluate(
     part: Part,
     scan_spec: ScanSpec,
     traj: Trajectory,
     seed: int = 0,
     points_per_profile: int | None = None,
-    profile_rate_hz: float = 200.0,
-    travel_speed_mm_s: float = 250.0,
     chunk_poses: int = 256,
     max_map_points: int = 200_000,
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
-    points_per_profile: sub-sample the fan for a faster evaluation (same line width).
+    points_per_profile: sub-sample the fan for a faster evaluation (same line width); the
+    in-spec density rule still judges the real sensor's columns.
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -235,148 +587,49 @@ def evaluate(
     lateral_spacing = spec.line_width_mm / max(n_cols - 1, 1)
     cover_spacing = max(2.0, 1.2 * lateral_spacing)
     surface = upward_visible_samples(part, cover_spacing, seed)
-    covered = np.zeros(len(surface.points), bool)
-    tree = None
-    if len(surface.points):
-        from scipy.spatial import cKDTree
-
-        tree = cKDTree(surface.points)
     # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
     col_stride = max(1, int(cover_spacing / 3 / lateral_spacing))
     # Wide enough that every sample between two measured lines has a point within reach.
     cover_radius = max(1.0, lateral_spacing * col_stride)
+    in_spec_radius = in_spec_radius_mm(scan_spec, lateral_spacing * col_stride)
 
+    errors = _PointErrors(wd, spec.z_range_mm)
+    spacing = _Spacing(u_dir, has_prev)
+    coverage = _Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius)
+    sample = _CloudSample(m * n_cols, max_map_points, seed)
     profiler = LineProfilometer(part, spec, seed=seed)
-    n_points = n_valid = n_hit = n_in_range = 0
-    sum_abs = sum_sq = sum_signed = 0.0
-    sum_ori = 0.0
-    dist_hist = np.zeros(int(math.ceil(spec.z_range_mm / 2 / _DIST_BIN_MM)) + 2, np.int64)
-    ori_hist = np.zeros(int(math.ceil(90.0 / _ORI_BIN_DEG)) + 2, np.int64)
-    d_prof = np.full(m, np.nan)
-    a_prof = np.full(m, np.nan)
-    ds_prof = np.full(m, np.nan)
-    map_stride = max(1.0, m * n_cols / (2 * max_map_points))
-    map_rng = np.random.default_rng(seed)
-    sample: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
-    prev_points: np.ndarray | None = None
-    prev_valid: np.ndarray | None = None
-
     for lo in range(0, m, chunk_poses):
         hi = min(m, lo + chunk_poses)
         scan = profiler.measure_many(poses[lo:hi])
-        valid = scan.valid
-        hit = scan.face >= 0
-        n_points += valid.size
-        n_valid += int(valid.sum())
-        n_hit += int(hit.sum())
-        n_in_range += int((hit & (scan.status != PointStatus.OUT_OF_RANGE)).sum())
+        ori = point_orientation_error(scan.normals_part, scan.poses)
+        errors.add(scan, ori)
+        spacing.add(lo, scan)
+        coverage.add(scan, ori, has_prev[lo:hi])
+        sample.add(lo, scan, ori, swath[lo:hi], wd)
 
-        err = scan.z_sensor[valid] - wd
-        abs_err = np.abs(err)
-        sum_abs += float(abs_err.sum())
-        sum_sq += float((err**2).sum())
-        sum_signed += float(err.sum())
-        dist_hist += np.bincount(
-            np.minimum((abs_err / _DIST_BIN_MM).astype(np.int64), len(dist_hist) - 1),
-            minlength=len(dist_hist),
-        )
-        ori_all = point_orientation_error(scan.normals_part, scan.poses)
-        ori = np.degrees(ori_all[valid])
-        sum_ori += float(ori.sum())
-        ori_hist += np.bincount(
-            np.minimum((ori / _ORI_BIN_DEG).astype(np.int64), len(ori_hist) - 1),
-            minlength=len(ori_hist),
-        )
-
-        d_prof[lo:hi] = mean_distance(scan.z_sensor, valid)
-        a_prof[lo:hi] = signed_alpha(scan.normals_part, valid, scan.poses)
-        # Δs against the previous profile, carried across chunk boundaries.
-        pts = scan.points_part
-        if prev_points is not None and prev_valid is not None:
-            pts_prev = np.concatenate([prev_points[None], pts[:-1]])
-            val_prev = np.concatenate([prev_valid[None], valid[:-1]])
-        else:
-            pts_prev = np.concatenate([pts[:1], pts[:-1]])
-            val_prev = np.concatenate([np.zeros_like(valid[:1]), valid[:-1]])
-        ds_prof[lo:hi] = advance(pts_prev, val_prev, pts, valid, u_dir[lo:hi])
-        prev_points, prev_valid = pts[-1], valid[-1]
-
-        if tree is not None:
-            cols = valid[:, ::col_stride]
-            near = pts[:, ::col_stride][cols]
-            if len(near):
-                # k nearest: a sample with a small Voronoi cell is still marked.
-                dist, which = tree.query(near, k=8, distance_upper_bound=cover_radius, workers=-1)
-                covered[which[np.isfinite(dist)]] = True
-
-        rows, cols_idx = np.nonzero(valid)
-        # Seeded random pick: a stride over row-major points would draw moire on the maps.
-        pick = np.flatnonzero(map_rng.random(len(rows)) * map_stride < 1.0)
-        r, c = rows[pick], cols_idx[pick]
-        sample["points_part"].append(pts[r, c])
-        sample["distance_error_mm"].append(scan.z_sensor[r, c] - wd)
-        sample["orientation_error_rad"].append(ori_all[r, c])
-        sample["profile"].append(lo + r)
-        sample["swath"].append(swath[lo + r])
-
-    if n_valid == 0:
+    if errors.n_valid == 0:
         raise ValueError(
             f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
         )
-    ds_prof[~has_prev] = np.nan
-    steps = np.flatnonzero(has_prev)
-    ds_ok = ds_prof[steps][np.isfinite(ds_prof[steps])]
-    terms = reward_terms(d_prof[steps], a_prof[steps], ds_prof[steps], scan_spec)
-    d_ok = d_prof[np.isfinite(d_prof)]
-
-    spacing_mean = float(ds_ok.mean()) if len(ds_ok) else 0.0
-    spacing_cv = float(ds_ok.std() / abs(spacing_mean)) if len(ds_ok) and spacing_mean else 0.0
-    scan_len = float(
-        np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)[
-            traj.scanning[1:] & traj.scanning[:-1] & (traj.swath[1:] == traj.swath[:-1])
-        ].sum()
-    )
-    path_len = traj.path_length_mm()
-    cycle = m / scan_spec.profile_rate_hz + (path_len - scan_len) / scan_spec.travel_speed_mm_s
-    cloud = PointCloud(**{k: np.concatenate(v) for k, v in sample.items()})
-
-    def mean_or_zero(a: np.ndarray) -> float:
-        return float(a.mean()) if len(a) else 0.0
-
+    coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
     return Metrics(
         part=part.name,
         planner=traj.planner,
         sensor=spec.name,
         profiles=m,
         points_per_profile=n_cols,
-        valid_fraction=n_valid / n_points,
-        in_range_fraction=n_in_range / n_hit if n_hit else 0.0,
-        distance_error_mean_abs_mm=sum_abs / n_valid,
-        distance_error_rms_mm=math.sqrt(sum_sq / n_valid),
-        distance_error_p95_abs_mm=_percentile_from_hist(dist_hist, _DIST_BIN_MM, 0.95),
-        distance_error_mean_mm=sum_signed / n_valid,
-        profile_distance_error_mean_abs_mm=mean_or_zero(np.abs(d_ok - wd)),
-        orientation_error_mean_deg=sum_ori / n_valid,
-        orientation_error_p95_deg=_percentile_from_hist(ori_hist, _ORI_BIN_DEG, 0.95),
-        spacing_mean_mm=spacing_mean,
-        spacing_cv=spacing_cv,
-        spacing_max_gap_mm=float(ds_ok.max()) if len(ds_ok) else 0.0,
-        backward_steps=int((ds_ok < 0).sum()),
-        spacing_pairs=len(ds_ok),
-        pairs_without_overlap=int(len(steps) - len(ds_ok)),
-        coverage_fraction=float(covered.mean()) if len(covered) else 0.0,
+        coverage_fraction=coverage_fraction,
         coverage_radius_mm=cover_radius,
         visible_area_mm2=surface.area_mm2,
-        path_length_mm=path_len,
-        scan_length_mm=scan_len,
-        cycle_time_s=cycle,
-        profile_rate_hz=scan_spec.profile_rate_hz,
-        travel_speed_mm_s=scan_spec.travel_speed_mm_s,
-        plan_time_s=float(traj.plan_time_s),
+        in_spec_coverage=in_spec_fraction,
+        in_spec_radius_mm=in_spec_radius,
+        in_spec_cell_mm=2.0 * scan_spec.delta_s_opt_mm,
+        tolerance_mm=scan_spec.tolerance_mm,
+        tolerance_deg=math.degrees(scan_spec.tol_angle_rad),
         eval_time_s=time.perf_counter() - start_time,
-        reward_mean=mean_or_zero(terms["reward"]),
-        r_d_mean=mean_or_zero(terms["r_d"]),
-        r_alpha_mean=mean_or_zero(terms["r_alpha"]),
-        r_delta_s_mean=mean_or_zero(terms["r_delta_s"]),
-        cloud=cloud,
+        cloud=sample.cloud(),
+        coverage_map=coverage_map,
+        **errors.summary(),
+        **spacing.summary(wd, scan_spec),
+        **_path_summary(traj, m, scan_spec),
     )

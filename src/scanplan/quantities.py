@@ -132,6 +132,15 @@ def point_orientation_error(normals_part: np.ndarray, poses: np.ndarray) -> np.n
     return np.arccos(np.clip(-np.sum(normals_part * z_s, axis=-1), -1.0, 1.0))
 
 
+def in_spec(
+    z_sensor: np.ndarray, orientation_rad: np.ndarray, valid: np.ndarray, spec: ScanSpec
+) -> np.ndarray:
+    """The in-spec test of a point (SPEC §7): valid, |z_s − W_d| <= tol_d and alpha_i <= tol_alpha.
+    (...), (...), (...) bool -> (...) bool; NaN depths or angles never pass."""
+    near = np.abs(z_sensor - spec.working_distance_mm) <= spec.tolerance_mm
+    return valid & near & (orientation_rad <= spec.tol_angle_rad)
+
+
 def advance(
     points_prev: np.ndarray,
     valid_prev: np.ndarray,

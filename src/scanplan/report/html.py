@@ -17,7 +17,7 @@ import numpy as np
 
 from scanplan.cloud import PointCloud
 from scanplan.part import Part
-from scanplan.report.table import lookup, table_rows
+from scanplan.report.table import lookup, table_rows, tolerance_label
 from scanplan.trajectory import Trajectory, atomic_write_text
 
 # Enough for a smooth picture, small enough that the file stays a few MB.
@@ -44,6 +44,24 @@ def metrics_table_html(results: list[PlannerResult]) -> str:
         for label, values in table_rows([r.metrics for r in results])
     ]
     return f"<table><tr><th>metric</th>{head}</tr>{''.join(rows)}</table>"
+
+
+def _in_spec_headline(results: list[PlannerResult]) -> str:
+    """The headline figure, one per planner: the in-spec coverage and its tolerance."""
+    values = [(r.name, lookup(r.metrics, ("in_spec_coverage",))) for r in results]
+    shown = [
+        f"{html.escape(name)} <b>{v:.1%}</b>" for name, v in values if isinstance(v, int | float)
+    ]
+    if not shown:
+        return ""
+    tolerance = html.escape(tolerance_label([r.metrics for r in results]).strip(" ()"))
+    return (
+        "<p class='headline'>In-spec coverage"
+        + (f" <span class='note'>({tolerance})</span>" if tolerance else "")
+        + ": "
+        + " · ".join(shown)
+        + "</p>"
+    )
 
 
 def _subsample(n: int, k: int, seed: int = 0) -> np.ndarray:
@@ -178,6 +196,14 @@ def _png_data_uri(path: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode()
 
 
+def _figure(path: Path) -> str:
+    name = html.escape(path.name)
+    return (
+        f"<figure><img src='{_png_data_uri(path)}' alt='{name}'>"
+        f"<figcaption>{name}</figcaption></figure>"
+    )
+
+
 _STYLE = """
 body{font-family:system-ui,sans-serif;margin:24px auto;max-width:1400px;color:#222}
 table{border-collapse:collapse;margin:12px 0}th,td{border:1px solid #ccc;padding:4px 10px}
@@ -185,6 +211,7 @@ td{text-align:right;font-variant-numeric:tabular-nums}tr:nth-child(even){backgro
 .grid{display:grid;grid-template-columns:repeat(auto-fit,minmax(600px,1fr));gap:12px}
 .grid>*{min-width:0}
 img{max-width:100%;border:1px solid #ddd}.note{color:#555;font-size:0.9em}
+.headline{font-size:1.3em;margin:8px 0 16px}
 """
 
 
@@ -217,14 +244,26 @@ def write_html_report(
         f"<p>part <b>{html.escape(part.name)}</b> "
         f"({' × '.join(f'{e:.0f}' for e in part.extents)} mm, {len(part.mesh.faces)} triangles),"
         f" sensor <b>{html.escape(sensor_name)}</b>.</p>",
-        "<h2>Scan quality</h2>",
-        metrics_table_html(results),
     ]
-    coverage_note = lookup(results[0].metrics, ("coverage_definition",))
-    if coverage_note:
-        sections.append(f"<p class='note'>Coverage: {html.escape(str(coverage_note))}</p>")
+    headline = _in_spec_headline(results)
+    if headline:
+        sections.append(headline)
+    sections += ["<h2>Scan quality</h2>", metrics_table_html(results)]
+    for key, what in (
+        ("in_spec_definition", "In-spec coverage"),
+        ("coverage_definition", "Coverage"),
+    ):
+        definition = lookup(results[0].metrics, (key,))
+        if definition:
+            sections.append(f"<p class='note'>{what}: {html.escape(str(definition))}</p>")
     for note in notes or []:
         sections.append(f"<p class='note'>{html.escape(note)}</p>")
+    # The in-spec maps belong with the headline figure; the error maps come at the end.
+    in_spec_maps = [p for p in pictures or [] if Path(p).name.startswith("in_spec")]
+    pictures = [p for p in pictures or [] if p not in in_spec_maps]
+    if in_spec_maps:
+        sections.append("<h2>Where the surface is in spec</h2>")
+        sections.extend(_figure(Path(p)) for p in in_spec_maps)
     sections.append("<h2>Trajectories and simulated scans</h2>")
     sections.append(
         "<p class='note'>Drag to rotate. Buttons switch the point colours between distance "
@@ -240,13 +279,8 @@ def write_html_report(
                 pio.to_html(_training_figure(log), full_html=False, include_plotlyjs=False)
             )
     if pictures:
-        sections.append("<h2>Error maps</h2><div class='grid'>")
-        for pic in pictures:
-            name = html.escape(Path(pic).name)
-            sections.append(
-                f"<figure><img src='{_png_data_uri(Path(pic))}' alt='{name}'>"
-                f"<figcaption>{name}</figcaption></figure>"
-            )
+        sections.append("<h2>Error maps and training curves</h2><div class='grid'>")
+        sections.extend(_figure(Path(pic)) for pic in pictures)
         sections.append("</div>")
     page = (
         "<!DOCTYPE html><html><head><meta charset='utf-8'>"

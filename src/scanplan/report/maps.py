@@ -1,10 +1,12 @@
 """The paper's error maps as PNG (matplotlib): scanned points seen from above, coloured by
-distance error (diverging, mm) or orientation error (sequential, degrees), and the metrics
+distance error (diverging, mm) or orientation error (sequential, degrees); the in-spec map
+(the surface to inspect seen from above: in spec, out of spec, not seen); and the metrics
 table as Markdown.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -12,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.cloud import PointCloud
-from scanplan.metrics import Metrics
+from scanplan.metrics import CoverageMap, Metrics, SurfaceState
 from scanplan.report.table import table_rows
 
 MAX_PLOT_POINTS = 120_000
@@ -170,6 +172,157 @@ def plot_comparison(
         shrink=0.8,
         extend="both" if quantity == "distance" else "max",
     )
+    path = Path(out_path)
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+# Three colours that stay apart for colour-blind readers too (ColorBrewer Dark2 + grey).
+COVERAGE_COLOURS = {
+    SurfaceState.IN_SPEC: ("#1b9e77", "in spec"),
+    SurfaceState.OUT_OF_SPEC: ("#d95f02", "out of spec"),
+    SurfaceState.UNSEEN: ("#b4b4b4", "not seen"),
+}
+COVERAGE_MAP_NAME = "in_spec_coverage.png"
+_MAP_PIXELS = 700  # cells across the longer side of a coverage map
+
+
+def _coverage_of(source: Metrics) -> CoverageMap:
+    if source.coverage_map is None or len(source.coverage_map.state) == 0:
+        raise ValueError("no surface sample to draw the in-spec map")
+    return source.coverage_map
+
+
+def _coverage_image(
+    cmap: CoverageMap, lo: np.ndarray, cell: float, shape: tuple[int, int]
+) -> np.ndarray:
+    """RGBA image (rows = y, cols = x) of the majority state of the samples in each cell.
+    A cell that drew no sample takes the majority of its 3 x 3 neighbourhood (random samples
+    leave a few such holes); one with none around it is off the part and stays transparent."""
+    from matplotlib.colors import to_rgba
+
+    ij = np.floor((cmap.points_part[:, :2] - lo) / cell).astype(np.int64)
+    ij = np.clip(ij, 0, np.array(shape[::-1]) - 1)
+    flat = ij[:, 1] * shape[1] + ij[:, 0]
+    counts = np.stack(
+        [
+            np.bincount(flat[cmap.state == s], minlength=shape[0] * shape[1]).reshape(shape)
+            for s in SurfaceState
+        ]
+    )
+    padded = np.pad(counts, ((0, 0), (1, 1), (1, 1)))
+    around = sum(
+        padded[:, 1 + di : 1 + di + shape[0], 1 + dj : 1 + dj + shape[1]]
+        for di in (-1, 0, 1)
+        for dj in (-1, 0, 1)
+    )
+    empty = counts.sum(axis=0) == 0
+    counts = np.where(empty[None], around, counts)
+    palette = np.array([to_rgba(COVERAGE_COLOURS[s][0]) for s in SurfaceState])
+    image = palette[counts.argmax(axis=0)]
+    image[counts.sum(axis=0) == 0] = 0.0
+    return image
+
+
+def _draw_coverage(ax, cmap: CoverageMap, lo: np.ndarray, hi: np.ndarray, title: str) -> None:
+    cell = float(max(hi - lo)) / _MAP_PIXELS
+    # Coarse enough that a cell holds a few samples: a solid picture, not speckle.
+    span = np.maximum(hi - lo, 1e-9)
+    per_mm2 = len(cmap.state) / (span[0] * span[1])
+    cell = max(cell, math.sqrt(4.0 / max(per_mm2, 1e-12)))
+    shape = (max(1, int(math.ceil(span[1] / cell))), max(1, int(math.ceil(span[0] / cell))))
+    image = _coverage_image(cmap, lo, cell, shape)
+    ax.imshow(
+        image,
+        origin="lower",
+        extent=(lo[0], lo[0] + shape[1] * cell, lo[1], lo[1] + shape[0] * cell),
+        interpolation="nearest",
+    )
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(title, fontsize=10)
+
+
+def _coverage_legend(fig, maps: Sequence[CoverageMap] = ()) -> None:
+    from matplotlib.patches import Patch
+
+    handles = []
+    for state in (SurfaceState.IN_SPEC, SurfaceState.OUT_OF_SPEC, SurfaceState.UNSEEN):
+        colour, label = COVERAGE_COLOURS[state]
+        if len(maps) == 1:
+            label += f" ({maps[0].fraction(state):.1%})"
+        handles.append(Patch(facecolor=colour, edgecolor="none", label=label))
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, frameon=False)
+
+
+def _tolerance_text(metrics: Metrics) -> str:
+    return f"|z_s − W_d| ≤ {metrics.tolerance_mm:g} mm, α_i ≤ {metrics.tolerance_deg:g}°"
+
+
+def plot_coverage_map(
+    source: Metrics, out_path: str | os.PathLike, planner: str = "", part: str = ""
+) -> Path:
+    """The in-spec map of one scan, seen from above: where the surface to inspect is in spec,
+    out of spec or not seen, the in-spec fraction in the title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cmap = _coverage_of(source)
+    planner, part = planner or source.planner or "trajectory", part or source.part or "part"
+    xy = cmap.points_part[:, :2]
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    aspect = float(np.clip((hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9), 0.3, 3.0))
+    fig, ax = plt.subplots(figsize=(8, 8 * aspect + 1.0), layout="constrained")
+    _draw_coverage(
+        ax,
+        cmap,
+        lo,
+        hi,
+        f"In-spec coverage {source.in_spec_coverage:.1%} — {planner} on {part}\n"
+        f"({_tolerance_text(source)}, ≥ 1 point per "
+        f"{source.in_spec_cell_mm:g} mm square)",
+    )
+    _coverage_legend(fig, [cmap])
+    path = Path(out_path)
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def plot_coverage_comparison(
+    sources: Sequence[tuple[str, Metrics]], out_path: str | os.PathLike, part: str = ""
+) -> Path:
+    """Side-by-side in-spec maps of several planners, each panel titled with its fraction."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not sources:
+        raise ValueError("nothing to compare")
+    maps = [_coverage_of(m) for _, m in sources]
+    xy = np.concatenate([c.points_part[:, :2] for c in maps])
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    aspect = float(np.clip((hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9), 0.3, 3.0))
+    fig, axes = plt.subplots(
+        1,
+        len(sources),
+        figsize=(5.5 * len(sources) + 1.0, 5.5 * aspect + 1.6),
+        squeeze=False,
+        layout="constrained",
+    )
+    for ax, (name, metrics), cmap in zip(axes[0], sources, maps, strict=True):
+        _draw_coverage(ax, cmap, lo, hi, f"{name}: {metrics.in_spec_coverage:.1%} in spec")
+    first = sources[0][1]
+    fig.suptitle(
+        f"In-spec coverage — {part or first.part} ({_tolerance_text(first)}, ≥ 1 point per "
+        f"{first.in_spec_cell_mm:g} mm square)"
+    )
+    _coverage_legend(fig)
     path = Path(out_path)
     _save(fig, path)
     plt.close(fig)

@@ -6,8 +6,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-# (label, key path in Metrics.to_json_dict(), format)
+# (label, key path in Metrics.to_json_dict(), format). In-spec coverage is the headline.
 TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
+    ("in-spec coverage", ("in_spec_coverage",), "{:.1%}"),
+    ("coverage (any valid point)", ("coverage_fraction",), "{:.1%}"),
     ("profiles", ("profiles",), "{:.0f}"),
     ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
     ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),
@@ -17,7 +19,6 @@ TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
     ("p95 orientation error (°)", ("orientation_error_deg", "p95"), "{:.2f}"),
     ("points in range", ("in_range_fraction",), "{:.1%}"),
     ("valid points", ("valid_fraction",), "{:.1%}"),
-    ("coverage", ("coverage_fraction",), "{:.1%}"),
     ("mean spacing Δs (mm)", ("spacing_mm", "mean"), "{:.3f}"),
     ("spacing CV", ("spacing_mm", "cv"), "{:.3f}"),
     ("largest gap (mm)", ("spacing_mm", "max_gap"), "{:.2f}"),
@@ -31,6 +32,8 @@ TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
     ("R_Δs", ("reward", "r_delta_s"), "{:.4f}"),
 ]
 MISSING = "–"
+# The tolerance the in-spec row was judged with, appended to its label.
+_TOLERANCE_LABEL = " (±{mm:g} mm, {deg:g}°)"
 
 
 def lookup(metrics: dict[str, Any], path: tuple[str, ...]) -> Any:
@@ -50,7 +53,18 @@ def table_rows(metrics: Sequence[dict[str, Any]]) -> list[tuple[str, list[str]]]
         values = [lookup(m, path) for m in metrics]
         if all(v is None for v in values):
             continue
+        if path == ("in_spec_coverage",):
+            label += tolerance_label(metrics)
         rows.append(
             (label, [fmt.format(v) if isinstance(v, int | float) else MISSING for v in values])
         )
     return rows
+
+
+def tolerance_label(metrics: Sequence[dict[str, Any]]) -> str:
+    """' (±12.5 mm, 15°)': the in-spec tolerance of the first trajectory that has one."""
+    for m in metrics:
+        tol = lookup(m, ("tolerance",))
+        if isinstance(tol, dict) and tol.get("mm") is not None and tol.get("deg") is not None:
+            return _TOLERANCE_LABEL.format(mm=round(tol["mm"], 3), deg=round(tol["deg"], 3))
+    return ""

@@ -1,0 +1,167 @@
+"""`write_report`: one report directory — maps, metrics.json, metrics.md, report.html and any
+extra files — written atomically, so a failing or interrupted run never leaves half a one."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from scanplan.metrics import Metrics
+from scanplan.part import Part
+from scanplan.quantities import ScanSpec
+from scanplan.trajectory import Trajectory, atomic_write_bytes, atomic_write_text
+
+# A directory holding one of these was written by scanplan and may be replaced.
+_REPORT_MARKERS = ("metrics.json", "report.html")
+
+
+@dataclass(frozen=True)
+class Evaluated:
+    """One trajectory and its metrics, as a report shows them."""
+
+    name: str
+    trajectory: Trajectory
+    metrics: Metrics
+
+
+@contextmanager
+def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield an empty temporary sibling of `path`; when the block ends without error, it
+    replaces `path` (an earlier report there is removed), else it is removed.
+
+    Refuses to replace a non-empty directory that holds no scanplan report, so a mistyped
+    `-o ~` cannot delete a home directory."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"output {path} exists and is not a directory")
+    if path.is_dir() and any(path.iterdir()):
+        if not any((path / marker).exists() for marker in _REPORT_MARKERS):
+            raise ValueError(
+                f"output directory {path} is not empty and holds no scanplan report; "
+                "choose another or remove it"
+            )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private
+        if path.exists():
+            old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".old"))
+            os.rmdir(old)
+            os.rename(path, old)
+            try:
+                os.rename(tmp, path)
+            except BaseException:
+                os.rename(old, path)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def write_report(
+    out_dir: str | os.PathLike,
+    part: Part,
+    results: Sequence[Evaluated],
+    spec: ScanSpec,
+    pictures: Sequence[Path] = (),
+    notes: Sequence[str] = (),
+    training_log: Path | None = None,
+    files: Mapping[str, str | bytes | Path] | None = None,
+    title: str | None = None,
+) -> Path:
+    """Write the report directory of one or more evaluated trajectories; return report.html.
+
+    One result: its maps (in-spec, distance, orientation) at the top level and metrics.json
+    its metrics. Several: each one's maps in a sub-directory named after it, side-by-side
+    comparison maps at the top level and metrics.json a mapping name -> metrics.
+    pictures: more PNGs for the HTML report (e.g. training curves); files: more outputs by
+    relative name — text, bytes, or a Path to copy."""
+    from scanplan.report.html import PlannerResult, write_html_report
+    from scanplan.report.maps import (
+        COVERAGE_MAP_NAME,
+        metrics_table_markdown,
+        plot_comparison,
+        plot_coverage_comparison,
+        plot_coverage_map,
+        plot_error_maps,
+    )
+
+    if not results:
+        raise ValueError("the report needs at least one evaluated trajectory")
+    names = [r.name for r in results]
+    if len(set(names)) != len(names):
+        raise ValueError(f"report: trajectory names must differ, got {names}")
+    out_dir = Path(out_dir)
+    with atomic_directory(out_dir) as tmp:
+
+        def has_map(m: Metrics) -> bool:
+            return m.coverage_map is not None and len(m.coverage_map.state) > 0
+
+        maps: list[Path] = []
+        if len(results) == 1:
+            r = results[0]
+            if has_map(r.metrics):
+                maps.append(
+                    plot_coverage_map(r.metrics, tmp / COVERAGE_MAP_NAME, r.name, part.name)
+                )
+            maps += plot_error_maps(r.metrics, tmp, planner=r.name, part=part.name)
+            data: dict = r.metrics.to_json_dict()
+        else:
+            for r in results:
+                if has_map(r.metrics):
+                    plot_coverage_map(
+                        r.metrics, tmp / r.name / COVERAGE_MAP_NAME, r.name, part.name
+                    )
+                plot_error_maps(r.metrics, tmp / r.name, planner=r.name, part=part.name)
+            sources = [(r.name, r.metrics) for r in results]
+            if all(has_map(r.metrics) for r in results):
+                maps.append(
+                    plot_coverage_comparison(sources, tmp / "in_spec_coverage_maps.png", part.name)
+                )
+            for quantity in ("distance", "orientation"):
+                path = tmp / f"{quantity}_error_maps.png"
+                maps.append(plot_comparison(sources, quantity, path, part=part.name))
+            data = {r.name: r.metrics.to_json_dict() for r in results}
+        for name, content in (files or {}).items():
+            target = tmp / name
+            if isinstance(content, Path):
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(content, target)
+            else:
+                atomic_write_bytes(
+                    target, content.encode("utf-8") if isinstance(content, str) else content
+                )
+        atomic_write_text(tmp / "metrics.json", json.dumps(data, indent=1, allow_nan=False) + "\n")
+        atomic_write_text(
+            tmp / "metrics.md",
+            f"# {title or part.name}\n\n"
+            + metrics_table_markdown([r.metrics for r in results], names),
+        )
+        with_cloud = [
+            PlannerResult(r.name, r.trajectory, cloud, r.metrics.to_json_dict())
+            for r in results
+            if (cloud := r.metrics.cloud) is not None and len(cloud.points_part)
+        ]
+        if with_cloud:
+            write_html_report(
+                tmp / "report.html",
+                part,
+                with_cloud,
+                spec.sensor.name,
+                training_log=training_log,
+                pictures=[*maps, *pictures],
+                notes=list(notes),
+            )
+    return out_dir / "report.html"
