@@ -94,7 +94,7 @@ def in_spec_band(
     narrower: a local feature must not shrink a whole pass). `margin` scales both
     tolerances: tracking and noise leave less than the full tolerance. Columns without
     surface count as in spec (nothing there to measure)."""
-    from scanplan.planners.geometric import CentredLookahead
+    from scanplan.planners.geometric import CentredLookahead, RobustLookahead
 
     tol_d = margin * spec.tolerance_mm
     cos_tol = math.cos(margin * spec.tol_angle_rad)
@@ -115,12 +115,13 @@ def in_spec_band(
     n_u, n_v, n_w = n_c @ u, n_c @ v, n_c[:, 2]
     if rows.sum() >= 2:
         grid = surface.along_mm[rows]
-        shaper = CentredLookahead()
         pitch = np.interp(surface.along_mm, grid, np.arctan2(n_u, np.maximum(n_w, 1e-9))[rows])
         roll = np.interp(surface.along_mm, grid, np.arctan2(-n_v, np.hypot(n_u, n_w))[rows])
-        pitch = shaper.shape(surface.along_mm, pitch, pitch_lever / wd)
+        pitch = RobustLookahead().shape(surface.along_mm, pitch, pitch_lever / wd)
         lim = StepLimits()
-        roll = shaper.shape(surface.along_mm, roll, 0.8 * lim.dphi_max_rad / spec.delta_s_opt_mm)
+        roll = CentredLookahead().shape(
+            surface.along_mm, roll, 0.8 * lim.dphi_max_rad / spec.delta_s_opt_mm
+        )
         cr = np.cos(roll)
         beam = (  # −z_s: from the surface towards the sensor (the normal, when aligned)
             -np.sin(roll)[:, None] * v

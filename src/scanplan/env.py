@@ -8,6 +8,7 @@ planner feeds its policy), the reward (`reward.reward_terms`) and when an episod
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -351,6 +352,8 @@ class SwathScanEnv(gym.Env):
 
 
 def register() -> None:
+    # v0 stays the paper's MDP on purpose; Gymnasium's "v0 is out of date" note is noise here.
+    warnings.filterwarnings("ignore", message=r".*SwathScan-v0 is out of date.*")
     if ENV_ID not in gym.registry:
         gym.register(id=ENV_ID, entry_point="scanplan.env:SwathScanEnv")
     if ENV_ID_ROLL not in gym.registry:

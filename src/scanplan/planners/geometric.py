@@ -90,6 +90,48 @@ class CentredLookahead:
         return _rate_limit(both, step)
 
 
+@dataclass(frozen=True)
+class RobustLookahead:
+    """The rate-limited profile closest to the target, found exactly by dynamic programming:
+    minimize Σ min((v_i − t_i)², cap²) (+ a slight pull beyond the cap) subject to
+    |v_i − v_{i−1}| ≤ rate·cell. The cap (a
+    truncated square) lets the profile give up on a feature too short to follow at this
+    rate (a drone's nose, a narrow crease) instead of dragging the ramp into the surface
+    around it, which a centred ramp does. Values are quantized to rate·cell (the exact
+    reachable set of a rate-limited walk from a grid start)."""
+
+    cap: float = math.radians(12.0)
+    max_states: int = 4000
+
+    def shape(self, grid_mm, values, max_rate_per_mm):
+        values = np.asarray(values, dtype=np.float64)
+        if len(values) < 2:
+            return values.copy()
+        cell = float(np.mean(np.diff(grid_mm)))
+        step = max(max_rate_per_mm * cell, (values.max() - values.min()) / self.max_states)
+        if step <= 0:
+            return values.copy()
+        lo = float(values.min())
+        levels = lo + step * np.arange(int(math.ceil((values.max() - lo) / step)) + 1)
+        miss = np.abs(levels[None, :] - values[:, None])
+        # Beyond the cap, a slight pull towards the target still breaks ties.
+        cost = np.minimum(miss**2, self.cap**2) + 1e-3 * self.cap * miss
+        total = cost[0].copy()
+        back = np.zeros((len(values), len(levels)), np.int8)
+        for i in range(1, len(values)):  # each level comes from itself or a neighbour
+            options = np.stack(
+                [np.r_[np.inf, total[:-1]], total, np.r_[total[1:], np.inf]]
+            )  # from level −1, 0, +1
+            pick = np.argmin(options, axis=0)
+            back[i] = pick - 1
+            total = options[pick, np.arange(len(levels))] + cost[i]
+        path = np.zeros(len(values), np.int64)
+        path[-1] = int(np.argmin(total))
+        for i in range(len(values) - 1, 0, -1):
+            path[i - 1] = path[i] + back[i, path[i]]
+        return levels[path]
+
+
 # ---- the surface model under a pass -------------------------------------------------------
 
 
@@ -215,6 +257,15 @@ class GeometricPlanner:
     refinements: int = 2
     roll: bool = False
     name: str = "geometric"
+
+    @classmethod
+    def with_roll(cls) -> GeometricPlanner:
+        """Beyond the paper: roll with the line, and a look-ahead that may give up on a
+        feature too short to follow (`RobustLookahead`) among the candidates."""
+        return cls(
+            lookaheads=(RobustLookahead(), CentredLookahead(0.0), CentredLookahead(15.0)),
+            roll=True,
+        )
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         probe = probe_swath(part, swath, spec, self.probe_step_mm, self.probe_columns)
