@@ -82,7 +82,7 @@ def in_spec_band(
     centre_mm: float,
     spec: ScanSpec,
     margin: float = 0.7,
-    centre_halfwidth_mm: float = 15.0,
+    centre_halfwidth_mm: float = 5.0,
     row_quantile: float = 0.15,
     pitch_lever: float = 0.6,
 ) -> Band:

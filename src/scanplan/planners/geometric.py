@@ -186,7 +186,7 @@ def probe_swath(
     if swath.band_mm is not None:
         # An adaptive pass is aligned to the surface at its centre line (the band was
         # predicted that way, `bands.in_spec_band`): height and normal from there.
-        centre = np.abs(np.linspace(lo, hi, columns)) <= max(15.0, (hi - lo) / columns)
+        centre = np.abs(np.linspace(lo, hi, columns)) <= max(3.0, 1.5 * (hi - lo) / columns)
         if (hit & centre[None, :]).any():
             hit_h, facing = hit & centre[None, :], facing & centre[None, :]
             n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
@@ -269,7 +269,9 @@ class GeometricPlanner:
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         probe = probe_swath(part, swath, spec, self.probe_step_mm, self.probe_columns)
-        fan = LineProfilometer(part, spec.sensor.without_noise().with_points(self.sensor_points))
+        # A band of a few cm needs more than the 64 columns that judge a whole line.
+        points = self.sensor_points if swath.band_mm is None else 4 * self.sensor_points
+        fan = LineProfilometer(part, spec.sensor.without_noise().with_points(points))
         best: tuple[float, np.ndarray] | None = None
         for lookahead in self.lookaheads:
             pitch_t, height_t, arc = probe.pitch_rad, probe.height_mm, probe.arc_mm
@@ -287,11 +289,12 @@ class GeometricPlanner:
                     )
                     poses = swath.poses(s, h, th)
                 scan = fan.measure_many(poses)
-                d = mean_distance(scan.z_sensor, scan.valid)
-                alpha = signed_alpha(scan.normals_part, scan.valid, poses)
+                valid = self._band_columns(scan, swath)
+                d = mean_distance(scan.z_sensor, valid)
+                alpha = signed_alpha(scan.normals_part, valid, poses)
                 if self.roll:
-                    tilt = beam_angle(scan.normals_part, scan.valid, poses)
-                    beta = signed_beta(scan.normals_part, scan.valid, poses)
+                    tilt = beam_angle(scan.normals_part, valid, poses)
+                    beta = signed_beta(scan.normals_part, valid, poses)
                 ds = advance(
                     scan.points_part[:-1],
                     scan.valid[:-1],
@@ -341,6 +344,17 @@ class GeometricPlanner:
         th = np.interp(sigma, grid, pitch)
         s, h, th = track(s, h, th, lim)
         return s, h, th, sigma
+
+    @staticmethod
+    def _band_columns(scan, swath: Swath) -> np.ndarray:
+        """The valid columns the pass is judged by: on an adaptive pass, those in its band
+        (x_s within `band_mm`; a station with none there keeps all its valid columns)."""
+        if swath.band_mm is None:
+            return scan.valid
+        lo, hi = swath.band_mm
+        with np.errstate(invalid="ignore"):
+            band = scan.valid & (scan.x_sensor >= lo) & (scan.x_sensor <= hi)
+        return np.where(band.any(axis=1, keepdims=True), band, scan.valid)
 
     def _rolled_stations(
         self, grid, pitch_t, height_t, arc, roll_t, lookahead: Lookahead, spec: ScanSpec
