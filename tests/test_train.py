@@ -13,9 +13,11 @@ import torch
 from safetensors.torch import load_file
 
 from scanplan.learn.checkpoint import save_checkpoint
+from scanplan.learn.config import TrainConfig
+from scanplan.learn.train import train
 from scanplan.planners.rl import RLPlanner
 from scanplan.quantities import ScanSpec
-from scanplan.train import LOG_COLUMNS, TrainConfig, train
+from scanplan.report.training import LOG_COLUMNS, LOG_KEYS, read_log
 from test_env import plate, plate_swath  # noqa: F401  (fixture)
 
 
@@ -40,9 +42,23 @@ def tiny_config(out, **kw) -> TrainConfig:
 def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     result = train(tiny_config(tmp_path / "pol"))
     assert result.timesteps >= 256
+    # SB3's progress.csv: one row per update (256 / (2 x 64)), the paper's quantities in it.
     rows = list(csv.DictReader(result.log_csv.open()))
-    assert len(rows) == 2 and tuple(rows[0]) == LOG_COLUMNS  # 256 / (2 x 64) updates
-    assert all(-1.0 <= float(r["r_alpha"]) <= 0.0 for r in rows)
+    assert result.log_csv.name == "progress.csv" and len(rows) == 2
+    assert set(LOG_KEYS.values()) <= set(rows[0])
+    log = read_log(result.log_csv)
+    assert tuple(log) == LOG_COLUMNS
+    assert log["update"].tolist() == [1, 2] and log["timesteps"].tolist() == [128, 256]
+    for key in ("reward_per_step", "r_d", "r_alpha", "r_delta_s"):
+        assert ((-1.0 <= log[key]) & (log[key] <= 0.0)).all(), key
+    # Overall = weighted partial rewards (1/3 each) unless a lost pass was charged extra.
+    partial = (log["r_d"] + log["r_alpha"] + log["r_delta_s"]) / 3
+    lost = log["lost_episodes"] > 0
+    assert np.allclose(log["reward_per_step"][~lost], partial[~lost], atol=1e-6)
+    assert (np.diff(log["episodes"]) >= 0).all() and (np.diff(log["wall_time_s"]) > 0).all()
+    finished = np.isfinite(log["ep_len_mean"])
+    assert (log["ep_len_mean"][finished] >= 1).all()
+    assert (log["ep_rew_mean"][finished] <= 0).all()
     for png in result.plots:
         assert png.stat().st_size > 5_000 and png.read_bytes()[:4] == b"\x89PNG"
     meta = json.loads(result.policy_json.read_text())
@@ -53,7 +69,7 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     assert state["0.weight"].shape == (64, 7) and state["4.weight"].shape == (3, 64)
 
     # TensorBoard event files exactly when TensorBoard is installed (an optional extra).
-    events = list((result.output_dir / "tensorboard").glob("**/events.out.tfevents.*"))
+    events = list(result.output_dir.glob("events.out.tfevents.*"))
     assert bool(events) == (importlib.util.find_spec("tensorboard") is not None)
 
     planner = RLPlanner.from_file(result.output_dir)
@@ -64,7 +80,7 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     # Resume: continues from the last checkpoint, appends to the log.
     again = train(tiny_config(tmp_path / "pol", total_timesteps=512, resume=str(tmp_path / "pol")))
     assert again.timesteps >= 512
-    assert len(list(csv.DictReader(again.log_csv.open()))) == 4
+    assert read_log(again.log_csv)["update"].tolist() == [1, 2, 3, 4]
 
 
 def test_bad_training_config_is_a_value_error(tmp_path):
@@ -140,9 +156,10 @@ def test_resume_continues_from_the_saved_parameters(tmp_path):
     # Resume to more steps: the count, the log and the checkpoints continue.
     more = train(tiny_config(tmp_path / "run", total_timesteps=512, resume=str(first.output_dir)))
     assert more.timesteps == 512
-    rows = list(csv.DictReader(more.log_csv.open()))
-    assert [int(r["update"]) for r in rows] == [1, 2, 3, 4]
-    assert [int(r["timesteps"]) for r in rows] == [128, 256, 384, 512]
+    log = read_log(more.log_csv)
+    assert log["update"].tolist() == [1, 2, 3, 4]
+    assert log["timesteps"].tolist() == [128, 256, 384, 512]
+    assert (np.diff(log["episodes"]) >= 0).all() and (np.diff(log["wall_time_s"]) > 0).all()
     assert (more.output_dir / "checkpoints" / "ppo_512.json").is_file()
     assert json.loads(more.policy_json.read_text())["training"]["timesteps"] == 512
 
