@@ -271,3 +271,77 @@ def test_checkpoint_with_pickled_tensors_is_refused(tmp_path):
     with pytest.raises(ValueError, match="checkpoint .*ppo_0.safetensors: not a safetensors file"):
         load_checkpoint(path)
     assert not marker.exists()
+
+
+# ---- reproducibility, env options, logs -------------------------------------------------
+
+
+@pytest.mark.slow
+def test_same_config_and_seed_train_bit_identical_weights(tmp_path):
+    def actor(out, **kw):
+        result = train(tiny_config(out, bc_samples=64, **kw))
+        return load_file(result.weights), read_log(result.log_csv)
+
+    first, log_first = actor(tmp_path / "a")
+    again, log_again = actor(tmp_path / "b")
+    other, _ = actor(tmp_path / "c", seed=1)
+    assert first.keys() == again.keys() == other.keys()
+    for key in first:
+        assert torch.equal(first[key], again[key]), key
+    assert not all(torch.equal(first[key], other[key]) for key in first)
+    for key in ("reward_per_step", "r_d", "r_alpha", "r_delta_s", "episodes"):
+        assert np.array_equal(log_first[key], log_again[key]), key
+
+
+def test_step_limits_in_the_config_reach_the_envs_and_the_policy_file():
+    import math
+
+    from scanplan.dynamics import StepLimits
+    from scanplan.learn.vec_env import make_vec_env, swath_env_kwargs
+    from scanplan.policy import EnvOptions
+
+    limits = {"dy_max_mm": 0.5, "dz_max_mm": 0.8, "dtheta_max_rad": math.radians(0.5)}
+    env = {"fan_points": 32, "noise": False, "segment_mm": [20.0, 40.0], **limits}
+    want = StepLimits(**limits)
+    vec = make_vec_env(TrainConfig(n_envs=2, env=env))
+    assert [e.limits for e in vec.unwrapped.envs] == [want, want]  # type: ignore[attr-defined]
+    obs = vec.reset()
+    assert obs.shape == (2, 7) and vec.action_space.shape == (3,)
+    # What policy.json records gives the same env back (the rl planner's side).
+    recorded = EnvOptions.from_env_kwargs(env).env_kwargs()
+    assert swath_env_kwargs(recorded)["limits"] == want
+    assert "limits" not in swath_env_kwargs({"fan_points": 32})  # the env's defaults
+
+
+def test_batched_vec_env_reports_episodes_through_sb3_vec_monitor():
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from scanplan.learn.vec_env import make_vec_env
+
+    vec = make_vec_env(tiny_config("unused", env={"fan_points": 32, "segment_mm": (5.0, 6.0)}))
+    assert isinstance(vec, VecMonitor)
+    vec.reset()
+    ended = []
+    for _ in range(40):
+        _, rewards, dones, infos = vec.step(np.tile([1.0, 0.0, 0.0], (2, 1)).astype(np.float32))
+        ended += [i["episode"] for i, d in zip(infos, dones, strict=True) if d]
+        assert all(("episode" in i) == d for i, d in zip(infos, dones, strict=True))
+    assert ended and all(e["l"] >= 1 and e["r"] <= 0 for e in ended)
+
+
+def test_read_log_reads_the_shipped_old_format_log_unchanged():
+    from scanplan.planners.rl import DEFAULT_POLICY
+
+    path = DEFAULT_POLICY / "training_log.csv"
+    log = read_log(path)
+    rows = list(csv.DictReader(path.open()))
+    assert tuple(log) == LOG_COLUMNS and len(log["timesteps"]) == len(rows) == 30
+    for column in LOG_COLUMNS:
+        assert log[column].tolist() == [float(r[column]) for r in rows], column
+
+
+def test_read_log_refuses_a_csv_that_is_no_training_log(tmp_path):
+    path = tmp_path / "x.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="x.csv: neither SB3's progress.csv"):
+        read_log(path)
