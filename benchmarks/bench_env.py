@@ -26,7 +26,8 @@ def main() -> None:
     args = parser.parse_args()
 
     from scanplan.env import SwathScanEnv
-    from scanplan.train import TrainConfig, make_vec_env
+    from scanplan.learn.config import TrainConfig
+    from scanplan.learn.vec_env import make_vec_env
 
     action = np.array([0.5, 0.0, 0.0], np.float32)
     env = SwathScanEnv(noise=False)

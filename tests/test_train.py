@@ -13,9 +13,11 @@ import torch
 from safetensors.torch import load_file
 
 from scanplan.learn.checkpoint import save_checkpoint
+from scanplan.learn.config import TrainConfig
+from scanplan.learn.train import train
 from scanplan.planners.rl import RLPlanner
 from scanplan.quantities import ScanSpec
-from scanplan.train import LOG_COLUMNS, TrainConfig, train
+from scanplan.report.training import LOG_COLUMNS, LOG_KEYS, read_log
 from test_env import plate, plate_swath  # noqa: F401  (fixture)
 
 
@@ -40,9 +42,24 @@ def tiny_config(out, **kw) -> TrainConfig:
 def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     result = train(tiny_config(tmp_path / "pol"))
     assert result.timesteps >= 256
+    # SB3's progress.csv: one row per update (256 / (2 x 64)), the paper's quantities in it.
     rows = list(csv.DictReader(result.log_csv.open()))
-    assert len(rows) == 2 and tuple(rows[0]) == LOG_COLUMNS  # 256 / (2 x 64) updates
-    assert all(-1.0 <= float(r["r_alpha"]) <= 0.0 for r in rows)
+    assert result.log_csv.name == "progress.csv" and len(rows) == 2
+    assert set(LOG_KEYS.values()) <= set(rows[0])
+    log = read_log(result.log_csv)
+    assert tuple(log) == LOG_COLUMNS
+    assert log["update"].tolist() == [1, 2] and log["timesteps"].tolist() == [128, 256]
+    for key in ("reward_per_step", "r_d", "r_alpha", "r_delta_s"):
+        assert ((-1.0 <= log[key]) & (log[key] <= 0.0)).all(), key
+    # Overall = weighted partial rewards (1/3 each) unless a lost pass was charged extra
+    # (or SB3 bootstrapped a truncated pass's reward: none does in this seeded run).
+    partial = (log["r_d"] + log["r_alpha"] + log["r_delta_s"]) / 3
+    lost = log["lost_episodes"] > 0
+    assert np.allclose(log["reward_per_step"][~lost], partial[~lost], atol=1e-6)
+    assert (np.diff(log["episodes"]) >= 0).all() and (np.diff(log["wall_time_s"]) > 0).all()
+    finished = np.isfinite(log["ep_len_mean"])
+    assert (log["ep_len_mean"][finished] >= 1).all()
+    assert (log["ep_rew_mean"][finished] <= 0).all()
     for png in result.plots:
         assert png.stat().st_size > 5_000 and png.read_bytes()[:4] == b"\x89PNG"
     meta = json.loads(result.policy_json.read_text())
@@ -53,7 +70,7 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     assert state["0.weight"].shape == (64, 7) and state["4.weight"].shape == (3, 64)
 
     # TensorBoard event files exactly when TensorBoard is installed (an optional extra).
-    events = list((result.output_dir / "tensorboard").glob("**/events.out.tfevents.*"))
+    events = list(result.output_dir.glob("events.out.tfevents.*"))
     assert bool(events) == (importlib.util.find_spec("tensorboard") is not None)
 
     planner = RLPlanner.from_file(result.output_dir)
@@ -64,7 +81,7 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
     # Resume: continues from the last checkpoint, appends to the log.
     again = train(tiny_config(tmp_path / "pol", total_timesteps=512, resume=str(tmp_path / "pol")))
     assert again.timesteps >= 512
-    assert len(list(csv.DictReader(again.log_csv.open()))) == 4
+    assert read_log(again.log_csv)["update"].tolist() == [1, 2, 3, 4]
 
 
 def test_bad_training_config_is_a_value_error(tmp_path):
@@ -140,9 +157,10 @@ def test_resume_continues_from_the_saved_parameters(tmp_path):
     # Resume to more steps: the count, the log and the checkpoints continue.
     more = train(tiny_config(tmp_path / "run", total_timesteps=512, resume=str(first.output_dir)))
     assert more.timesteps == 512
-    rows = list(csv.DictReader(more.log_csv.open()))
-    assert [int(r["update"]) for r in rows] == [1, 2, 3, 4]
-    assert [int(r["timesteps"]) for r in rows] == [128, 256, 384, 512]
+    log = read_log(more.log_csv)
+    assert log["update"].tolist() == [1, 2, 3, 4]
+    assert log["timesteps"].tolist() == [128, 256, 384, 512]
+    assert (np.diff(log["episodes"]) >= 0).all() and (np.diff(log["wall_time_s"]) > 0).all()
     assert (more.output_dir / "checkpoints" / "ppo_512.json").is_file()
     assert json.loads(more.policy_json.read_text())["training"]["timesteps"] == 512
 
@@ -254,3 +272,77 @@ def test_checkpoint_with_pickled_tensors_is_refused(tmp_path):
     with pytest.raises(ValueError, match="checkpoint .*ppo_0.safetensors: not a safetensors file"):
         load_checkpoint(path)
     assert not marker.exists()
+
+
+# ---- reproducibility, env options, logs -------------------------------------------------
+
+
+@pytest.mark.slow
+def test_same_config_and_seed_train_bit_identical_weights(tmp_path):
+    def actor(out, **kw):
+        result = train(tiny_config(out, bc_samples=64, **kw))
+        return load_file(result.weights), read_log(result.log_csv)
+
+    first, log_first = actor(tmp_path / "a")
+    again, log_again = actor(tmp_path / "b")
+    other, _ = actor(tmp_path / "c", seed=1)
+    assert first.keys() == again.keys() == other.keys()
+    for key in first:
+        assert torch.equal(first[key], again[key]), key
+    assert not all(torch.equal(first[key], other[key]) for key in first)
+    for key in ("reward_per_step", "r_d", "r_alpha", "r_delta_s", "episodes"):
+        assert np.array_equal(log_first[key], log_again[key]), key
+
+
+def test_step_limits_in_the_config_reach_the_envs_and_the_policy_file():
+    import math
+
+    from scanplan.dynamics import StepLimits
+    from scanplan.learn.vec_env import make_vec_env, swath_env_kwargs
+    from scanplan.policy import EnvOptions
+
+    limits = {"dy_max_mm": 0.5, "dz_max_mm": 0.8, "dtheta_max_rad": math.radians(0.5)}
+    env = {"fan_points": 32, "noise": False, "segment_mm": [20.0, 40.0], **limits}
+    want = StepLimits(**limits)
+    vec = make_vec_env(TrainConfig(n_envs=2, env=env))
+    assert [e.limits for e in vec.unwrapped.envs] == [want, want]  # type: ignore[attr-defined]
+    obs = vec.reset()
+    assert obs.shape == (2, 7) and vec.action_space.shape == (3,)
+    # What policy.json records gives the same env back (the rl planner's side).
+    recorded = EnvOptions.from_env_kwargs(env).env_kwargs()
+    assert swath_env_kwargs(recorded)["limits"] == want
+    assert "limits" not in swath_env_kwargs({"fan_points": 32})  # the env's defaults
+
+
+def test_batched_vec_env_reports_episodes_through_sb3_vec_monitor():
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from scanplan.learn.vec_env import make_vec_env
+
+    vec = make_vec_env(tiny_config("unused", env={"fan_points": 32, "segment_mm": (5.0, 6.0)}))
+    assert isinstance(vec, VecMonitor)
+    vec.reset()
+    ended = []
+    for _ in range(40):
+        _, rewards, dones, infos = vec.step(np.tile([1.0, 0.0, 0.0], (2, 1)).astype(np.float32))
+        ended += [i["episode"] for i, d in zip(infos, dones, strict=True) if d]
+        assert all(("episode" in i) == d for i, d in zip(infos, dones, strict=True))
+    assert ended and all(e["l"] >= 1 and e["r"] <= 0 for e in ended)
+
+
+def test_read_log_reads_the_shipped_old_format_log_unchanged():
+    from scanplan.planners.rl import DEFAULT_POLICY
+
+    path = DEFAULT_POLICY / "training_log.csv"
+    log = read_log(path)
+    rows = list(csv.DictReader(path.open()))
+    assert tuple(log) == LOG_COLUMNS and len(log["timesteps"]) == len(rows) == 30
+    for column in LOG_COLUMNS:
+        assert log[column].tolist() == [float(r[column]) for r in rows], column
+
+
+def test_read_log_refuses_a_csv_that_is_no_training_log(tmp_path):
+    path = tmp_path / "x.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="x.csv: neither SB3's progress.csv"):
+        read_log(path)

@@ -297,7 +297,8 @@ def train_cmd(
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
     import shlex
 
-    from scanplan.train import TrainConfig, train
+    from scanplan.learn.config import TrainConfig
+    from scanplan.learn.train import train
 
     states = {
         "paper": (True, False),
@@ -307,10 +308,6 @@ def train_cmd(
     }
     if state not in states:
         raise ValueError(f"unknown --state {state!r}; use one of {', '.join(states)}")
-    if timesteps <= 0 or n_envs < 1 or fan_points < 2 or procedural < 0:
-        raise ValueError("--timesteps, --n-envs, --fan-points and --procedural must be positive")
-    if vec not in ("batched", "subproc"):
-        raise ValueError(f"unknown --vec {vec!r}; use batched or subproc")
     if resume is not None and not resume.is_dir():
         raise ValueError(f"--resume {resume} is not a directory")
     use_position, lookahead = states[state]
@@ -327,7 +324,7 @@ def train_cmd(
         seed=seed,
         n_envs=n_envs,
         vec_env=vec,
-        n_steps=max(2048 // n_envs, 8),
+        n_steps=max(2048 // max(n_envs, 1), 8),  # the paper: an update every 2048 steps
         log_std_init=stds[0] if len(stds) == 1 else stds,
         init_advance=init_advance,
         bc_samples=bc_samples,

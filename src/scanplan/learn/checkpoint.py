@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 from scanplan.policy import read_tensors
 
 if TYPE_CHECKING:
-    from scanplan.train import TrainConfig
+    from scanplan.learn.config import TrainConfig
 
 FORMAT: Literal["scanplan-checkpoint/1"] = "scanplan-checkpoint/1"
 CHECKPOINT_DIR = "checkpoints"
@@ -161,7 +161,7 @@ def resumed_config(ckpt: Checkpoint, config: TrainConfig) -> TrainConfig:
     """The recorded config (everything that shapes the model and its envs: parts, seed,
     PPO hyperparameters, net, env options), with this run's output, total timesteps, resume,
     checkpoint interval, progress bar and command."""
-    from scanplan.train import TrainConfig
+    from scanplan.learn.config import TrainConfig
 
     try:
         recorded = TypeAdapter(TrainConfig).validate_python(ckpt.meta.config)

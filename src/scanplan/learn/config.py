@@ -1,0 +1,80 @@
+"""The training configuration: one typed object that `scanplan train` builds and
+`learn.train.train` runs; checkpoints record it and resuming validates it back.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+VEC_ENVS = ("batched", "subproc")
+ACTIVATIONS = ("relu", "tanh")
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run needs. PPO fields keep stable-baselines3's names; their
+    defaults are the paper's table. SB3's `n_steps` counts steps per env: 16 batched envs x
+    128 = the paper's update every 2048 steps. `env` holds `SwathScanEnv` keyword arguments,
+    except that the step limits are given as numbers (`dy_max_mm`, `dz_max_mm`,
+    `dtheta_max_rad`, as in policy.json) and `procedural_parts` is drawn once per run."""
+
+    output_dir: str = "policy"
+    parts: tuple[str, ...] = ("training-piece",)
+    total_timesteps: int = 1_000_000
+    seed: int = 0
+    n_envs: int = 16
+    vec_env: str = "batched"
+    learning_rate: float = 3e-4
+    n_steps: int = 128
+    batch_size: int = 64
+    gamma: float = 0.99
+    clip_range: float = 0.2
+    n_epochs: int = 10
+    net_arch: tuple[int, ...] = (64, 64)
+    activation: str = "relu"
+    log_std_init: float | tuple[float, ...] = 0.0  # one per action: (Δy, Δz, Δθ)
+    init_advance: float | None = None  # initial mean Δy action (0.5 = Δs_opt at Δy_max 1 mm)
+    bc_samples: int = 0  # > 0: behaviour-clone the feedback controller on this many states first
+    env: dict[str, Any] = field(
+        default_factory=lambda: {
+            "fan_points": 128,
+            "noise": False,  # µm-scale noise does not move mm-scale D, α, Δs; 20 % faster
+            "use_position": True,
+            "lookahead": False,
+            "segment_mm": (100.0, 400.0),
+            "procedural_parts": 0,
+        }
+    )
+    checkpoint_every_updates: int = 10
+    resume: str | None = None
+    progress_bar: bool = True
+    command: str = ""
+
+    def __post_init__(self) -> None:
+        positive = {
+            "total_timesteps": self.total_timesteps,
+            "n_envs": self.n_envs,
+            "n_steps": self.n_steps,
+            "batch_size": self.batch_size,
+            "n_epochs": self.n_epochs,
+            "checkpoint_every_updates": self.checkpoint_every_updates,
+        }
+        for name, value in positive.items():
+            if value < 1:
+                raise ValueError(f"training config: {name} must be >= 1, got {value}")
+        if self.vec_env not in VEC_ENVS:
+            raise ValueError(f"training config: vec_env {self.vec_env!r}, use one of {VEC_ENVS}")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(
+                f"training config: activation {self.activation!r}, use one of {ACTIVATIONS}"
+            )
+        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
+            raise ValueError(
+                f"training config: learning_rate must be > 0, got {self.learning_rate}"
+            )
+        if self.bc_samples < 0:
+            raise ValueError(f"training config: bc_samples must be >= 0, got {self.bc_samples}")
+        if self.bc_samples > 0 and self.vec_env != "batched":
+            raise ValueError("training config: behaviour cloning needs vec_env 'batched'")

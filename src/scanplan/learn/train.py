@@ -1,0 +1,249 @@
+"""`train(TrainConfig)`: PPO (stable-baselines3) over the training vector env, the paper's
+curves through SB3's logger, checkpoints and resuming (no pickle), and the actor exported as
+a policy file (`scanplan.policy`: safetensors + validated JSON).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scanplan.learn.checkpoint import (
+    latest_checkpoint,
+    load_checkpoint,
+    restore,
+    resumed_config,
+    save_checkpoint,
+)
+from scanplan.learn.config import TrainConfig
+from scanplan.policy import FORMAT as POLICY_FORMAT
+from scanplan.policy import (
+    WEIGHTS,
+    Architecture,
+    EnvOptions,
+    PolicyMeta,
+    TrainingRecord,
+    save_policy,
+)
+from scanplan.report.training import (
+    CURVES,
+    PROGRESS_CSV,
+    final_metrics,
+    plot_training_curves,
+    read_log,
+)
+
+_STATS_WINDOW = 50  # episodes in SB3's rollout/ep_*_mean (the old log's window)
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    output_dir: Path
+    policy_json: Path
+    weights: Path
+    log_csv: Path  # SB3's progress.csv: read it with `report.training.read_log`
+    plots: tuple[Path, ...]
+    timesteps: int
+    wall_time_s: float
+    final: dict[str, float]
+
+
+def actor_state_dict(model: Any) -> dict[str, Any]:
+    """The deterministic actor of an SB3 PPO MlpPolicy as `nn.Sequential` weights:
+    hidden Linear layers (keys `<2i>.weight/bias`) then the action head."""
+    linears = [m for m in model.policy.mlp_extractor.policy_net if hasattr(m, "weight")]
+    linears.append(model.policy.action_net)
+    state = {}
+    for i, layer in enumerate(linears):
+        state[f"{2 * i}.weight"] = layer.weight.detach().cpu().clone()
+        state[f"{2 * i}.bias"] = layer.bias.detach().cpu().clone()
+    return state
+
+
+def policy_meta(model: Any, config: TrainConfig, training: dict[str, Any]) -> PolicyMeta:
+    """The policy.json of a trained model (validated: see `scanplan.policy`)."""
+    return PolicyMeta(
+        format=POLICY_FORMAT,
+        weights=WEIGHTS,
+        architecture=Architecture(
+            obs_dim=int(model.observation_space.shape[0]),
+            hidden=tuple(config.net_arch),
+            activation=config.activation,  # type: ignore[arg-type]
+            action_dim=int(model.action_space.shape[0]),
+        ),
+        env=EnvOptions.from_env_kwargs(config.env),
+        training=TrainingRecord.model_validate(training),
+    )
+
+
+def build_ppo(config: TrainConfig, vec: Any) -> Any:
+    """PPO with the config's hyperparameters (SB3's names), on the CPU. A resumed run builds
+    it exactly so, then loads the checkpoint."""
+    import torch
+    from stable_baselines3 import PPO
+
+    activation = {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh}[config.activation]
+    return PPO(
+        "MlpPolicy",
+        vec,
+        learning_rate=config.learning_rate,
+        n_steps=config.n_steps,
+        batch_size=config.batch_size,
+        gamma=config.gamma,
+        clip_range=config.clip_range,
+        n_epochs=config.n_epochs,
+        policy_kwargs={
+            "net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)},
+            "activation_fn": activation,
+        },
+        stats_window_size=_STATS_WINDOW,
+        seed=config.seed,
+        device="cpu",
+        verbose=0,
+    )
+
+
+def _init_actor(model: Any, config: TrainConfig) -> None:
+    import torch
+
+    with torch.no_grad():
+        # Per-action initial spread: a 1° pitch jump moves the footprint by W_d·Δθ ≈ 7 mm, so
+        # exploring Δθ as widely as Δy ruins every Δs reward (capped at −1, no gradient).
+        model.policy.log_std[:] = torch.as_tensor(config.log_std_init)
+        # Start from the nominal advance: a policy that starts at Δy ≈ 0 first learns that
+        # standing still at a flat start beats meeting the ramps ahead.
+        if config.init_advance is not None:
+            model.policy.action_net.bias[0] = config.init_advance
+
+
+def _read_rows(path: Path) -> tuple[list[str], list[dict[str, str]]]:
+    if not path.is_file():
+        return [], []
+    with path.open(newline="") as f:
+        reader = csv.DictReader(f)
+        return list(reader.fieldnames or ()), list(reader)
+
+
+def _prepend_rows(path: Path, before: tuple[list[str], list[dict[str, str]]]) -> None:
+    """SB3's CSV logger starts its file afresh: put the resumed run's earlier rows first."""
+    old_keys, old_rows = before
+    if not old_rows:
+        return
+    keys, rows = _read_rows(path)
+    columns = old_keys + [k for k in keys if k not in old_keys]
+    tmp = path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, columns, restval="")
+        writer.writeheader()
+        writer.writerows(old_rows + rows)
+    os.replace(tmp, path)
+
+
+def _last(log: dict[str, np.ndarray], key: str) -> float:
+    values = log[key][np.isfinite(log[key])]
+    return float(values[-1]) if len(values) else 0.0
+
+
+def train(config: TrainConfig) -> TrainResult:
+    """Train PPO and write in `config.output_dir`: policy.json + policy.safetensors,
+    progress.csv (SB3's logger; the paper's quantities under `report.training.LOG_KEYS`),
+    the curve PNGs, and checkpoints/ (safetensors + JSON, for resuming only). Resuming takes
+    the model's and envs' config from the checkpoint (`resumed_config`) and continues the
+    count, the log and the checkpoints. Torch runs on one thread while training."""
+    import torch
+
+    from scanplan.learn.callbacks import PaperQuantities, make_logger
+    from scanplan.learn.teacher import behaviour_clone
+    from scanplan.learn.vec_env import make_vec_env
+
+    ckpt = None
+    if config.resume:
+        ckpt = load_checkpoint(latest_checkpoint(config.resume))
+        config = resumed_config(ckpt, config)
+    EnvOptions.from_env_kwargs(config.env)  # fail before training, not when saving
+    out = Path(config.output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    log_csv = out / PROGRESS_CSV
+    before: tuple[list[str], list[dict[str, str]]] = ([], [])
+    wall_before, episodes_before = 0.0, 0
+    if config.resume:
+        previous = Path(config.resume) / PROGRESS_CSV
+        if previous.resolve() == log_csv.resolve() and previous.is_file():
+            # Kept on disk until merged: SB3's logger truncates progress.csv.
+            previous = previous.replace(out / f"{PROGRESS_CSV}.before-resume")
+        before = _read_rows(previous)
+        if before[1]:
+            log = read_log(previous)
+            wall_before, episodes_before = _last(log, "wall_time_s"), int(_last(log, "episodes"))
+    else:
+        log_csv.unlink(missing_ok=True)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # several times faster here than torch's default for a 64x64 MLP
+    start = time.perf_counter()
+    bc_mse = math.nan
+    vec = make_vec_env(config)
+    try:
+        model = build_ppo(config, vec)
+        if ckpt is not None:
+            restore(model, ckpt)
+            vec.seed(config.seed + model.num_timesteps)
+        else:
+            _init_actor(model, config)
+            if config.bc_samples > 0:
+                bc_mse = behaviour_clone(model, vec, config.bc_samples, config.seed)
+        remaining = config.total_timesteps - model.num_timesteps
+        if remaining > 0:
+            model.set_logger(make_logger(out))
+            callback = PaperQuantities(config, out, start, wall_before, episodes_before)
+            try:
+                model.learn(
+                    remaining,
+                    callback=callback,
+                    progress_bar=config.progress_bar,
+                    reset_num_timesteps=False,
+                )
+            finally:
+                model.logger.close()
+                _prepend_rows(log_csv, before)
+            save_checkpoint(model, config, out)
+        elif before[1]:
+            _prepend_rows(log_csv, before)  # nothing new: the log is the resumed one
+    finally:
+        vec.close()
+        torch.set_num_threads(threads)
+    (out / f"{PROGRESS_CSV}.before-resume").unlink(missing_ok=True)
+    wall = time.perf_counter() - start + wall_before
+    final = (
+        final_metrics(read_log(log_csv)) if log_csv.is_file() else dict.fromkeys(CURVES, math.nan)
+    )
+    cfg = {k: v for k, v in asdict(config).items() if k not in ("command", "resume")}
+    training = {
+        "command": config.command,
+        "seed": config.seed,
+        "timesteps": int(model.num_timesteps),
+        "wall_time_s": round(wall, 1),
+        "final_metrics_last5_updates": final,
+        "behaviour_cloning_mse": bc_mse,
+        "config": cfg,
+        "machine_cores": os.cpu_count(),
+    }
+    meta = policy_meta(model, config, training)
+    policy_json = save_policy(actor_state_dict(model), meta, out)
+    plots = plot_training_curves(log_csv, out) if log_csv.is_file() else ()
+    return TrainResult(
+        output_dir=out,
+        policy_json=policy_json,
+        weights=out / meta.weights,
+        log_csv=log_csv,
+        plots=plots,
+        timesteps=int(model.num_timesteps),
+        wall_time_s=wall,
+        final=final,
+    )
