@@ -158,10 +158,10 @@ def in_spec_band(
     return Band(centre_mm, lo, hi, row_lo, row_hi)
 
 
-def _covered_cells(surface: TopSurface, band: Band) -> np.ndarray:
-    """(k, c) bool: the surface cells inside the band's per-row edges."""
+def _covered_cells(surface: TopSurface, band: Band, edge_mm: float = 0.0) -> np.ndarray:
+    """(k, c) bool: the surface cells inside the band's per-row edges, less `edge_mm`."""
     across = surface.across_mm[None, :]
-    lo, hi = band.row_lo_mm[:, None], band.row_hi_mm[:, None]
+    lo, hi = band.row_lo_mm[:, None] + edge_mm, band.row_hi_mm[:, None] - edge_mm
     with np.errstate(invalid="ignore"):
         return surface.hit & (across >= lo) & (across <= hi)
 
@@ -170,15 +170,18 @@ def adaptive_offsets(
     surface: TopSurface,
     spec: ScanSpec,
     candidate_step_mm: float = 10.0,
-    min_gain: float = 0.01,
+    min_gain: float = 0.005,
     max_passes: int = 60,
+    edge_mm: float = 8.0,
 ) -> list[Band]:
     """Pass centres chosen greedily, set-cover style: among candidate centres every
     `candidate_step_mm` across the footprint, take the one whose predicted in-spec band
     covers the most surface not yet covered, until the next one would add less than
     `min_gain` of the surface. Curved parts get closer passes, flat ones fewer, and a strip
     no pass can hold in spec (a steep flange) does not pull in passes that add nothing.
-    Returned in order across the part (for the snake)."""
+    A band claims its cells less `edge_mm` at each edge, so neighbouring passes overlap
+    (tracking and the camera's shadow blur a band's edge). Returned in order across the
+    part (for the snake)."""
     cols = surface.hit.any(axis=0)
     if not cols.any():
         raise ValueError("the part has no surface a top-down raster can see")
@@ -188,7 +191,7 @@ def adaptive_offsets(
     if len(centres) == 0:
         centres = np.array([0.5 * (first + last)])
     bands = [in_spec_band(surface, float(c), spec) for c in centres]
-    cells = np.stack([_covered_cells(surface, b).ravel() for b in bands])
+    cells = np.stack([_covered_cells(surface, b, edge_mm).ravel() for b in bands])
     total = max(int(surface.hit.sum()), 1)
     covered = np.zeros(cells.shape[1], bool)
     chosen: list[int] = []
