@@ -1,13 +1,19 @@
-"""Scan quality of the three planners, side by side, on parts none of them was tuned on.
+"""Scan quality of the planners, side by side, on parts none of them was tuned on.
 
-For each part: plan `fixed`, `geometric` and `rl` (the shipped policy) over the same base path,
-evaluate each (noise on, seed 0) and print mean |distance error|, mean orientation error,
-spacing CV, backward steps and coverage, then the ratios the issues judge by (rl / fixed,
-rl / geometric, geometric / fixed), measured in the same run.
+For each part and planner (each with its own default raster): plan, evaluate (noise on,
+seed 0) and print in-spec coverage (the headline, `metrics.evaluate`), an independent check
+of it from the simulated point cloud of `scanplan scan` (its per-point distance and
+orientation error fields, area samples of the upward-visible surface, a sample counts if an
+in-spec point lies within `--radius` mm), plain coverage, mean |distance| and orientation
+errors, passes, profiles, cycle time and planning time.
+
+Planners: fixed (the paper's baseline), geometric-v0 (the paper's model: pitch only, nominal
+raster), feedback (the controller, with roll), geometric (roll + adaptive passes), rl (the
+shipped policy).
 
 Run: .venv/bin/python benchmarks/compare_planners.py [PART[:UNITS] ...] [--points 1024]
   PART is a built-in name (door, drone, training-piece) or a mesh file; default door drone.
-  Example: ... door drone ../shared/parts/vito_left_car_door.obj:m \
+  Example: ... door drone ../shared/parts/vito_left_car_door.obj:m \\
                 ../shared/parts/trimesh_featuretype.stl:in
 """
 
@@ -17,63 +23,69 @@ import argparse
 import time
 from pathlib import Path
 
-from scanplan.metrics import Metrics, evaluate
-from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_path
+import numpy as np
+from scipy.spatial import cKDTree
+
+from scanplan.cloud import simulate_cloud
+from scanplan.metrics import Metrics, evaluate, upward_visible_samples
+from scanplan.part import Part, load_part
+from scanplan.planners import Planner, make_planner, plan_scan
 from scanplan.quantities import ScanSpec
-from scanplan.swaths import plan_swaths
+from scanplan.trajectory import Trajectory
 
-PLANNERS = ("fixed", "geometric", "rl")
+PLANNERS: dict[str, tuple[str, bool, str]] = {  # label: (planner, roll, raster)
+    "fixed": ("fixed", False, "nominal"),
+    "geometric-v0": ("geometric", False, "nominal"),
+    "feedback": ("feedback", True, "auto"),
+    "geometric": ("geometric", True, "auto"),
+    "rl": ("rl", True, "auto"),
+}
 
 
-def cell(m: Metrics) -> str:
-    return (
-        f"{m.distance_error_mean_abs_mm:6.2f} / {m.orientation_error_mean_deg:5.2f} / "
-        f"{m.spacing_cv:.2f} / {m.backward_steps} / {m.coverage_fraction:.3f}"
+def cloud_in_spec(part: Part, spec: ScanSpec, traj: Trajectory, points: int, radius: float):
+    """In-spec coverage from the point cloud alone: the check a user can run on the PLY."""
+    cloud = simulate_cloud(part, spec.sensor.with_points(points), traj, seed=0)
+    ok = (np.abs(cloud.distance_error_mm) <= spec.tolerance_mm) & (
+        cloud.orientation_error_rad <= spec.tol_angle_rad
     )
+    samples = upward_visible_samples(part, 2.0, seed=1).points
+    near = cKDTree(cloud.points_part[ok]).query(samples, distance_upper_bound=radius)[0]
+    return float(np.isfinite(near).mean())
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("parts", nargs="*", default=["door", "drone"])
     parser.add_argument("--points", type=int, default=1024, help="columns per profile")
-    parser.add_argument("--direction", default="auto")
+    parser.add_argument("--radius", type=float, default=1.0, help="cloud check radius, mm")
+    parser.add_argument("--planners", default=",".join(PLANNERS))
     args = parser.parse_args()
-
+    labels = args.planners.split(",")
     spec = ScanSpec()
-    sensor = spec.sensor
-    print("per planner: mean |dist err| mm / mean orient. err ° / spacing CV / backward / coverage")
-    print(f"| part | {' | '.join(PLANNERS)} | rl/fixed d, o | rl/geo d | geo/fixed d, o |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "per planner: in-spec (metrics) / in-spec (cloud check) / coverage / "
+        "|dist err| mm / orient. err ° / passes / profiles / cycle s / plan s"
+    )
+    print(f"| part | {' | '.join(labels)} |")
+    print("|---" * (len(labels) + 1) + "|")
     for arg in args.parts:
         path, _, units = arg.partition(":")
         part = load_part(path, units or "mm")
-        swaths = plan_swaths(part, sensor, args.direction)
-        results: dict[str, Metrics] = {}
-        seconds: dict[str, float] = {}
-        for name in PLANNERS:
+        cells = []
+        for label in labels:
+            name, roll, raster = PLANNERS[label]
+            planner: Planner = make_planner(name, roll=roll)
             t0 = time.perf_counter()
-            traj = plan_path(part, spec, make_planner(name), swaths)
-            results[name] = evaluate(part, spec, traj, points_per_profile=args.points)
-            seconds[name] = time.perf_counter() - t0
-        f, g, r = (results[n] for n in PLANNERS)
-
-        def ratio(a: float, b: float) -> str:
-            return f"{a / b:.2f}" if b > 0 else "n/a"
-
-        print(
-            f"| {Path(path).stem} ({len(swaths)} passes) | {cell(f)} | {cell(g)} | {cell(r)} | "
-            f"{ratio(r.distance_error_mean_abs_mm, f.distance_error_mean_abs_mm)}, "
-            f"{ratio(r.orientation_error_mean_deg, f.orientation_error_mean_deg)} | "
-            f"{ratio(r.distance_error_mean_abs_mm, g.distance_error_mean_abs_mm)} | "
-            f"{ratio(g.distance_error_mean_abs_mm, f.distance_error_mean_abs_mm)}, "
-            f"{ratio(g.orientation_error_mean_deg, f.orientation_error_mean_deg)} |",
-            flush=True,
-        )
-        print(
-            "    seconds (plan+evaluate): " + ", ".join(f"{n} {s:.0f}" for n, s in seconds.items()),
-            flush=True,
-        )
+            swaths, traj = plan_scan(part, spec, planner, raster)
+            plan_s = time.perf_counter() - t0
+            m: Metrics = evaluate(part, spec, traj, points_per_profile=args.points)
+            check = cloud_in_spec(part, spec, traj, args.points, args.radius)
+            cells.append(
+                f"{m.in_spec_coverage:.3f} / {check:.3f} / {m.coverage_fraction:.3f} / "
+                f"{m.distance_error_mean_abs_mm:.2f} / {m.orientation_error_mean_deg:.1f} / "
+                f"{len(swaths)} / {m.profiles} / {m.cycle_time_s:.0f} / {plan_s:.1f}"
+            )
+        print(f"| {Path(path).stem} | {' | '.join(cells)} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -207,14 +207,3 @@ def adaptive_offsets(
         chosen.append(best)
         covered |= cells[best]
     return [bands[i] for i in sorted(chosen)]
-
-
-def predicted_in_spec(surface: TopSurface, bands: list[Band]) -> float:
-    """Fraction of the grid's surface cells inside some pass's per-row band: the in-spec
-    coverage these passes are expected to reach (ranks scan directions)."""
-    covered = np.zeros(surface.hit.shape, bool)
-    across = surface.across_mm[None, :]
-    for band in bands:
-        lo, hi = band.row_lo_mm[:, None], band.row_hi_mm[:, None]
-        covered |= (across >= lo) & (across <= hi)
-    return float(covered[surface.hit].mean()) if surface.hit.any() else 0.0

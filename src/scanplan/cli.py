@@ -173,23 +173,38 @@ def plan_cmd(
             "(the long side unless scanning across leaves clearly less cross-line error)"
         ),
     ] = "auto",
-    overlap: Annotated[float, typer.Option(help="overlap of adjacent passes, [0, 1)")] = 0.2,
+    overlap: Annotated[
+        float, typer.Option(help="overlap of adjacent passes of the nominal raster, [0, 1)")
+    ] = 0.2,
+    raster: Annotated[
+        str,
+        typer.Option(
+            help="nominal (the paper's: line width x (1 - overlap)), adaptive (passes spaced "
+            "by the band of the line that stays in spec) or auto (adaptive if the planner rolls)"
+        ),
+    ] = "auto",
+    roll: Annotated[
+        bool,
+        typer.Option(
+            "--roll/--no-roll",
+            help="geometric/feedback: roll the line with the surface (--no-roll: the paper's "
+            "pitch-only model); rl follows its policy",
+        ),
+    ] = True,
     units: UnitsOpt = "mm",
     tolerance: ToleranceOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.part import load_part
-    from scanplan.planners import make_planner, plan_path
-    from scanplan.swaths import plan_swaths
+    from scanplan.planners import make_planner, plan_scan
     from scanplan.trajectory import write_csv, write_json
 
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units)
-    the_planner = make_planner(planner, policy)
-    swaths = plan_swaths(the_part, spec.sensor, direction, overlap)
-    traj = plan_path(the_part, spec, the_planner, swaths)
+    the_planner = make_planner(planner, policy, roll)
+    swaths, traj = plan_scan(the_part, spec, the_planner, raster, direction, overlap)
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     typer.echo(
         f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
@@ -279,6 +294,9 @@ def train_cmd(
     state: Annotated[
         str, typer.Option(help="paper (P, θ, D, α, Δs) | no-position | lookahead")
     ] = "paper",
+    env_version: Annotated[
+        str, typer.Option("--env", help="v0 (the paper's) | v1 (with roll: Δφ, φ and β)")
+    ] = "v0",
     procedural: Annotated[
         int, typer.Option(help="also train on N randomized procedural parts")
     ] = 0,
@@ -315,8 +333,13 @@ def train_cmd(
         stds = tuple(float(v) for v in log_std_init.split(","))
     except ValueError:
         raise ValueError(f"--log-std-init {log_std_init!r}: expected numbers") from None
-    if len(stds) not in (1, 3):
-        raise ValueError("--log-std-init takes one value or three (Δy,Δz,Δθ)")
+    if env_version not in ("v0", "v1"):
+        raise ValueError(f"unknown --env {env_version!r}; use v0 or v1")
+    roll = env_version == "v1"
+    if len(stds) not in (1, 4 if roll else 3):
+        raise ValueError(
+            "--log-std-init takes one value or one per action (Δy,Δz,Δθ[,Δφ with --env v1])"
+        )
     config = TrainConfig(
         output_dir=str(output),
         parts=tuple(part or ["training-piece"]),
@@ -335,6 +358,7 @@ def train_cmd(
             "lookahead": lookahead,
             "segment_mm": (100.0, 400.0),
             "procedural_parts": procedural,
+            "roll": roll,
         },
         resume=str(resume) if resume else None,
         progress_bar=not no_progress,

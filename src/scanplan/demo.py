@@ -16,10 +16,9 @@ import numpy as np
 
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
-from scanplan.planners import Planner, make_planner, plan_path
+from scanplan.planners import Planner, make_planner, plan_scan
 from scanplan.quantities import ScanSpec
 from scanplan.report import Evaluated, write_report
-from scanplan.swaths import plan_swaths
 from scanplan.trajectory import Trajectory, to_csv_text
 
 PLANNER_ORDER = ("fixed", "geometric", "rl")
@@ -57,15 +56,15 @@ def run_demo(
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
     part: Part = load_part(part_name, units)
-    swaths = plan_swaths(part, sensor)
 
     metrics: dict[str, Metrics] = {}
     trajectories: dict[str, Trajectory] = {}
     files: dict[str, str | bytes | Path] = {}
     for name in PLANNER_ORDER:
         planner: Planner = make_planner(name)
-        step(f"planning {name} ({len(swaths)} passes)")
-        traj = plan_path(part, spec, planner, swaths)
+        step(f"planning {name}")
+        swaths, traj = plan_scan(part, spec, planner)  # each planner's own default raster
+        step(f"planned {name}: {len(swaths)} passes")
         trajectories[name] = traj
         files[f"trajectory_{name}.csv"] = to_csv_text(traj)
         step(f"evaluating {name} ({int(traj.scanning.sum())} profiles)")

@@ -96,6 +96,8 @@ class EnvOptions(_Model):
     dy_max_mm: Positive | None = None
     dz_max_mm: Positive | None = None
     dtheta_max_rad: Positive | None = None
+    dphi_max_rad: Positive | None = None
+    roll: StrictBool = False
 
     @field_validator("segment_mm")
     @classmethod
@@ -186,6 +188,11 @@ class PolicyMeta(_Model):
     def _consistent(self) -> PolicyMeta:
         arch, env = self.architecture, self.env
         n = observation_size(env.use_position, env.lookahead, arch.action_dim)
+        if env.roll != (arch.action_dim == 4):
+            raise ValueError(
+                f"env.roll {env.roll} does not match architecture.action_dim "
+                f"{arch.action_dim} (a roll-capable v1 policy has 4 actions)"
+            )
         if arch.obs_dim != n:
             raise ValueError(
                 f"architecture.obs_dim {arch.obs_dim} does not match the env options "

@@ -297,25 +297,13 @@ def plan_adaptive_swaths(
     """Passes that adapt to the surface (SPEC §3b): pass centres chosen so that their
     predicted in-spec bands (`bands.in_spec_band`) cover the surface (a greedy set cover,
     `bands.adaptive_offsets`); the band goes with the swath (`Swath.band_mm`) so planners
-    align the line to it. 'auto' direction: of the footprint rectangle's two sides, the one
-    whose passes are predicted to put more of the surface in spec (fewer passes on a tie
-    within 2 %)."""
-    from scanplan.bands import adaptive_offsets, predicted_in_spec, top_surface
+    align the line to it. The direction rule is the nominal raster's ('auto': less
+    variation across the line): ranking the two directions by predicted in-spec coverage
+    picked the worse one on two of three real parts (benchmarks/compare_planners.py)."""
+    from scanplan.bands import adaptive_offsets, top_surface
 
-    if isinstance(direction, str) and direction.lower() == "auto":
-        candidates = list(rectangle_axes(part))
-    else:
-        candidates = [scan_direction(part, spec.sensor, direction)]
-    best = None
-    for axis in candidates:
-        u = scan_direction(part, spec.sensor, axis)
-        surface = top_surface(part, u, np.cross(UP, u))
-        bands = adaptive_offsets(surface, spec)
-        score = (round(predicted_in_spec(surface, bands) / 0.02), -len(bands))
-        if best is None or score > best[0]:
-            best = (score, u, bands)
-    assert best is not None
-    _, u, bands = best
+    u = scan_direction(part, spec.sensor, direction)
+    bands = adaptive_offsets(top_surface(part, u, np.cross(UP, u)), spec)
     offsets = [b.centre_mm for b in bands]
     rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
     return _swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, adaptive=True)

@@ -34,7 +34,7 @@ class TrainConfig:
     n_epochs: int = 10
     net_arch: tuple[int, ...] = (64, 64)
     activation: str = "relu"
-    log_std_init: float | tuple[float, ...] = 0.0  # one per action: (Δy, Δz, Δθ)
+    log_std_init: float | tuple[float, ...] = 0.0  # one per action: (Δy, Δz, Δθ[, Δφ])
     init_advance: float | None = None  # initial mean Δy action (0.5 = Δs_opt at Δy_max 1 mm)
     bc_samples: int = 0  # > 0: behaviour-clone the feedback controller on this many states first
     env: dict[str, Any] = field(

@@ -17,8 +17,7 @@ _NOISE_LINEAR, _NOISE_ANGLE = 0.1, 0.03
 
 
 def _teacher_actions(controller: FeedbackController, batched: BatchedVecEnv) -> np.ndarray:
-    """The controller's action for each env, zero-padded to the env's action size (it does
-    not roll: Δφ = 0 on a v1 env)."""
+    """The controller's action for each env (4-D on a v1 env: it rolls by β too)."""
     n = batched.action_shape[0]
     out = np.zeros((batched.num_envs, n))
     for i, env in enumerate(batched.envs):

@@ -1,7 +1,8 @@
 """Planners: each turns one Swath into the sensor poses of that pass.
 
-A planner is any object with a `name` and `plan(part, swath, spec) -> Trajectory`;
-`plan_path` runs one over a whole Boustrophedon base path and adds the lift-off transitions.
+A planner is any object with a `name`, whether it rolls the line (`roll`) and
+`plan(part, swath, spec) -> Trajectory`; `plan_path` runs one over a whole Boustrophedon base
+path and adds the lift-off transitions; `plan_scan` also lays out that base path.
 """
 
 from __future__ import annotations
@@ -23,6 +24,11 @@ class Planner(Protocol):
     @property
     def name(self) -> str: ...
 
+    @property
+    def roll(self) -> bool:
+        """Whether the planner tilts the line across the pass (beyond the paper)."""
+        ...
+
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         """The scanning poses of one pass (all flagged scanning, swath = swath.index)."""
         ...
@@ -31,8 +37,13 @@ class Planner(Protocol):
 PLANNERS = ("fixed", "feedback", "geometric", "rl")
 
 
-def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
-    """The planner called `name`; `rl` loads a policy directory (None: the shipped one)."""
+RASTERS = ("auto", "adaptive", "nominal")
+
+
+def make_planner(name: str, policy: str | os.PathLike | None = None, roll: bool = True) -> Planner:
+    """The planner called `name`; `rl` loads a policy directory (None: the shipped one) and
+    rolls if the policy is a v1 one. roll=False: the paper's pitch-only geometric and
+    feedback planners."""
     if name == "fixed":
         from scanplan.planners.fixed import FixedPlanner
 
@@ -40,11 +51,11 @@ def make_planner(name: str, policy: str | os.PathLike | None = None) -> Planner:
     if name == "feedback":
         from scanplan.planners.feedback import FeedbackPlanner
 
-        return FeedbackPlanner()
+        return FeedbackPlanner(roll=roll)
     if name == "geometric":
         from scanplan.planners.geometric import GeometricPlanner
 
-        return GeometricPlanner()
+        return GeometricPlanner.with_roll() if roll else GeometricPlanner()
     if name == "rl":
         from scanplan.planners.rl import RLPlanner
 
@@ -74,3 +85,26 @@ def plan_path(part: Part, spec: ScanSpec, planner: Planner, swaths: list[Swath])
         planner=planner.name,
         meta=traj.meta,
     )
+
+
+def plan_scan(
+    part: Part,
+    spec: ScanSpec,
+    planner: Planner,
+    raster: str = "auto",
+    direction: str = "auto",
+    overlap: float = 0.2,
+) -> tuple[list[Swath], Trajectory]:
+    """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral
+    step = line width x (1 − overlap)); 'adaptive' spaces passes by the band of the line that
+    stays in spec (SPEC §3b) — it assumes the line rolls with the surface; 'auto' takes
+    adaptive for a planner that rolls, else nominal."""
+    from scanplan.swaths import plan_adaptive_swaths, plan_swaths
+
+    if raster not in RASTERS:
+        raise ValueError(f"unknown raster {raster!r}; use one of {', '.join(RASTERS)}")
+    if raster == "adaptive" or (raster == "auto" and planner.roll):
+        swaths = plan_adaptive_swaths(part, spec, direction)
+    else:
+        swaths = plan_swaths(part, spec.sensor, direction, overlap)
+    return swaths, plan_path(part, spec, planner, swaths)

@@ -40,6 +40,10 @@ class FixedPlanner:
     height_iterations: int = 3
     name: str = "fixed"
 
+    @property
+    def roll(self) -> bool:
+        return False  # the paper's baseline: pitch 0, no roll
+
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         sensor = spec.sensor
         s_probe = station_advances(swath.length_mm, self.probe_step_mm)
