@@ -127,9 +127,10 @@ def half_cylinder_part(radius: float = 150.0, length: float = 600.0):
 @pytest.mark.slow
 def test_horizontal_cylinder_adaptive_passes_with_roll_cover_its_upper_half():
     """R = 150 mm, axis along x, scanned along the axis. The band a pass holds in spec spans
-    about ±10° of the surface (the 15° tolerance with margin), so covering the upper half to
-    the 80° of the coverage definition takes rolls from about −75° to +75° and some 8-12
-    passes; a nominal raster with pitch only is one pass, in spec only near the top."""
+    about ±10° of the surface (the 15° tolerance with margin) and claims a little less (its
+    edges overlap the neighbours'), so covering the upper half to the 80° of the coverage
+    definition takes rolls from about −75° to +75° and some 10-16 passes; a nominal raster
+    with pitch only is one pass, in spec only near the top."""
     part = half_cylinder_part()
     adaptive = plan_adaptive_swaths(part, SPEC, "x")
     traj = plan_path(part, SPEC, GeometricPlanner.with_roll(), adaptive)
@@ -138,7 +139,7 @@ def test_horizontal_cylinder_adaptive_passes_with_roll_cover_its_upper_half():
         math.degrees(math.asin(traj.poses[traj.swath == s.index][len(traj.poses) // 100, 1, 2]))
         for s in adaptive
     ]
-    assert 6 <= len(adaptive) <= 14
+    assert 8 <= len(adaptive) <= 16
     assert max(rolls) > 55.0 and min(rolls) < -55.0
     assert m.in_spec_coverage >= 0.9
     nominal = plan_path(part, SPEC, GeometricPlanner(), plan_swaths(part, SPEC.sensor, "x"))
