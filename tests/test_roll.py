@@ -144,3 +144,14 @@ def test_horizontal_cylinder_adaptive_passes_with_roll_cover_its_upper_half():
     assert m.in_spec_coverage >= 0.9
     nominal = plan_path(part, SPEC, GeometricPlanner(), plan_swaths(part, SPEC.sensor, "x"))
     assert evaluate(part, SPEC, nominal, points_per_profile=256).in_spec_coverage < 0.4
+
+
+def test_shipped_v1_policy_rolls_a_cross_slope_into_spec():
+    from scanplan.planners.rl import RLPlanner
+
+    planner = RLPlanner.from_file("v1")
+    assert planner.roll and planner.config["training"]["command"].startswith("scanplan train")
+    part = cross_slope_plate()
+    swaths = plan_swaths(part, SPEC.sensor, "x")
+    m = evaluate(part, SPEC, plan_path(part, SPEC, planner, swaths), points_per_profile=256)
+    assert m.in_spec_coverage >= 0.9

@@ -24,7 +24,10 @@ from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
-DEFAULT_POLICY = Path(__file__).resolve().parent.parent / "policies" / "default"
+_SHIPPED = Path(__file__).resolve().parent.parent / "policies"
+DEFAULT_POLICY = _SHIPPED / "default"
+# Policies that ship with the package, by name: `--policy v1` (a path of that name wins).
+SHIPPED_POLICIES = {"default": DEFAULT_POLICY, "v1": _SHIPPED / "v1"}
 # Step limits a planning run takes from the policy file's env options.
 _LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad")
 
@@ -48,8 +51,13 @@ class RLPlanner:
 
     @classmethod
     def from_file(cls, path: str | Path | None = None) -> RLPlanner:
-        """A policy directory or its policy.json; None = the packaged default policy."""
-        policy = load_policy(path if path is not None else DEFAULT_POLICY)
+        """A policy directory or its policy.json, or the name of a shipped policy
+        (`SHIPPED_POLICIES`); None = the packaged default (v0) policy."""
+        if path is None:
+            path = DEFAULT_POLICY
+        elif str(path) in SHIPPED_POLICIES and not Path(path).exists():
+            path = SHIPPED_POLICIES[str(path)]
+        policy = load_policy(path)
         # `config` is policy.json as a dict; env holds only the options it sets, as
         # `SwathScanEnv` keyword arguments.
         config = policy.meta.model_dump(mode="json")
