@@ -15,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.dynamics import StepLimits
+from scanplan.dynamics import StepLimits, aligning_angles, probe_grid
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
+from scanplan.swaths import Swath
 
-UP = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -53,16 +53,10 @@ def top_surface(
     if len(along) == 0:
         along = np.array([0.5 * (a.min() + a.max())])
     across = np.arange(c.min(), c.max() + across_step_mm, across_step_mm)
-    top = float(part.bounds[1, 2]) + 10.0
-    xy = along[:, None, None] * u + across[None, :, None] * v
-    origins = xy.reshape(-1, 3).copy()
-    origins[:, 2] = top
-    t, face, normals = part.ray_engine.cast_down(origins)
-    shape = (len(along), len(across))
-    hit = (face >= 0).reshape(shape)
-    points = origins.reshape(*shape, 3).copy()
-    points[..., 2] = top - np.where(hit, t.reshape(shape), 0.0)
-    return TopSurface(u, v, along, across, hit, points, normals.reshape(*shape, 3))
+    probe = probe_grid(part, np.zeros(3), u, v, along, across)
+    points = along[:, None, None] * u + across[None, :, None] * v
+    points[..., 2] = np.where(probe.hit, probe.z_mm, 0.0)
+    return TopSurface(u, v, along, across, probe.hit, points, probe.normals_up)
 
 
 @dataclass(frozen=True)
@@ -112,22 +106,19 @@ def in_spec_band(
     # The beam the step limits let the planner reach: pitch (in the u-w plane) and roll (the
     # rest) from the centre normal, each rate-limited along the pass.
     u, v = surface.u, surface.v
-    n_u, n_v, n_w = n_c @ u, n_c @ v, n_c[:, 2]
     if rows.sum() >= 2:
         grid = surface.along_mm[rows]
-        pitch = np.interp(surface.along_mm, grid, np.arctan2(n_u, np.maximum(n_w, 1e-9))[rows])
-        roll = np.interp(surface.along_mm, grid, np.arctan2(-n_v, np.hypot(n_u, n_w))[rows])
+        pitch_c, roll_c = aligning_angles(n_c, u, v)
+        pitch = np.interp(surface.along_mm, grid, pitch_c[rows])
+        roll = np.interp(surface.along_mm, grid, roll_c[rows])
         pitch = RobustLookahead().shape(surface.along_mm, pitch, pitch_lever / wd)
         lim = StepLimits()
         roll = CentredLookahead().shape(
             surface.along_mm, roll, 0.8 * lim.dphi_max_rad / spec.delta_s_opt_mm
         )
-        cr = np.cos(roll)
-        beam = (  # −z_s: from the surface towards the sensor (the normal, when aligned)
-            -np.sin(roll)[:, None] * v
-            + (cr * np.sin(pitch))[:, None] * u
-            + (cr * np.cos(pitch))[:, None] * UP
-        )
+        # −z_s of those poses: from the surface towards the sensor (the normal, if aligned)
+        frame = Swath(0, np.zeros(3), np.zeros(3), u, v)
+        beam = -frame.poses(0 * pitch, 0 * pitch, pitch, roll)[:, :3, 2]
     else:
         beam = n_c
     offset = surface.points - p_c[:, None, :]

@@ -218,17 +218,39 @@ def probe_line(
 ) -> LineProbe:
     """Cast vertical rays at the given advances along u (from `swath.start_mm`) and lateral
     offsets along v, from 10 mm above the part, in one batch."""
+    return probe_grid(part, swath.start_mm, swath.u, swath.v, advances_mm, lateral_mm)
+
+
+def probe_grid(
+    part: Part,
+    origin: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    advances_mm: np.ndarray,
+    lateral_mm: np.ndarray,
+) -> LineProbe:
+    """`probe_line` on any horizontal grid: origin + a·u + l·v (the raster's own frame)."""
     top = float(part.bounds[1, 2]) + 10.0
     base = (
-        swath.start_mm
-        + np.asarray(advances_mm)[:, None, None] * swath.u
-        + np.asarray(lateral_mm)[None, :, None] * swath.v
+        origin
+        + np.asarray(advances_mm)[:, None, None] * u
+        + np.asarray(lateral_mm)[None, :, None] * v
     )
     origins = base.reshape(-1, 3).copy()
     origins[:, 2] = top
     t, face, normals = part.ray_engine.cast_down(origins)
     shape = (len(advances_mm), len(lateral_mm))
     return LineProbe((face >= 0).reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
+
+
+def aligning_angles(normals: np.ndarray, u: np.ndarray, v: np.ndarray):
+    """The pitch θ and then roll φ that turn the beam against `normals` (..., 3), in a
+    swath frame (u, v, up): beam = −normal gives sinφ = −n_v, cosφ·sinθ = n_u,
+    cosφ·cosθ = n_w."""
+    n_u, n_v, n_w = normals @ u, normals @ v, normals[..., 2]
+    pitch = np.arctan2(n_u, np.maximum(n_w, 1e-9))
+    roll = np.arctan2(-n_v, np.hypot(n_u, n_w))
+    return pitch, roll
 
 
 @dataclass(frozen=True)

@@ -128,7 +128,9 @@ class SwathScanEnv(gym.Env):
     """Optimize one Boustrophedon pass of a line profilometer, step by step (the paper's MDP).
 
     The sensor starts at the first station of the pass that sees the part, at the working
-    distance and aligned (D = W_d, α = 0), and advances along the pass direction u.
+    distance and aligned (D = W_d, α = 0), and advances along the pass direction u. The step
+    model is `self.dynamics` (`dynamics.PassDynamics`); this class adds the MDP around it.
+    `roll=True` is env v1 (`scanplan/SwathScan-v1`, beyond the paper; rows marked v1 below).
 
     ## Action space
 
@@ -139,6 +141,7 @@ class SwathScanEnv(gym.Env):
     | 0     | Δy     | along u                          | none                                  |
     | 1     | Δz     | along z_s, + = towards the part  | [0, max] if D ≥ W_d else [−max, 0]    |
     | 2     | Δθ     | pitch about x_s                  | [0, max] if α ≥ 0 else [−max, 0]      |
+    | 3 (v1)| Δφ     | roll about y_s, pivot at W_d     | [0, max] if β ≥ 0 else [−max, 0]      |
 
     Where the profile has no valid point, D and α are unknown: Δz and Δθ are held at 0.
 
@@ -154,6 +157,7 @@ class SwathScanEnv(gym.Env):
     | 1              | D mean profile distance                      | (D − W_d) / (Z_r/2)  |
     | 1              | α signed angle to the mean normal            | α / α_max            |
     | 1              | Δs advance since the previous profile        | Δs / Δs_opt          |
+    | 2 if v1        | φ roll; β the roll that aligns (SPEC §5)     | φ / α_max, β / α_max |
     | 10 if lookahead| CAD surface at 10/30/60/120/200 mm ahead:    | Δh / (Z_r/2),        |
     |                | height change, pitch that aligns minus θ     | Δθ / α_max           |
 
@@ -162,7 +166,8 @@ class SwathScanEnv(gym.Env):
 
     ## Reward
 
-    `reward.reward_terms(D, α, Δs)`: R = w_D·R_D + w_α·R_α + w_Δs·R_Δs, each term in [−1, 0];
+    `reward.reward_terms(D, α, Δs)`: R = w_D·R_D + w_α·R_α + w_Δs·R_Δs, each term in [−1, 0]
+    (v1: R_α of the full angle between beam and mean normal instead of α);
     the terms are in `info` (`r_d`, `r_alpha`, `r_delta_s`) with `d_mm`, `alpha_rad`,
     `delta_s_mm`. A pass that loses the surface for good (`lost_patience` consecutive profiles
     without a valid point) ends and is charged −1 for each of its remaining nominal steps
@@ -190,6 +195,8 @@ class SwathScanEnv(gym.Env):
     |---------|--------|
     | v0      | the paper's state, action, reward; options: look-ahead, no-P state,    |
     |         | sub-segments of passes, procedural parts                                |
+    | v1      | roll: Δφ (about the point W_d along the beam), φ and β observed,        |
+    |         | orientation reward on the full angle; v0 unchanged                      |
     """
 
     metadata: dict[str, Any] = {"render_modes": []}

@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from scanplan.dynamics import StepLimits, probe_line, track, track_rolled
+from scanplan.dynamics import StepLimits, aligning_angles, probe_line, track, track_rolled
 from scanplan.part import Part
 from scanplan.quantities import (
     ScanSpec,
@@ -180,7 +180,6 @@ def probe_swath(
     # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
     facing = hit & (normals[..., 2] > math.cos(math.radians(max_pitch_slope_deg)))
     n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
-    n_u, n_v, n_w = n_mean @ swath.u, n_mean @ swath.v, n_mean[:, 2]
 
     hit_h = hit  # the columns the height comes from
     if swath.band_mm is not None:
@@ -190,17 +189,14 @@ def probe_swath(
         if (hit & centre[None, :]).any():
             hit_h, facing = hit & centre[None, :], facing & centre[None, :]
             n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
-            n_u, n_v, n_w = n_mean @ swath.u, n_mean @ swath.v, n_mean[:, 2]
     rows = hit.any(axis=1)
     rows_h = hit_h.any(axis=1)
     count = np.maximum(hit_h.sum(axis=1), 1)
     height = np.where(hit_h, z, 0.0).sum(axis=1) / count
-    pitch = np.arctan2(n_u, np.maximum(n_w, 1e-9))  # beam = -normal: sin = n_u, cos = n_w
+    pitch, roll = aligning_angles(n_mean, swath.u, swath.v)
     height = np.interp(grid, grid[rows_h], height[rows_h])
     flat_rows = facing.any(axis=1)
     pitch = np.interp(grid, grid[flat_rows], pitch[flat_rows]) if flat_rows.any() else 0 * grid
-    # Beam = −normal after the pitch: sinφ = −n_v (φ about y_s, towards +x_s = +v).
-    roll = np.arctan2(-n_v, np.hypot(n_u, n_w))
     roll = np.interp(grid, grid[flat_rows], roll[flat_rows]) if flat_rows.any() else 0 * grid
 
     # Per-column 3-D advance; a wall counts as flat: the sensor sees (almost) none of it.
