@@ -21,7 +21,6 @@ from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
 
 
-
 @dataclass(frozen=True)
 class TopSurface:
     """The part's top surface seen from above on a grid in the raster's (u, v) frame.
