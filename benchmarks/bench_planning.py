@@ -1,46 +1,59 @@
 """Planning and evaluation time on the built-in door, in one run.
 
-Plans `fixed` and `geometric`, then evaluates each at full resolution (4096 columns) and
-prints the evaluation throughput in profiles/s next to a bare `LineProfilometer.measure_many`
-of the same poses (the simulator alone), measured in the same run: only the ratio travels.
-Run: .venv/bin/python benchmarks/bench_planning.py [--points N] [--direction auto|x|y]
+Plans the door with every planner in its default configuration and, as the reference
+measured in the same run, with the paper's configuration (`geometric-v0`: pitch only,
+nominal raster — what planning cost before roll and adaptive passes). Prints each planning
+time (median of `--repeats`) and its ratio to that reference, then evaluates each plan
+(`--points` columns) and prints the evaluation throughput in profiles/s next to a bare
+`LineProfilometer.measure_many` of the same poses (the simulator alone): only ratios travel.
+Run: .venv/bin/python benchmarks/bench_planning.py [--points N] [--repeats 3]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import time
 
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
-from scanplan.planners import plan_path
-from scanplan.planners.fixed import FixedPlanner
-from scanplan.planners.geometric import GeometricPlanner
+from scanplan.planners import make_planner, plan_scan
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import LineProfilometer
-from scanplan.swaths import plan_swaths
+
+CONFIGS = {  # label: (planner, roll, raster)
+    "geometric-v0": ("geometric", False, "nominal"),
+    "fixed": ("fixed", False, "nominal"),
+    "feedback": ("feedback", True, "auto"),
+    "geometric": ("geometric", True, "auto"),
+    "rl": ("rl", True, "auto"),
+}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--points", type=int, default=None, help="sub-sampled fan (default full)")
-    parser.add_argument("--direction", default="auto")
+    parser.add_argument("--points", type=int, default=1024, help="evaluation fan (0 = full)")
+    parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--bare-profiles", type=int, default=2000)
     args = parser.parse_args()
 
     part = load_part("door")
     spec = ScanSpec()
     sensor = spec.sensor.with_points(args.points) if args.points else spec.sensor
-    swaths = plan_swaths(part, spec.sensor, args.direction)
-    print(f"door: {len(part.mesh.faces)} triangles, {len(swaths)} passes, {os.cpu_count()} cores")
-    for planner in (FixedPlanner(), GeometricPlanner()):
-        t0 = time.perf_counter()
-        traj = plan_path(part, spec, planner, swaths)
-        plan_s = time.perf_counter() - t0
+    print(f"door: {len(part.mesh.faces)} triangles, {os.cpu_count()} cores")
+    reference = None
+    for label, (name, roll, raster) in CONFIGS.items():
+        times = []
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            swaths, traj = plan_scan(part, spec, make_planner(name, roll=roll), raster)
+            times.append(time.perf_counter() - t0)
+        plan_s = statistics.median(times)
+        reference = reference or plan_s
         poses = traj.scan_poses
         t0 = time.perf_counter()
-        metrics = evaluate(part, spec, traj, points_per_profile=args.points)
+        metrics = evaluate(part, spec, traj, points_per_profile=args.points or None)
         eval_s = time.perf_counter() - t0
         bare = poses[: args.bare_profiles]
         profiler = LineProfilometer(part, sensor)
@@ -50,10 +63,10 @@ def main() -> None:
         bare_rate = len(bare) / (time.perf_counter() - t0)
         eval_rate = len(poses) / eval_s
         print(
-            f"{planner.name:>9}: plan {plan_s:6.2f} s | {len(poses)} profiles x "
-            f"{sensor.points_per_profile} | evaluate {eval_s:6.2f} s = {eval_rate:6.0f} profiles/s "
-            f"| bare measure_many {bare_rate:6.0f} profiles/s | ratio {eval_rate / bare_rate:.2f} "
-            f"| mean |dist err| {metrics.distance_error_mean_abs_mm:.2f} mm"
+            f"{label:>12}: plan {plan_s:6.2f} s (x{plan_s / reference:4.2f} geometric-v0) | "
+            f"{len(swaths)} passes, {len(poses)} profiles x {sensor.points_per_profile} | "
+            f"evaluate {eval_rate:6.0f} profiles/s, bare {bare_rate:6.0f} "
+            f"(ratio {eval_rate / bare_rate:.2f}) | in-spec {metrics.in_spec_coverage:.3f}"
         )
 
 
