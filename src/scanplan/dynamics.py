@@ -107,21 +107,21 @@ def limit_action(
 def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float = 400.0) -> np.ndarray:
     """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad; (s, h, θ, φ, l) after
     (Δy, Δz, Δθ, Δφ), the roll about the point `pivot_mm` (W_d) along the beam. The beam is
-    z_s = sinφ·v + cosφ·(−sinθ·u − cosθ·w)."""
+    z_s = −sinθ·u + cosθ·(sinφ·v − cosφ·w) (`Swath.poses`)."""
     if len(state) == 5:
         s, h, th, phi, lat = state
         dy, dz, dth, dphi = step
-        cp = math.cos(phi)
+        ct = math.cos(th)
         s, h, lat = (
-            s + dy - dz * cp * math.sin(th),
-            h - dz * cp * math.cos(th),
-            lat + dz * math.sin(phi),
+            s + dy - dz * math.sin(th),
+            h - dz * ct * math.cos(phi),
+            lat + dz * ct * math.sin(phi),
         )
         th, phi2 = th + dth, phi + dphi
-        # Rolling about the pivot moves the sensor by W_d (z_s(φ) − z_s(φ')).
-        dc = pivot_mm * (math.cos(phi) - math.cos(phi2))
-        s, h = s - dc * math.sin(th), h - dc * math.cos(th)
-        lat += pivot_mm * (math.sin(phi) - math.sin(phi2))
+        # Rolling about the pivot moves the sensor by W_d (z_s(θ', φ) − z_s(θ', φ')).
+        ct2 = pivot_mm * math.cos(th)
+        h -= ct2 * (math.cos(phi) - math.cos(phi2))
+        lat += ct2 * (math.sin(phi) - math.sin(phi2))
         return np.array([s, h, th, phi2, lat])
     s, h, th = state
     dy, dz, dth = step
@@ -178,11 +178,10 @@ def track_rolled(
         s, h, th, phi, _ = states[i - 1]
         dphi = min(max(roll_rad[i] - phi, -lim[3]), lim[3])
         dth = min(max(pitch_rad[i] - th, -lim[2]), lim[2])
-        th2, cp = th + dth, math.cos(phi)
-        dc = pivot_mm * (cp - math.cos(phi + dphi))  # the roll pivot's share of the motion
-        dz = -(h_mm[i] - h + dc * math.cos(th2)) / (cp * math.cos(th))
+        pivot_h = pivot_mm * math.cos(th + dth) * (math.cos(phi) - math.cos(phi + dphi))
+        dz = -(h_mm[i] - h + pivot_h) / (math.cos(th) * math.cos(phi))
         dz = min(max(dz, -lim[1]), lim[1])
-        dy = s_mm[i] - s + dz * cp * math.sin(th) + dc * math.sin(th2)
+        dy = s_mm[i] - s + dz * math.sin(th)
         dy = min(max(dy, -lim[0]), lim[0])
         states[i] = apply_step(states[i - 1], np.array([dy, dz, dth, dphi]), pivot_mm)
     return states
@@ -192,9 +191,7 @@ def progress_mm(state: np.ndarray, wd_mm: float) -> float:
     """Advance of the scan along u: where the beam meets the working distance (a pitched sensor
     looks W_d·sinθ behind itself; ending on the sensor's own advance would leave the end of the
     pass unscanned)."""
-    if len(state) == 5:
-        return float(state[0] - wd_mm * math.cos(state[3]) * math.sin(state[2]))
-    return float(state[0] - wd_mm * math.sin(state[2]))
+    return float(state[0] - wd_mm * math.sin(state[2]))  # with roll too: z_s·u = −sinθ
 
 
 # ---- the CAD under a pass -----------------------------------------------------------------
@@ -243,14 +240,15 @@ def probe_grid(
     return LineProbe((face >= 0).reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
 
 
-def aligning_angles(normals: np.ndarray, u: np.ndarray, v: np.ndarray):
-    """The pitch θ and then roll φ that turn the beam against `normals` (..., 3), in a
-    swath frame (u, v, up): beam = −normal gives sinφ = −n_v, cosφ·sinθ = n_u,
-    cosφ·cosθ = n_w."""
+def aligning_angles(normals: np.ndarray, u: np.ndarray, v: np.ndarray, roll: bool = True):
+    """The pitch θ and roll φ that turn the beam against `normals` (..., 3) in a swath frame
+    (u, v, up). With roll, beam = −normal gives sinθ = n_u, cosθ·sinφ = −n_v,
+    cosθ·cosφ = n_w (`Swath.poses`); without (the paper's model), the pitch that faces the
+    normal's projection on the u-w plane, and φ = 0."""
     n_u, n_v, n_w = normals @ u, normals @ v, normals[..., 2]
-    pitch = np.arctan2(n_u, np.maximum(n_w, 1e-9))
-    roll = np.arctan2(-n_v, np.hypot(n_u, n_w))
-    return pitch, roll
+    if not roll:
+        return np.arctan2(n_u, np.maximum(n_w, 1e-9)), np.zeros_like(n_u)
+    return np.arctan2(n_u, np.hypot(n_v, n_w)), np.arctan2(-n_v, np.maximum(n_w, 1e-9))
 
 
 @dataclass(frozen=True)
@@ -446,7 +444,7 @@ class PassDynamics:
             surface_h = h - d * math.cos(phi) * math.cos(th)
             th = float(np.clip(th + a, -self.start_pitch_max_rad, self.start_pitch_max_rad))
             phi = float(np.clip(phi + b, -self.start_pitch_max_rad, self.start_pitch_max_rad))
-            s = s0 + wd * math.cos(phi) * math.sin(th)
-            h = surface_h + wd * math.cos(phi) * math.cos(th)
-            lat = -wd * math.sin(phi)
+            s = s0 + wd * math.sin(th)
+            h = surface_h + wd * math.cos(th) * math.cos(phi)
+            lat = -wd * math.cos(th) * math.sin(phi)
         return np.array([s, h, th, phi, lat])

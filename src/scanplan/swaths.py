@@ -52,8 +52,9 @@ class Swath:
         lateral_mm: float = 0.0,
     ) -> np.ndarray:
         """T_part_sensor at advance s along u, lateral offset l along v and height h above
-        `start_mm`, pitched by θ about x_s (θ > 0 tilts the beam backwards, towards −u), then
-        rolled by φ about the new y_s (φ > 0 tilts the beam towards +x_s)."""
+        `start_mm`: rolled by φ about u (φ > 0 tilts the beam towards +v), then pitched by θ
+        about the sensor's x_s (θ > 0 tilts the beam backwards, towards −u). The beam is
+        z_s = −sinθ·u + cosθ·(sinφ·v − cosφ·w)."""
         return self.poses(
             np.array([s_mm]),
             np.array([h_mm]),
@@ -80,11 +81,15 @@ class Swath:
         poses[:, :3, 2] = -sn[:, None] * self.u - c[:, None] * UP  # z_s: the beam
         poses[:, :3, 3] = self.start_mm + s[:, None] * self.u + h[:, None] * UP
         if roll_rad is not None and np.any(np.asarray(roll_rad) != 0):
+            # Roll about u first, then pitch about the rolled x_s: on a steep flank the big
+            # rotation is the roll and the pitch stays small (pitch-then-roll would need a
+            # pitch that swings with every small change of the normal along the pass).
             phi = np.broadcast_to(np.asarray(roll_rad, dtype=np.float64).reshape(-1), s.shape)
             cp, sp = np.cos(phi)[:, None], np.sin(phi)[:, None]
-            x1, z1 = poses[:, :3, 0].copy(), poses[:, :3, 2].copy()
-            poses[:, :3, 0] = cp * x1 - sp * z1
-            poses[:, :3, 2] = sp * x1 + cp * z1
+            z1 = sp * self.v - cp * UP
+            poses[:, :3, 0] = cp * self.v + sp * UP
+            poses[:, :3, 1] = c[:, None] * self.u + sn[:, None] * z1
+            poses[:, :3, 2] = -sn[:, None] * self.u + c[:, None] * z1
         if lateral_mm is not None and np.any(np.asarray(lateral_mm) != 0):
             lat = np.broadcast_to(np.asarray(lateral_mm, dtype=np.float64).reshape(-1), s.shape)
             poses[:, :3, 3] += lat[:, None] * self.v

@@ -161,6 +161,7 @@ def probe_swath(
     columns: int = 48,
     max_slope_deg: float = 75.0,
     max_pitch_slope_deg: float = 60.0,
+    roll: bool = False,
 ) -> SurfaceProbe:
     """Cast a vertical raster under the laser line (or the swath's in-spec band of it); holes
     and run-in are filled from the nearest hits. Raises ValueError if the pass sees nothing."""
@@ -179,6 +180,9 @@ def probe_swath(
     # Walls steeper than max_pitch_slope return little to a sensor looking down, and the pitch
     # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
     facing = hit & (normals[..., 2] > math.cos(math.radians(max_pitch_slope_deg)))
+    if roll:  # a slope across the pass is the roll's to follow: only walls along it are out
+        along = np.abs(normals @ swath.u) < math.sin(math.radians(max_pitch_slope_deg))
+        facing = hit & along & (normals[..., 2] > math.cos(math.radians(85.0)))
     n_mean = np.where(facing[..., None], normals, 0.0).sum(axis=1)
 
     hit_h = hit  # the columns the height comes from
@@ -193,11 +197,11 @@ def probe_swath(
     rows_h = hit_h.any(axis=1)
     count = np.maximum(hit_h.sum(axis=1), 1)
     height = np.where(hit_h, z, 0.0).sum(axis=1) / count
-    pitch, roll = aligning_angles(n_mean, swath.u, swath.v)
+    pitch, roll_t = aligning_angles(n_mean, swath.u, swath.v, roll)
     height = np.interp(grid, grid[rows_h], height[rows_h])
     flat_rows = facing.any(axis=1)
     pitch = np.interp(grid, grid[flat_rows], pitch[flat_rows]) if flat_rows.any() else 0 * grid
-    roll = np.interp(grid, grid[flat_rows], roll[flat_rows]) if flat_rows.any() else 0 * grid
+    roll_t = np.interp(grid, grid[flat_rows], roll_t[flat_rows]) if flat_rows.any() else 0 * grid
 
     # Per-column 3-D advance; a wall counts as flat: the sensor sees (almost) none of it.
     dz = np.abs(np.diff(z, axis=0))
@@ -215,7 +219,9 @@ def probe_swath(
     keep = slice(first, last + 1)
     if last - first < 1:
         keep = slice(max(first - 1, 0), max(first - 1, 0) + 2)
-    return SurfaceProbe(grid[keep], height[keep], pitch[keep], arc[keep] - arc[keep][0], roll[keep])
+    return SurfaceProbe(
+        grid[keep], height[keep], pitch[keep], arc[keep] - arc[keep][0], roll_t[keep]
+    )
 
 
 # ---- the planner --------------------------------------------------------------------------
@@ -264,7 +270,9 @@ class GeometricPlanner:
         )
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
-        probe = probe_swath(part, swath, spec, self.probe_step_mm, self.probe_columns)
+        probe = probe_swath(
+            part, swath, spec, self.probe_step_mm, self.probe_columns, roll=self.roll
+        )
         # A band of a few cm needs more than the 64 columns that judge a whole line.
         points = self.sensor_points if swath.band_mm is None else 4 * self.sensor_points
         fan = LineProfilometer(part, spec.sensor.without_noise().with_points(points))
@@ -363,7 +371,7 @@ class GeometricPlanner:
         pitch = np.clip(lookahead.shape(grid, pitch_t, self.pitch_lever / wd), -1.4, 1.4)
         roll = np.clip(lookahead.shape(grid, roll_t, 0.8 * lim.dphi_max_rad / ds_opt), -1.4, 1.4)
         cr = np.cos(roll)
-        s_grid = grid + wd * cr * np.sin(pitch)
+        s_grid = grid + wd * np.sin(pitch)
         h_grid = height_t + wd * cr * np.cos(pitch)
         h_rate = 0.8 * lim.dz_max_mm * float((cr * np.cos(pitch)).min()) / ds_opt
         h_grid = self.height_lookahead.shape(grid, h_grid, h_rate)
@@ -373,7 +381,7 @@ class GeometricPlanner:
         h = np.interp(sigma, grid, h_grid)
         th = np.interp(sigma, grid, pitch)
         phi = np.interp(sigma, grid, roll)
-        states = track_rolled(s, h, th, phi, -wd * math.sin(phi[0]), lim, wd)
+        states = track_rolled(s, h, th, phi, -wd * math.cos(th[0]) * math.sin(phi[0]), lim, wd)
         return states, sigma
 
     def _refine(self, grid, sigma, th, h, d, alpha, ds, targets, spec: ScanSpec):
