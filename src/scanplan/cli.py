@@ -513,7 +513,9 @@ def train_cmd(
             callback=SEED_CHECK,
         ),
     ] = 0,
-    no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+    no_progress: Annotated[
+        bool, typer.Option("--no-progress", "--quiet", "-q", help="no progress bar")
+    ] = False,
 ):
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
     import shlex
@@ -695,6 +697,7 @@ def place_cmd(
             callback=bounded(0, 360, lo_open=True),
         ),
     ] = 30.0,
+    quiet: QuietOpt = False,
 ):
     """Search the part's pose on the table (x, y, z, yaw) from which the arm reaches every
     pose with no configuration flip in a pass; print it as --part-pose. Exit 2 if none does."""
@@ -712,7 +715,8 @@ def place_cmd(
             raise ValueError(f"--height-range {height_range!r}: expected finite LO <= HI in mm")
         heights = (lo, hi)
     traj = read_trajectory(trajectory)
-    result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
+    with progress_bar("searching a placement", quiet):
+        result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
     m = result.report.worst_margins()
     typer.echo(f"--part-pose {result.pose_arg()}")
     typer.echo(result.report.summary())
