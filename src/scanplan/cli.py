@@ -8,17 +8,90 @@ from __future__ import annotations
 
 import functools
 import math
+import shutil
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import typer
+import typer.core
 
 from scanplan.quantities import ScanSpec
+from scanplan.sensor import SensorSpec
+
+
+class _OneLineErrors(typer.core.TyperGroup):
+    """The app's Click group: a usage error (unknown option or command, missing argument, a
+    value that does not convert or is out of bounds) is one line on stderr and exit 2, not
+    Typer's boxed panel; --help stays rich."""
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
+        from typer._click.exceptions import ClickException
+
+        try:
+            rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+        except ClickException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":  # bare `scanplan`: the help
+                exc.show()
+                code = 2
+            else:
+                typer.echo(f"error: {usage_message(exc)}", err=True)
+                code = exc.exit_code
+            if not standalone_mode:
+                return code
+            sys.exit(code)
+        except typer.Abort:
+            typer.echo("interrupted", err=True)
+            if not standalone_mode:
+                return 130
+            sys.exit(130)
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def usage_message(exc: Exception) -> str:
+    """A Click usage error as one line naming the option or argument."""
+    message = getattr(exc, "message", str(exc))
+    param = getattr(exc, "param", None)
+    hint = getattr(exc, "param_hint", None)
+    if hint is None and param is not None:
+        hint = param.get_error_hint()
+    if isinstance(hint, list | tuple):
+        hint = " / ".join(hint)
+    errors = getattr(exc.__cause__, "errors", None)
+    if callable(errors):  # a pydantic conversion error
+        first = (errors() or [{}])[0]
+        kind = str(first.get("type", ""))
+        value = first.get("input")
+        if kind.startswith("int_"):
+            message = f"{value!r} is not a valid integer"
+        elif kind.startswith("float_"):
+            message = f"{value!r} is not a valid number"
+        elif "input" in first:
+            message = f"{value!r}: {first.get('msg', message)}"
+    if type(exc).__name__ == "MissingParameter" or not hint:
+        text = exc.format_message() if hasattr(exc, "format_message") else message
+    else:
+        text = f"{str(hint).replace(chr(39), '')}: {message}"
+    ctx = getattr(exc, "ctx", None)
+    where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+    return " ".join(f"{text}{where}".split())
+
 
 app = typer.Typer(
+    cls=_OneLineErrors,
     add_completion=False,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
@@ -46,6 +119,92 @@ def user_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def bounded(
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> Callable[[Any], Any]:
+    """A Typer callback refusing a number outside [lo, hi] (open ends on request), NaN and
+    infinities; Click names the option in the error."""
+    interval = (
+        f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        if lo is not None and hi is not None
+        else f"{'>' if lo_open else '>='} {lo:g}"
+        if lo is not None
+        else f"{'<' if hi_open else '<='} {hi:g}"
+        if hi is not None
+        else "finite"
+    )
+
+    def check(value: Any) -> Any:
+        if value is None:
+            return value
+        if not math.isfinite(value):
+            raise typer.BadParameter(f"{value} is not a finite number")
+        below = lo is not None and (value <= lo if lo_open else value < lo)
+        above = hi is not None and (value >= hi if hi_open else value > hi)
+        if below or above:
+            verb = "is not in" if lo is not None and hi is not None else "must be"
+            raise typer.BadParameter(f"{value:g} {verb} {interval}")
+        return value
+
+    return check
+
+
+def pose_option(value: str) -> str:
+    """--tcp / --part-pose: six finite numbers, checked before any work."""
+    from scanplan.export import parse_pose_arg
+
+    try:
+        parse_pose_arg(value)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+    return value
+
+
+@contextmanager
+def progress_bar(label: str, quiet: bool) -> Iterator[Callable[[int, int], None] | None]:
+    """A transient rich progress bar on stderr, fed by the library's progress(done, total);
+    None (no output at all) with --quiet or when stderr is not a terminal."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(label, total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+@contextmanager
+def removed_on_error(directory: Path, keep: Callable[[Path], bool]) -> Iterator[None]:
+    """Remove `directory` (and the parents made for it) if the block fails and it did not
+    exist before, unless keep(directory) says it holds something worth resuming from."""
+    created = None
+    for candidate in (directory, *directory.parents):
+        if candidate.exists():
+            break
+        created = candidate
+    try:
+        yield
+    except BaseException:
+        if created is not None and created.exists() and not keep(directory):
+            shutil.rmtree(created, ignore_errors=True)
+        raise
+
+
+SEED_CHECK = bounded(0)
+POSITIVE = bounded(0, lo_open=True)
+POINTS_CHECK = bounded(2, SensorSpec.MAX_POINTS)
+
 PartArg = Annotated[
     str, typer.Argument(help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB) or STEP file")
 ]
@@ -54,6 +213,10 @@ SensorOpt = Annotated[
     str, typer.Option("--sensor", help="sensor preset name or TOML/YAML datasheet file")
 ]
 OutOpt = Annotated[Path, typer.Option("-o", "--output", help="output file")]
+SeedOpt = Annotated[int, typer.Option(help="noise seed, >= 0", callback=SEED_CHECK)]
+QuietOpt = Annotated[
+    bool, typer.Option("--quiet", "-q", help="no progress bar (none either off a terminal)")
+]
 ToleranceOpt = Annotated[
     str | None,
     typer.Option(
@@ -126,8 +289,9 @@ def scan_cmd(
     output: OutOpt,
     sensor: SensorOpt = "at-c5-4090cs30-495",
     units: UnitsOpt = "mm",
-    seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+    seed: SeedOpt = 0,
     no_noise: Annotated[bool, typer.Option("--no-noise", help="switch noise off")] = False,
+    quiet: QuietOpt = False,
 ):
     """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields."""
     from scanplan.cloud import simulate_cloud, write_ply
@@ -144,7 +308,8 @@ def scan_cmd(
     traj = read_trajectory(trajectory)
     if not traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
-    cloud = simulate_cloud(the_part, spec, traj, seed=seed)
+    with progress_bar("scanning", quiet) as progress:
+        cloud = simulate_cloud(the_part, spec, traj, seed=seed, progress=progress)
     if len(cloud.points_part) == 0:
         raise ValueError(
             f"no valid point: part {part} is outside the sensor's reach along {trajectory}"
@@ -174,7 +339,11 @@ def plan_cmd(
         ),
     ] = "auto",
     overlap: Annotated[
-        float, typer.Option(help="overlap of adjacent passes of the nominal raster, [0, 1)")
+        float,
+        typer.Option(
+            help="overlap of adjacent passes of the nominal raster, [0, 1)",
+            callback=bounded(0, 1, hi_open=True),
+        ),
     ] = 0.2,
     raster: Annotated[
         str,
@@ -193,6 +362,7 @@ def plan_cmd(
     ] = True,
     units: UnitsOpt = "mm",
     tolerance: ToleranceOpt = None,
+    quiet: QuietOpt = False,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.part import load_part
@@ -204,7 +374,10 @@ def plan_cmd(
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units)
     the_planner = make_planner(planner, policy, roll)
-    swaths, traj = plan_scan(the_part, spec, the_planner, raster, direction, overlap)
+    with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
+        swaths, traj = plan_scan(
+            the_part, spec, the_planner, raster, direction, overlap, progress=progress
+        )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     typer.echo(
         f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
@@ -228,10 +401,16 @@ def evaluate_cmd(
     sensor: SensorOpt = "at-c5-4090cs30-495",
     units: UnitsOpt = "mm",
     points: Annotated[
-        int | None, typer.Option("--points", help="sub-sample the fan to N points (faster)")
+        int | None,
+        typer.Option(
+            "--points",
+            help=f"sub-sample the fan to N points (faster), 2 to {SensorSpec.MAX_POINTS}",
+            callback=POINTS_CHECK,
+        ),
     ] = None,
-    seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+    seed: SeedOpt = 0,
     tolerance: ToleranceOpt = None,
+    quiet: QuietOpt = False,
 ):
     """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
     import json
@@ -240,12 +419,13 @@ def evaluate_cmd(
     from scanplan.part import load_part
     from scanplan.trajectory import read_trajectory
 
-    if points is not None and points < 2:
-        raise ValueError(f"--points must be >= 2, got {points}")
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units)
     traj = read_trajectory(trajectory)
-    metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
+    with progress_bar("evaluating", quiet) as progress:
+        metrics = evaluate(
+            the_part, spec, traj, seed=seed, points_per_profile=points, progress=progress
+        )
     if output is not None:
         from scanplan.report import Evaluated, write_report
 
@@ -282,9 +462,18 @@ def train_cmd(
     part: Annotated[
         list[str] | None, typer.Option("--part", help="training part(s): built-in name or mesh")
     ] = None,
-    timesteps: Annotated[int, typer.Option(help="total PPO timesteps")] = 1_000_000,
-    seed: Annotated[int, typer.Option(help="seed of PPO and the environments")] = 0,
-    n_envs: Annotated[int, typer.Option("--n-envs", help="parallel environments")] = 16,
+    timesteps: Annotated[
+        int, typer.Option(help="total PPO timesteps, >= 1", callback=bounded(1))
+    ] = 1_000_000,
+    seed: Annotated[
+        int, typer.Option(help="seed of PPO and the environments, >= 0", callback=SEED_CHECK)
+    ] = 0,
+    n_envs: Annotated[
+        int,
+        typer.Option(
+            "--n-envs", help="parallel environments, 1 to 1024", callback=bounded(1, 1024)
+        ),
+    ] = 16,
     vec: Annotated[
         str, typer.Option(help="batched (envs stepped together, one process) | subproc")
     ] = "batched",
@@ -298,19 +487,35 @@ def train_cmd(
         str, typer.Option("--env", help="v0 (the paper's) | v1 (with roll: Δφ, φ and β)")
     ] = "v0",
     procedural: Annotated[
-        int, typer.Option(help="also train on N randomized procedural parts")
+        int,
+        typer.Option(help="also train on N randomized procedural parts, >= 0", callback=SEED_CHECK),
     ] = 0,
-    fan_points: Annotated[int, typer.Option(help="sub-sampled fan for training")] = 128,
+    fan_points: Annotated[
+        int,
+        typer.Option(
+            help=f"sub-sampled fan for training, 2 to {SensorSpec.MAX_POINTS}",
+            callback=POINTS_CHECK,
+        ),
+    ] = 128,
     log_std_init: Annotated[
         str, typer.Option(help="initial log std: one value, or Δy,Δz,Δθ (SB3 default 0)")
     ] = "0",
     init_advance: Annotated[
-        float | None, typer.Option(help="initial mean Δy action (0.5 = Δs_opt); default none")
+        float | None,
+        typer.Option(
+            help="initial mean Δy action (0.5 = Δs_opt); default none", callback=bounded()
+        ),
     ] = None,
     bc_samples: Annotated[
-        int, typer.Option(help="warm start: behaviour-clone a P-controller on N states first")
+        int,
+        typer.Option(
+            help="warm start: behaviour-clone a P-controller on N states first",
+            callback=SEED_CHECK,
+        ),
     ] = 0,
-    no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+    no_progress: Annotated[
+        bool, typer.Option("--no-progress", "--quiet", "-q", help="no progress bar")
+    ] = False,
 ):
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
     import shlex
@@ -364,7 +569,13 @@ def train_cmd(
         progress_bar=not no_progress,
         command=shlex.join(["scanplan", *sys.argv[1:]]),
     )
-    result = train(config)
+    from scanplan.learn.checkpoint import CHECKPOINT_DIR
+
+    def has_checkpoint(out: Path) -> bool:
+        return any((out / CHECKPOINT_DIR).glob("*.json"))
+
+    with removed_on_error(output, keep=has_checkpoint):
+        result = train(config)
     f = result.final
     typer.echo(
         f"{result.timesteps} timesteps in {result.wall_time_s:.0f} s | reward/step "
@@ -375,6 +586,7 @@ def train_cmd(
 
 # ---- export (robot programs) --------------------------------------------------------------
 POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
+TcpOpt = Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option)]
 ROBOT_HELP = (
     "arm to check reach on: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
     "file of OPW parameters; 'none' to skip"
@@ -391,20 +603,27 @@ def export_cmd(
     fmt: Annotated[
         str, typer.Option("--format", help="urscript, rapid, krl, ros, rosbag2 or csv")
     ] = "urscript",
-    tcp: Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}")] = "0,0,0,0,0,0",
+    tcp: TcpOpt = "0,0,0,0,0,0",
     part_pose: Annotated[
-        str, typer.Option("--part-pose", help=f"part in the robot base frame: {POSE_HELP}")
+        str,
+        typer.Option(
+            "--part-pose", help=f"part in the robot base frame: {POSE_HELP}", callback=pose_option
+        ),
     ] = "0,0,0,0,0,0",
     profile_rate: Annotated[
-        float, typer.Option(help="sensor profile rate, Hz; scan speed = rate x spacing")
+        float,
+        typer.Option(
+            help="sensor profile rate, Hz (> 0); scan speed = rate x spacing", callback=POSITIVE
+        ),
     ] = ScanSpec.profile_rate_hz,
     spacing: Annotated[
-        float, typer.Option(help="profile spacing on the part, mm")
+        float, typer.Option(help="profile spacing on the part, mm (> 0)", callback=POSITIVE)
     ] = ScanSpec.delta_s_opt_mm,
     travel_speed: Annotated[
-        float, typer.Option(help="speed between passes, mm/s")
+        float, typer.Option(help="speed between passes, mm/s (> 0)", callback=POSITIVE)
     ] = ScanSpec.travel_speed_mm_s,
     robot: Annotated[str, typer.Option(help=ROBOT_HELP)] = "ur5e",
+    quiet: QuietOpt = False,
 ):
     """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV)."""
     from scanplan.export import (
@@ -438,9 +657,13 @@ def export_cmd(
     if text is None:
         plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
     if robot.lower() != "none":
-        report = check_reach(
-            flange_poses(traj, options), get_robot(robot), swath=traj.swath, scanning=traj.scanning
-        )
+        with progress_bar("reach check", quiet):
+            report = check_reach(
+                flange_poses(traj, options),
+                get_robot(robot),
+                swath=traj.swath,
+                scanning=traj.scanning,
+            )
         if not report.ok:
             typer.echo(f"warning: {report.summary()}", err=True)
         else:
@@ -461,12 +684,20 @@ def place_cmd(
         str,
         typer.Option(help="ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file"),
     ],
-    tcp: Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}")] = "0,0,0,0,0,0",
+    tcp: TcpOpt = "0,0,0,0,0,0",
     height_range: Annotated[
         str | None,
         typer.Option("--height-range", help="LO,HI mm: the part origin's z in the base frame"),
     ] = None,
-    yaw_step: Annotated[float, typer.Option("--yaw-step", help="coarse yaw grid, deg")] = 30.0,
+    yaw_step: Annotated[
+        float,
+        typer.Option(
+            "--yaw-step",
+            help="coarse yaw grid, deg, (0, 360]",
+            callback=bounded(0, 360, lo_open=True),
+        ),
+    ] = 30.0,
+    quiet: QuietOpt = False,
 ):
     """Search the part's pose on the table (x, y, z, yaw) from which the arm reaches every
     pose with no configuration flip in a pass; print it as --part-pose. Exit 2 if none does."""
@@ -480,9 +711,12 @@ def place_cmd(
             lo, hi = (float(v) for v in height_range.split(","))
         except ValueError:
             raise ValueError(f"--height-range {height_range!r}: expected LO,HI in mm") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+            raise ValueError(f"--height-range {height_range!r}: expected finite LO <= HI in mm")
         heights = (lo, hi)
     traj = read_trajectory(trajectory)
-    result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
+    with progress_bar("searching a placement", quiet):
+        result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
     m = result.report.worst_margins()
     typer.echo(f"--part-pose {result.pose_arg()}")
     typer.echo(result.report.summary())
@@ -507,9 +741,14 @@ def demo_cmd(
     units: UnitsOpt = "mm",
     sensor: SensorOpt = "at-c5-4090cs30-495",
     points: Annotated[
-        int, typer.Option("--points", help="pixel columns per profile in the evaluation")
+        int,
+        typer.Option(
+            "--points",
+            help=f"pixel columns per profile in the evaluation, 2 to {SensorSpec.MAX_POINTS}",
+            callback=POINTS_CHECK,
+        ),
     ] = 1024,
-    seed: Annotated[int, typer.Option(help="noise seed")] = 0,
+    seed: SeedOpt = 0,
     tolerance: ToleranceOpt = None,
 ):
     """The main job: three planners on a part (the door by default), the table, maps, an
@@ -522,8 +761,6 @@ def demo_cmd(
 
     console = Console(log_path=False)
     spec = scan_spec(sensor, tolerance)
-    if points < 2:
-        raise ValueError(f"--points must be >= 2, got {points}")
     with console.status("starting") as status:
         started = time.perf_counter()
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,9 +32,15 @@ class PointCloud:
 
 
 def simulate_cloud(
-    part: Part, sensor: SensorSpec, traj: Trajectory, seed: int = 0, chunk_poses: int = 256
+    part: Part,
+    sensor: SensorSpec,
+    traj: Trajectory,
+    seed: int = 0,
+    chunk_poses: int = 256,
+    progress: Callable[[int, int], None] | None = None,
 ) -> PointCloud:
-    """Measure every scanning pose and keep the valid points (chunked to bound memory)."""
+    """Measure every scanning pose and keep the valid points (chunked to bound memory);
+    progress(done, total) is called after each chunk."""
     profilometer = LineProfilometer(part, sensor, seed=seed)
     poses = traj.scan_poses
     swath_of_pose = traj.swath[traj.scanning]
@@ -48,6 +55,8 @@ def simulate_cloud(
         out["orientation_error_rad"].append(alpha[valid])
         out["profile"].append(rows + start)
         out["swath"].append(swath_of_pose[rows + start])
+        if progress is not None:
+            progress(min(start + chunk_poses, len(poses)), len(poses))
     return PointCloud(
         **{
             k: np.concatenate(v) if v else np.zeros((0, 3) if k == "points_part" else 0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -559,11 +560,13 @@ def evaluate(
     points_per_profile: int | None = None,
     chunk_poses: int = 256,
     max_map_points: int = 200_000,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
     points_per_profile: sub-sample the fan for a faster evaluation (same line width); the
     in-spec density rule still judges the real sensor's columns.
+    progress(done, total): called after each chunk of scanning poses (a caller's progress bar).
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -606,6 +609,8 @@ def evaluate(
         spacing.add(lo, scan)
         coverage.add(scan, ori, has_prev[lo:hi])
         sample.add(lo, scan, ori, swath[lo:hi], wd)
+        if progress is not None:
+            progress(hi, m)
 
     if errors.n_valid == 0:
         raise ValueError(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
@@ -63,8 +64,15 @@ def make_planner(name: str, policy: str | os.PathLike | None = None, roll: bool 
     raise ValueError(f"unknown planner {name!r}; use one of {', '.join(PLANNERS)}")
 
 
-def plan_path(part: Part, spec: ScanSpec, planner: Planner, swaths: list[Swath]) -> Trajectory:
-    """All passes in snake order, joined by non-scanning lift-off transitions."""
+def plan_path(
+    part: Part,
+    spec: ScanSpec,
+    planner: Planner,
+    swaths: list[Swath],
+    progress: Callable[[int, int], None] | None = None,
+) -> Trajectory:
+    """All passes in snake order, joined by non-scanning lift-off transitions.
+    progress(done, total) is called after each pass (a caller's progress bar)."""
     if not swaths:
         raise ValueError("no swath to plan")
     start = time.perf_counter()
@@ -76,6 +84,8 @@ def plan_path(part: Part, spec: ScanSpec, planner: Planner, swaths: list[Swath])
                 Trajectory(moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool))
             )
         pieces.append(planner.plan(part, swath, spec))
+        if progress is not None:
+            progress(i + 1, len(swaths))
     traj = Trajectory.concatenate(pieces, planner=planner.name)
     return Trajectory(
         traj.poses,
@@ -94,6 +104,7 @@ def plan_scan(
     raster: str = "auto",
     direction: str = "auto",
     overlap: float = 0.2,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[list[Swath], Trajectory]:
     """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral
     step = line width x (1 − overlap)); 'adaptive' spaces passes by the band of the line that
@@ -107,4 +118,4 @@ def plan_scan(
         swaths = plan_adaptive_swaths(part, spec, direction)
     else:
         swaths = plan_swaths(part, spec.sensor, direction, overlap)
-    return swaths, plan_path(part, spec, planner, swaths)
+    return swaths, plan_path(part, spec, planner, swaths, progress)

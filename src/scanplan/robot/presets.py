@@ -162,7 +162,7 @@ def load_robot_file(path: str | Path) -> OPWRobot:
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"robot file {path} cannot be parsed: {first}") from None
     try:
