@@ -149,9 +149,13 @@ def in_spec_band(
 
 
 def _covered_cells(surface: TopSurface, band: Band, edge_mm: float = 0.0) -> np.ndarray:
-    """(k, c) bool: the surface cells inside the band's per-row edges, less `edge_mm`."""
+    """(k, c) bool: the surface cells inside the band's per-row edges, less `edge_mm` (at
+    most a quarter of the row's band, so a narrow band on a small part still claims some)."""
     across = surface.across_mm[None, :]
-    lo, hi = band.row_lo_mm[:, None] + edge_mm, band.row_hi_mm[:, None] - edge_mm
+    width = band.row_hi_mm - band.row_lo_mm
+    with np.errstate(invalid="ignore"):
+        edge = np.minimum(edge_mm, 0.25 * width)[:, None]
+    lo, hi = band.row_lo_mm[:, None] + edge, band.row_hi_mm[:, None] - edge
     with np.errstate(invalid="ignore"):
         return surface.hit & (across >= lo) & (across <= hi)
 
