@@ -1,5 +1,9 @@
 """The plans of every planner on the door and the drone are those recorded before the
-foundation refactor (tests/data/make_golden_plans.py): a change of structure, not of result."""
+foundation refactor (tests/data/make_golden_plans.py): a change of structure, not of result.
+
+The recording has the old three-pose transitions (lift 50 mm, cross, descend); transitions
+are now planned clear of the part (`motion.plan_transition`), so the scanning poses are
+compared exactly and the transitions are checked for keeping the sensor body clear."""
 
 from __future__ import annotations
 
@@ -8,14 +12,40 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.make_golden_plans import PARTS, PLANNERS, golden_plans
+from data.make_golden_plans import PARTS, PLANNERS, STRIDE
+from scanplan.collision import CollisionChecker
+from scanplan.part import load_part
+from scanplan.planners import make_planner, plan_path
+from scanplan.quantities import ScanSpec
+from scanplan.swaths import plan_swaths
 
 GOLDEN = Path(__file__).parent / "data" / "golden_plans.npz"
+OLD_TRANSITION_POSES = 3
+
+
+def recorded_scanning(swath: np.ndarray) -> np.ndarray:
+    """The recording's scanning flags: every pass after the first began with the three
+    transition poses that led to it."""
+    scanning = np.ones(len(swath), bool)
+    starts = np.flatnonzero(np.diff(swath)) + 1
+    for s in starts:
+        scanning[s : s + OLD_TRANSITION_POSES] = False
+    return scanning
 
 
 @pytest.fixture(scope="module")
 def plans():
-    return golden_plans()
+    spec = ScanSpec()
+    out = {}
+    for part_name in PARTS:
+        part = load_part(part_name)
+        swaths = plan_swaths(part, spec.sensor)
+        for name in PLANNERS:
+            out[f"{part_name}/{name}"] = (
+                part,
+                plan_path(part, spec, make_planner(name, roll=False), swaths),
+            )
+    return out
 
 
 @pytest.mark.slow
@@ -24,8 +54,22 @@ def plans():
 def test_plan_matches_the_recorded_one(plans, part, planner):
     recorded = np.load(GOLDEN)
     key = f"{part}/{planner}"
-    np.testing.assert_array_equal(plans[f"{key}/n"], recorded[f"{key}/n"])
-    np.testing.assert_array_equal(plans[f"{key}/swath"], recorded[f"{key}/swath"])
-    got, want = plans[f"{key}/poses"], recorded[f"{key}/poses"]
+    the_part, traj = plans[key]
+    swath_rec = recorded[f"{key}/swath"]
+    scanning_rec = recorded_scanning(swath_rec)
+    assert int(scanning_rec.sum()) == int(recorded[f"{key}/n"][1])
+    # Scanning poses: the same, pass by pass.
+    np.testing.assert_array_equal(traj.swath[traj.scanning], swath_rec[scanning_rec])
+    sampled = np.arange(0, len(swath_rec), STRIDE)  # the recorded rows
+    keep = scanning_rec[sampled]
+    order = np.cumsum(scanning_rec) - 1  # recorded index -> index among scanning poses
+    got = traj.scan_poses[order[sampled[keep]]]
+    want = recorded[f"{key}/poses"][keep]
     np.testing.assert_allclose(got[:, :3, 3], want[:, :3, 3], rtol=0, atol=1e-9)
     np.testing.assert_allclose(got[:, :3, :3], want[:, :3, :3], rtol=0, atol=1e-12)
+    # Transitions (where there is more than one pass): clear of the part by the clearance.
+    moving = ~traj.scanning
+    assert moving.any() == (len(np.unique(swath_rec)) > 1)
+    report = CollisionChecker(the_part, ScanSpec().sensor).check(traj.poses[moving], 20.0)
+    assert not report.colliding.any()
+    assert traj.meta["collisions_dropped"] == 0

@@ -10,7 +10,7 @@ import trimesh
 
 from scanplan.part import part_from_mesh
 from scanplan.sensor import SensorSpec
-from scanplan.swaths import UP, plan_swaths, transition_poses
+from scanplan.swaths import UP, plan_swaths
 
 SENSOR = SensorSpec()
 W = SENSOR.line_width_mm  # 495 mm
@@ -62,15 +62,6 @@ def test_snake_order_alternates_direction():
         assert np.linalg.norm(a.end_mm[:2] - b.start_mm[:2]) < np.linalg.norm(
             a.start_mm[:2] - b.start_mm[:2]
         )
-
-
-def test_transitions_lift_clear_of_the_part():
-    part = plate(1000.0, 1500.0)
-    swaths = plan_swaths(part, SENSOR, "x")
-    moves = transition_poses(swaths[0], swaths[1])
-    top = part.bounds[1, 2]
-    assert np.all(moves[:2, 2, 3] > top + SENSOR.working_distance_mm)
-    assert moves[-1, :3, 3] == pytest.approx(swaths[1].start_mm)
 
 
 def test_pose_pitch_convention_and_inverse():

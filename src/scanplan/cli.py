@@ -383,6 +383,11 @@ def plan_cmd(
         f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
         f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
     )
+    if dropped := traj.meta.get("collisions_dropped", 0):
+        typer.echo(
+            f"collisions: {dropped} scanning poses dropped (sensor body within "
+            f"{spec.clearance_mm:g} mm of the part)"
+        )
     if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
         # The rl planner's guards replaced some of the policy's steps: say how many.
         typer.echo("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()))
@@ -450,6 +455,8 @@ def evaluate_cmd(
         f"{metrics.orientation_error_mean_deg:.2f} p95 {metrics.orientation_error_p95_deg:.2f} deg"
         f" | spacing {metrics.spacing_mean_mm:.3f} mm (cv {metrics.spacing_cv:.3f}, "
         f"{metrics.backward_steps} backward) | reward {metrics.reward_mean:.4f}"
+        f" | collisions {metrics.collisions_count} within {metrics.clearance_mm:g} mm, "
+        f"{metrics.collisions_touching} touching (worst {metrics.worst_penetration_mm:.1f} mm)"
         + (f" -> {output}" if output is not None else "")
     )
 

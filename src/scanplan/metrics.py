@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from scanplan.cloud import PointCloud
+from scanplan.collision import checker_for
 from scanplan.part import Part
 from scanplan.quantities import (
     ScanSpec,
@@ -95,7 +96,11 @@ class Metrics:
     Coverage: see `COVERAGE_DEFINITION`; in-spec coverage (the headline figure): see
     `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg` and at
     least one point per `in_spec_cell_mm`² (2·Δs_opt).
-    Cycle time: see `CYCLE_TIME_ASSUMPTIONS`.
+    Cycle time: see `CYCLE_TIME_ASSUMPTIONS`; split into scanning (profiles at the profile
+    rate) and moving (the rest of the path at the travel speed).
+    Collisions (every pose, scanning or not; `collision.CollisionChecker`): poses whose sensor
+    body comes closer to the part than `clearance_mm`, those touching it (0 mm), and the
+    deepest penetration.
     `cloud`: a bounded sample of the valid points with their errors, for the maps;
     `coverage_map`: the surface samples and their `SurfaceState`, for the in-spec map.
     """
@@ -130,7 +135,10 @@ class Metrics:
     tolerance_deg: float
     path_length_mm: float
     scan_length_mm: float
+    move_length_mm: float
     cycle_time_s: float
+    scan_time_s: float
+    move_time_s: float
     profile_rate_hz: float
     travel_speed_mm_s: float
     plan_time_s: float
@@ -139,6 +147,10 @@ class Metrics:
     r_d_mean: float
     r_alpha_mean: float
     r_delta_s_mean: float
+    collisions_count: int
+    collisions_touching: int
+    worst_penetration_mm: float
+    clearance_mm: float
     cloud: PointCloud | None = field(default=None, repr=False, compare=False)
     coverage_map: CoverageMap | None = field(default=None, repr=False, compare=False)
 
@@ -184,7 +196,10 @@ class Metrics:
                 },
                 "path_length_mm": self.path_length_mm,
                 "scan_length_mm": self.scan_length_mm,
+                "move_length_mm": self.move_length_mm,
                 "cycle_time_s": self.cycle_time_s,
+                "scan_time_s": self.scan_time_s,
+                "move_time_s": self.move_time_s,
                 "cycle_time_assumptions": {
                     "profile_rate_hz": self.profile_rate_hz,
                     "travel_speed_mm_s": self.travel_speed_mm_s,
@@ -197,6 +212,12 @@ class Metrics:
                     "r_d": self.r_d_mean,
                     "r_alpha": self.r_alpha_mean,
                     "r_delta_s": self.r_delta_s_mean,
+                },
+                "collisions": {
+                    "count": self.collisions_count,
+                    "count_touching": self.collisions_touching,
+                    "worst_penetration_mm": self.worst_penetration_mm,
+                    "clearance_mm": self.clearance_mm,
                 },
             }
         )
@@ -528,13 +549,15 @@ def _path_summary(traj: Trajectory, profiles: int, scan_spec: ScanSpec) -> dict[
         ].sum()
     )
     path_len = traj.path_length_mm()
-    cycle = (
-        profiles / scan_spec.profile_rate_hz + (path_len - scan_len) / scan_spec.travel_speed_mm_s
-    )
+    scan_time = profiles / scan_spec.profile_rate_hz
+    move_time = (path_len - scan_len) / scan_spec.travel_speed_mm_s
     return {
         "path_length_mm": path_len,
         "scan_length_mm": scan_len,
-        "cycle_time_s": cycle,
+        "move_length_mm": path_len - scan_len,
+        "cycle_time_s": scan_time + move_time,
+        "scan_time_s": scan_time,
+        "move_time_s": move_time,
         "profile_rate_hz": scan_spec.profile_rate_hz,
         "travel_speed_mm_s": scan_spec.travel_speed_mm_s,
         "plan_time_s": float(traj.plan_time_s),
@@ -617,6 +640,7 @@ def evaluate(
             f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
         )
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
+    collisions = checker_for(part, sensor).check(traj.poses, scan_spec.clearance_mm)
     return Metrics(
         part=part.name,
         planner=traj.planner,
@@ -634,6 +658,10 @@ def evaluate(
         eval_time_s=time.perf_counter() - start_time,
         cloud=sample.cloud(),
         coverage_map=coverage_map,
+        collisions_count=int(collisions.colliding.sum()),
+        collisions_touching=int(collisions.touching.sum()),
+        worst_penetration_mm=collisions.worst_penetration_mm,
+        clearance_mm=collisions.clearance_mm,
         **errors.summary(),
         **spacing.summary(wd, scan_spec),
         **_path_summary(traj, m, scan_spec),

@@ -26,6 +26,7 @@ class ScanSpec:
     profile_rate_hz, travel_speed_mm_s: the cycle-time model of the metrics and the robot
     programs: scan speed = profile rate × Δs_opt (profiles land Δs_opt apart), moves between
     passes at the travel speed.
+    clearance_mm: how far the sensor body stays from the part on every pose (SPEC §3b).
     """
 
     sensor: SensorSpec = field(default_factory=SensorSpec)
@@ -38,6 +39,7 @@ class ScanSpec:
     tol_angle_rad: float = math.radians(15.0)
     profile_rate_hz: float = 200.0
     travel_speed_mm_s: float = 250.0
+    clearance_mm: float = 20.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -51,6 +53,11 @@ class ScanSpec:
         for value, what in checks:
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"scan spec: {what} must be a finite number > 0, got {value}")
+        if not (math.isfinite(self.clearance_mm) and self.clearance_mm >= 0):
+            raise ValueError(
+                f"scan spec: clearance (clearance_mm) must be a finite number >= 0, "
+                f"got {self.clearance_mm}"
+            )
         weights = (self.w_d, self.w_alpha, self.w_delta_s)
         if not all(math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
             raise ValueError(f"scan spec: reward weights must be >= 0, not all 0: {weights}")

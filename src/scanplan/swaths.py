@@ -312,13 +312,3 @@ def plan_adaptive_swaths(
     offsets = [b.centre_mm for b in bands]
     rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
     return _swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, adaptive=True)
-
-
-def transition_poses(prev: Swath, nxt: Swath, clearance_mm: float = 50.0) -> np.ndarray:
-    """Non-scanning moves from the end of one pass to the start of the next: lift clear of the
-    part, cross over, descend. (3, 4, 4)."""
-    lift = max(prev.end_mm[2], nxt.start_mm[2]) + clearance_mm
-    a = prev.pose(prev.length_mm, lift - prev.start_mm[2], 0.0)
-    b = nxt.pose(0.0, lift - nxt.start_mm[2], 0.0)
-    c = nxt.pose(0.0, 0.0, 0.0)
-    return np.stack([a, b, c])

@@ -2,7 +2,9 @@
 
 A planner is any object with a `name`, whether it rolls the line (`roll`) and
 `plan(part, swath, spec) -> Trajectory`; `plan_path` runs one over a whole Boustrophedon base
-path and adds the lift-off transitions; `plan_scan` also lays out that base path.
+path, drops the scanning poses whose sensor body would touch the part and joins what is left
+with collision-free transitions (`motion.plan_transition`); `plan_scan` also lays out that
+base path.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
-from scanplan.swaths import Swath, transition_poses
+from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
 
@@ -71,21 +73,51 @@ def plan_path(
     swaths: list[Swath],
     progress: Callable[[int, int], None] | None = None,
 ) -> Trajectory:
-    """All passes in snake order, joined by non-scanning lift-off transitions.
-    progress(done, total) is called after each pass (a caller's progress bar)."""
+    """All passes in snake order, joined by non-scanning transitions that keep the sensor
+    body `spec.clearance_mm` from the part (SPEC §3b).
+
+    A scanning pose whose body would come closer than the clearance is not emitted: the pass
+    is cut there and its pieces are joined like passes (lift over, descend).
+    meta["collisions_dropped"] counts the dropped poses. progress(done, total) is called
+    after each pass (a caller's progress bar).
+    """
+    from scanplan.collision import checker_for
+    from scanplan.motion import plan_transition
+
     if not swaths:
         raise ValueError("no swath to plan")
     start = time.perf_counter()
+    checker = checker_for(part, spec.sensor)
     pieces: list[Trajectory] = []
+    dropped = 0
+    last_pose: np.ndarray | None = None
     for i, swath in enumerate(swaths):
-        if i > 0:
-            moves = transition_poses(swaths[i - 1], swath)
+        planned = planner.plan(part, swath, spec)
+        colliding = checker.check(planned.poses, spec.clearance_mm).colliding
+        dropped += int(colliding.sum())
+        for k, run in enumerate(_runs(~colliding)):
+            poses = planned.poses[run]
+            if last_pose is not None:
+                moves = plan_transition(checker, last_pose, poses[0], spec.clearance_mm)
+                pieces.append(
+                    Trajectory(moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool))
+                )
             pieces.append(
-                Trajectory(moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool))
+                Trajectory(
+                    poses,
+                    planned.swath[run],
+                    planned.scanning[run],
+                    meta=planned.meta if k == 0 else {},  # the pass's counters once
+                )
             )
-        pieces.append(planner.plan(part, swath, spec))
+            last_pose = poses[-1]
         if progress is not None:
             progress(i + 1, len(swaths))
+    if not pieces:
+        raise ValueError(
+            f"every scanning pose on part {part.name} brings the sensor body within "
+            f"{spec.clearance_mm:g} mm of the part"
+        )
     traj = Trajectory.concatenate(pieces, planner=planner.name)
     return Trajectory(
         traj.poses,
@@ -93,8 +125,14 @@ def plan_path(
         traj.scanning,
         plan_time_s=time.perf_counter() - start,
         planner=planner.name,
-        meta=traj.meta,
+        meta={**traj.meta, "collisions_dropped": dropped},
     )
+
+
+def _runs(keep: np.ndarray) -> list[slice]:
+    """The maximal runs of True in `keep`, as slices."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(np.int8), [0]])))
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def plan_scan(

@@ -25,6 +25,7 @@ TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
     ("backward steps", ("spacing_mm", "backward_steps"), "{:.0f}"),
     ("path length (mm)", ("path_length_mm",), "{:.0f}"),
     ("cycle time (s)", ("cycle_time_s",), "{:.1f}"),
+    ("colliding poses (within clearance)", ("collisions", "count"), "{:.0f}"),
     ("plan time (s)", ("plan_time_s",), "{:.2f}"),
     ("mean reward", ("reward", "mean"), "{:.4f}"),
     ("R_D", ("reward", "r_d"), "{:.4f}"),

@@ -1,0 +1,272 @@
+"""The one place that talks to FCL: the sensor body (a box in the sensor frame, SPEC §2)
+against the part's mesh (SPEC §3b), for every pose of a trajectory, scanning or not.
+
+`CollisionChecker` builds the part's BVH once; `check` answers per pose with a signed
+distance (negative = penetration), after an AABB prefilter that keeps FCL for the poses near
+the part.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+from typing import Any
+
+import fcl
+import numpy as np
+
+from scanplan.part import Part
+from scanplan.sensor import SensorSpec
+
+# The unit cube's corners, for the body box's 8 corners in the sensor frame.
+_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
+# An inside test casts one ray in a direction no axis-aligned edge of a mesh lies along.
+_INSIDE_RAY = np.array([0.267, 0.534, 0.802]) / np.linalg.norm([0.267, 0.534, 0.802])
+
+
+@dataclass(frozen=True)
+class CollisionReport:
+    """Sensor body vs part, per pose. (n,) arrays.
+
+    distance_mm: signed distance between the body and the part: > 0 apart, < 0 penetrating
+        (minus the penetration depth, see `CollisionChecker.check`). Exact where `exact`;
+        elsewhere a lower bound that is at least `clearance_mm` (the AABB prefilter or the
+        box grown by the clearance proved the pose clear without measuring it).
+    exact: (n,) bool, whether FCL measured the distance.
+    clearance_mm: the clearance the report was asked for.
+    """
+
+    distance_mm: np.ndarray
+    exact: np.ndarray
+    clearance_mm: float
+
+    def __len__(self) -> int:
+        return len(self.distance_mm)
+
+    def colliding_at(self, clearance_mm: float) -> np.ndarray:
+        """(n,) bool: closer than `clearance_mm`, or touching (distance <= 0). Only valid for
+        clearances up to the report's own."""
+        if clearance_mm > self.clearance_mm + 1e-12:
+            raise ValueError(
+                f"collision report made at {self.clearance_mm:g} mm cannot judge {clearance_mm:g}"
+            )
+        return (self.distance_mm < clearance_mm) | (self.distance_mm <= 0.0)
+
+    @property
+    def colliding(self) -> np.ndarray:
+        """(n,) bool: closer to the part than the clearance (or touching it)."""
+        return self.colliding_at(self.clearance_mm)
+
+    @property
+    def touching(self) -> np.ndarray:
+        """(n,) bool: touching or penetrating the part (colliding at 0 mm)."""
+        return self.distance_mm <= 0.0
+
+    @property
+    def penetration_mm(self) -> np.ndarray:
+        """(n,) depth of penetration, 0 where apart."""
+        return np.maximum(0.0, -self.distance_mm)
+
+    @property
+    def worst_penetration_mm(self) -> float:
+        return float(self.penetration_mm.max()) if len(self) else 0.0
+
+    def summary(self) -> dict[str, float | int]:
+        """The `collisions` entry of the metrics JSON."""
+        return {
+            "count": int(self.colliding.sum()),
+            "count_touching": int(self.touching.sum()),
+            "worst_penetration_mm": self.worst_penetration_mm,
+            "clearance_mm": self.clearance_mm,
+        }
+
+
+def body_corners(sensor: SensorSpec) -> np.ndarray:
+    """(8, 3) corners of the sensor body in the sensor frame, mm."""
+    lo, hi = sensor.body_bounds_mm
+    return lo + _CORNERS * (hi - lo)
+
+
+class CollisionChecker:
+    """The sensor body of `sensor` against `part`, built once per part (the BVH of its mesh).
+
+    The body is `SensorSpec.body_bounds_mm`, a box in the sensor frame; poses are
+    `T_part_sensor` (n, 4, 4) in mm.
+    """
+
+    def __init__(self, part: Part, sensor: SensorSpec) -> None:
+        # No reference to the Part itself: `checker_for` caches checkers weakly by part.
+        self.part_name = part.name
+        self.sensor = sensor
+        mesh = part.mesh
+        self._ray_engine = part.ray_engine
+        self._face_normals = np.asarray(mesh.face_normals)
+        self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        bvh = fcl.BVHModel()
+        bvh.beginModel(len(self.vertices), len(mesh.faces))
+        bvh.addSubModel(self.vertices, np.asarray(mesh.faces, dtype=np.int32))
+        bvh.endModel()
+        self._part_obj = fcl.CollisionObject(bvh, fcl.Transform())
+        self.bounds = np.asarray(part.bounds, dtype=np.float64)
+        lo, hi = sensor.body_bounds_mm
+        self.body_lo, self.body_hi = lo, hi
+        self.body_centre = 0.5 * (lo + hi)
+        self.body_half = 0.5 * (hi - lo)
+        self._box_obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform())
+        self._point_obj = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform())
+        # A box inside a closed mesh touches no triangle: FCL calls it apart. Only a closed
+        # mesh has an inside to test.
+        self._closed = bool(mesh.is_watertight)
+        self._grown: dict[float, fcl.CollisionObject] = {}
+        self._vertex_tree: Any = None  # a cKDTree of the vertices, built on first need
+
+    @property
+    def body_radius_mm(self) -> float:
+        """The farthest the body reaches from the sensor origin (for rotation sampling)."""
+        return float(np.linalg.norm(body_corners(self.sensor), axis=1).max())
+
+    def body_corners_part(self, poses: np.ndarray) -> np.ndarray:
+        """(n, 8, 3) the body's corners in the part frame."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        corners = body_corners(self.sensor)
+        return np.einsum("nij,kj->nki", poses[:, :3, :3], corners) + poses[:, None, :3, 3]
+
+    def aabb_gap_mm(self, poses: np.ndarray) -> np.ndarray:
+        """(n,) distance between the body's part-frame AABB and the part's AABB (0 if they
+        overlap): a lower bound on the body-part distance."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        rot = poses[:, :3, :3]
+        centre = rot @ self.body_centre + poses[:, :3, 3]
+        half = np.abs(rot) @ self.body_half
+        lo, hi = self.bounds
+        gap = np.maximum(lo - (centre + half), (centre - half) - hi)
+        return np.linalg.norm(np.maximum(gap, 0.0), axis=1)
+
+    def check(
+        self, poses: np.ndarray, clearance_mm: float = 20.0, exact: bool = False
+    ) -> CollisionReport:
+        """Body vs part for every pose (n, 4, 4).
+
+        Stages: poses whose body AABB is at least the clearance from the part's AABB are
+        clear without FCL; the rest collide with the body grown by the clearance (a box that
+        holds every point within the clearance of the body), and only those touching it get
+        an exact `fcl.distance`. Penetrating poses get a depth: the deepest a body corner lies
+        inside the part or a part vertex inside the body (a lower bound on the translation
+        that separates them, exact when a face or a corner presses in), else, for an edge
+        crossing an edge, FCL's contact depth. A body wholly inside a closed part counts as
+        penetrating by its corners' depth. exact=True: every pose gets `fcl.distance`.
+        """
+        if not (np.isfinite(clearance_mm) and clearance_mm >= 0):
+            raise ValueError(f"clearance must be a finite number >= 0 mm, got {clearance_mm}")
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        n = len(poses)
+        gap = self.aabb_gap_mm(poses)
+        distance = gap.copy()
+        measured = np.zeros(n, bool)
+        near = np.flatnonzero(gap <= clearance_mm) if not exact else np.arange(n)
+        if clearance_mm > 0 and not exact:
+            grown = self._grown_box(clearance_mm)
+            request = fcl.CollisionRequest()
+            keep = []
+            for i in near:
+                grown.setTransform(self._transform(poses[i]))
+                if fcl.collide(grown, self._part_obj, request, fcl.CollisionResult()):
+                    keep.append(i)
+                else:  # apart by more than the clearance, unless wholly inside
+                    distance[i] = max(gap[i], clearance_mm)
+            near_inside = np.setdiff1d(near, keep)
+            near = np.asarray(keep, dtype=np.int64)
+        else:
+            near_inside = np.zeros(0, np.int64)
+        request = fcl.DistanceRequest()
+        for i in near:
+            self._box_obj.setTransform(self._transform(poses[i]))
+            d = fcl.distance(self._box_obj, self._part_obj, request, fcl.DistanceResult())
+            distance[i] = d if d > 0 else -self._penetration_mm(poses[i])
+            measured[i] = True
+        # A body apart from every triangle may still be inside a closed part.
+        apart = np.concatenate([near_inside, near[distance[near] > 0]])
+        if self._closed and len(apart):
+            inside = apart[
+                self._inside(poses[apart, :3, :3] @ self.body_centre + poses[apart, :3, 3])
+            ]
+            for i in inside:
+                distance[i] = -self._penetration_mm(poses[i])
+                measured[i] = True
+        return CollisionReport(distance, measured, float(clearance_mm))
+
+    # ---- internals --------------------------------------------------------------------------
+
+    def _grown_box(self, clearance_mm: float) -> fcl.CollisionObject:
+        obj = self._grown.get(clearance_mm)
+        if obj is None:
+            obj = fcl.CollisionObject(
+                fcl.Box(*(self.body_hi - self.body_lo + 2 * clearance_mm)), fcl.Transform()
+            )
+            self._grown[clearance_mm] = obj
+        return obj
+
+    def _transform(self, pose: np.ndarray) -> fcl.Transform:
+        """The FCL transform of the body box (FCL boxes are centred on their origin)."""
+        rot = pose[:3, :3]
+        return fcl.Transform(rot, rot @ self.body_centre + pose[:3, 3])
+
+    def _inside(self, points: np.ndarray) -> np.ndarray:
+        """(k,) bool: points inside the closed mesh (the first face a ray meets faces away)."""
+        directions = np.tile(_INSIDE_RAY, (len(points), 1))
+        _, face = self._ray_engine.first_hit(points, directions)
+        hit = face >= 0
+        out = np.zeros(len(points), bool)
+        out[hit] = self._face_normals[face[hit]] @ _INSIDE_RAY > 0
+        return out
+
+    def _surface_distance_mm(self, point: np.ndarray) -> float:
+        self._point_obj.setTransform(fcl.Transform(np.eye(3), point))
+        return float(
+            fcl.distance(
+                self._point_obj, self._part_obj, fcl.DistanceRequest(), fcl.DistanceResult()
+            )
+        )
+
+    def _penetration_mm(self, pose: np.ndarray) -> float:
+        depth = 0.0
+        if self._closed:  # body corners inside the part: their depth below its surface
+            corners = self.body_corners_part(pose)[0]
+            for c in corners[self._inside(corners)]:
+                depth = max(depth, self._surface_distance_mm(c))
+        # Part vertices inside the body: their depth below the body's nearest face.
+        if self._vertex_tree is None:
+            from scipy.spatial import cKDTree
+
+            self._vertex_tree = cKDTree(self.vertices)
+        centre = pose[:3, :3] @ self.body_centre + pose[:3, 3]
+        idx = self._vertex_tree.query_ball_point(centre, float(np.linalg.norm(self.body_half)))
+        if idx:
+            local = (self.vertices[idx] - pose[:3, 3]) @ pose[:3, :3]  # into the sensor frame
+            inner = np.minimum(local - self.body_lo, self.body_hi - local).min(axis=1)
+            if (inner > 0).any():
+                depth = max(depth, float(inner.max()))
+        if depth > 0:
+            return depth
+        # Edges crossing edges: no vertex inside either; FCL's contact depth.
+        self._box_obj.setTransform(self._transform(pose))
+        result = fcl.CollisionResult()
+        request = fcl.CollisionRequest(num_max_contacts=16, enable_contact=True)
+        fcl.collide(self._box_obj, self._part_obj, request, result)
+        depths = [c.penetration_depth for c in result.contacts]
+        return float(min(depths)) if depths else 0.0
+
+
+_CHECKERS: weakref.WeakKeyDictionary[Part, dict[bytes, CollisionChecker]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def checker_for(part: Part, sensor: SensorSpec) -> CollisionChecker:
+    """The checker of this part and this sensor body, built once while the part lives (the
+    planner and the evaluation of one part share its BVH)."""
+    by_body = _CHECKERS.setdefault(part, {})
+    key = sensor.body_bounds_mm.tobytes()
+    if key not in by_body:
+        by_body[key] = CollisionChecker(part, sensor)
+    return by_body[key]

@@ -1,0 +1,208 @@
+"""The sensor body vs the part (SPEC §3b): distances and depths against analytic answers,
+plans that keep clear (checked with FCL built here, not through the checker), and a post
+planted beside a plate that the transitions must go over."""
+
+from __future__ import annotations
+
+import fcl
+import numpy as np
+import pytest
+import trimesh
+
+from scanplan.collision import CollisionChecker
+from scanplan.metrics import evaluate
+from scanplan.part import Part, load_part
+from scanplan.planners import make_planner, plan_path
+from scanplan.quantities import ScanSpec
+from scanplan.sensor import SensorSpec
+from scanplan.swaths import plan_swaths
+
+SPEC = ScanSpec()
+CUBE = SensorSpec(body_min_mm=(-10.0, -10.0, -10.0), body_max_mm=(10.0, 10.0, 10.0))
+
+
+def plate_part(thickness: float = 20.0) -> Part:
+    """400 x 400 plate, top face at z = 0."""
+    mesh = trimesh.creation.box((400.0, 400.0, thickness))
+    mesh.apply_translation((0.0, 0.0, -thickness / 2))
+    return Part(mesh, name="plate")
+
+
+def at(x: float, y: float, z: float) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:3, 3] = (x, y, z)
+    return pose
+
+
+_BVH: dict[int, fcl.CollisionObject] = {}
+
+
+def fcl_distance(part: Part, sensor: SensorSpec, pose: np.ndarray) -> float:
+    """Body vs part straight from FCL, for an independent check."""
+    if id(part) not in _BVH:
+        bvh = fcl.BVHModel()
+        bvh.beginModel(len(part.mesh.vertices), len(part.mesh.faces))
+        vertices, faces = np.asarray(part.mesh.vertices, float), np.asarray(part.mesh.faces)
+        bvh.addSubModel(vertices, faces.astype(np.int32))
+        bvh.endModel()
+        _BVH[id(part)] = fcl.CollisionObject(bvh, fcl.Transform())
+    lo, hi = sensor.body_bounds_mm
+    rot = pose[:3, :3]
+    box = fcl.CollisionObject(
+        fcl.Box(*(hi - lo)), fcl.Transform(rot, rot @ (0.5 * (lo + hi)) + pose[:3, 3])
+    )
+    return fcl.distance(box, _BVH[id(part)], fcl.DistanceRequest(), fcl.DistanceResult())
+
+
+def test_a_box_far_from_the_part_is_clear_at_the_right_distance():
+    checker = CollisionChecker(plate_part(), CUBE)
+    poses = np.stack([at(0, 0, 60.0), at(0, 0, 10.0 + 7.25), at(230.0, 0, 30.0)])
+    report = checker.check(poses, clearance_mm=5.0, exact=True)
+    # Box bottom 10 below its centre; the last is off the plate's edge by 20 in x and
+    # 20 above its top: diagonal distance.
+    want = [50.0, 7.25, float(np.hypot(20.0, 20.0))]
+    np.testing.assert_allclose(report.distance_mm, want, atol=1e-6)
+    assert not report.colliding.any() and report.exact.all()
+    # Without exact: the first and the last are cleared by the prefilters, still >= clearance.
+    quick = checker.check(poses, clearance_mm=5.0)
+    assert not quick.colliding.any()
+    assert np.all(quick.distance_mm <= np.array(want) + 1e-9)
+    assert quick.distance_mm[1] == pytest.approx(7.25, abs=1e-6)
+
+
+def test_a_box_pressed_into_a_plate_collides_by_its_depth():
+    checker = CollisionChecker(plate_part(thickness=20.0), CUBE)
+    depths = np.array([0.5, 3.0, 7.5])
+    poses = np.stack([at(0, 0, 10.0 - d) for d in depths])
+    report = checker.check(poses, clearance_mm=20.0)
+    assert report.colliding.all() and report.touching.all()
+    np.testing.assert_allclose(report.penetration_mm, depths, atol=1e-6)
+    assert report.worst_penetration_mm == pytest.approx(7.5, abs=1e-6)
+    summary = report.summary()
+    assert summary["count"] == 3 and summary["count_touching"] == 3
+
+
+def test_within_the_clearance_is_colliding_but_not_touching():
+    checker = CollisionChecker(plate_part(), CUBE)
+    report = checker.check(np.stack([at(0, 0, 10.0 + 4.0)]), clearance_mm=20.0)
+    assert report.colliding[0] and not report.touching[0]
+    assert report.distance_mm[0] == pytest.approx(4.0, abs=1e-6)
+    assert report.penetration_mm[0] == 0.0
+
+
+def test_a_body_wholly_inside_a_closed_part_collides():
+    checker = CollisionChecker(plate_part(thickness=100.0), CUBE)
+    report = checker.check(np.stack([at(0, 0, -50.0)]), clearance_mm=0.0)
+    assert report.touching[0]
+    assert report.penetration_mm[0] == pytest.approx(40.0, abs=1e-6)  # corners 40 deep
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("part_name", ["door", "drone"])
+@pytest.mark.parametrize("planner", ["fixed", "geometric"])
+def test_default_plans_keep_the_body_clear(part_name, planner):
+    part = load_part(part_name)
+    traj = plan_path(part, SPEC, make_planner(planner, roll=False), plan_swaths(part, SPEC.sensor))
+    assert traj.meta["collisions_dropped"] == 0
+    report = CollisionChecker(part, SPEC.sensor).check(traj.poses, 0.0)
+    assert not report.touching.any()
+    # Independently: FCL objects built here, a sample of poses with every transition pose.
+    rng = np.random.default_rng(0)
+    moving = np.flatnonzero(~traj.scanning)
+    sample = np.concatenate([moving, rng.choice(len(traj), 20, replace=False)])
+    for i in sample[::3]:
+        assert fcl_distance(part, SPEC.sensor, traj.poses[i]) > 0
+
+
+# ---- a post planted beside a plate --------------------------------------------------------
+
+
+def plate_and_post() -> tuple[Part, Part]:
+    """A 600 x 700 plate (top at 0) and, just past its +x end between the two passes, a
+    60 x 60 post 600 mm tall: what the old 50 mm lift would have crossed through."""
+    plate = trimesh.creation.box((600.0, 700.0, 10.0))
+    plate.apply_translation((0.0, 0.0, -5.0))
+    post = trimesh.creation.box((60.0, 60.0, 600.0))
+    post.apply_translation((330.0, 0.0, 300.0))
+    return Part(plate, name="plate"), Part(trimesh.util.concatenate([plate, post]), name="post")
+
+
+POST_TOP = 600.0
+
+
+def test_transitions_go_over_a_post_beside_the_part():
+    plate, part = plate_and_post()
+    swaths = plan_swaths(plate, SPEC.sensor, "x")  # the post is a fixture: not scanned
+    assert len(swaths) == 2
+    traj = plan_path(part, SPEC, make_planner("fixed"), swaths)
+    moving = ~traj.scanning
+    assert moving.sum() > 3
+    assert traj.meta["collisions_dropped"] == 0
+    # The old straight 50 mm lift across would hit the post.
+    end0 = traj.poses[np.flatnonzero(traj.swath == 0)[-1]]
+    old_height = end0[2, 3] + 50.0
+    ys = np.linspace(end0[1, 3], -end0[1, 3], 41)
+    old = np.stack([at(end0[0, 3], y, old_height) for y in ys])
+    old[:, :3, :3] = end0[:3, :3]
+    assert min(fcl_distance(part, SPEC.sensor, p) for p in old) <= 0
+    # The planned one goes over it, clear at 0 mm for every pose (checked here with FCL).
+    for pose in traj.poses[moving]:
+        assert fcl_distance(part, SPEC.sensor, pose) > 0
+    checker = CollisionChecker(part, SPEC.sensor)
+    height = traj.poses[moving, 2, 3]
+    crossing = traj.poses[moving][height > height.max() - 1e-6]
+    assert len(crossing) > 3
+    # The whole body, not just the emitter, passes above the post's top by the clearance.
+    assert checker.body_corners_part(crossing)[..., 2].min() >= POST_TOP + SPEC.clearance_mm - 1e-6
+    report = checker.check(traj.poses, SPEC.clearance_mm)
+    assert not report.colliding.any()
+
+
+def test_a_scanning_pose_inside_the_post_is_dropped_and_counted():
+    _, part = plate_and_post()
+
+    class Planner:
+        """A straight pass whose middle poses run through the post."""
+
+        name = "through"
+        roll = False
+
+        def plan(self, part_, swath, spec):
+            from scanplan.trajectory import Trajectory
+
+            s = np.arange(0.0, swath.length_mm, 10.0)
+            poses = swath.poses(s, np.zeros_like(s), np.zeros_like(s))
+            return Trajectory(poses, np.full(len(s), swath.index), np.ones(len(s), bool))
+
+    from scanplan.swaths import Swath
+
+    u, v = np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0])
+    # Along y through the post at x = 330 with the emitter at z = 300 (inside the post).
+    swath = Swath(0, np.array([330.0, -400.0, 300.0]), np.array([330.0, 400.0, 300.0]), u, v)
+    traj = plan_path(part, SPEC, Planner(), [swath])
+    dropped = traj.meta["collisions_dropped"]
+    checker = CollisionChecker(part, SPEC.sensor)
+    planned = Planner().plan(part, swath, SPEC)
+    assert dropped == int(checker.check(planned.poses, SPEC.clearance_mm).colliding.sum()) > 0
+    assert traj.scanning.sum() == len(planned) - dropped
+    # What is left, and the move around the post, is clear.
+    assert not checker.check(traj.poses, SPEC.clearance_mm).colliding.any()
+    assert (~traj.scanning).any()
+
+
+def test_evaluate_reports_collisions_of_a_trajectory_through_the_post():
+    from scanplan.trajectory import Trajectory
+
+    plate, part = plate_and_post()
+    (swath, _) = plan_swaths(plate, SPEC.sensor, "x")
+    good = plan_path(part, SPEC, make_planner("fixed"), [swath])
+    bad_pose = at(330.0, 0.0, 300.0)
+    bad_pose[:3, :3] = good.poses[0, :3, :3]
+    poses = np.concatenate([good.poses, bad_pose[None]])
+    traj = Trajectory(poses, np.zeros(len(poses), int), np.r_[good.scanning, False])
+    data = evaluate(part, SPEC, traj, points_per_profile=64).to_json_dict()
+    assert data["collisions"]["count"] == 1 and data["collisions"]["count_touching"] == 1
+    assert data["collisions"]["worst_penetration_mm"] > 0
+    assert data["collisions"]["clearance_mm"] == SPEC.clearance_mm
+    assert data["move_length_mm"] + data["scan_length_mm"] == pytest.approx(data["path_length_mm"])
+    assert data["scan_time_s"] + data["move_time_s"] == pytest.approx(data["cycle_time_s"])
