@@ -132,6 +132,19 @@ def beam_angle(normals_part: np.ndarray, valid: np.ndarray, poses: np.ndarray) -
     return np.arccos(np.clip(-np.sum(n * z_s, axis=-1), -1.0, 1.0))
 
 
+def profile_angles(
+    normals_part: np.ndarray, valid: np.ndarray, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(α, β, beam angle) of profiles from one mean normal: `signed_alpha`, `signed_beta` and
+    `beam_angle` at the cost of one."""
+    n = mean_normal(normals_part, valid)
+    x_s, y_s, z_s = poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2]
+    facing = -np.sum(n * z_s, axis=-1)
+    alpha = np.arctan2(np.sum(n * y_s, axis=-1), facing)
+    beta = np.arctan2(-np.sum(n * x_s, axis=-1), facing)
+    return alpha, beta, np.arccos(np.clip(facing, -1.0, 1.0))
+
+
 def point_orientation_error(normals_part: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """alpha_i = acos(-z_s . n_i) per point, radians; includes what pitch cannot correct.
     (..., N, 3), (..., 4, 4) -> (..., N)."""

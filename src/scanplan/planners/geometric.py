@@ -24,10 +24,9 @@ from scanplan.part import Part
 from scanplan.quantities import (
     ScanSpec,
     advance,
-    beam_angle,
     mean_distance,
+    profile_angles,
     signed_alpha,
-    signed_beta,
 )
 from scanplan.reward import reward_terms
 from scanplan.sensor import LineProfilometer
@@ -274,7 +273,7 @@ class GeometricPlanner:
             part, swath, spec, self.probe_step_mm, self.probe_columns, roll=self.roll
         )
         # A band of a few cm needs more than the 64 columns that judge a whole line.
-        points = self.sensor_points if swath.band_mm is None else 4 * self.sensor_points
+        points = self.sensor_points if swath.band_mm is None else 2 * self.sensor_points
         fan = LineProfilometer(part, spec.sensor.without_noise().with_points(points))
         best: tuple[float, np.ndarray] | None = None
         for lookahead in self.lookaheads:
@@ -295,10 +294,10 @@ class GeometricPlanner:
                 scan = fan.measure_many(poses)
                 valid = self._band_columns(scan, swath)
                 d = mean_distance(scan.z_sensor, valid)
-                alpha = signed_alpha(scan.normals_part, valid, poses)
                 if self.roll:
-                    tilt = beam_angle(scan.normals_part, valid, poses)
-                    beta = signed_beta(scan.normals_part, valid, poses)
+                    alpha, beta, tilt = profile_angles(scan.normals_part, valid, poses)
+                else:
+                    alpha = signed_alpha(scan.normals_part, valid, poses)
                 ds = advance(
                     scan.points_part[:-1],
                     scan.valid[:-1],
