@@ -64,6 +64,16 @@ ToleranceOpt = Annotated[
 ]
 
 
+RoiOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--roi",
+        help="region of interest: box:x0,y0,z0,x1,y1,z1 (mm), +z:30 (a normal cone; any of "
+        "±x ±y ±z or n:X,Y,Z:DEG), body:I (the I-th connected body); ';' joins terms (AND)",
+    ),
+]
+
+
 def parse_tolerance(text: str | None) -> dict[str, float]:
     """--tolerance MM,DEG as ScanSpec keyword arguments (none when not given)."""
     if text is None:
@@ -128,6 +138,7 @@ def scan_cmd(
     units: UnitsOpt = "mm",
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
     no_noise: Annotated[bool, typer.Option("--no-noise", help="switch noise off")] = False,
+    roi: RoiOpt = None,
 ):
     """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields."""
     from scanplan.cloud import simulate_cloud, write_ply
@@ -140,7 +151,7 @@ def scan_cmd(
     spec = load_sensor(sensor)
     if no_noise:
         spec = spec.without_noise()
-    the_part = load_part(part, units)
+    the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
     if not traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
@@ -193,6 +204,7 @@ def plan_cmd(
     ] = True,
     units: UnitsOpt = "mm",
     tolerance: ToleranceOpt = None,
+    roi: RoiOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.part import load_part
@@ -202,7 +214,7 @@ def plan_cmd(
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units)
+    the_part = load_part(part, units).with_roi(roi)
     the_planner = make_planner(planner, policy, roll)
     swaths, traj = plan_scan(the_part, spec, the_planner, raster, direction, overlap)
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
@@ -232,6 +244,7 @@ def evaluate_cmd(
     ] = None,
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
     tolerance: ToleranceOpt = None,
+    roi: RoiOpt = None,
 ):
     """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
     import json
@@ -243,7 +256,7 @@ def evaluate_cmd(
     if points is not None and points < 2:
         raise ValueError(f"--points must be >= 2, got {points}")
     spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units)
+    the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
     metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
     if output is not None:
@@ -511,6 +524,7 @@ def demo_cmd(
     ] = 1024,
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
     tolerance: ToleranceOpt = None,
+    roi: RoiOpt = None,
 ):
     """The main job: three planners on a part (the door by default), the table, maps, an
     HTML report and a URScript program."""
@@ -539,6 +553,7 @@ def demo_cmd(
             points_per_profile=points,
             seed=seed,
             step=step,
+            roi=roi,
         )
     table = Table(title=f"{part}: scan quality by planner")
     table.add_column("metric")

@@ -33,7 +33,8 @@ class PointCloud:
 def simulate_cloud(
     part: Part, sensor: SensorSpec, traj: Trajectory, seed: int = 0, chunk_poses: int = 256
 ) -> PointCloud:
-    """Measure every scanning pose and keep the valid points (chunked to bound memory)."""
+    """Measure every scanning pose and keep the valid points (chunked to bound memory); of a
+    part with a region of interest, only the points on its faces."""
     profilometer = LineProfilometer(part, sensor, seed=seed)
     poses = traj.scan_poses
     swath_of_pose = traj.swath[traj.scanning]
@@ -41,6 +42,8 @@ def simulate_cloud(
     for start in range(0, len(poses), chunk_poses):
         scan = profilometer.measure_many(poses[start : start + chunk_poses])
         valid = scan.valid
+        if part.inspect_faces is not None:
+            valid = valid & part.inspect_faces[np.maximum(scan.face, 0)]
         rows = np.nonzero(valid)[0]
         out["points_part"].append(scan.points_part[valid])
         out["distance_error_mm"].append(scan.z_sensor[valid] - sensor.working_distance_mm)

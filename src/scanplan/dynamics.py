@@ -217,7 +217,8 @@ def probe_line(
     part: Part, swath: Swath, advances_mm: np.ndarray, lateral_mm: np.ndarray
 ) -> LineProbe:
     """Cast vertical rays at the given advances along u (from `swath.start_mm`) and lateral
-    offsets along v, from 10 mm above the part, in one batch."""
+    offsets along v, from 10 mm above the part, in one batch. Of a part with a region of
+    interest, a ray whose first hit is not on it counts as no hit: the pass follows the ROI."""
     top = float(part.bounds[1, 2]) + 10.0
     base = (
         swath.start_mm
@@ -228,7 +229,8 @@ def probe_line(
     origins[:, 2] = top
     t, face, normals = part.ray_engine.cast_down(origins)
     shape = (len(advances_mm), len(lateral_mm))
-    return LineProbe((face >= 0).reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
+    hit = (face >= 0) & part.inspect_mask[face]
+    return LineProbe(hit.reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
 
 
 @dataclass(frozen=True)

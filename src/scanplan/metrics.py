@@ -229,12 +229,13 @@ class VisibleSurface:
 
 def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> VisibleSurface:
     """Sample faces within COVERAGE_MAX_SLOPE_DEG of horizontal (either winding) at about one
-    point per spacing² of area; keep the samples from which a vertical ray escapes."""
+    point per spacing² of area; keep the samples from which a vertical ray escapes. Only the
+    part's faces to inspect (its region of interest) are sampled; the whole part occludes."""
     mesh = part.mesh
     normals = part.ray_engine.face_normals
     area = np.asarray(mesh.area_faces)
     steep_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
-    candidate = np.abs(normals[:, 2]) > steep_cos
+    candidate = (np.abs(normals[:, 2]) > steep_cos) & part.inspect_mask
     cand_area = float(area[candidate].sum())
     if cand_area <= 0:
         return VisibleSurface(np.zeros((0, 3)), 0.0)
