@@ -205,6 +205,16 @@ def plan_cmd(
     units: UnitsOpt = "mm",
     tolerance: ToleranceOpt = None,
     roi: RoiOpt = None,
+    views: Annotated[
+        str,
+        typer.Option(
+            help="top (the paper's single top-down raster) or auto (views chosen greedily, "
+            "each a raster of the part seen along its own axis, toward --coverage-target)"
+        ),
+    ] = "top",
+    coverage_target: Annotated[
+        float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
+    ] = 0.9,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.part import load_part
@@ -216,10 +226,19 @@ def plan_cmd(
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units).with_roi(roi)
     the_planner = make_planner(planner, policy, roll)
-    swaths, traj = plan_scan(the_part, spec, the_planner, raster, direction, overlap)
+    if views == "top":
+        swaths, traj = plan_scan(the_part, spec, the_planner, raster, direction, overlap)
+        n_pass, n_view = len(swaths), ""
+    else:
+        from scanplan.views import plan_views
+
+        plans, traj = plan_views(
+            the_part, spec, the_planner, views, coverage_target, raster, direction, overlap
+        )
+        n_pass, n_view = sum(p.passes for p in plans), f"{len(plans)} views, "
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     typer.echo(
-        f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
+        f"{the_planner.name}: {n_view}{n_pass} passes, {int(traj.scanning.sum())} profiles, "
         f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
     )
     if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
@@ -245,6 +264,13 @@ def evaluate_cmd(
     seed: Annotated[int, typer.Option(help="noise seed")] = 0,
     tolerance: ToleranceOpt = None,
     roi: RoiOpt = None,
+    views: Annotated[
+        str | None,
+        typer.Option(
+            help="the surface to inspect: top (upward-visible) or auto (visible from the "
+            "upper hemisphere); default: auto for a JSON trajectory of several views, else top"
+        ),
+    ] = None,
 ):
     """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
     import json
@@ -258,7 +284,10 @@ def evaluate_cmd(
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
-    metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points)
+    if views not in (None, "top", "auto"):
+        raise ValueError(f"unknown --views {views!r}; use top or auto")
+    visible = {None: "auto", "top": "top", "auto": "hemisphere"}[views]
+    metrics = evaluate(the_part, spec, traj, seed=seed, points_per_profile=points, visible=visible)
     if output is not None:
         from scanplan.report import Evaluated, write_report
 
