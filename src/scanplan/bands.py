@@ -45,8 +45,10 @@ def top_surface(
     along_step_mm: float = 20.0,
     across_step_mm: float = 4.0,
 ) -> TopSurface:
-    """Vertical rays on a grid over the part's footprint along u and v (one batch)."""
-    vertices = np.asarray(part.mesh.vertices)
+    """Vertical rays on a grid over the part's footprint along u and v (one batch). With a
+    region of interest, the grid spans its footprint and a ray whose first hit (on the whole
+    part: occlusion stays real) is not one of its faces counts as no surface."""
+    vertices = part.inspect_vertices
     a, c = vertices @ u, vertices @ v
     along = np.arange(a.min() + along_step_mm / 2, a.max(), along_step_mm)
     if len(along) == 0:

@@ -227,6 +227,16 @@ ToleranceOpt = Annotated[
 ]
 
 
+RoiOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--roi",
+        help="region of interest: box:x0,y0,z0,x1,y1,z1 (mm), +z:30 (a normal cone; any of "
+        "±x ±y ±z or n:X,Y,Z:DEG), body:I (the I-th connected body); ';' joins terms (AND)",
+    ),
+]
+
+
 def parse_tolerance(text: str | None) -> dict[str, float]:
     """--tolerance MM,DEG as ScanSpec keyword arguments (none when not given)."""
     if text is None:
@@ -292,6 +302,7 @@ def scan_cmd(
     seed: SeedOpt = 0,
     no_noise: Annotated[bool, typer.Option("--no-noise", help="switch noise off")] = False,
     quiet: QuietOpt = False,
+    roi: RoiOpt = None,
 ):
     """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields."""
     from scanplan.cloud import simulate_cloud, write_ply
@@ -304,7 +315,7 @@ def scan_cmd(
     spec = load_sensor(sensor)
     if no_noise:
         spec = spec.without_noise()
-    the_part = load_part(part, units)
+    the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
     if not traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
@@ -363,6 +374,17 @@ def plan_cmd(
     units: UnitsOpt = "mm",
     tolerance: ToleranceOpt = None,
     quiet: QuietOpt = False,
+    roi: RoiOpt = None,
+    views: Annotated[
+        str,
+        typer.Option(
+            help="top (the paper's single top-down raster) or auto (views chosen greedily, "
+            "each a raster of the part seen along its own axis, toward --coverage-target)"
+        ),
+    ] = "top",
+    coverage_target: Annotated[
+        float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
+    ] = 0.9,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.part import load_part
@@ -372,15 +394,24 @@ def plan_cmd(
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units)
+    the_part = load_part(part, units).with_roi(roi)
     the_planner = make_planner(planner, policy, roll)
     with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
-        swaths, traj = plan_scan(
-            the_part, spec, the_planner, raster, direction, overlap, progress=progress
-        )
+        if views == "top":
+            swaths, traj = plan_scan(
+                the_part, spec, the_planner, raster, direction, overlap, progress=progress
+            )
+            n_pass, n_view = len(swaths), ""
+        else:
+            from scanplan.views import plan_views
+
+            plans, traj = plan_views(
+                the_part, spec, the_planner, views, coverage_target, raster, direction, overlap
+            )
+            n_pass, n_view = sum(p.passes for p in plans), f"{len(plans)} views, "
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     typer.echo(
-        f"{the_planner.name}: {len(swaths)} passes, {int(traj.scanning.sum())} profiles, "
+        f"{the_planner.name}: {n_view}{n_pass} passes, {int(traj.scanning.sum())} profiles, "
         f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
     )
     if dropped := traj.meta.get("collisions_dropped", 0):
@@ -416,6 +447,14 @@ def evaluate_cmd(
     seed: SeedOpt = 0,
     tolerance: ToleranceOpt = None,
     quiet: QuietOpt = False,
+    roi: RoiOpt = None,
+    views: Annotated[
+        str | None,
+        typer.Option(
+            help="the surface to inspect: top (upward-visible) or auto (visible from the "
+            "upper hemisphere); default: auto for a JSON trajectory of several views, else top"
+        ),
+    ] = None,
 ):
     """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
     import json
@@ -425,11 +464,20 @@ def evaluate_cmd(
     from scanplan.trajectory import read_trajectory
 
     spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units)
+    the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
+    if views not in (None, "top", "auto"):
+        raise ValueError(f"unknown --views {views!r}; use top or auto")
+    visible = {None: "auto", "top": "top", "auto": "hemisphere"}[views]
     with progress_bar("evaluating", quiet) as progress:
         metrics = evaluate(
-            the_part, spec, traj, seed=seed, points_per_profile=points, progress=progress
+            the_part,
+            spec,
+            traj,
+            seed=seed,
+            points_per_profile=points,
+            visible=visible,
+            progress=progress,
         )
     if output is not None:
         from scanplan.report import Evaluated, write_report
@@ -757,6 +805,7 @@ def demo_cmd(
     ] = 1024,
     seed: SeedOpt = 0,
     tolerance: ToleranceOpt = None,
+    roi: RoiOpt = None,
 ):
     """The main job: three planners on a part (the door by default), the table, maps, an
     HTML report and a URScript program."""
@@ -783,6 +832,7 @@ def demo_cmd(
             points_per_profile=points,
             seed=seed,
             step=step,
+            roi=roi,
         )
     table = Table(title=f"{part}: scan quality by planner")
     table.add_column("metric")

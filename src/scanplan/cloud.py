@@ -39,8 +39,9 @@ def simulate_cloud(
     chunk_poses: int = 256,
     progress: Callable[[int, int], None] | None = None,
 ) -> PointCloud:
-    """Measure every scanning pose and keep the valid points (chunked to bound memory);
-    progress(done, total) is called after each chunk."""
+    """Measure every scanning pose and keep the valid points (chunked to bound memory); of a
+    part with a region of interest, only the points on its faces. progress(done, total) is
+    called after each chunk."""
     profilometer = LineProfilometer(part, sensor, seed=seed)
     poses = traj.scan_poses
     swath_of_pose = traj.swath[traj.scanning]
@@ -48,6 +49,8 @@ def simulate_cloud(
     for start in range(0, len(poses), chunk_poses):
         scan = profilometer.measure_many(poses[start : start + chunk_poses])
         valid = scan.valid
+        if part.inspect_faces is not None:
+            valid = valid & part.inspect_faces[np.maximum(scan.face, 0)]
         rows = np.nonzero(valid)[0]
         out["points_part"].append(scan.points_part[valid])
         out["distance_error_mm"].append(scan.z_sensor[valid] - sensor.working_distance_mm)

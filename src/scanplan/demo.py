@@ -43,8 +43,10 @@ def run_demo(
     points_per_profile: int | None = 1024,
     seed: int = 0,
     step: Callable[[str], None] = lambda message: None,
+    roi: str | None = None,
 ) -> DemoResult:
-    """Plan, evaluate, draw, report and export. `step` is told what is starting (progress).
+    """Plan, evaluate, draw, report and export. `step` is told what is starting (progress);
+    `roi`: a region of interest (`part.parse_roi`) that planning and coverage keep to.
 
     Everything is computed first and written at the end by `report.write_report`, as one
     directory that replaces `out_dir` atomically: an interrupted demo leaves no half of one."""
@@ -55,7 +57,7 @@ def run_demo(
     sensor = spec.sensor
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
-    part: Part = load_part(part_name, units)
+    part: Part = load_part(part_name, units).with_roi(roi)
 
     metrics: dict[str, Metrics] = {}
     trajectories: dict[str, Trajectory] = {}

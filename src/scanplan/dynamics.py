@@ -214,7 +214,8 @@ def probe_line(
     part: Part, swath: Swath, advances_mm: np.ndarray, lateral_mm: np.ndarray
 ) -> LineProbe:
     """Cast vertical rays at the given advances along u (from `swath.start_mm`) and lateral
-    offsets along v, from 10 mm above the part, in one batch."""
+    offsets along v, from 10 mm above the part, in one batch. Of a part with a region of
+    interest, a ray whose first hit is not on it counts as no hit: the pass follows the ROI."""
     return probe_grid(part, swath.start_mm, swath.u, swath.v, advances_mm, lateral_mm)
 
 
@@ -237,7 +238,8 @@ def probe_grid(
     origins[:, 2] = top
     t, face, normals = part.ray_engine.cast_down(origins)
     shape = (len(advances_mm), len(lateral_mm))
-    return LineProbe((face >= 0).reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
+    hit = (face >= 0) & part.inspect_mask[face]
+    return LineProbe(hit.reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
 
 
 def aligning_angles(normals: np.ndarray, u: np.ndarray, v: np.ndarray, roll: bool = True):

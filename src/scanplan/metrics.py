@@ -243,23 +243,23 @@ def _finite_or_none(value: Any) -> Any:
 
 @dataclass(frozen=True)
 class VisibleSurface:
-    """Area-uniform samples of the upward-visible surface. points: (k, 3); area_mm2: total."""
+    """Area-uniform samples of the visible surface to inspect. points: (k, 3); area_mm2:
+    total; faces: (k,) the face each sample lies on."""
 
     points: np.ndarray
     area_mm2: float
+    faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
-def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> VisibleSurface:
-    """Sample faces within COVERAGE_MAX_SLOPE_DEG of horizontal (either winding) at about one
-    point per spacing² of area; keep the samples from which a vertical ray escapes."""
-    mesh = part.mesh
-    normals = part.ray_engine.face_normals
-    area = np.asarray(mesh.area_faces)
-    steep_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
-    candidate = np.abs(normals[:, 2]) > steep_cos
+def _area_samples(
+    part: Part, candidate: np.ndarray, spacing_mm: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """About one point per spacing² of the `candidate` faces' area (20 000..400 000),
+    uniform by area, seeded: (points (k, 3), faces (k,), candidate area)."""
+    area = np.asarray(part.mesh.area_faces)
     cand_area = float(area[candidate].sum())
     if cand_area <= 0:
-        return VisibleSurface(np.zeros((0, 3)), 0.0)
+        return np.zeros((0, 3)), np.zeros(0, np.int64), 0.0
     count = int(np.clip(cand_area / spacing_mm**2, 20_000, 400_000))
     rng = np.random.default_rng(seed)
     idx = np.flatnonzero(candidate)
@@ -271,12 +271,58 @@ def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> Visi
     points = (
         tri[:, 0] + r1[:, None] * (tri[:, 1] - tri[:, 0]) + r2[:, None] * (tri[:, 2] - tri[:, 0])
     )
+    return points, faces, cand_area
+
+
+def coverage_spacing_mm(sensor: SensorSpec) -> float:
+    """The spacing of the coverage samples `evaluate` draws for a fan of this sensor."""
+    lateral_spacing = sensor.line_width_mm / max(sensor.points_per_profile - 1, 1)
+    return max(2.0, 1.2 * lateral_spacing)
+
+
+def hemisphere_visible_samples(
+    part: Part, spacing_mm: float, seed: int = 0, directions: np.ndarray | None = None
+) -> VisibleSurface:
+    """The surface a sensor can see from the upper hemisphere (`--views auto`): samples of
+    the faces to inspect (any slope) kept if, along at least one of `directions` (default
+    `views.hemisphere_directions`, 28 directions up to 75° from +Z), the face is within
+    COVERAGE_MAX_SLOPE_DEG of facing it (either winding) and a ray from it escapes the part."""
+    from scanplan.views import hemisphere_directions
+
+    dirs = hemisphere_directions() if directions is None else np.asarray(directions, float)
+    points, faces, cand_area = _area_samples(part, part.inspect_mask, spacing_mm, seed)
+    n = part.ray_engine.face_normals[faces]
+    facing_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
+    visible = np.zeros(len(points), bool)
+    for d in dirs:
+        cos = n @ d
+        todo = np.flatnonzero(~visible & (np.abs(cos) > facing_cos))
+        if len(todo) == 0:
+            continue
+        start = points[todo] + np.sign(cos[todo])[:, None] * n[todo] * 0.05
+        ray = np.broadcast_to(d, start.shape)
+        visible[todo] = ~part.ray_engine.occluded(start, ray, np.full(len(todo), 1e6))
+    frac = float(visible.mean()) if len(visible) else 0.0
+    return VisibleSurface(points[visible], cand_area * frac, faces[visible])
+
+
+def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> VisibleSurface:
+    """Sample faces within COVERAGE_MAX_SLOPE_DEG of horizontal (either winding) at about one
+    point per spacing² of area; keep the samples from which a vertical ray escapes. Only the
+    part's faces to inspect (its region of interest) are sampled; the whole part occludes."""
+    normals = part.ray_engine.face_normals
+    steep_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
+    candidate = (np.abs(normals[:, 2]) > steep_cos) & part.inspect_mask
+    points, faces, cand_area = _area_samples(part, candidate, spacing_mm, seed)
+    if cand_area <= 0:
+        return VisibleSurface(np.zeros((0, 3)), 0.0)
+    count = len(points)
     up_normal = normals[faces] * np.sign(normals[faces, 2:3])
     start = points + up_normal * 0.05  # off the face, above float32 error at part scale
     up = np.tile([0.0, 0.0, 1.0], (count, 1))
     blocked = part.ray_engine.occluded(start, up, np.full(count, 1e6))
     visible = ~blocked
-    return VisibleSurface(points[visible], cand_area * float(visible.mean()))
+    return VisibleSurface(points[visible], cand_area * float(visible.mean()), faces[visible])
 
 
 def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None)) -> np.ndarray:
@@ -584,12 +630,17 @@ def evaluate(
     chunk_poses: int = 256,
     max_map_points: int = 200_000,
     progress: Callable[[int, int], None] | None = None,
+    visible: str = "auto",
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
     points_per_profile: sub-sample the fan for a faster evaluation (same line width); the
     in-spec density rule still judges the real sensor's columns.
     progress(done, total): called after each chunk of scanning poses (a caller's progress bar).
+    visible: the surface to inspect — 'top' the upward-visible surface
+    (`upward_visible_samples`), 'hemisphere' what a sensor sees from the upper hemisphere
+    (`hemisphere_visible_samples`), 'auto' the latter for a trajectory of several views
+    (`meta["views"]`), else the former. Both keep to the part's region of interest.
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -611,8 +662,13 @@ def evaluate(
     u_dir /= np.maximum(np.linalg.norm(u_dir, axis=1, keepdims=True), 1e-12)
 
     lateral_spacing = spec.line_width_mm / max(n_cols - 1, 1)
-    cover_spacing = max(2.0, 1.2 * lateral_spacing)
-    surface = upward_visible_samples(part, cover_spacing, seed)
+    cover_spacing = coverage_spacing_mm(spec)
+    if visible == "auto":
+        visible = "hemisphere" if len(traj.meta.get("views") or ()) > 1 else "top"
+    if visible not in ("top", "hemisphere"):
+        raise ValueError(f"unknown visible surface {visible!r}; use top, hemisphere or auto")
+    sampler = upward_visible_samples if visible == "top" else hemisphere_visible_samples
+    surface = sampler(part, cover_spacing, seed)
     # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
     col_stride = max(1, int(cover_spacing / 3 / lateral_spacing))
     # Wide enough that every sample between two measured lines has a point within reach.

@@ -106,7 +106,9 @@ class Swath:
 def rectangle_axes(part: Part) -> tuple[np.ndarray, np.ndarray]:
     """The long and the short axis (unit, horizontal) of the minimum-area rectangle around the
     part seen from above."""
-    xy = np.asarray(part.mesh.vertices)[:, :2]
+    xy = np.asarray(
+        part.inspect_vertices if part.inspect_faces is not None else part.mesh.vertices
+    )[:, :2]  # the region of interest's footprint, if any
     try:
         # The footprint's 2-D hull: what the rectangle depends on, and much cheaper than the
         # mesh's 3-D hull on a part of 10^5 vertices.
@@ -127,17 +129,20 @@ def cross_line_residual_mm(
 
     During a pass only height and pitch follow the surface (roll is fixed), so what varies
     across the line (along v) within one station is error no planner can remove. Heights come
-    from vertical rays on a grid over the footprint.
+    from vertical rays on a grid over the footprint (of the region of interest, if any: rays
+    that meet another face of the part first are left out).
     """
     u = np.asarray(u, dtype=np.float64)
     v = np.cross(UP, u)
-    lo, hi = part.bounds
-    xs = np.arange(lo[0], hi[0] + grid_mm, grid_mm)
-    ys = np.arange(lo[1], hi[1] + grid_mm, grid_mm)
+    roi = part.inspect_vertices
+    lo, hi = roi.min(axis=0), part.bounds[1]
+    top = roi.max(axis=0)
+    xs = np.arange(lo[0], top[0] + grid_mm, grid_mm)
+    ys = np.arange(lo[1], top[1] + grid_mm, grid_mm)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     origins = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, hi[2] + 10.0)], axis=1)
     t, face, _ = part.ray_engine.cast_down(origins)
-    hit = face >= 0
+    hit = (face >= 0) & part.inspect_mask[face]
     if hit.sum() < 2:
         return 0.0
     points = origins[hit] - t[hit, None] * UP
@@ -242,7 +247,8 @@ def plan_swaths(
     overlap: float = 0.2,
     run_in_mm: float = 20.0,
 ) -> list[Swath]:
-    """Passes covering the part's footprint, centred on it, in snake order.
+    """Passes covering the part's footprint (its region of interest's, if it has one),
+    centred on it, in snake order.
 
     Lateral step d = w * (1 - overlap), w the line width at W_d; a part narrower than w gets
     one pass along its centre line. Each pass spans the part's extent along u plus `run_in_mm`
@@ -252,8 +258,7 @@ def plan_swaths(
         raise ValueError(f"overlap must be in [0, 1), got {overlap}")
     u = scan_direction(part, sensor, direction, overlap)
     v = np.cross(UP, u)
-    vertices = np.asarray(part.mesh.vertices)
-    across = vertices @ v
+    across = part.inspect_vertices @ v  # the region of interest's footprint, if any
     width = sensor.line_width_mm
     step = width * (1.0 - overlap)
     span = float(across.max() - across.min())
@@ -275,7 +280,7 @@ def _swaths_at(
     """Passes along u at the lateral `offsets`, each at (highest point under its band) + W_d,
     spanning the part's extent along u plus `run_in_mm` at each end, in snake order."""
     v = np.cross(UP, u)
-    vertices = np.asarray(part.mesh.vertices)
+    vertices = part.inspect_vertices
     along, across = vertices @ u, vertices @ v
     s0, s1 = float(along.min()) - run_in_mm, float(along.max()) + run_in_mm
     swaths = []

@@ -31,6 +31,10 @@ class Trajectory:
     scanning: (n,) bool, True where the sensor records profiles.
     plan_time_s: wall time the planner took.
     planner:  name of the planner that made it.
+    meta:     extra records; `meta["views"]` (a scan of several views, `views.join_views`):
+              per view its `axis` and its block of swath indices `first_swath..last_swath` —
+              the views' swaths are consecutive blocks, which is how a CSV (which has no
+              views column) is read back into views; the JSON carries the record.
     """
 
     poses: np.ndarray
@@ -314,6 +318,7 @@ def to_json_dict(traj: Trajectory) -> dict:
         "part, x = along the laser line, y = scan direction)",
         "planner": traj.planner,
         "plan_time_s": traj.plan_time_s,
+        **({"views": traj.meta["views"]} if traj.meta.get("views") else {}),
         "poses": [
             {
                 "swath": int(traj.swath[i]),
@@ -341,11 +346,22 @@ class _PoseJson(BaseModel):
     quaternion_wxyz: list[FiniteFloat] = Field(min_length=4, max_length=4)
 
 
+class _ViewJson(BaseModel):
+    """One view's record (`views.join_views`): its axis and its block of swath indices."""
+
+    model_config = ConfigDict(extra="allow", strict=True)
+    index: int
+    axis: list[FiniteFloat] = Field(min_length=3, max_length=3)
+    first_swath: int
+    last_swath: int
+
+
 class _TrajectoryJson(BaseModel):
     # Strict: a planner of 3 or a plan time of "fast" is a broken file, not a value to coerce.
     model_config = ConfigDict(extra="ignore", strict=True)
     planner: str = ""
     plan_time_s: float = Field(0.0, ge=0, allow_inf_nan=False)
+    views: list[_ViewJson] | None = None
     poses: list[_PoseJson] = Field(min_length=1)
 
 
@@ -387,6 +403,7 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         np.array([p.scanning for p in model.poses], dtype=bool),
         plan_time_s=model.plan_time_s,
         planner=model.planner,
+        meta={"views": [v.model_dump() for v in model.views]} if model.views else {},
     )
 
 

@@ -292,7 +292,7 @@ class GeometricPlanner:
                     )
                     poses = swath.poses(s, h, th)
                 scan = fan.measure_many(poses)
-                valid = self._band_columns(scan, swath)
+                valid = self._band_columns(scan, swath, part)
                 d = mean_distance(scan.z_sensor, valid)
                 if self.roll:
                     alpha, beta, tilt = profile_angles(scan.normals_part, valid, poses)
@@ -349,15 +349,20 @@ class GeometricPlanner:
         return s, h, th, sigma
 
     @staticmethod
-    def _band_columns(scan, swath: Swath) -> np.ndarray:
+    def _band_columns(scan, swath: Swath, part: Part | None = None) -> np.ndarray:
         """The valid columns the pass is judged by: on an adaptive pass, those in its band
-        (x_s within `band_mm`; a station with none there keeps all its valid columns)."""
-        if swath.band_mm is None:
+        (x_s within `band_mm`), and of a part with a region of interest, those on it; a
+        station with none left keeps all its valid columns."""
+        keep = scan.valid
+        if part is not None and part.inspect_faces is not None:
+            keep = keep & part.inspect_faces[np.maximum(scan.face, 0)]
+        if swath.band_mm is not None:
+            lo, hi = swath.band_mm
+            with np.errstate(invalid="ignore"):
+                keep = keep & (scan.x_sensor >= lo) & (scan.x_sensor <= hi)
+        if keep is scan.valid:
             return scan.valid
-        lo, hi = swath.band_mm
-        with np.errstate(invalid="ignore"):
-            band = scan.valid & (scan.x_sensor >= lo) & (scan.x_sensor <= hi)
-        return np.where(band.any(axis=1, keepdims=True), band, scan.valid)
+        return np.where(keep.any(axis=1, keepdims=True), keep, scan.valid)
 
     def _rolled_stations(
         self, grid, pitch_t, height_t, arc, roll_t, lookahead: Lookahead, spec: ScanSpec

@@ -1,0 +1,61 @@
+"""`--views top` vs `--views auto` on the real parts (../shared/parts): in-spec coverage
+(of the upward-visible surface and of the surface visible from the upper hemisphere),
+views, passes and planning time, geometric planner with its default raster.
+
+    PYTHONPATH=src python benchmarks/compare_views.py [PARTS_DIR] [--points 256]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from scanplan.metrics import evaluate
+from scanplan.part import load_part
+from scanplan.planners import make_planner, plan_scan
+from scanplan.quantities import ScanSpec
+from scanplan.views import plan_views
+
+PARTS = {  # file: units (PARTS.md)
+    "tum_ardrone_quadrotor_4.stl": "m",
+    "nist_pmi1_stepped_plate.stl": "mm",
+    "nist_pmi3_sheet_metal.stl": "mm",
+    "nist_pmi4_pocket_plate.stl": "mm",
+    "trimesh_featuretype.stl": "in",
+    "reach_curved_panel_up.ply": "m",
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("parts_dir", nargs="?", default="../shared/parts")
+    ap.add_argument("--points", type=int, default=256)
+    ap.add_argument("--only", default="")
+    args = ap.parse_args()
+    spec = ScanSpec()
+    planner = make_planner("geometric")
+    print("part | views | passes | in-spec top-surface | in-spec hemisphere | plan s")
+    for name, units in PARTS.items():
+        if args.only and args.only not in name:
+            continue
+        part = load_part(Path(args.parts_dir) / name, units)
+        start = time.perf_counter()
+        swaths, top = plan_scan(part, spec, planner)
+        t_top = time.perf_counter() - start
+        plans, auto = plan_views(part, spec, planner, "auto")
+        for label, traj, n_view, n_pass, t in (
+            ("top", top, 1, len(swaths), t_top),
+            ("auto", auto, len(plans), sum(p.passes for p in plans), auto.plan_time_s),
+        ):
+            up = evaluate(part, spec, traj, points_per_profile=args.points, visible="top")
+            hemi = evaluate(part, spec, traj, points_per_profile=args.points, visible="hemisphere")
+            print(
+                f"{name} {label} | {n_view} | {n_pass} | {up.in_spec_coverage:.3f} | "
+                f"{hemi.in_spec_coverage:.3f} | {t:.1f}",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,412 @@
+"""Views and regions (SPEC §3b): the surface to inspect cut into regions by normal direction,
+a view (a top-view raster of the part rotated so the view's up is +Z) per region, and the
+greedy choice of views toward in-spec coverage.
+
+A view is planned with the top-view machinery unchanged: the part is rotated by the view's
+R (the view's up axis to +Z), restricted to the region's faces as a region of interest, and
+planned with `plan_scan`; the poses come back as R⁻¹ @ T.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.transform import Rotation
+
+from scanplan.part import Part
+from scanplan.planners import Planner
+from scanplan.quantities import ScanSpec
+from scanplan.trajectory import Trajectory
+
+UP = np.array([0.0, 0.0, 1.0])
+VIEW_MODES = ("top", "auto")
+# The sensor stays above the fixture: a view axis at most this far from +Z.
+MAX_VIEW_TILT_DEG = 75.0
+
+
+def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) -> np.ndarray:
+    """(k, 3) unit directions on the upper hemisphere: +Z and rings (tilt deg, count), each
+    ring's azimuths offset by half a step from the previous one. Default 28 directions."""
+    rings = rings or ((30.0, 6), (55.0, 9), (MAX_VIEW_TILT_DEG, 12))
+    out = [UP]
+    for i, (tilt, count) in enumerate(rings):
+        az = (np.arange(count) + 0.5 * (i % 2)) * 2 * math.pi / count
+        t = math.radians(tilt)
+        out.append(
+            np.stack(
+                [math.sin(t) * np.cos(az), math.sin(t) * np.sin(az), 0 * az + math.cos(t)], axis=1
+            )
+        )
+    return np.vstack(out)
+
+
+def oriented_normals(part: Part) -> np.ndarray:
+    """(f, 3) face normals pointing out of the part, towards where a sensor could be. A closed,
+    consistently wound mesh's own normals; otherwise (real CAD exports) each face's normal
+    is turned to the side from which a ray escapes the part (if both, upwards)."""
+    mesh = part.mesh
+    normals = np.asarray(part.ray_engine.face_normals)
+    if mesh.is_watertight and mesh.is_winding_consistent:
+        return normals * (1.0 if mesh.volume >= 0 else -1.0)
+    centre = np.asarray(mesh.triangles_center)
+    far = np.full(len(normals), 1e6)
+    eps = 1e-3 * float(np.linalg.norm(part.extents)) + 0.05
+    front = ~part.ray_engine.occluded(centre + eps * normals, normals, far)
+    back = ~part.ray_engine.occluded(centre - eps * normals, -normals, far)
+    flip = (back & ~front) | (back & front & (normals[:, 2] < 0))
+    return np.where(flip[:, None], -normals, normals)
+
+
+@dataclass(frozen=True)
+class Region:
+    """A connected patch of the surface to inspect whose normals share a direction bin.
+
+    faces: (k,) int face indices; normal: (3,) its area-weighted mean normal (unit);
+    area_mm2: its area.
+    """
+
+    faces: np.ndarray
+    normal: np.ndarray
+    area_mm2: float
+
+
+def segment_regions(
+    part: Part, directions: np.ndarray | None = None, min_area_fraction: float = 0.005
+) -> list[Region]:
+    """The surface to inspect (the part's region of interest, else every face that faces the
+    upper hemisphere) cut into regions: each face goes to the nearest of `directions` by its
+    (oriented) normal, and the connected components of same-direction faces over the mesh's
+    face adjacency are the regions. Regions below `min_area_fraction` of the surface are
+    dropped (they still count in coverage; a view for each would add nothing measurable).
+    Largest first."""
+    dirs = hemisphere_directions() if directions is None else directions
+    normals = oriented_normals(part)
+    mesh = part.mesh
+    area = np.asarray(mesh.area_faces)
+    inspect = part.inspect_mask & (normals[:, 2] > -1e-6)
+    label = np.argmax(normals @ dirs.T, axis=1)
+    adj = np.asarray(mesh.face_adjacency)
+    same = inspect[adj[:, 0]] & inspect[adj[:, 1]] & (label[adj[:, 0]] == label[adj[:, 1]])
+    a, b = adj[same, 0], adj[same, 1]
+    f = len(mesh.faces)
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(f, f))
+    _, comp = connected_components(graph, directed=False)
+    comp = np.where(inspect, comp, -1)
+    total = float(area[inspect].sum())
+    regions = []
+    ids, inverse = np.unique(comp[inspect], return_inverse=True)
+    face_ids = np.flatnonzero(inspect)
+    comp_area = np.bincount(inverse, area[inspect])
+    for k in np.flatnonzero(comp_area >= min_area_fraction * total):
+        faces = face_ids[inverse == k]
+        n = (normals[faces] * area[faces, None]).sum(axis=0)
+        regions.append(Region(faces, n / max(np.linalg.norm(n), 1e-12), float(comp_area[k])))
+    del ids
+    return sorted(regions, key=lambda r: -r.area_mm2)
+
+
+def view_axis(normal: np.ndarray, max_tilt_deg: float = MAX_VIEW_TILT_DEG) -> np.ndarray:
+    """The view's up axis (the sensor looks along −axis): the region's mean normal, tilted
+    back to at most `max_tilt_deg` from +Z (the sensor above the fixture)."""
+    n = np.asarray(normal, dtype=np.float64) / max(float(np.linalg.norm(normal)), 1e-12)
+    tilt = math.acos(float(np.clip(n[2], -1.0, 1.0)))
+    if tilt <= math.radians(max_tilt_deg):
+        return n
+    horizontal = np.array([n[0], n[1], 0.0])
+    h = np.linalg.norm(horizontal)
+    horizontal = horizontal / h if h > 1e-9 else np.array([1.0, 0.0, 0.0])
+    t = math.radians(max_tilt_deg)
+    return math.sin(t) * horizontal + math.cos(t) * UP
+
+
+@dataclass(frozen=True)
+class View:
+    """One raster of the scan, seen along −axis.
+
+    index: order of the view; axis: (3,) unit, the view's up (part frame); R: (4, 4) the
+    rotation mapping the part frame to the view frame (axis → +Z); faces: (k,) int the
+    faces of its region (None: the whole surface to inspect, the top view).
+    """
+
+    index: int
+    axis: np.ndarray
+    R: np.ndarray
+    faces: np.ndarray | None = None
+
+    @staticmethod
+    def looking_along(axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None) -> View:
+        axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+        R = np.eye(4)
+        if not np.allclose(axis, UP):
+            # The smallest rotation taking axis to +Z: the view's "up" tilts, nothing spins.
+            rot, _ = Rotation.align_vectors([UP], [axis])
+            R[:3, :3] = rot.as_matrix()
+        return View(index, axis, R, faces)
+
+    def part(self, part: Part) -> Part:
+        """The part in the view frame, restricted to the view's region (and the part's ROI).
+        Face order is kept (no re-validation), so face masks carry over."""
+        mesh = part.mesh.copy()
+        mesh.apply_transform(self.R)
+        mask = part.inspect_mask.copy()
+        if self.faces is not None:
+            region = np.zeros(len(mask), bool)
+            region[self.faces] = True
+            mask &= region
+        return Part(mesh, name=part.name, source=part.source, inspect_faces=mask)
+
+    def to_part_frame(self, traj: Trajectory) -> Trajectory:
+        """A trajectory planned in the view frame, back in the part frame (R⁻¹ @ T)."""
+        poses = np.linalg.inv(self.R)[None] @ traj.poses
+        return replace(traj, poses=poses)
+
+
+def view_transition(
+    prev_pose: np.ndarray,
+    prev_axis: np.ndarray,
+    next_pose: np.ndarray,
+    next_axis: np.ndarray,
+    centre_mm: np.ndarray,
+    radius_mm: float,
+) -> np.ndarray:
+    """Non-scanning moves between views: lift along the previous view's axis to the sphere
+    around the part (`radius_mm` includes the clearance), over its top, descend along the
+    next view's axis to the next view's first pose. (4, 4, 4). The collision-checked planner
+    replaces this."""
+
+    def on_sphere(pose: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        out = pose.copy()
+        p = pose[:3, 3] - centre_mm
+        # Along the axis from the pose until outside the sphere.
+        b = float(p @ axis)
+        c = float(p @ p) - radius_mm**2
+        t = max(0.0, -b + math.sqrt(max(b * b - c, 0.0)))
+        out[:3, 3] = pose[:3, 3] + t * axis
+        return out
+
+    a = on_sphere(prev_pose, prev_axis)
+    top = next_pose.copy()
+    top[:3, 3] = centre_mm + radius_mm * UP
+    b = on_sphere(next_pose, next_axis)
+    return np.stack([a, top, b, next_pose])
+
+
+@dataclass(frozen=True)
+class ViewPlan:
+    """A view planned: its trajectory (part frame, swath indices from 0) and passes."""
+
+    view: View
+    traj: Trajectory
+    passes: int
+
+
+PlanView = Callable[[Part], tuple[int, Trajectory]]
+
+
+def plan_view(part: Part, view: View, plan: PlanView) -> ViewPlan:
+    """Plan one view with `plan` (the top-view planner: part -> (passes, trajectory)) on the
+    rotated, region-restricted part; the trajectory comes back in the part frame."""
+    passes, traj = plan(view.part(part))
+    return ViewPlan(view, view.to_part_frame(traj), passes)
+
+
+def candidate_views(
+    part: Part,
+    max_candidates: int = 8,
+    merge_deg: float = 10.0,
+    max_region_tilt_deg: float = MAX_VIEW_TILT_DEG + 5.0,
+) -> list[View]:
+    """Views for the largest regions (their axes, `view_axis`); regions whose axes lie within
+    `merge_deg` of each other share one view. A region whose mean normal is more than
+    `max_region_tilt_deg` from +Z (a vertical wall) gets no view of its own: the steepest
+    view would see it within 5° of the angle tolerance, where tracking error takes it out
+    of spec — a panel's cut edges must not pull in views."""
+    views: list[View] = []
+    groups: list[list[np.ndarray]] = []
+    for region in segment_regions(part):
+        if region.normal[2] < math.cos(math.radians(max_region_tilt_deg)):
+            continue
+        axis = view_axis(region.normal)
+        for i, view in enumerate(views):
+            if math.degrees(math.acos(float(np.clip(axis @ view.axis, -1, 1)))) <= merge_deg:
+                groups[i].append(region.faces)
+                break
+        else:
+            if len(views) < max_candidates:
+                views.append(View.looking_along(axis, len(views) + 1))
+                groups.append([region.faces])
+    return [replace(v, faces=np.concatenate(g)) for v, g in zip(views, groups, strict=True)]
+
+
+@dataclass(frozen=True)
+class ViewSelection:
+    """The views chosen and their estimated in-spec coverage after each (`coverage`)."""
+
+    plans: list[ViewPlan]
+    coverage: list[float]
+    candidates: int
+
+
+def choose_views(
+    part: Part,
+    spec: ScanSpec,
+    plan: PlanView,
+    coverage_target: float = 0.9,
+    min_gain: float = 0.01,
+    min_yield: float = 0.25,
+    max_views: int = 6,
+    points_per_profile: int = 128,
+    seed: int = 0,
+) -> ViewSelection:
+    """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
+    view first (the paper's raster; on a panel it is all there is), then, while in-spec
+    coverage is below `coverage_target`, the candidate view (`candidate_views`) that adds
+    the most, unless it adds less than `min_gain` — or less than `min_yield` times what the
+    top view yields per profile (in-spec fraction per scanning pose): a "useful amount"
+    (SPEC §3b) weighs what a view adds against what it costs, so a panel's few steep strips
+    (the door's tumblehome edge adds ~1.8 % for a whole view) do not pull in views.
+
+    Each view's gain is estimated by evaluating its own trajectory alone on the whole part
+    with a sub-sampled fan. That is sound because a surface sample's in-spec state depends
+    only on the points of one pass (the in-spec test and the density rule look at a point,
+    its profile's columns and its neighbouring profiles of the same pass): the in-spec set
+    of several views is the union of their in-spec sets on the same (seeded) samples, so the
+    set cover is computed exactly on these sets, and a fan of 128 columns finds the same
+    samples (the search radius grows with the evaluated column pitch; density is judged on
+    the real sensor's columns). Candidates are tried largest possible gain first (their
+    region's area not yet in spec) and skipped once that bound is below the best gain found
+    (lazy greedy: a view's gain only shrinks as others are chosen)."""
+    from scanplan.metrics import SurfaceState, evaluate
+
+    def in_spec_set(vp: ViewPlan) -> np.ndarray:
+        m = evaluate(part, spec, vp.traj, seed, points_per_profile, visible="hemisphere")
+        assert m.coverage_map is not None
+        return m.coverage_map.state == SurfaceState.IN_SPEC
+
+    def profiles(vp: ViewPlan) -> int:
+        return max(int(vp.traj.scanning.sum()), 1)
+
+    top = plan_view(part, View.looking_along(UP, 0), plan)
+    covered = in_spec_set(top)
+    plans, coverage = [top], [float(covered.mean())]
+    top_yield = coverage[0] / profiles(top)
+    if coverage[-1] >= coverage_target:
+        return ViewSelection(plans, coverage, 0)
+    from scanplan.metrics import hemisphere_visible_samples
+
+    candidates = candidate_views(part)
+    # The samples on each candidate's faces: the bound on its gain.
+    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
+    on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
+    evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
+    while len(plans) < max_views and coverage[-1] < coverage_target:
+        bounds = [float((m & ~covered).mean()) for m in on_faces]
+        best: tuple[float, int] | None = None
+        for i in np.argsort(bounds)[::-1]:
+            if bounds[i] < min_gain or (best is not None and bounds[i] <= best[0]):
+                break
+            if i not in evaluated:
+                try:
+                    vp = plan_view(part, replace(candidates[i], index=len(plans)), plan)
+                    evaluated[i] = (vp, in_spec_set(vp))
+                except ValueError:  # a view whose passes see nothing of the part
+                    on_faces[i] = np.zeros_like(on_faces[i])
+                    continue
+            gain = float((evaluated[i][1] & ~covered).mean())
+            if gain < min_yield * top_yield * profiles(evaluated[i][0]):
+                continue  # too little for what it costs
+            if best is None or gain > best[0]:
+                best = (gain, int(i))
+        if best is None or best[0] < min_gain:
+            break
+        vp, cov = evaluated.pop(best[1])
+        on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
+        plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
+        covered |= cov
+        coverage.append(float(covered.mean()))
+    return ViewSelection(plans, coverage, len(candidates))
+
+
+def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
+    """The sample spacing `metrics.evaluate` uses with that fan (the same samples)."""
+    from scanplan.metrics import coverage_spacing_mm
+
+    return coverage_spacing_mm(spec.sensor.with_points(points_per_profile))
+
+
+def join_views(part: Part, plans: list[ViewPlan], clearance_mm: float = 50.0) -> Trajectory:
+    """One trajectory: each view's swaths renumbered into a block of its own (view k's
+    swaths follow view k−1's), joined by `view_transition`s. `meta["views"]` records, per
+    view, its axis and its swath block (first, last), which is how a CSV reader tells the
+    views apart."""
+    centre = 0.5 * (part.bounds[0] + part.bounds[1])
+    # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
+    reach = max(float(np.linalg.norm(vp.traj.positions_mm - centre, axis=1).max()) for vp in plans)
+    radius = max(0.5 * float(np.linalg.norm(part.extents)) + clearance_mm, reach)
+    pieces: list[Trajectory] = []
+    views = []
+    first = 0
+    for k, vp in enumerate(plans):
+        traj = vp.traj
+        swath = traj.swath - traj.swath.min() + first
+        if k > 0:
+            prev = plans[k - 1]
+            moves = view_transition(
+                pieces[-1].poses[-1], prev.view.axis, traj.poses[0], vp.view.axis, centre, radius
+            )
+            pieces.append(Trajectory(moves, np.full(len(moves), first), np.zeros(len(moves), bool)))
+        pieces.append(replace(traj, swath=swath))
+        views.append(
+            {
+                "index": k,
+                "axis": [float(c) for c in vp.view.axis],
+                "first_swath": int(swath.min()),
+                "last_swath": int(swath.max()),
+                "passes": vp.passes,
+            }
+        )
+        first = int(swath.max()) + 1
+    out = Trajectory.concatenate(pieces)
+    meta = dict(out.meta)
+    meta["views"] = views
+    return replace(out, meta=meta)
+
+
+def plan_views(
+    part: Part,
+    spec: ScanSpec,
+    planner: Planner,
+    views: str = "auto",
+    coverage_target: float = 0.9,
+    raster: str = "auto",
+    direction: str = "auto",
+    overlap: float = 0.2,
+) -> tuple[list[ViewPlan], Trajectory]:
+    """Plan a scan by views: 'top' the paper's single top raster, 'auto' `choose_views`;
+    each view is planned by `planners.plan_scan` (raster, direction, overlap as there) on
+    the rotated part. Returns the views and the joined trajectory (`join_views`; its plan
+    time: the whole choice)."""
+    from scanplan.planners import plan_scan
+
+    if views not in VIEW_MODES:
+        raise ValueError(f"unknown --views {views!r}; use top or auto")
+    if not 0.0 < coverage_target <= 1.0:
+        raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
+
+    def plan(view_part: Part) -> tuple[int, Trajectory]:
+        swaths, traj = plan_scan(view_part, spec, planner, raster, direction, overlap)
+        return len(swaths), traj
+
+    start = time.perf_counter()
+    if views == "top":
+        plans = [plan_view(part, View.looking_along(UP, 0), plan)]
+    else:
+        plans = choose_views(part, spec, plan, coverage_target).plans
+    traj = join_views(part, plans)
+    return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
