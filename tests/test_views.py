@@ -101,7 +101,9 @@ def test_housing_auto_views_raise_in_spec_coverage(tmp_path):
     top_cov = evaluate(part, SPEC, top, points_per_profile=256, visible="hemisphere")
     auto_cov = evaluate(part, SPEC, auto, points_per_profile=256)  # several views: hemisphere
     assert auto_cov.visible_area_mm2 == pytest.approx(top_cov.visible_area_mm2)
-    assert auto_cov.in_spec_coverage > top_cov.in_spec_coverage + 0.3
+    # The top raster rolls its line onto the 60° walls too (0.67), but only views hold them.
+    assert auto_cov.in_spec_coverage >= 0.9
+    assert auto_cov.in_spec_coverage > top_cov.in_spec_coverage + 0.2
     # Each added view looks along its axis: its scanning poses' beams point against it (the
     # top view's passes roll onto the walls, so its beams tilt).
     for k, v in enumerate(views[1:], start=1):
