@@ -4,7 +4,8 @@ pose under the per-step limits and the paper's action limitation.
 State (s, h, θ): advance along u and height above the swath's start (mm), pitch about x_s
 (rad). A step (Δy, Δz, Δθ) moves Δy along u and Δz along the beam z_s = −sinθ·u − cosθ·w of
 the pose it starts from, then pitches by Δθ. With roll (beyond the paper, env v1) the state is
-(s, h, θ, φ, l) — roll about y_s and the lateral offset along v of the sensor — and a step
+(s, h, θ, φ, l) — roll about the scan direction u (applied before the pitch, so it is the
+roll about y_s of SPEC §1 when θ = 0) and the sensor's lateral offset along v — and a step
 (Δy, Δz, Δθ, Δφ) also rolls by Δφ, about the point W_d along the beam (the line's centre at
 the working distance, where a robot's TCP would be set), so the footprint stays on the pass
 while the line tilts; pitch keeps the paper's pivot, the sensor origin.
@@ -38,7 +39,7 @@ from scanplan.swaths import Swath
 @dataclass(frozen=True)
 class StepLimits:
     """The per-step limits (SPEC §4, §5): Δy along u (mm), Δz along z_s (mm), Δθ about x_s
-    (rad) and, with roll, Δφ about y_s (rad)."""
+    (rad) and, with roll, Δφ about the scan direction (rad)."""
 
     dy_max_mm: float = 1.0
     dz_max_mm: float = 1.0

@@ -141,7 +141,7 @@ class SwathScanEnv(gym.Env):
     | 0     | Δy     | along u                          | none                                  |
     | 1     | Δz     | along z_s, + = towards the part  | [0, max] if D ≥ W_d else [−max, 0]    |
     | 2     | Δθ     | pitch about x_s                  | [0, max] if α ≥ 0 else [−max, 0]      |
-    | 3 (v1)| Δφ     | roll about y_s, pivot at W_d     | [0, max] if β ≥ 0 else [−max, 0]      |
+    | 3 (v1)| Δφ     | roll about u (≈ y_s), pivot W_d  | [0, max] if β ≥ 0 else [−max, 0]      |
 
     Where the profile has no valid point, D and α are unknown: Δz and Δθ are held at 0.
 

@@ -239,8 +239,9 @@ class GeometricPlanner:
     planner). pitch_lever: pitch rate as a fraction of 1/W_d rad per mm of
     footprint, so that the sensor's swing (W_d·Δθ) stays within a step's translation.
     refinements: sensor-measured corrections of each candidate.
-    roll: also roll the line (φ about y_s, beyond the paper) to the surface across it, under
-    Δφ_max; the cost then charges the full angle between beam and mean normal (env v1).
+    roll: also roll the line (φ about the scan direction, beyond the paper) to the surface
+    across it, under Δφ_max; the cost then charges the full angle between beam and mean
+    normal (env v1).
     """
 
     cost: Cost = field(default_factory=RewardCost)
