@@ -82,34 +82,23 @@ def limit_action(
     limitation from the current D and α (eqs. clipActionD/N): Δz only towards W_d, Δθ only
     towards alignment. With no valid point D and α are unknown: Δz and Δθ are held at 0.
     An action in [−1, 1]⁴ (roll) adds Δφ, limited by the sign of β as Δθ is by α's."""
-    if len(action) == 4:
-        lim4 = limits.array_roll
-        dy, dz, dth, dphi = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * lim4
-        dz = float(np.clip(dz, *_towards(d_mm - wd_mm, lim4[1])))
-        dth = float(np.clip(dth, *_towards(alpha_rad, lim4[2])))
-        dphi = float(np.clip(dphi, *_towards(beta_rad, lim4[3])))
-        return np.array([dy, dz, dth, dphi])
-    lim = limits.array
-    dy, dz, dth = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * lim
-    lo_z, hi_z = (
-        (0.0, 0.0)
-        if not np.isfinite(d_mm)
-        else ((0.0, lim[1]) if d_mm >= wd_mm else (-lim[1], 0.0))
-    )
-    lo_t, hi_t = (
-        (0.0, 0.0)
-        if not np.isfinite(alpha_rad)
-        else ((0.0, lim[2]) if alpha_rad >= 0 else (-lim[2], 0.0))
-    )
-    dz, dth = float(np.clip(dz, lo_z, hi_z)), float(np.clip(dth, lo_t, hi_t))
-    return np.array([dy, dz, dth])
+    roll = len(action) == 4
+    lim = limits.array_roll if roll else limits.array
+    step = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * lim
+    step[1] = float(np.clip(step[1], *_towards(d_mm - wd_mm, lim[1])))
+    step[2] = float(np.clip(step[2], *_towards(alpha_rad, lim[2])))
+    if roll:
+        step[3] = float(np.clip(step[3], *_towards(beta_rad, lim[3])))
+    return step
 
 
-def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float = 400.0) -> np.ndarray:
+def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float | None = None) -> np.ndarray:
     """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad; (s, h, θ, φ, l) after
     (Δy, Δz, Δθ, Δφ), the roll about the point `pivot_mm` (W_d) along the beam. The beam is
     z_s = −sinθ·u + cosθ·(sinφ·v − cosφ·w) (`Swath.poses`)."""
     if len(state) == 5:
+        if pivot_mm is None:
+            raise ValueError("a rolled step needs its pivot distance (W_d)")
         s, h, th, phi, lat = state
         dy, dz, dth, dphi = step
         ct = math.cos(th)
