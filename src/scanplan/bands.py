@@ -4,8 +4,8 @@ A 495 mm line on a curved part is in spec (|z_s − W_d| ≤ tol_d, α_i ≤ tol
 around where the beam is aligned with the surface. `in_spec_band` predicts that band for a
 pass centred at a lateral offset, from the CAD's top surface (vertical rays on a grid), with
 the beam aligned — by pitch and roll — to the surface normal at the band's centre.
-`adaptive_offsets` sweeps across the part placing passes so that consecutive bands overlap:
-curved parts get closer passes, flat ones fewer.
+`adaptive_offsets` chooses pass centres greedily until their bands cover the surface (set
+cover): curved parts get closer passes, flat ones fewer.
 """
 
 from __future__ import annotations
@@ -79,17 +79,20 @@ def in_spec_band(
     margin: float = 0.7,
     centre_halfwidth_mm: float = 5.0,
     row_quantile: float = 0.15,
-    pitch_lever: float = 0.6,
+    limits: StepLimits | None = None,
 ) -> Band:
     """The band around `centre_mm` where the surface would be in spec, per grid row, with the
     beam W_d from the centre point and aligned to the mean normal near it as far as the step
-    limits allow: the pitch follows that normal along the pass only at `pitch_lever`/W_d rad
-    per mm (the geometric planner's rate, a centred ramp), the roll at Δφ_max per Δs_opt.
+    limits allow, as the geometric planner shapes them: the pitch follows that normal along
+    the pass only at its `pitch_lever`/W_d rad per mm (its `RobustLookahead`), the roll at
+    its `roll_rate` Δφ_max per Δs_opt.
     The pass's band is a robust envelope over the rows (`row_quantile` of the rows may be
     narrower: a local feature must not shrink a whole pass). `margin` scales both
     tolerances: tracking and noise leave less than the full tolerance. Columns without
     surface count as in spec (nothing there to measure)."""
-    from scanplan.planners.geometric import CentredLookahead, RobustLookahead
+    from scanplan.planners.geometric import CentredLookahead, GeometricPlanner, RobustLookahead
+
+    lim = limits or StepLimits()
 
     tol_d = margin * spec.tolerance_mm
     cos_tol = math.cos(margin * spec.tol_angle_rad)
@@ -112,10 +115,11 @@ def in_spec_band(
         pitch_c, roll_c = aligning_angles(n_c, u, v)
         pitch = np.interp(surface.along_mm, grid, pitch_c[rows])
         roll = np.interp(surface.along_mm, grid, roll_c[rows])
-        pitch = RobustLookahead().shape(surface.along_mm, pitch, pitch_lever / wd)
-        lim = StepLimits()
+        pitch = RobustLookahead().shape(surface.along_mm, pitch, GeometricPlanner.pitch_lever / wd)
         roll = CentredLookahead().shape(
-            surface.along_mm, roll, 0.8 * lim.dphi_max_rad / spec.delta_s_opt_mm
+            surface.along_mm,
+            roll,
+            GeometricPlanner.roll_rate * lim.dphi_max_rad / spec.delta_s_opt_mm,
         )
         # −z_s of those poses: from the surface towards the sensor (the normal, if aligned)
         frame = Swath(0, np.zeros(3), np.zeros(3), u, v)

@@ -238,6 +238,7 @@ class GeometricPlanner:
     clipActionD/N, is a training aid that forbids anticipation, which is the point of this
     planner). pitch_lever: pitch rate as a fraction of 1/W_d rad per mm of
     footprint, so that the sensor's swing (W_d·Δθ) stays within a step's translation.
+    roll_rate: roll rate as a fraction of Δφ_max per Δs_opt (headroom for the tracker).
     refinements: sensor-measured corrections of each candidate.
     roll: also roll the line (φ about the scan direction, beyond the paper) to the surface
     across it, under Δφ_max; the cost then charges the full angle between beam and mean
@@ -253,6 +254,7 @@ class GeometricPlanner:
     height_lookahead: Lookahead = field(default_factory=CentredLookahead)
     limits: StepLimits = field(default_factory=StepLimits)
     pitch_lever: float = 0.6
+    roll_rate: float = 0.8
     probe_step_mm: float = 2.0
     probe_columns: int = 48
     sensor_points: int = 64
@@ -374,7 +376,9 @@ class GeometricPlanner:
         ds_opt = spec.delta_s_opt_mm
         lim = self.limits
         pitch = np.clip(lookahead.shape(grid, pitch_t, self.pitch_lever / wd), -1.4, 1.4)
-        roll = np.clip(lookahead.shape(grid, roll_t, 0.8 * lim.dphi_max_rad / ds_opt), -1.4, 1.4)
+        roll = np.clip(
+            lookahead.shape(grid, roll_t, self.roll_rate * lim.dphi_max_rad / ds_opt), -1.4, 1.4
+        )
         cr = np.cos(roll)
         s_grid = grid + wd * np.sin(pitch)
         h_grid = height_t + wd * cr * np.cos(pitch)
