@@ -14,7 +14,7 @@ import re
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ COLUMNS = (
     *METRICS,
     "timesteps",
     "train_wall_s",
+    "train_cpu_s",
     "eval_s",
     "policy_dir",
 )
@@ -123,21 +124,53 @@ def grid_tasks(
     return tasks
 
 
-def run_task(task: SweepTask, parts: Sequence[EvalPart]) -> list[dict[str, Any]]:
+_DONE = "sweep_train.json"
+
+
+def _config_record(config: TrainConfig) -> dict[str, Any]:
+    record = {k: v for k, v in asdict(config).items() if k not in ("command", "progress_bar")}
+    return json.loads(json.dumps(record))  # tuples as lists, as read back
+
+
+def train_once(config: TrainConfig, reuse: bool = False) -> tuple[int, float, float]:
+    """`train(config)` -> (timesteps, wall s, CPU s of this process). reuse: a directory that
+    already holds a finished run of exactly this config is not trained again."""
+    from scanplan.learn.train import train
+
+    done = Path(config.output_dir) / _DONE
+    if reuse and done.is_file():
+        record = json.loads(done.read_text())
+        if record["config"] == _config_record(config):
+            return int(record["timesteps"]), float(record["wall_s"]), float(record["cpu_s"])
+    cpu = time.process_time()
+    result = train(config)
+    cpu = time.process_time() - cpu
+    record = {
+        "config": _config_record(config),
+        "timesteps": result.timesteps,
+        "wall_s": result.wall_time_s,
+        "cpu_s": cpu,
+    }
+    done.write_text(json.dumps(record, indent=1))
+    return result.timesteps, result.wall_time_s, cpu
+
+
+def run_task(
+    task: SweepTask, parts: Sequence[EvalPart], reuse: bool = False
+) -> list[dict[str, Any]]:
     """Train (if the task does) and evaluate on each part; one row per part. Runs in a Dask
-    worker, so everything it needs comes in its arguments."""
+    worker, so everything it needs comes in its arguments. CPU s counts this process only
+    (torch runs on one thread while training)."""
     from scanplan.metrics import evaluate
     from scanplan.part import load_part
     from scanplan.planners import make_planner, plan_scan
     from scanplan.quantities import ScanSpec
 
-    timesteps, wall, policy_dir = 0, 0.0, ""
+    timesteps, wall, cpu, policy_dir = 0, 0.0, 0.0, ""
     if task.config is not None:
-        from scanplan.learn.train import train
-
-        result = train(task.config)
-        timesteps, wall, policy_dir = result.timesteps, result.wall_time_s, str(result.output_dir)
-        planner = make_planner("rl", policy=result.output_dir)
+        timesteps, wall, cpu = train_once(task.config, reuse)
+        policy_dir = task.config.output_dir
+        planner = make_planner("rl", policy=policy_dir)
     else:
         planner = make_planner(task.planner, roll=task.roll)
     spec = ScanSpec()
@@ -156,6 +189,7 @@ def run_task(task: SweepTask, parts: Sequence[EvalPart]) -> list[dict[str, Any]]
             **{k: float(getattr(m, k)) for k in METRICS},
             "timesteps": timesteps,
             "train_wall_s": round(wall, 1),
+            "train_cpu_s": round(cpu, 1),
             "eval_s": round(time.perf_counter() - start, 1),
             "policy_dir": policy_dir,
         }
@@ -201,8 +235,10 @@ def run_sweep(
     parts: Sequence[EvalPart],
     client: Any,
     on_done: Callable[[list[dict[str, Any]]], None] | None = None,
+    reuse: bool = False,
 ) -> list[dict[str, Any]]:
-    """Every task on the cluster (the longest-training first); rows in task order."""
+    """Every task on the cluster (the longest-training first); rows in task order. reuse:
+    runs already finished with the same config are evaluated, not trained again."""
     from dask.distributed import as_completed
 
     if not tasks:
@@ -214,10 +250,7 @@ def run_sweep(
         return -1 if task.config is None else task.config.total_timesteps + task.config.bc_samples
 
     order = sorted(range(len(tasks)), key=lambda i: -cost(tasks[i]))
-    futures = {
-        client.submit(run_task, tasks[i], list(parts), pure=False, key=f"sweep-{i}"): i
-        for i in order
-    }
+    futures = {client.submit(run_task, tasks[i], list(parts), reuse, pure=False): i for i in order}
     results: dict[int, list[dict[str, Any]]] = {}
     for future in as_completed(futures):
         rows = future.result()
@@ -243,7 +276,7 @@ def read_csv(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
     with Path(path).open(newline="") as f:
         rows: list[dict[str, Any]] = list(csv.DictReader(f))
     for row in rows:
-        for key in (*METRICS, "train_wall_s", "eval_s"):
+        for key in (*METRICS, "train_wall_s", "train_cpu_s", "eval_s"):
             row[key] = float(row[key])
         row["timesteps"] = int(row["timesteps"])
     return rows
@@ -268,6 +301,7 @@ class Summary:
     mean: dict[str, float]
     sd: dict[str, float]
     train_wall_s: float  # mean over seeds
+    train_cpu_s: float  # mean over seeds
     timesteps: int
 
 
@@ -290,6 +324,7 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> list[Summary]:
                 {k: v[0] for k, v in stats.items()},
                 {k: v[1] for k, v in stats.items()},
                 _mean_sd([float(r["train_wall_s"]) for r in group])[0],
+                _mean_sd([float(r.get("train_cpu_s", 0.0)) for r in group])[0],
                 int(group[0]["timesteps"]),
             )
         )
@@ -304,20 +339,22 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Mean ± sd over seeds (sample sd; a single run shows its value)."""
     lines = [
         "| env | row | part | seeds | mean reward | in-spec coverage | \\|dist err\\| mm "
-        "| orient. err ° | PPO steps | train wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| orient. err ° | PPO steps | train wall s | train CPU s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for s in summarize(rows):
         label = s.label + (f" {s.params}" if s.params else "")
-        wall = f"{s.train_wall_s:.0f}" if s.timesteps or s.train_wall_s else "-"
-        steps = f"{s.timesteps}" if wall != "-" else "-"
+        trained = bool(s.timesteps or s.train_wall_s)
+        wall = f"{s.train_wall_s:.0f}" if trained else "-"
+        cpu = f"{s.train_cpu_s:.0f}" if trained else "-"
+        steps = f"{s.timesteps}" if trained else "-"
         lines.append(
             f"| {s.env} | {label} | {s.part} | {s.seeds} "
             f"| {_cell(s.mean['reward_mean'], s.sd['reward_mean'], s.seeds, 4)} "
             f"| {_cell(s.mean['in_spec_coverage'], s.sd['in_spec_coverage'], s.seeds, 3)} "
             f"| {_cell(s.mean['distance_error_mean_abs_mm'], s.sd['distance_error_mean_abs_mm'], s.seeds, 2)} "  # noqa: E501
             f"| {_cell(s.mean['orientation_error_mean_deg'], s.sd['orientation_error_mean_deg'], s.seeds, 2)} "  # noqa: E501
-            f"| {steps} | {wall} |"
+            f"| {steps} | {wall} | {cpu} |"
         )
     return "\n".join(lines) + "\n"
 
