@@ -51,7 +51,7 @@ def tiny_config(**kw) -> TrainConfig:
 def client():
     distributed = pytest.importorskip("dask.distributed")
     cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0"
     )
     with distributed.Client(cluster) as c:
         yield c
@@ -150,3 +150,17 @@ def test_sweep_without_dask_is_one_line_and_exit_2(tmp_path, monkeypatch):
         "error: scanplan sweep needs the cluster extra: pip install 'scanplan[cluster]'"
     ]
     assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.slow
+def test_reuse_neither_retrains_nor_reevaluates_a_finished_run(tmp_path, small_plate):
+    task = SweepTask("tiny", tiny_config(output_dir=str(tmp_path / "run")))
+    (first,) = run_task(task, [small_plate], reuse=True)
+    weights = tmp_path / "run" / "policy.safetensors"
+    stamp = weights.stat().st_mtime_ns
+    (again,) = run_task(task, [small_plate], reuse=True)
+    assert again == first and weights.stat().st_mtime_ns == stamp
+    # Another config in the same directory is trained (and evaluated) afresh.
+    other = SweepTask("tiny", tiny_config(output_dir=str(tmp_path / "run"), seed=5))
+    (third,) = run_task(other, [small_plate], reuse=True)
+    assert weights.stat().st_mtime_ns != stamp and third["seed"] == 5

@@ -125,6 +125,7 @@ def grid_tasks(
 
 
 _DONE = "sweep_train.json"
+_EVALUATED = "sweep_eval.json"
 
 
 def _config_record(config: TrainConfig) -> dict[str, Any]:
@@ -142,6 +143,7 @@ def train_once(config: TrainConfig, reuse: bool = False) -> tuple[int, float, fl
         record = json.loads(done.read_text())
         if record["config"] == _config_record(config):
             return int(record["timesteps"]), float(record["wall_s"]), float(record["cpu_s"])
+    (Path(config.output_dir) / _EVALUATED).unlink(missing_ok=True)
     cpu = time.process_time()
     result = train(config)
     cpu = time.process_time() - cpu
@@ -174,23 +176,34 @@ def run_task(
     else:
         planner = make_planner(task.planner, roll=task.roll)
     spec = ScanSpec()
+    # A trained run's evaluations are kept beside it (dropped when it is trained again).
+    cache_path = Path(policy_dir) / _EVALUATED if policy_dir else None
+    cache: dict[str, Any] = {}
+    if reuse and cache_path is not None and cache_path.is_file():
+        cache = json.loads(cache_path.read_text())
     rows = []
     for p in parts:
-        start = time.perf_counter()
-        part = load_part(p.source, p.units)
-        _, traj = plan_scan(part, spec, planner)
-        m = evaluate(part, spec, traj, points_per_profile=512)
+        key = f"{p.source}:{p.units}"
+        if key not in cache:
+            start = time.perf_counter()
+            part = load_part(p.source, p.units)
+            _, traj = plan_scan(part, spec, planner)
+            m = evaluate(part, spec, traj, points_per_profile=512)
+            cache[key] = {k: float(getattr(m, k)) for k in METRICS}
+            cache[key]["eval_s"] = round(time.perf_counter() - start, 1)
+            if cache_path is not None:
+                cache_path.write_text(json.dumps(cache, indent=1))
         row: dict[str, Any] = {
             "label": task.label,
             "env": task.env,
             "seed": "" if task.seed is None else task.seed,
             "params": json.dumps(dict(task.params), sort_keys=True) if task.params else "",
             "part": p.name,
-            **{k: float(getattr(m, k)) for k in METRICS},
+            **{k: cache[key][k] for k in METRICS},
             "timesteps": timesteps,
             "train_wall_s": round(wall, 1),
             "train_cpu_s": round(cpu, 1),
-            "eval_s": round(time.perf_counter() - start, 1),
+            "eval_s": cache[key]["eval_s"],
             "policy_dir": policy_dir,
         }
         rows.append(row)
@@ -223,7 +236,7 @@ def connect(scheduler: str | None = None, n_workers: int | None = None) -> Itera
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
-            dashboard_address=None,
+            dashboard_address=":0",
         ) as cluster,
         client_class(cluster) as client,
     ):
