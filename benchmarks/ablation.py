@@ -16,7 +16,7 @@ policy's README between its ablation markers.
 
 Run: nice -n 10 .venv/bin/python benchmarks/ablation.py --out /tmp/ablation [--seeds 0,1,2]
        [--long] [--bc-only-v1] [--variant lookahead|more-ppo] [--workers 2] [--scheduler tcp://HOST:8786]
-       [--readme]
+       [--readme] [--figure docs/training_comparison.png]
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from scanplan.learn.sweep import (
     summarize,
     write_tables,
 )
+from scanplan.report.training import plot_training_comparison
 
 REAL_PARTS = {  # file in ../shared/parts -> units
     "vito_left_car_door.obj": "m",
@@ -52,6 +53,12 @@ SHIPPED = {  # the shipped recipe (policies/default/policy.json)
 }
 PAPER = {"state": "paper"}  # the paper's state, SB3's defaults, the training piece
 README = Path(__file__).resolve().parents[1] / "src/scanplan/policies/default/README.md"
+FIGURE_SHIPPED = (
+    "shipped: BC warm start (not in the x axis) + PPO, no-position state, procedural parts, seed 0"
+)
+FIGURE_FAITHFUL = (
+    "faithful: pure PPO, the paper's state and SB3 defaults, training piece only, seed 0"
+)
 BEGIN, END = "<!-- ablation:begin -->", "<!-- ablation:end -->"
 
 
@@ -157,6 +164,7 @@ def main() -> None:
     parser.add_argument("--scheduler", default=None)
     parser.add_argument("--no-reuse", action="store_true", help="retrain finished runs")
     parser.add_argument("--readme", action="store_true", help="write the policy README table")
+    parser.add_argument("--figure", default=None, help="PNG: shipped vs faithful training curves")
     args = parser.parse_args()
 
     tasks, legend = rows(args)
@@ -197,6 +205,15 @@ def main() -> None:
     ]
     report = "\n".join(text)
     print(report)
+    if args.figure:
+        faithful = sorted(Path(args.out, "runs", "v0").glob("pure-ppo-*-s0/progress.csv"))
+        if faithful:  # the longest faithful run (205k with --long) beside the shipped one
+            faithful.sort(key=lambda p: len(p.read_text().splitlines()))
+            logs = {
+                FIGURE_SHIPPED: README.parent / "training_log.csv",
+                FIGURE_FAITHFUL: faithful[-1],
+            }
+            print(f"-> {plot_training_comparison(logs, args.figure)} ({faithful[-1].parent.name})")
     if args.readme:
         write_readme(report)
 

@@ -126,6 +126,7 @@ def plot_training_comparison(logs: dict[str, str | Path], out_png: str | Path) -
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     if not logs:
         raise ValueError("plot_training_comparison: no log")
@@ -137,9 +138,11 @@ def plot_training_comparison(logs: dict[str, str | Path], out_png: str | Path) -
             ax.plot(log["timesteps"][ok], log[key][ok], lw=1.2, label=label)
         ax.set_title(title)
         ax.set_xlabel("PPO timesteps")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
         ax.grid(alpha=0.3)
-    axes.flat[0].legend(fontsize=8)
-    fig.tight_layout()
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 2), fontsize=9)
+    fig.tight_layout(rect=(0, 0.04 + 0.03 * ((len(labels) - 1) // 2), 1, 1))
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
