@@ -52,6 +52,7 @@ SHIPPED = {  # the shipped recipe (policies/default/policy.json)
     "log_std_init": (-2.0, -2.0, -4.0),
 }
 PAPER = {"state": "paper"}  # the paper's state, SB3's defaults, the training piece
+VARIANTS = {"lookahead": "BC + PPO, look-ahead state", "more-ppo": "BC + PPO 205k"}
 README = Path(__file__).resolve().parents[1] / "src/scanplan/policies/default/README.md"
 FIGURE_SHIPPED = (
     "shipped: BC warm start (not in the x axis) + PPO, no-position state, procedural parts, seed 0"
@@ -101,9 +102,9 @@ def rows(args: argparse.Namespace) -> tuple[list[SweepTask], list[tuple[str, str
             if args.long:
                 trained("pure PPO 205k, paper's state", env, PAPER | {"timesteps": 204_800})
             if args.variant == "lookahead":
-                trained("BC + PPO, look-ahead state", env, SHIPPED | {"state": "lookahead"})
+                trained(VARIANTS["lookahead"], env, SHIPPED | {"state": "lookahead"})
             elif args.variant == "more-ppo":
-                trained("BC + PPO 205k", env, SHIPPED | {"timesteps": 204_800})
+                trained(VARIANTS["more-ppo"], env, SHIPPED | {"timesteps": 204_800})
         tasks.append(SweepTask("geometric", planner="geometric", roll=roll))
     return tasks, legend
 
@@ -120,7 +121,7 @@ def eval_parts(shared: Path) -> tuple[list[EvalPart], list[str]]:
     return parts, missing
 
 
-def verdict(table_rows: list[dict[str, Any]], env: str, row: str = "BC + PPO") -> list[str]:
+def verdict(table_rows: list[dict[str, Any]], env: str, row: str) -> list[str]:
     """Per part: does `row` beat feedback and geometric on mean reward by more than its seed
     spread (mean − sd above the baseline)?"""
     by = {(s.env, s.label, s.part): s for s in summarize(table_rows)}
@@ -135,8 +136,13 @@ def verdict(table_rows: list[dict[str, Any]], env: str, row: str = "BC + PPO") -
                 continue
             m, sd = s.mean["reward_mean"], s.sd["reward_mean"]
             d = m - b.mean["reward_mean"]
-            word = "beats" if d > sd else ("loses to" if d < -sd else "ties")
-            out.append(f"{word} {baseline} ({d:+.4f}, seed sd {sd:.4f})")
+            if d > sd:
+                word = "beats"
+            elif d < -sd:
+                word = "is behind (beyond the seed sd)"
+            else:
+                word = f"does not beat ({'ahead' if d > 0 else 'behind'} within the seed sd)"
+            out.append(f"{word} {baseline}: {d:+.4f}, seed sd {sd:.4f}")
         lines.append(f"- {env} {part}: {row} " + "; ".join(out))
     return lines
 
@@ -196,11 +202,12 @@ def main() -> None:
         *(f"- {env} **{label}**: `{opts}`" for env, label, opts in legend),
         "",
         markdown_table(done),
-        "Verdict, BC + PPO against its teacher and the model-based planner on mean reward "
-        "(beats = mean − baseline > seed sd):",
+        "Verdict per part, trained rows against the teacher (feedback) and the model-based "
+        "planner (geometric) on mean reward (beats = mean − baseline > seed sd):",
         "",
-        *verdict(done, "v0"),
-        *verdict(done, "v1"),
+        *verdict(done, "v0", "BC + PPO"),
+        *verdict(done, "v1", "BC + PPO"),
+        *(verdict(done, "v0", VARIANTS[args.variant]) if args.variant else []),
         "",
     ]
     report = "\n".join(text)
