@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import json
 import sys
 
 import pytest
@@ -164,3 +165,26 @@ def test_reuse_neither_retrains_nor_reevaluates_a_finished_run(tmp_path, small_p
     other = SweepTask("tiny", tiny_config(output_dir=str(tmp_path / "run"), seed=5))
     (third,) = run_task(other, [small_plate], reuse=True)
     assert weights.stat().st_mtime_ns != stamp and third["seed"] == 5
+
+
+@needs_dask
+@pytest.mark.slow
+def test_sweep_cli_writes_and_prints_the_table(tmp_path, small_plate):
+    from typer.testing import CliRunner
+
+    from scanplan.cli import app
+
+    out = tmp_path / "s"
+    args = ["sweep", "-o", str(out), "--seeds", "0", "--timesteps", "64", "--n-envs", "2"]
+    args += ["--fan-points", "32", "--workers", "1", "--baseline", "feedback", "--label", "tiny"]
+    args += ["--part", f"{small_plate.source}:mm"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "| v0 | tiny | small_plate | 1 |" in result.output
+    assert "| v0 | feedback | small_plate | 1 |" in result.output
+    rows = read_csv(out / "sweep.csv")
+    assert [r["label"] for r in rows] == ["tiny", "feedback"]
+    meta = json.loads((out / "runs" / "tiny-s0" / "policy.json").read_text())
+    assert meta["training"]["command"].startswith("scanplan ")  # the sweep's command line
+    bad = CliRunner().invoke(app, ["sweep", "-o", str(out), "--baseline", "rl"])
+    assert bad.exit_code == 2 and "--baseline 'rl'" in bad.output
