@@ -85,8 +85,8 @@ def test_tiny_training_run_end_to_end(tmp_path, plate):  # noqa: F811
 
 
 def test_bad_training_config_is_a_value_error(tmp_path):
-    with pytest.raises(ValueError, match="timesteps"):
-        train(tiny_config(tmp_path, total_timesteps=0))
+    with pytest.raises(ValueError, match="timesteps"):  # 0 PPO steps and nothing to clone
+        train(tiny_config(tmp_path, total_timesteps=0, bc_samples=0))
     with pytest.raises(ValueError, match="no checkpoint"):
         train(tiny_config(tmp_path / "x", resume=str(tmp_path / "empty")))
 
@@ -346,3 +346,47 @@ def test_read_log_refuses_a_csv_that_is_no_training_log(tmp_path):
     path.write_text("a,b\n1,2\n")
     with pytest.raises(ValueError, match="x.csv: neither SB3's progress.csv"):
         read_log(path)
+
+
+def test_training_comparison_plots_every_run_in_every_panel(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from scanplan.planners.rl import DEFAULT_POLICY
+    from scanplan.report.training import COMPARISON_PANELS, plot_training_comparison
+
+    shipped = DEFAULT_POLICY / "training_log.csv"
+    other = tmp_path / "other.csv"  # the same log at half the reward, as a second run
+    rows = list(csv.DictReader(shipped.open()))
+    with other.open("w", newline="") as f:
+        writer = csv.DictWriter(f, list(rows[0]))
+        writer.writeheader()
+        for r in rows:
+            writer.writerow(r | {"ep_rew_mean": str(float(r["ep_rew_mean"]) / 2)})
+    figures = []
+    monkeypatch.setattr(plt, "close", lambda fig: figures.append(fig))
+    out = plot_training_comparison({"shipped": shipped, "half": other}, tmp_path / "c.png")
+    assert out.is_file() and out.stat().st_size > 10_000
+    (fig,) = figures
+    assert [ax.get_title() for ax in fig.axes] == [t for _, t in COMPARISON_PANELS]
+    reward = fig.axes[0].get_lines()
+    assert len(reward) == 2 and all(len(ax.get_lines()) == 2 for ax in fig.axes)
+    ys = read_log(shipped)["ep_rew_mean"]
+    np.testing.assert_allclose(reward[0].get_ydata(), ys)
+    np.testing.assert_allclose(reward[1].get_ydata(), ys / 2)
+    with pytest.raises(ValueError, match="no log"):
+        plot_training_comparison({}, tmp_path / "none.png")
+
+
+def test_zero_timesteps_is_behaviour_cloning_only(tmp_path):
+    result = train(tiny_config(tmp_path / "bc", total_timesteps=0, bc_samples=64))
+    meta = json.loads(result.policy_json.read_text())
+    assert result.timesteps == 0 and meta["training"]["timesteps"] == 0
+    assert meta["training"]["behaviour_cloning_mse"] > 0
+    assert not result.log_csv.exists() and result.plots == ()
+    with pytest.raises(ValueError, match="no behaviour cloning"):
+        tiny_config(tmp_path, total_timesteps=0, bc_samples=0)
+    with pytest.raises(ValueError, match="total_timesteps must be >= 0"):
+        tiny_config(tmp_path, total_timesteps=-1)

@@ -237,6 +237,14 @@ RoiOpt = Annotated[
 ]
 
 
+def parse_floats(text: str, option: str) -> tuple[float, ...]:
+    """A comma-separated list of numbers, e.g. --log-std-init=-2,-2,-4."""
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"{option} {text!r}: expected numbers") from None
+
+
 def parse_tolerance(text: str | None) -> dict[str, float]:
     """--tolerance MM,DEG as ScanSpec keyword arguments (none when not given)."""
     if text is None:
@@ -575,51 +583,25 @@ def train_cmd(
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
     import shlex
 
-    from scanplan.learn.config import TrainConfig
+    from scanplan.learn.config import recipe_config
     from scanplan.learn.train import train
 
-    states = {
-        "paper": (True, False),
-        "no-position": (False, False),
-        "lookahead": (False, True),
-        "lookahead-position": (True, True),
-    }
-    if state not in states:
-        raise ValueError(f"unknown --state {state!r}; use one of {', '.join(states)}")
     if resume is not None and not resume.is_dir():
         raise ValueError(f"--resume {resume} is not a directory")
-    use_position, lookahead = states[state]
-    try:
-        stds = tuple(float(v) for v in log_std_init.split(","))
-    except ValueError:
-        raise ValueError(f"--log-std-init {log_std_init!r}: expected numbers") from None
-    if env_version not in ("v0", "v1"):
-        raise ValueError(f"unknown --env {env_version!r}; use v0 or v1")
-    roll = env_version == "v1"
-    if len(stds) not in (1, 4 if roll else 3):
-        raise ValueError(
-            "--log-std-init takes one value or one per action (Δy,Δz,Δθ[,Δφ with --env v1])"
-        )
-    config = TrainConfig(
-        output_dir=str(output),
+    config = recipe_config(
+        str(output),
         parts=tuple(part or ["training-piece"]),
-        total_timesteps=timesteps,
+        timesteps=timesteps,
         seed=seed,
         n_envs=n_envs,
         vec_env=vec,
-        n_steps=max(2048 // max(n_envs, 1), 8),  # the paper: an update every 2048 steps
-        log_std_init=stds[0] if len(stds) == 1 else stds,
+        state=state,
+        env_version=env_version,
+        procedural=procedural,
+        fan_points=fan_points,
+        log_std_init=parse_floats(log_std_init, "--log-std-init"),
         init_advance=init_advance,
         bc_samples=bc_samples,
-        env={
-            "fan_points": fan_points,
-            "noise": False,
-            "use_position": use_position,
-            "lookahead": lookahead,
-            "segment_mm": (100.0, 400.0),
-            "procedural_parts": procedural,
-            "roll": roll,
-        },
         resume=str(resume) if resume else None,
         progress_bar=not no_progress,
         command=shlex.join(["scanplan", *sys.argv[1:]]),
@@ -637,6 +619,119 @@ def train_cmd(
         f"{f['reward_per_step']:.4f} (R_D {f['r_d']:.4f}, R_α {f['r_alpha']:.4f}, "
         f"R_Δs {f['r_delta_s']:.4f}) -> {result.policy_json}"
     )
+
+
+def parse_grid(items: list[str]) -> dict[str, list[Any]]:
+    """--grid KEY=V1,V2 (values as JSON where they parse, e.g. [-2,-2,-4], else strings)."""
+    import json
+    import re
+
+    grid: dict[str, list[Any]] = {}
+    for item in items:
+        key, sep, values = item.partition("=")
+        if not sep or not key or not values:
+            raise ValueError(f"--grid {item!r}: expected KEY=V1,V2,...")
+        parsed = []
+        for text in re.split(r",(?![^\[]*\])", values):
+            try:
+                value = json.loads(text)
+            except json.JSONDecodeError:
+                value = text
+            parsed.append(tuple(value) if isinstance(value, list) else value)
+        grid[key.strip()] = parsed
+    return grid
+
+
+@app.command("sweep")
+@user_errors
+def sweep_cmd(
+    output: Annotated[Path, typer.Option("-o", "--output", help="directory of runs and tables")],
+    part: Annotated[
+        list[str] | None,
+        typer.Option("--part", help="unseen part(s) to evaluate on: name or PATH[:UNITS]"),
+    ] = None,
+    seeds: Annotated[str, typer.Option(help="training seeds, e.g. 0,1,2")] = "0,1,2",
+    grid: Annotated[
+        list[str] | None,
+        typer.Option("--grid", help="KEY=V1,V2: a TrainConfig field (or env.NAME) and its values"),
+    ] = None,
+    label: Annotated[str, typer.Option(help="row label of the trained runs")] = "rl",
+    baseline: Annotated[
+        list[str] | None,
+        typer.Option("--baseline", help="also evaluate an untrained planner: feedback, geometric"),
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option(help="Dask scheduler tcp://HOST:8786 (default: a LocalCluster)")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="LocalCluster workers (default: one per core)")
+    ] = None,
+    timesteps: Annotated[int, typer.Option(help="PPO timesteps per run (0: BC only)")] = 61_440,
+    state: Annotated[str, typer.Option(help="paper | no-position | lookahead")] = "paper",
+    env_version: Annotated[str, typer.Option("--env", help="v0 | v1")] = "v0",
+    procedural: Annotated[int, typer.Option(help="N randomized procedural parts")] = 0,
+    fan_points: Annotated[int, typer.Option(help="sub-sampled fan for training")] = 128,
+    log_std_init: Annotated[str, typer.Option(help="initial log std, as for train")] = "0",
+    init_advance: Annotated[float | None, typer.Option(help="initial mean Δy action")] = None,
+    bc_samples: Annotated[int, typer.Option(help="behaviour-cloning warm start states")] = 0,
+    n_envs: Annotated[int, typer.Option("--n-envs", help="envs per run")] = 16,
+):
+    """Train seeds x a grid of configs as Dask tasks, evaluate each policy on unseen parts,
+    and write sweep.csv (per run and part) and sweep.md (mean ± sd over seeds)."""
+    import shlex
+
+    from scanplan.learn.sweep import CLUSTER_HINT
+
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        raise ValueError(CLUSTER_HINT) from None
+    from scanplan.learn.config import recipe_config
+    from scanplan.learn.sweep import (
+        EvalPart,
+        SweepTask,
+        connect,
+        grid_tasks,
+        run_sweep,
+        write_tables,
+    )
+
+    seed_list = [int(v) for v in parse_floats(seeds, "--seeds")]
+    command = shlex.join(["scanplan", *sys.argv[1:]])
+    base = recipe_config(
+        str(output),
+        timesteps=timesteps,
+        n_envs=n_envs,
+        state=state,
+        env_version=env_version,
+        procedural=procedural,
+        fan_points=fan_points,
+        log_std_init=parse_floats(log_std_init, "--log-std-init"),
+        init_advance=init_advance,
+        bc_samples=bc_samples,
+        progress_bar=False,
+        command=command,
+    )
+    tasks = grid_tasks(label, base, output / "runs", seed_list, parse_grid(grid or []))
+    roll = env_version == "v1"
+    for name in baseline or []:
+        if name not in ("fixed", "feedback", "geometric"):
+            raise ValueError(f"--baseline {name!r}: use fixed, feedback or geometric")
+    tasks += [SweepTask(name, planner=name, roll=roll) for name in baseline or []]
+    parts = [EvalPart.parse(p) for p in part or ["door", "drone"]]
+    output.mkdir(parents=True, exist_ok=True)
+    with connect(scheduler, workers) as client:
+        rows = run_sweep(
+            tasks,
+            parts,
+            client,
+            on_done=lambda done: typer.echo(
+                f"done: {done[0]['label']} seed {done[0]['seed']}", err=True
+            ),
+        )
+    csv_path, md_path = write_tables(rows, output)
+    typer.echo(md_path.read_text(), nl=False)
+    typer.echo(f"-> {csv_path}, {md_path}")
 
 
 # ---- export (robot programs) --------------------------------------------------------------

@@ -22,7 +22,7 @@ class TrainConfig:
 
     output_dir: str = "policy"
     parts: tuple[str, ...] = ("training-piece",)
-    total_timesteps: int = 1_000_000
+    total_timesteps: int = 1_000_000  # PPO steps; 0 with bc_samples > 0: behaviour cloning only
     seed: int = 0
     n_envs: int = 16
     vec_env: str = "batched"
@@ -54,7 +54,6 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         positive = {
-            "total_timesteps": self.total_timesteps,
             "n_envs": self.n_envs,
             "n_steps": self.n_steps,
             "batch_size": self.batch_size,
@@ -64,6 +63,14 @@ class TrainConfig:
         for name, value in positive.items():
             if value < 1:
                 raise ValueError(f"training config: {name} must be >= 1, got {value}")
+        if self.total_timesteps < 0:
+            raise ValueError(
+                f"training config: total_timesteps must be >= 0, got {self.total_timesteps}"
+            )
+        if self.total_timesteps == 0 and self.bc_samples == 0:
+            raise ValueError(
+                "training config: 0 timesteps and no behaviour cloning: nothing to train"
+            )
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"training config: vec_env {self.vec_env!r}, use one of {VEC_ENVS}")
         if self.activation not in ACTIVATIONS:
@@ -78,3 +85,70 @@ class TrainConfig:
             raise ValueError(f"training config: bc_samples must be >= 0, got {self.bc_samples}")
         if self.bc_samples > 0 and self.vec_env != "batched":
             raise ValueError("training config: behaviour cloning needs vec_env 'batched'")
+
+
+# `scanplan train --state`: (use_position, lookahead)
+STATES = {
+    "paper": (True, False),
+    "no-position": (False, False),
+    "lookahead": (False, True),
+    "lookahead-position": (True, True),
+}
+ENV_VERSIONS = ("v0", "v1")
+
+
+def recipe_config(
+    output_dir: str,
+    *,
+    parts: tuple[str, ...] = ("training-piece",),
+    timesteps: int = 1_000_000,
+    seed: int = 0,
+    n_envs: int = 16,
+    vec_env: str = "batched",
+    state: str = "paper",
+    env_version: str = "v0",
+    procedural: int = 0,
+    fan_points: int = 128,
+    log_std_init: tuple[float, ...] = (0.0,),
+    init_advance: float | None = None,
+    bc_samples: int = 0,
+    resume: str | None = None,
+    progress_bar: bool = True,
+    command: str = "",
+) -> TrainConfig:
+    """The config of `scanplan train` with these options (the CLI and `learn.sweep` both
+    build theirs here, so a sweep's row is exactly the command it records)."""
+    if state not in STATES:
+        raise ValueError(f"unknown --state {state!r}; use one of {', '.join(STATES)}")
+    if env_version not in ENV_VERSIONS:
+        raise ValueError(f"unknown --env {env_version!r}; use v0 or v1")
+    roll = env_version == "v1"
+    if len(log_std_init) not in (1, 4 if roll else 3):
+        raise ValueError(
+            "--log-std-init takes one value or one per action (Δy,Δz,Δθ[,Δφ with --env v1])"
+        )
+    use_position, lookahead = STATES[state]
+    return TrainConfig(
+        output_dir=output_dir,
+        parts=tuple(parts),
+        total_timesteps=timesteps,
+        seed=seed,
+        n_envs=n_envs,
+        vec_env=vec_env,
+        n_steps=max(2048 // max(n_envs, 1), 8),  # the paper: an update every 2048 steps
+        log_std_init=log_std_init[0] if len(log_std_init) == 1 else tuple(log_std_init),
+        init_advance=init_advance,
+        bc_samples=bc_samples,
+        env={
+            "fan_points": fan_points,
+            "noise": False,
+            "use_position": use_position,
+            "lookahead": lookahead,
+            "segment_mm": (100.0, 400.0),
+            "procedural_parts": procedural,
+            "roll": roll,
+        },
+        resume=resume,
+        progress_bar=progress_bar,
+        command=command,
+    )

@@ -106,3 +106,45 @@ def plot_training_curves(log_csv: str | Path, out_dir: str | Path) -> tuple[Path
     fig.savefig(rewards_png, dpi=110)
     plt.close(fig)
     return metrics_png, rewards_png
+
+
+COMPARISON_PANELS = (
+    ("ep_rew_mean", "(a) mean episodic reward"),
+    ("ep_len_mean", "(b) mean episode length"),
+    ("reward_per_step", "(c) normalized reward (per step)"),
+    ("r_d", "R_D (distance)"),
+    ("r_alpha", "R_α (orientation)"),
+    ("r_delta_s", "R_Δs (spacing)"),
+)
+
+
+def plot_training_comparison(logs: dict[str, str | Path], out_png: str | Path) -> Path:
+    """The paper's training figures for several runs side by side: one panel per quantity
+    (`COMPARISON_PANELS`), one line per run ({label: progress.csv or training_log.csv}),
+    against PPO timesteps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    if not logs:
+        raise ValueError("plot_training_comparison: no log")
+    read = {label: read_log(path) for label, path in logs.items()}
+    fig, axes = plt.subplots(2, 3, figsize=(14, 7.2))
+    for ax, (key, title) in zip(axes.flat, COMPARISON_PANELS, strict=True):
+        for label, log in read.items():
+            ok = np.isfinite(log[key])
+            ax.plot(log["timesteps"][ok], log[key][ok], lw=1.2, label=label)
+        ax.set_title(title)
+        ax.set_xlabel("PPO timesteps")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
+        ax.grid(alpha=0.3)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 2), fontsize=9)
+    fig.tight_layout(rect=(0, 0.04 + 0.03 * ((len(labels) - 1) // 2), 1, 1))
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
