@@ -336,6 +336,7 @@ NEEDS = {
     "place": ["{good}", "--robot", "ur5e"],
     "train": ["-o", "{out}/policy"],
     "demo": ["-o", "{out}/demo"],
+    "sweep": ["-o", "{out}/sweep"],
 }
 
 
@@ -373,6 +374,7 @@ def _stop(*args, **kwargs):
 @given(args=argument_lists())
 def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
     import scanplan.demo
+    import scanplan.learn.sweep
     import scanplan.learn.train
     import scanplan.robot.place
 
@@ -384,6 +386,7 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
         mp.setattr(scanplan.learn.train, "train", _stop)
         mp.setattr(scanplan.demo, "run_demo", _stop)
         mp.setattr(scanplan.robot.place, "place", _stop)
+        mp.setattr(scanplan.learn.sweep, "connect", _stop)  # no cluster, no training
         result = runner.invoke(app, argv)
     event(f"{args[0]} exit {result.exit_code}")
     assert result.exit_code in (0, 2), (argv, result.output, result.exception)

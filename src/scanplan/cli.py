@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import shutil
 import sys
 import time
@@ -719,17 +720,29 @@ def sweep_cmd(
             raise ValueError(f"--baseline {name!r}: use fixed, feedback or geometric")
     tasks += [SweepTask(name, planner=name, roll=roll) for name in baseline or []]
     parts = [EvalPart.parse(p) for p in part or ["door", "drone"]]
-    output.mkdir(parents=True, exist_ok=True)
-    with connect(scheduler, workers) as client:
-        rows = run_sweep(
-            tasks,
-            parts,
-            client,
-            on_done=lambda done: typer.echo(
-                f"done: {done[0]['label']} seed {done[0]['seed']}", err=True
-            ),
-        )
-    csv_path, md_path = write_tables(rows, output)
+    if scheduler is not None and not re.fullmatch(r"(tcp|tls|inproc)://[^\s/]+", scheduler):
+        raise ValueError(f"--scheduler {scheduler!r}: expected tcp://HOST:PORT")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers: {workers} must be >= 1")
+
+    def has_runs(directory: Path) -> bool:  # finished runs are reused by a rerun: keep them
+        return any((directory / "runs").glob("**/policy.json"))
+
+    with removed_on_error(output, keep=has_runs):
+        output.mkdir(parents=True, exist_ok=True)
+        try:
+            with connect(scheduler, workers) as client:
+                rows = run_sweep(
+                    tasks,
+                    parts,
+                    client,
+                    on_done=lambda done: typer.echo(
+                        f"done: {done[0]['label']} seed {done[0]['seed']}", err=True
+                    ),
+                )
+        except (OSError, TimeoutError) as exc:  # no scheduler there, or it went away
+            raise ValueError(f"--scheduler {scheduler}: {exc}".splitlines()[0]) from None
+        csv_path, md_path = write_tables(rows, output)
     typer.echo(md_path.read_text(), nl=False)
     typer.echo(f"-> {csv_path}, {md_path}")
 
@@ -792,6 +805,8 @@ def export_cmd(
     if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
         choices = ", ".join([*FORMATS, *DIRECTORY_FORMATS])
         raise ValueError(f"unknown format {fmt!r}; use one of {choices}")
+    if fmt in FORMATS and (str(output) in ("", ".") or output.is_dir()):
+        raise ValueError(f"-o {str(output)!r} is a directory: give the program's file name")
     # KUKA wants the .src file named after its DEF.
     name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
     options = ExportOptions(
