@@ -93,11 +93,11 @@ class CentredLookahead:
 class RobustLookahead:
     """The rate-limited profile closest to the target, found exactly by dynamic programming:
     minimize Σ min((v_i − t_i)², cap²) (+ a slight pull beyond the cap) subject to
-    |v_i − v_{i−1}| ≤ rate·cell. The cap (a
-    truncated square) lets the profile give up on a feature too short to follow at this
-    rate (a drone's nose, a narrow crease) instead of dragging the ramp into the surface
-    around it, which a centred ramp does. Values are quantized to rate·cell (the exact
-    reachable set of a rate-limited walk from a grid start)."""
+    |v_i − v_{i−1}| ≤ rate·cell. The cap (a truncated square) lets the profile give up on a
+    feature too short to follow at this rate (a drone's nose, a narrow crease) instead of
+    dragging the ramp into the surface around it, which a centred ramp does. Values are
+    quantized to rate·cell (the exact reachable set of a rate-limited walk from a grid
+    start)."""
 
     cap: float = math.radians(12.0)
     max_states: int = 4000
