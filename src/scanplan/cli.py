@@ -555,12 +555,13 @@ def train_cmd(
         typer.Option(help="also train on N randomized procedural parts, >= 0", callback=SEED_CHECK),
     ] = 0,
     fan_points: Annotated[
-        int,
+        int | None,
         typer.Option(
-            help=f"sub-sampled fan for training, 2 to {SensorSpec.MAX_POINTS}",
+            help=f"sub-sampled fan for training, 2 to {SensorSpec.MAX_POINTS} "
+            "(default: the env's training fan, 128)",
             callback=POINTS_CHECK,
         ),
-    ] = 128,
+    ] = None,
     log_std_init: Annotated[
         str, typer.Option(help="initial log std: one value, or Δy,Δz,Δθ (SB3 default 0)")
     ] = "0",
@@ -671,7 +672,12 @@ def sweep_cmd(
     state: Annotated[str, typer.Option(help="paper | no-position | lookahead")] = "paper",
     env_version: Annotated[str, typer.Option("--env", help="v0 | v1")] = "v0",
     procedural: Annotated[int, typer.Option(help="N randomized procedural parts")] = 0,
-    fan_points: Annotated[int, typer.Option(help="sub-sampled fan for training")] = 128,
+    fan_points: Annotated[
+        int | None,
+        typer.Option(
+            help="sub-sampled fan for training (default: the env's, 128)", callback=POINTS_CHECK
+        ),
+    ] = None,
     log_std_init: Annotated[str, typer.Option(help="initial log std, as for train")] = "0",
     init_advance: Annotated[float | None, typer.Option(help="initial mean Δy action")] = None,
     bc_samples: Annotated[int, typer.Option(help="behaviour-cloning warm start states")] = 0,

@@ -142,9 +142,7 @@ class CollisionChecker:
         gap = np.maximum(lo - (centre + half), (centre - half) - hi)
         return np.linalg.norm(np.maximum(gap, 0.0), axis=1)
 
-    def check(
-        self, poses: np.ndarray, clearance_mm: float = 20.0, exact: bool = False
-    ) -> CollisionReport:
+    def check(self, poses: np.ndarray, clearance_mm: float, exact: bool = False) -> CollisionReport:
         """Body vs part for every pose (n, 4, 4).
 
         Stages: poses whose body AABB is at least the clearance from the part's AABB are

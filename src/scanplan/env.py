@@ -19,6 +19,7 @@ from gymnasium import spaces
 from scanplan.dynamics import (
     PassDynamics,
     StepLimits,
+    aligning_angles,
     pass_geometry,
     probe_line,
     step_budget,
@@ -36,6 +37,10 @@ ENV_ID = "scanplan/SwathScan-v0"
 ENV_ID_ROLL = "scanplan/SwathScan-v1"
 OBS_LIMIT = 10.0  # every normalized observation is clipped to [-OBS_LIMIT, OBS_LIMIT]
 LOOKAHEAD_MM = (10.0, 30.0, 60.0, 120.0, 200.0)
+# Training defaults of the env, also the trainer's (learn.config): a 128-column fan agrees
+# with the full one to 0.1 mm / 0.3° on the training piece; 100-400 mm sub-segments of passes.
+TRAINING_FAN_POINTS = 128
+TRAINING_SEGMENT_MM = (100.0, 400.0)
 _LOOKAHEAD_COLUMNS = 16
 
 
@@ -72,17 +77,17 @@ def _lookahead_features(dyn: PassDynamics) -> np.ndarray:
     """From the CAD (planning is offline): mean surface height and the pitch that faces its
     mean normal under the line at the footprint and at `LOOKAHEAD_MM` ahead; returned
     relative to the footprint's height and to θ."""
-    s, _, th = dyn.state[:3]
+    th = dyn.state[2]
     sw, spec = dyn.swath, dyn.spec
     half_line = spec.sensor.line_width_mm / 2
-    foot = s - spec.working_distance_mm * math.sin(th)
+    foot = dyn.progress_mm  # the footprint's advance: where the beam meets W_d
     ahead = foot + np.array((0.0, *LOOKAHEAD_MM))
     lateral = np.linspace(-half_line, half_line, _LOOKAHEAD_COLUMNS)
     probe = probe_line(dyn.part, sw, ahead, lateral)
     hit = probe.hit
     z = np.where(hit, probe.z_mm, 0.0).sum(1) / np.maximum(hit.sum(1), 1)
     n_mean = probe.normals_up.sum(1)
-    pitch = np.arctan2(n_mean @ sw.u, np.maximum(n_mean[:, 2], 1e-9))
+    pitch, _ = aligning_angles(n_mean, sw.u, sw.v, roll=False)
     seen: np.ndarray = np.asarray(hit.any(axis=1))
     z = np.where(seen, z, z[0] if seen[0] else 0.0)
     pitch = np.where(seen, pitch, th)
@@ -206,12 +211,12 @@ class SwathScanEnv(gym.Env):
         parts: Sequence[Part] | None = None,
         swaths: Sequence[Swath] | None = None,
         scan_spec: ScanSpec | None = None,
-        fan_points: int = 128,
+        fan_points: int = TRAINING_FAN_POINTS,
         noise: bool = True,
         limits: StepLimits | None = None,
         use_position: bool = True,
         lookahead: bool = False,
-        segment_mm: tuple[float, float] | None = (100.0, 400.0),
+        segment_mm: tuple[float, float] | None = TRAINING_SEGMENT_MM,
         lateral_jitter_mm: float = 150.0,
         random_direction: bool = True,
         procedural_parts: int = 0,

@@ -71,7 +71,7 @@ def plan_transition(
     checker: CollisionChecker,
     start: np.ndarray,
     end: np.ndarray,
-    clearance_mm: float = 20.0,
+    clearance_mm: float,
     up: np.ndarray = UP,
     step_mm: float = 20.0,
     raise_step_mm: float = 20.0,

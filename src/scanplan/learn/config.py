@@ -8,6 +8,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from scanplan.env import TRAINING_FAN_POINTS, TRAINING_SEGMENT_MM
+
 VEC_ENVS = ("batched", "subproc")
 ACTIVATIONS = ("relu", "tanh")
 
@@ -39,11 +41,11 @@ class TrainConfig:
     bc_samples: int = 0  # > 0: behaviour-clone the feedback controller on this many states first
     env: dict[str, Any] = field(
         default_factory=lambda: {
-            "fan_points": 128,
+            "fan_points": TRAINING_FAN_POINTS,
             "noise": False,  # µm-scale noise does not move mm-scale D, α, Δs; 20 % faster
             "use_position": True,
             "lookahead": False,
-            "segment_mm": (100.0, 400.0),
+            "segment_mm": TRAINING_SEGMENT_MM,
             "procedural_parts": 0,
         }
     )
@@ -108,7 +110,7 @@ def recipe_config(
     state: str = "paper",
     env_version: str = "v0",
     procedural: int = 0,
-    fan_points: int = 128,
+    fan_points: int | None = None,
     log_std_init: tuple[float, ...] = (0.0,),
     init_advance: float | None = None,
     bc_samples: int = 0,
@@ -140,11 +142,11 @@ def recipe_config(
         init_advance=init_advance,
         bc_samples=bc_samples,
         env={
-            "fan_points": fan_points,
+            "fan_points": TRAINING_FAN_POINTS if fan_points is None else fan_points,
             "noise": False,
             "use_position": use_position,
             "lookahead": lookahead,
-            "segment_mm": (100.0, 400.0),
+            "segment_mm": TRAINING_SEGMENT_MM,
             "procedural_parts": procedural,
             "roll": roll,
         },
