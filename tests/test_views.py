@@ -17,8 +17,8 @@ from scanplan.planners import make_planner, plan_scan
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import read_json, read_trajectory, write_json
 from scanplan.views import (
-    MAX_VIEW_TILT_DEG,
     UP,
+    VIEW_AXIS_MAX_TILT_DEG,
     View,
     candidate_views,
     plan_views,
@@ -47,7 +47,7 @@ def test_view_axis_is_the_normal_clamped_to_the_upper_cone():
         view_axis(np.array([0, 0.5, 1.0])), np.array([0, 0.5, 1]) / math.hypot(0.5, 1)
     )
     clamped = view_axis(np.array([1.0, 0, 0]))
-    assert math.degrees(math.acos(clamped[2])) == pytest.approx(MAX_VIEW_TILT_DEG)
+    assert math.degrees(math.acos(clamped[2])) == pytest.approx(VIEW_AXIS_MAX_TILT_DEG)
     assert clamped[0] > 0 and clamped[1] == pytest.approx(0)
 
 
@@ -69,7 +69,7 @@ def test_housing_regions_are_the_top_and_four_walls():
     assert sum(r.area_mm2 for r in regions) == pytest.approx(
         hemisphere_visible_samples(part, 2.0).area_mm2, rel=0.02
     )
-    assert len(candidate_views(part)) == 5
+    assert len(candidate_views(part, SPEC)) == 5
 
 
 def test_hemisphere_surface_adds_what_only_a_tilted_view_sees():

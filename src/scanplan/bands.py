@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.dynamics import StepLimits, aligning_angles, probe_grid
+from scanplan.metrics import COVERAGE_MAX_SLOPE_DEG
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
@@ -169,7 +170,7 @@ def _covered_cells(surface: TopSurface, band: Band, edge_mm: float = 0.0) -> np.
 def adaptive_offsets(
     surface: TopSurface,
     spec: ScanSpec,
-    candidate_step_mm: float = 10.0,
+    candidate_step_mm: float = 4.0,
     min_gain: float = 0.005,
     max_passes: int = 60,
     edge_mm: float = 8.0,
@@ -192,11 +193,15 @@ def adaptive_offsets(
         centres = np.array([0.5 * (first + last)])
     bands = [in_spec_band(surface, float(c), spec) for c in centres]
     cells = np.stack([_covered_cells(surface, b, edge_mm).ravel() for b in bands])
-    total = max(int(surface.hit.sum()), 1)
+    # A cell stands for its surface area, not its plan area: a 70° wall holds 3× its cell.
+    cos_steep = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
+    area = np.where(surface.hit, 1.0 / np.maximum(surface.normals[..., 2], cos_steep), 0.0)
+    area = area.ravel()
+    total = max(float(area.sum()), 1.0)
     covered = np.zeros(cells.shape[1], bool)
     chosen: list[int] = []
     while len(chosen) < max_passes:
-        gain = (cells & ~covered).sum(axis=1)
+        gain = (cells & ~covered) @ area
         best = int(np.argmax(gain))
         if chosen and gain[best] < min_gain * total:
             break

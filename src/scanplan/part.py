@@ -305,9 +305,10 @@ def _load_step(data: bytes, path: Path) -> trimesh.Trimesh:
 
 @functools.lru_cache(maxsize=8)
 def _builtin(name: str) -> Part:
-    from scanplan.parts import build_part
+    from scanplan.parts import build_part, surface_to_inspect
 
-    return Part(validate_mesh(build_part(name), f"built-in {name}"), name=name, source=name)
+    mesh = validate_mesh(build_part(name), f"built-in {name}")
+    return Part(mesh, name=name, source=name, inspect_faces=surface_to_inspect(name, mesh))
 
 
 def load_part(spec: str | Path, units: str = "mm") -> Part:

@@ -26,14 +26,18 @@ from scanplan.trajectory import Trajectory
 
 UP = np.array([0.0, 0.0, 1.0])
 VIEW_MODES = ("top", "auto")
-# The sensor stays above the fixture: a view axis at most this far from +Z.
-MAX_VIEW_TILT_DEG = 75.0
+# The directions that define what the upper hemisphere sees (the surface `--views auto`
+# inspects, `metrics.hemisphere_visible_samples`): +Z and rings up to this tilt.
+HEMISPHERE_MAX_TILT_DEG = 75.0
+# A view's axis at most this far from +Z: a vertical wall is then seen 10° off its normal,
+# inside the 15° tolerance with room for tracking, and the sensor stays above it.
+VIEW_AXIS_MAX_TILT_DEG = 80.0
 
 
 def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) -> np.ndarray:
     """(k, 3) unit directions on the upper hemisphere: +Z and rings (tilt deg, count), each
     ring's azimuths offset by half a step from the previous one. Default 28 directions."""
-    rings = rings or ((30.0, 6), (55.0, 9), (MAX_VIEW_TILT_DEG, 12))
+    rings = rings or ((30.0, 6), (55.0, 9), (HEMISPHERE_MAX_TILT_DEG, 12))
     out = [UP]
     for i, (tilt, count) in enumerate(rings):
         az = (np.arange(count) + 0.5 * (i % 2)) * 2 * math.pi / count
@@ -111,7 +115,7 @@ def segment_regions(
     return sorted(regions, key=lambda r: -r.area_mm2)
 
 
-def view_axis(normal: np.ndarray, max_tilt_deg: float = MAX_VIEW_TILT_DEG) -> np.ndarray:
+def view_axis(normal: np.ndarray, max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG) -> np.ndarray:
     """The view's up axis (the sensor looks along −axis): the region's mean normal, tilted
     back to at most `max_tilt_deg` from +Z (the sensor above the fixture)."""
     n = np.asarray(normal, dtype=np.float64) / max(float(np.linalg.norm(normal)), 1e-12)
@@ -216,32 +220,70 @@ def plan_view(part: Part, view: View, plan: PlanView) -> ViewPlan:
     return ViewPlan(view, view.to_part_frame(traj), passes)
 
 
+def depth_slabs(
+    part: Part, faces: np.ndarray, axis: np.ndarray, max_span_mm: float, gap_mm: float
+) -> list[np.ndarray]:
+    """`faces` cut by depth along `axis` (their centroids'): at gaps wider than `gap_mm`, and
+    a slab deeper than `max_span_mm` into equal slabs, so each fits one raster's depth
+    window (SPEC §3b: a region deeper than the Z range gets passes at the heights it needs;
+    one normal direction may also gather walls of several steps far apart)."""
+    faces = np.asarray(faces)
+    depth = np.asarray(part.mesh.triangles_center)[faces] @ axis
+    order = np.argsort(depth)
+    sorted_depth = depth[order]
+    breaks = np.flatnonzero(np.diff(sorted_depth) > gap_mm) + 1
+    slabs = []
+    for group in np.split(order, breaks):
+        span = float(depth[group].max() - depth[group].min())
+        count = max(1, math.ceil(span / max_span_mm - 1e-9))
+        if count == 1:
+            slabs.append(faces[group])
+            continue
+        edges = np.linspace(depth[group].min(), depth[group].max(), count + 1)[1:-1]
+        which = np.searchsorted(edges, depth[group])
+        slabs.extend(faces[group[which == k]] for k in range(count) if (which == k).any())
+    return slabs
+
+
 def candidate_views(
     part: Part,
-    max_candidates: int = 8,
+    spec: ScanSpec,
+    max_candidates: int = 16,
     merge_deg: float = 10.0,
-    max_region_tilt_deg: float = MAX_VIEW_TILT_DEG + 5.0,
+    min_area_fraction: float = 0.005,
 ) -> list[View]:
     """Views for the largest regions (their axes, `view_axis`); regions whose axes lie within
-    `merge_deg` of each other share one view. A region whose mean normal is more than
-    `max_region_tilt_deg` from +Z (a vertical wall) gets no view of its own: the steepest
-    view would see it within 5° of the angle tolerance, where tracking error takes it out
-    of spec — a panel's cut edges must not pull in views."""
-    views: list[View] = []
+    `merge_deg` of each other share one view axis, and their faces are cut into depth slabs
+    along it (`depth_slabs`: half the Z range at most, a gap of a tenth of it), one view
+    per slab of at least `min_area_fraction` of the surface. A wall facing sideways gets a
+    view tilted `VIEW_AXIS_MAX_TILT_DEG` from +Z: within 10° of its normal, the sensor
+    still above it."""
+    axes: list[np.ndarray] = []
     groups: list[list[np.ndarray]] = []
-    for region in segment_regions(part):
-        if region.normal[2] < math.cos(math.radians(max_region_tilt_deg)):
-            continue
+    regions = segment_regions(part)
+    total = sum(r.area_mm2 for r in regions)
+    for region in regions:
         axis = view_axis(region.normal)
-        for i, view in enumerate(views):
-            if math.degrees(math.acos(float(np.clip(axis @ view.axis, -1, 1)))) <= merge_deg:
+        for i, other in enumerate(axes):
+            if math.degrees(math.acos(float(np.clip(axis @ other, -1, 1)))) <= merge_deg:
                 groups[i].append(region.faces)
                 break
         else:
-            if len(views) < max_candidates:
-                views.append(View.looking_along(axis, len(views) + 1))
-                groups.append([region.faces])
-    return [replace(v, faces=np.concatenate(g)) for v, g in zip(views, groups, strict=True)]
+            axes.append(axis)
+            groups.append([region.faces])
+    area = np.asarray(part.mesh.area_faces)
+    z_range = spec.sensor.z_range_mm
+    slabs: list[tuple[float, np.ndarray, np.ndarray]] = []
+    for axis, group in zip(axes, groups, strict=True):
+        for faces in depth_slabs(part, np.concatenate(group), axis, z_range / 2, z_range / 10):
+            slab_area = float(area[faces].sum())
+            if slab_area >= min_area_fraction * total:
+                slabs.append((slab_area, axis, faces))
+    slabs.sort(key=lambda t: -t[0])
+    return [
+        View.looking_along(axis, k + 1, faces)
+        for k, (_, axis, faces) in enumerate(slabs[:max_candidates])
+    ]
 
 
 @dataclass(frozen=True)
@@ -260,7 +302,7 @@ def choose_views(
     coverage_target: float = 0.9,
     min_gain: float = 0.01,
     min_yield: float = 0.25,
-    max_views: int = 6,
+    max_views: int = 12,
     points_per_profile: int = 128,
     seed: int = 0,
 ) -> ViewSelection:
@@ -300,7 +342,7 @@ def choose_views(
         return ViewSelection(plans, coverage, 0)
     from scanplan.metrics import hemisphere_visible_samples
 
-    candidates = candidate_views(part)
+    candidates = candidate_views(part, spec)
     # The samples on each candidate's faces: the bound on its gain.
     samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]

@@ -110,3 +110,10 @@ def build() -> trimesh.Trimesh:
     if z.min() < 10.0:
         raise RuntimeError(f"door skin dips to {z.min():.1f} mm")
     return heightfield_solid(xs, ys, z)
+
+
+def skin_faces(mesh: trimesh.Trimesh) -> np.ndarray:
+    """(f,) bool: the outer skin, the surface a door is inspected on. The solid's vertical
+    sides and flat bottom only close the heightfield (a real door skin is a sheet, like
+    vito_left_car_door); the skin is the heightfield's top, every face facing up."""
+    return np.asarray(mesh.face_normals)[:, 2] > 1e-6
