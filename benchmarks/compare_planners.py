@@ -1,6 +1,6 @@
 """Scan quality of the planners, side by side, on parts none of them was tuned on.
 
-For each part and planner (each with its own default raster): plan, evaluate (noise on,
+For each part and planner (each with its own default raster and views): plan, evaluate (noise on,
 seed 0) and print in-spec coverage (the headline, `metrics.evaluate`), an independent check
 of it from the simulated point cloud of `scanplan scan` (its per-point distance and
 orientation error fields, area samples of the upward-visible surface, a sample counts if an
@@ -29,9 +29,10 @@ from scipy.spatial import cKDTree
 from scanplan.cloud import simulate_cloud
 from scanplan.metrics import Metrics, evaluate, upward_visible_samples
 from scanplan.part import Part, load_part
-from scanplan.planners import Planner, make_planner, plan_scan
+from scanplan.planners import Planner, make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory
+from scanplan.views import plan_views
 
 PLANNERS: dict[str, tuple[str, bool, str]] = {  # label: (planner, roll, raster)
     "fixed": ("fixed", False, "nominal"),
@@ -64,7 +65,7 @@ def main() -> None:
     spec = ScanSpec()
     print(
         "per planner: in-spec (metrics) / in-spec (cloud check) / coverage / "
-        "|dist err| mm / orient. err ° / passes / profiles / cycle s / plan s"
+        "|dist err| mm / orient. err ° / views:passes / profiles / cycle s / plan s"
     )
     print(f"| part | {' | '.join(labels)} |")
     print("|---" * (len(labels) + 1) + "|")
@@ -76,14 +77,15 @@ def main() -> None:
             name, roll, raster = PLANNERS[label]
             planner: Planner = make_planner(name, roll=roll)
             t0 = time.perf_counter()
-            swaths, traj = plan_scan(part, spec, planner, raster)
+            plans, traj = plan_views(part, spec, planner, raster=raster)  # default views
             plan_s = time.perf_counter() - t0
-            m: Metrics = evaluate(part, spec, traj, points_per_profile=args.points)
+            passes = sum(p.passes for p in plans)
+            m: Metrics = evaluate(part, spec, traj, points_per_profile=args.points, visible="top")
             check = cloud_in_spec(part, spec, traj, args.points, args.radius)
             cells.append(
                 f"{m.in_spec_coverage:.3f} / {check:.3f} / {m.coverage_fraction:.3f} / "
                 f"{m.distance_error_mean_abs_mm:.2f} / {m.orientation_error_mean_deg:.1f} / "
-                f"{len(swaths)} / {m.profiles} / {m.cycle_time_s:.0f} / {plan_s:.1f}"
+                f"{len(plans)}:{passes} / {m.profiles} / {m.cycle_time_s:.0f} / {plan_s:.1f}"
             )
         print(f"| {Path(path).stem} | {' | '.join(cells)} |", flush=True)
 

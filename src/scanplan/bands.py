@@ -170,13 +170,15 @@ def _covered_cells(surface: TopSurface, band: Band, edge_mm: float = 0.0) -> np.
 def adaptive_offsets(
     surface: TopSurface,
     spec: ScanSpec,
-    candidate_step_mm: float = 4.0,
+    candidate_step_mm: float = 10.0,
+    min_candidates: int = 24,
     min_gain: float = 0.005,
     max_passes: int = 60,
     edge_mm: float = 8.0,
 ) -> list[Band]:
     """Pass centres chosen greedily, set-cover style: among candidate centres every
-    `candidate_step_mm` across the footprint, take the one whose predicted in-spec band
+    `candidate_step_mm` across the footprint (closer on a narrow part, so that there are
+    at least `min_candidates`: its walls are narrow too), take the one whose predicted in-spec band
     covers the most surface not yet covered, until the next one would add less than
     `min_gain` of the surface. Curved parts get closer passes, flat ones fewer, and a strip
     no pass can hold in spec (a steep flange) does not pull in passes that add nothing.
@@ -188,7 +190,8 @@ def adaptive_offsets(
         raise ValueError("the part has no surface a top-down raster can see")
     across = surface.across_mm
     first, last = float(across[cols][0]), float(across[cols][-1])
-    centres = np.arange(first, last + candidate_step_mm / 2, candidate_step_mm)
+    step = min(candidate_step_mm, max((last - first) / min_candidates, 1e-3))
+    centres = np.arange(first, last + step / 2, step)
     if len(centres) == 0:
         centres = np.array([0.5 * (first + last)])
     bands = [in_spec_band(surface, float(c), spec) for c in centres]

@@ -385,12 +385,14 @@ def plan_cmd(
     quiet: QuietOpt = False,
     roi: RoiOpt = None,
     views: Annotated[
-        str,
+        str | None,
         typer.Option(
             help="top (the paper's single top-down raster) or auto (views chosen greedily, "
-            "each a raster of the part seen along its own axis, toward --coverage-target)"
+            "each a raster of the part seen along its own axis, toward --coverage-target); "
+            "default: auto if the planner rolls, else top",
+            show_default=False,
         ),
-    ] = "top",
+    ] = None,
     coverage_target: Annotated[
         float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
     ] = 0.9,
@@ -399,12 +401,14 @@ def plan_cmd(
     from scanplan.part import load_part
     from scanplan.planners import make_planner, plan_scan
     from scanplan.trajectory import write_csv, write_json
+    from scanplan.views import default_views, plan_views
 
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units).with_roi(roi)
     the_planner = make_planner(planner, policy, roll)
+    views = default_views(the_planner) if views is None else views
     with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
         if views == "top":
             swaths, traj = plan_scan(
@@ -412,8 +416,6 @@ def plan_cmd(
             )
             n_pass, n_view = len(swaths), ""
         else:
-            from scanplan.views import plan_views
-
             plans, traj = plan_views(
                 the_part, spec, the_planner, views, coverage_target, raster, direction, overlap
             )

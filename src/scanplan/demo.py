@@ -16,10 +16,11 @@ import numpy as np
 
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
-from scanplan.planners import Planner, make_planner, plan_scan
+from scanplan.planners import Planner, make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.report import Evaluated, write_report
 from scanplan.trajectory import Trajectory, to_csv_text
+from scanplan.views import plan_views
 
 PLANNER_ORDER = ("fixed", "geometric", "rl")
 
@@ -65,8 +66,9 @@ def run_demo(
     for name in PLANNER_ORDER:
         planner: Planner = make_planner(name)
         step(f"planning {name}")
-        swaths, traj = plan_scan(part, spec, planner)  # each planner's own default raster
-        step(f"planned {name}: {len(swaths)} passes")
+        plans, traj = plan_views(part, spec, planner)  # each planner's own default views
+        passes = sum(p.passes for p in plans)
+        step(f"planned {name}: {len(plans)} view{'s' * (len(plans) > 1)}, {passes} passes")
         trajectories[name] = traj
         files[f"trajectory_{name}.csv"] = to_csv_text(traj)
         step(f"evaluating {name} ({int(traj.scanning.sum())} profiles)")

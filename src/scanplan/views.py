@@ -155,7 +155,10 @@ class View:
 
     def part(self, part: Part) -> Part:
         """The part in the view frame, restricted to the view's region (and the part's ROI).
-        Face order is kept (no re-validation), so face masks carry over."""
+        Face order is kept (no re-validation), so face masks carry over. The top view of
+        the whole surface is the part itself (its ray engine and collision model reused)."""
+        if self.faces is None and np.array_equal(self.R, np.eye(4)):
+            return part
         mesh = part.mesh.copy()
         mesh.apply_transform(self.R)
         mask = part.inspect_mask.copy()
@@ -248,7 +251,7 @@ def depth_slabs(
 def candidate_views(
     part: Part,
     spec: ScanSpec,
-    max_candidates: int = 16,
+    max_candidates: int = 32,
     merge_deg: float = 10.0,
     min_area_fraction: float = 0.005,
 ) -> list[View]:
@@ -260,7 +263,7 @@ def candidate_views(
     still above it."""
     axes: list[np.ndarray] = []
     groups: list[list[np.ndarray]] = []
-    regions = segment_regions(part)
+    regions = segment_regions(part, min_area_fraction=0.0)
     total = sum(r.area_mm2 for r in regions)
     for region in regions:
         axis = view_axis(region.normal)
@@ -302,7 +305,7 @@ def choose_views(
     coverage_target: float = 0.9,
     min_gain: float = 0.01,
     min_yield: float = 0.25,
-    max_views: int = 12,
+    max_views: int = 16,
     points_per_profile: int = 128,
     seed: int = 0,
 ) -> ViewSelection:
@@ -420,22 +423,31 @@ def join_views(part: Part, plans: list[ViewPlan], clearance_mm: float = 50.0) ->
     return replace(out, meta=meta)
 
 
+def default_views(planner: Planner) -> str:
+    """`--views` when none is given: auto for a planner that rolls (as `--raster auto`
+    adapts its passes), top for the paper's pitch-only planners and a v0 policy, so the
+    baselines stay the paper's single raster."""
+    return "auto" if planner.roll else "top"
+
+
 def plan_views(
     part: Part,
     spec: ScanSpec,
     planner: Planner,
-    views: str = "auto",
+    views: str | None = None,
     coverage_target: float = 0.9,
     raster: str = "auto",
     direction: str = "auto",
     overlap: float = 0.2,
 ) -> tuple[list[ViewPlan], Trajectory]:
-    """Plan a scan by views: 'top' the paper's single top raster, 'auto' `choose_views`;
+    """Plan a scan by views: 'top' the paper's single top raster, 'auto' `choose_views`,
+    None the planner's default (`default_views`);
     each view is planned by `planners.plan_scan` (raster, direction, overlap as there) on
     the rotated part. Returns the views and the joined trajectory (`join_views`; its plan
     time: the whole choice)."""
     from scanplan.planners import plan_scan
 
+    views = default_views(planner) if views is None else views
     if views not in VIEW_MODES:
         raise ValueError(f"unknown --views {views!r}; use top or auto")
     if not 0.0 < coverage_target <= 1.0:
