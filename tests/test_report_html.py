@@ -70,3 +70,32 @@ def test_report_needs_a_result(tmp_path, results):
     with pytest.raises(ValueError, match="at least one"):
         write_html_report(tmp_path / "r.html", part, [], "s")
     assert not (tmp_path / "r.html").exists()
+
+
+def test_views_get_their_own_colours_and_the_surface_its_in_spec_map(tmp_path, results):
+    from dataclasses import replace
+
+    from scanplan.metrics import CoverageMap, SurfaceState
+    from scanplan.report.html import VIEW_COLOURS
+
+    part, res = results
+    traj = res[1].trajectory
+    # Two views: the second half of the poses as a second block of swaths.
+    half = len(traj) // 2
+    swath = np.where(np.arange(len(traj)) < half, 0, 1)
+    views = [
+        {"index": 0, "axis": [0.0, 0.0, 1.0], "first_swath": 0, "last_swath": 0, "passes": 1},
+        {"index": 1, "axis": [0.98, 0.0, 0.17], "first_swath": 1, "last_swath": 1, "passes": 1},
+    ]
+    two = replace(traj, swath=swath, meta={"views": views})
+    states = np.array([SurfaceState.IN_SPEC, SurfaceState.OUT_OF_SPEC, SurfaceState.UNSEEN])
+    coverage = CoverageMap(np.array([[0.0, 0, 0], [10, 0, 0], [20, 0, 0]]), states.astype(np.int8))
+    result = PlannerResult("views", two, res[1].cloud, res[1].metrics, coverage)
+    out = tmp_path / "report.html"
+    write_html_report(out, part, [result], "at-c5-4090cs30-495")
+    page = out.read_text()
+    assert "view 0 (0.00, 0.00, 1.00)" in page and "view 1 (0.98, 0.00, 0.17)" in page
+    assert VIEW_COLOURS[0] in page and VIEW_COLOURS[1] in page
+    assert "in-spec map" in page
+    for colour in ("#1b9e77", "#d95f02", "#b4b4b4"):  # in spec, out of spec, not seen
+        assert colour in page

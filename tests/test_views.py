@@ -11,6 +11,7 @@ import trimesh
 from typer.testing import CliRunner
 
 from scanplan.cli import app
+from scanplan.collision import checker_for
 from scanplan.metrics import evaluate, hemisphere_visible_samples, upward_visible_samples
 from scanplan.part import part_from_mesh
 from scanplan.planners import make_planner, plan_scan
@@ -21,6 +22,9 @@ from scanplan.views import (
     VIEW_AXIS_MAX_TILT_DEG,
     View,
     candidate_views,
+    default_views,
+    depth_slabs,
+    order_views,
     plan_views,
     segment_regions,
     view_axis,
@@ -149,3 +153,93 @@ def test_door_auto_reduces_to_the_single_top_view(tmp_path):
     np.testing.assert_allclose(
         auto.poses[auto.scanning][:, :3, 3], plain.poses[plain.scanning][:, :3, 3], atol=1e-3
     )
+
+
+def test_depth_slabs_cut_at_gaps_and_keep_each_within_the_span():
+    # Two walls facing +x, 300 mm apart along x: one direction, two depths.
+    near = trimesh.creation.box((10.0, 200.0, 100.0))
+    far = trimesh.creation.box((10.0, 200.0, 100.0))
+    far.apply_translation((-300.0, 0.0, 0.0))
+    part = part_from_mesh(trimesh.util.concatenate([near, far]), "walls")
+    facing = np.flatnonzero(part.mesh.face_normals[:, 0] > 0.99)
+    slabs = depth_slabs(part, facing, np.array([1.0, 0.0, 0.0]), 125.0, 25.0)
+    assert len(slabs) == 2
+    x = [part.mesh.triangles_center[s, 0] for s in slabs]
+    assert {round(float(v.mean())) for v in x} == {5, -295}
+    # One deep slab is cut into equal ones no deeper than the span.
+    tall = trimesh.creation.box((10.0, 10.0, 400.0)).subdivide().subdivide().subdivide()
+    tall_part = part_from_mesh(tall, "post")
+    side = np.flatnonzero(np.abs(tall_part.mesh.face_normals[:, 0]) > 0.99)
+    cut = depth_slabs(tall_part, side, np.array([0.0, 0.0, 1.0]), 125.0, 1000.0)
+    assert len(cut) == 3  # centroids span ~367 mm: three slabs of at most 125
+    for s in cut:
+        z = tall_part.mesh.triangles_center[s, 2]
+        assert z.max() - z.min() <= 125.0
+    assert sum(len(s) for s in cut) == len(side)
+
+
+def test_vertical_walls_get_views_that_see_them_nearly_head_on():
+    # A 150 mm tall box: its four vertical sides are a view each, tilted 80° from +Z.
+    part = part_from_mesh(trimesh.creation.box((400.0, 300.0, 150.0)), "block")
+    axes = [v.axis for v in candidate_views(part, SPEC)]
+    tilts = sorted(round(math.degrees(math.acos(a[2]))) for a in axes)
+    assert tilts == [0, 80, 80, 80, 80]
+    plans, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    top = evaluate(part, SPEC, plans[0].traj, points_per_profile=256, visible="hemisphere")
+    both = evaluate(part, SPEC, auto, points_per_profile=256, visible="hemisphere")
+    # The top view alone holds the lid (a third of the area); the side views the walls.
+    assert top.in_spec_coverage < 0.4
+    assert both.in_spec_coverage > 0.85
+
+
+def test_views_are_ordered_by_a_short_tour_with_the_top_first():
+    part = sloped_housing()
+    planner = make_planner("geometric")
+    plans, auto = plan_views(part, SPEC, planner, "auto")
+    assert np.allclose(plans[0].view.axis, UP)
+
+    def moving(order):
+        first = [vp.traj.poses[0, :3, 3] for vp in order]
+        last = [vp.traj.poses[-1, :3, 3] for vp in order]
+        return sum(float(np.linalg.norm(first[k + 1] - last[k])) for k in range(len(order) - 1))
+
+    ordered = order_views(plans)
+    assert np.allclose(ordered[0].view.axis, UP)
+    assert sorted(id(vp) for vp in ordered) == sorted(id(vp) for vp in plans)
+    # No worse than any order a user could have given: every permutation of the rest.
+    from itertools import permutations
+
+    best = min(moving([plans[0], *rest]) for rest in permutations(plans[1:]))
+    assert moving(ordered) <= best * 1.2
+
+
+def test_moves_between_views_keep_the_body_clear():
+    part = sloped_housing()
+    _, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    report = checker_for(part, SPEC.sensor).check(auto.poses, SPEC.clearance_mm)
+    assert not report.colliding.any()
+    # Independently of our checker: python-fcl's own distance for every non-scanning pose.
+    from test_collision import fcl_distance
+
+    for pose in auto.poses[~auto.scanning][::2]:
+        assert fcl_distance(part, SPEC.sensor, pose) > 0
+
+
+def test_default_views_follow_whether_the_planner_rolls():
+    assert default_views(make_planner("geometric")) == "auto"
+    assert default_views(make_planner("feedback")) == "auto"
+    assert default_views(make_planner("fixed")) == "top"
+    assert default_views(make_planner("geometric", roll=False)) == "top"
+    assert default_views(make_planner("rl")) == "top"  # the shipped v0 policy: pitch only
+
+
+def test_the_door_inspects_its_skin_not_the_solid_sides():
+    from scanplan.part import load_part
+
+    door = load_part("door")
+    assert door.inspect_faces is not None
+    normals = door.mesh.face_normals
+    assert (normals[door.inspect_faces, 2] > 0).all()
+    sides = np.abs(normals[:, 2]) < 1e-6
+    assert sides.any() and not door.inspect_faces[sides].any()
+    assert load_part("drone").inspect_faces is None

@@ -19,6 +19,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.transform import Rotation
 
+from scanplan.collision import CollisionChecker, checker_for
 from scanplan.part import Part
 from scanplan.planners import Planner
 from scanplan.quantities import ScanSpec
@@ -175,33 +176,73 @@ class View:
 
 
 def view_transition(
+    checker: CollisionChecker,
     prev_pose: np.ndarray,
     prev_axis: np.ndarray,
     next_pose: np.ndarray,
     next_axis: np.ndarray,
     centre_mm: np.ndarray,
     radius_mm: float,
+    clearance_mm: float,
 ) -> np.ndarray:
-    """Non-scanning moves between views: lift along the previous view's axis to the sphere
-    around the part (`radius_mm` includes the clearance), over its top, descend along the
-    next view's axis to the next view's first pose. (4, 4, 4). The collision-checked planner
-    replaces this."""
+    """Non-scanning poses (k, 4, 4) from the last pose of one view to the first of the next,
+    ending on it, clear of the part by `clearance_mm` (`motion.plan_transition`: up, across
+    above the part, down). Where going straight up from a pose is not clear (a view under an
+    overhang), the move first backs out along the view's axis to the sphere of `radius_mm`
+    around the part and comes in the same way. Raises ValueError if neither is clear."""
+    from scanplan.motion import plan_transition
 
-    def on_sphere(pose: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    try:
+        moves = plan_transition(checker, prev_pose, next_pose, clearance_mm)
+        return np.concatenate([moves, next_pose[None]])
+    except ValueError:
+        pass
+
+    def backed_out(pose: np.ndarray, axis: np.ndarray) -> np.ndarray:
         out = pose.copy()
         p = pose[:3, 3] - centre_mm
-        # Along the axis from the pose until outside the sphere.
         b = float(p @ axis)
         c = float(p @ p) - radius_mm**2
-        t = max(0.0, -b + math.sqrt(max(b * b - c, 0.0)))
-        out[:3, 3] = pose[:3, 3] + t * axis
+        out[:3, 3] = pose[:3, 3] + max(0.0, -b + math.sqrt(max(b * b - c, 0.0))) * axis
         return out
 
-    a = on_sphere(prev_pose, prev_axis)
-    top = next_pose.copy()
-    top[:3, 3] = centre_mm + radius_mm * UP
-    b = on_sphere(next_pose, next_axis)
-    return np.stack([a, top, b, next_pose])
+    a, b = backed_out(prev_pose, prev_axis), backed_out(next_pose, next_axis)
+    moves = np.concatenate(
+        [a[None], plan_transition(checker, a, b, clearance_mm), b[None], next_pose[None]]
+    )
+    report = checker.check(moves, clearance_mm)
+    if report.colliding.any():
+        where = moves[np.flatnonzero(report.colliding)[0], :3, 3]
+        raise ValueError(
+            f"no collision-free move between views: the sensor body comes within "
+            f"{clearance_mm:g} mm of the part at {np.round(where, 1).tolist()} mm"
+        )
+    return moves
+
+
+def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
+    """The views in an order that keeps the moves between them short: the first (the top
+    view) stays first, the rest follow a travelling-salesman tour (networkx's threshold
+    accepting from a greedy tour, seeded) over the distance from one view's last pose to
+    the next one's first (averaged both ways: the tour is symmetric)."""
+    if len(plans) <= 2:
+        return list(plans)
+    import networkx as nx
+
+    first = np.stack([vp.traj.poses[0, :3, 3] for vp in plans])
+    last = np.stack([vp.traj.poses[-1, :3, 3] for vp in plans])
+    gap = np.linalg.norm(last[:, None] - first[None], axis=-1)
+    graph = nx.Graph()
+    for i in range(len(plans)):
+        for j in range(i + 1, len(plans)):
+            graph.add_edge(i, j, weight=0.5 * float(gap[i, j] + gap[j, i]))
+    tour = nx.approximation.threshold_accepting_tsp(graph, "greedy", seed=0)[:-1]
+    start = tour.index(0)
+    order = tour[start:] + tour[:start]
+    # Either direction around the tour: the one with the shorter directed moves.
+    reverse = [0] + order[1:][::-1]
+    cost = [sum(gap[a, b] for a, b in zip(o[:-1], o[1:], strict=True)) for o in (order, reverse)]
+    return [plans[i] for i in (order if cost[0] <= cost[1] else reverse)]
 
 
 @dataclass(frozen=True)
@@ -385,15 +426,17 @@ def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
     return coverage_spacing_mm(spec.sensor.with_points(points_per_profile))
 
 
-def join_views(part: Part, plans: list[ViewPlan], clearance_mm: float = 50.0) -> Trajectory:
+def join_views(part: Part, plans: list[ViewPlan], spec: ScanSpec) -> Trajectory:
     """One trajectory: each view's swaths renumbered into a block of its own (view k's
-    swaths follow view k−1's), joined by `view_transition`s. `meta["views"]` records, per
-    view, its axis and its swath block (first, last), which is how a CSV reader tells the
-    views apart."""
+    swaths follow view k−1's), joined by `view_transition`s clear of the part by
+    `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
+    (first, last), which is how a CSV reader tells the views apart: a view is the block of
+    consecutive swaths whose scanning poses look along its axis."""
+    checker = checker_for(part, spec.sensor)
     centre = 0.5 * (part.bounds[0] + part.bounds[1])
     # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
     reach = max(float(np.linalg.norm(vp.traj.positions_mm - centre, axis=1).max()) for vp in plans)
-    radius = max(0.5 * float(np.linalg.norm(part.extents)) + clearance_mm, reach)
+    radius = max(0.5 * float(np.linalg.norm(part.extents)) + spec.clearance_mm, reach)
     pieces: list[Trajectory] = []
     views = []
     first = 0
@@ -403,8 +446,15 @@ def join_views(part: Part, plans: list[ViewPlan], clearance_mm: float = 50.0) ->
         if k > 0:
             prev = plans[k - 1]
             moves = view_transition(
-                pieces[-1].poses[-1], prev.view.axis, traj.poses[0], vp.view.axis, centre, radius
-            )
+                checker,
+                pieces[-1].poses[-1],
+                prev.view.axis,
+                traj.poses[0],
+                vp.view.axis,
+                centre,
+                radius,
+                spec.clearance_mm,
+            )[:-1]  # without the next view's first pose, which its trajectory holds
             pieces.append(Trajectory(moves, np.full(len(moves), first), np.zeros(len(moves), bool)))
         pieces.append(replace(traj, swath=swath))
         views.append(
@@ -462,5 +512,6 @@ def plan_views(
         plans = [plan_view(part, View.looking_along(UP, 0), plan)]
     else:
         plans = choose_views(part, spec, plan, coverage_target).plans
-    traj = join_views(part, plans)
+    plans = [replace(vp, view=replace(vp.view, index=k)) for k, vp in enumerate(order_views(plans))]
+    traj = join_views(part, plans, spec)
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)

@@ -9,12 +9,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import cache
 
+import numpy as np
 import trimesh
 
 from . import door, drone, training_piece
 from .heightfield import heightfield_solid, ring_solid
-
-import numpy as np
 
 __all__ = ["PART_NAMES", "build_part", "heightfield_solid", "ring_solid", "surface_to_inspect"]
 

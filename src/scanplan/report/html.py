@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.cloud import PointCloud
+from scanplan.metrics import CoverageMap, SurfaceState
 from scanplan.part import Part
+from scanplan.report.maps import COVERAGE_COLOURS
 from scanplan.report.table import lookup, table_rows, tolerance_label
 from scanplan.trajectory import Trajectory, atomic_write_text
 
@@ -24,6 +26,9 @@ from scanplan.trajectory import Trajectory, atomic_write_text
 MAX_POINTS_PER_PLANNER = 25_000
 MAX_PART_FACES = 15_000
 MAX_ARROWS = 120
+# One colour per view of a scan of several views (plotly's D3 palette).
+VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+                "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
 TRAINING_CURVES = ("ep_rew_mean", "ep_len_mean", "reward_per_step", "r_d", "r_alpha", "r_delta_s")
 
 
@@ -35,6 +40,7 @@ class PlannerResult:
     trajectory: Trajectory
     cloud: PointCloud
     metrics: dict
+    coverage: CoverageMap | None = None
 
 
 def metrics_table_html(results: list[PlannerResult]) -> str:
@@ -92,12 +98,19 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
     traj, cloud = result.trajectory, result.cloud
     pos = traj.positions_mm
     traces = [part_trace]
-    traces.append(
-        go.Scatter3d(
-            x=pos[:, 0], y=pos[:, 1], z=pos[:, 2], mode="lines",
-            line={"color": "black", "width": 3}, name="sensor path",
-        )
-    )  # fmt: skip
+    views = traj.meta.get("views") or []
+    if len(views) > 1:
+        # Each view's poses in its own colour (a view is a block of swaths), moves in grey.
+        traces.append(_path_trace(pos, ~traj.scanning, "moves", "gray", 2))
+        for k, v in enumerate(views):
+            in_view = (traj.swath >= v["first_swath"]) & (traj.swath <= v["last_swath"])
+            axis = ", ".join(f"{c:.2f}" for c in v["axis"])
+            colour = VIEW_COLOURS[k % len(VIEW_COLOURS)]
+            traces.append(
+                _path_trace(pos, in_view & traj.scanning, f"view {k} ({axis})", colour, 4)
+            )
+    else:
+        traces.append(_path_trace(pos, np.ones(len(pos), bool), "sensor path", "black", 3))
     # Sensor poses as arrows: the laser axis z_s drawn 60 mm long from the emitter.
     scan_idx = np.flatnonzero(traj.scanning)
     arrows = scan_idx[np.linspace(0, len(scan_idx) - 1, min(MAX_ARROWS, len(scan_idx))).astype(int)]
@@ -125,34 +138,73 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
             hovertemplate="z_s − W_d %{marker.color:.3f}<extra></extra>",
         )
     )  # fmt: skip
-    fig = go.Figure(traces)
     points_index = len(traces) - 1
+    fig = go.Figure(traces)
     orient_max = float(np.percentile(orient, 99)) if len(orient) else 1.0
+    distance_style = {
+        "marker.color": [dist], "marker.colorscale": ["RdBu_r"],
+        "marker.cmin": [-distance_limit_mm], "marker.cmax": [distance_limit_mm],
+        "marker.colorbar.title.text": ["distance error (mm)"],
+    }  # fmt: skip
+    orientation_style = {
+        "marker.color": [orient], "marker.colorscale": ["Viridis"],
+        "marker.cmin": [0.0], "marker.cmax": [max(orient_max, 1.0)],
+        "marker.colorbar.title.text": ["orientation error (°)"],
+    }  # fmt: skip
+    styles = [("distance error", distance_style), ("orientation error", orientation_style)]
+    targets = [points_index]
+    if result.coverage is not None and len(result.coverage.state):
+        # The in-spec map over the whole surface (walls too), in place of the scan points.
+        fig.add_trace(_coverage_trace(result.coverage))
+        targets = [points_index, points_index + 1]
+        # Per-trace values: the map keeps its own colours (None) and is hidden again.
+        styles = [
+            (label, {**{k: v + [None] for k, v in style.items()}, "visible": [True, False]})
+            for label, style in styles
+        ]
+    buttons = [
+        {"label": label, "method": "restyle", "args": [style, targets]} for label, style in styles
+    ]
+    if len(targets) == 2:
+        buttons.append(
+            {"label": "in-spec map", "method": "restyle",
+             "args": [{"visible": [False, True]}, targets]}
+        )  # fmt: skip
     fig.update_layout(
         title=f"{result.name}: trajectory and simulated scan",
         height=620,
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
         scene={"aspectmode": "data", "camera": {"eye": {"x": 1.3, "y": -1.3, "z": 1.0}}},
         legend={"x": 0, "y": 1},
-        updatemenus=[
-            {
-                "type": "buttons", "direction": "right", "x": 0.5, "y": 1.08,
-                "buttons": [
-                    {"label": "distance error", "method": "restyle", "args": [{
-                        "marker.color": [dist], "marker.colorscale": ["RdBu_r"],
-                        "marker.cmin": [-distance_limit_mm], "marker.cmax": [distance_limit_mm],
-                        "marker.colorbar.title.text": ["distance error (mm)"],
-                    }, [points_index]]},
-                    {"label": "orientation error", "method": "restyle", "args": [{
-                        "marker.color": [orient], "marker.colorscale": ["Viridis"],
-                        "marker.cmin": [0.0], "marker.cmax": [max(orient_max, 1.0)],
-                        "marker.colorbar.title.text": ["orientation error (°)"],
-                    }, [points_index]]},
-                ],
-            }
-        ],
+        updatemenus=[{"type": "buttons", "direction": "right", "x": 0.5, "y": 1.08,
+                      "buttons": buttons}],
     )  # fmt: skip
     return fig
+
+
+def _path_trace(pos: np.ndarray, keep: np.ndarray, name: str, colour: str, width: int):
+    """The poses where `keep` as one line, broken (NaN rows) wherever `keep` is False."""
+    import plotly.graph_objects as go
+
+    line = np.where(keep[:, None], pos, np.nan)
+    return go.Scatter3d(
+        x=line[:, 0], y=line[:, 1], z=line[:, 2], mode="lines", connectgaps=False,
+        line={"color": colour, "width": width}, name=name,
+    )  # fmt: skip
+
+
+def _coverage_trace(coverage: CoverageMap):
+    """The in-spec map over the whole surface to inspect (walls included, which a top-down
+    map flattens): its samples coloured in spec / out of spec / not seen."""
+    import plotly.graph_objects as go
+
+    keep = _subsample(len(coverage.state), MAX_POINTS_PER_PLANNER)
+    p, state = coverage.points_part[keep], coverage.state[keep]
+    colours = np.array([COVERAGE_COLOURS[SurfaceState(int(s))][0] for s in state])
+    return go.Scatter3d(
+        x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", name="surface: in spec / out / not seen",
+        marker={"size": 2.0, "color": colours}, visible=False, hoverinfo="skip",
+    )  # fmt: skip
 
 
 def read_training_log(path: Path) -> dict[str, np.ndarray]:

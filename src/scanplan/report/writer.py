@@ -150,7 +150,9 @@ def write_report(
             + metrics_table_markdown([r.metrics for r in results], names),
         )
         with_cloud = [
-            PlannerResult(r.name, r.trajectory, cloud, r.metrics.to_json_dict())
+            PlannerResult(
+                r.name, r.trajectory, cloud, r.metrics.to_json_dict(), r.metrics.coverage_map
+            )
             for r in results
             if (cloud := r.metrics.cloud) is not None and len(cloud.points_part)
         ]
