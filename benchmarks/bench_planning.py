@@ -1,6 +1,7 @@
 """Planning and evaluation time on the built-in door, in one run.
 
-Plans the door with every planner in its default configuration and, as the reference
+Plans the door with every planner in its default configuration (default raster and views:
+`scanplan plan door --planner NAME`) and, as the reference
 measured in the same run, with the paper's configuration (`geometric-v0`: pitch only,
 nominal raster — what planning cost before roll and adaptive passes). Prints each planning
 time (median of `--repeats`) and its ratio to that reference, then evaluates each plan
@@ -18,9 +19,10 @@ import time
 
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_scan
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import LineProfilometer
+from scanplan.views import plan_views
 
 CONFIGS = {  # label: (planner, roll, raster)
     "geometric-v0": ("geometric", False, "nominal"),
@@ -47,7 +49,7 @@ def main() -> None:
         times = []
         for _ in range(args.repeats):
             t0 = time.perf_counter()
-            swaths, traj = plan_scan(part, spec, make_planner(name, roll=roll), raster)
+            plans, traj = plan_views(part, spec, make_planner(name, roll=roll), raster=raster)
             times.append(time.perf_counter() - t0)
         plan_s = statistics.median(times)
         reference = reference or plan_s
@@ -64,7 +66,7 @@ def main() -> None:
         eval_rate = len(poses) / eval_s
         print(
             f"{label:>12}: plan {plan_s:6.2f} s (x{plan_s / reference:4.2f} geometric-v0) | "
-            f"{len(swaths)} passes, {len(poses)} profiles x {sensor.points_per_profile} | "
+            f"{len(plans)} view(s), {sum(p.passes for p in plans)} passes, {len(poses)} profiles x {sensor.points_per_profile} | "
             f"evaluate {eval_rate:6.0f} profiles/s, bare {bare_rate:6.0f} "
             f"(ratio {eval_rate / bare_rate:.2f}) | in-spec {metrics.in_spec_coverage:.3f}"
         )

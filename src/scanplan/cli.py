@@ -425,6 +425,8 @@ def plan_cmd(
         f"{the_planner.name}: {n_view}{n_pass} passes, {int(traj.scanning.sum())} profiles, "
         f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
     )
+    if unreachable := traj.meta.get("views_unreachable", 0):
+        typer.echo(f"views: {unreachable} left out, no collision-free move reaches them")
     if dropped := traj.meta.get("collisions_dropped", 0):
         typer.echo(
             f"collisions: {dropped} scanning poses dropped (sensor body within "

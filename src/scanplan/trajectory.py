@@ -312,6 +312,7 @@ def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -
 
 
 def to_json_dict(traj: Trajectory) -> dict:
+    positions, quaternions = traj.positions_mm.tolist(), traj.quaternions_wxyz.tolist()
     return {
         "units": {"length": "mm", "rotation": "unit quaternion, scalar first (w, x, y, z)"},
         "frame": "part frame; each pose is T_part_sensor (sensor z = laser axis towards the "
@@ -323,8 +324,8 @@ def to_json_dict(traj: Trajectory) -> dict:
             {
                 "swath": int(traj.swath[i]),
                 "scanning": bool(traj.scanning[i]),
-                "position_mm": traj.positions_mm[i].tolist(),
-                "quaternion_wxyz": traj.quaternions_wxyz[i].tolist(),
+                "position_mm": positions[i],
+                "quaternion_wxyz": quaternions[i],
             }
             for i in range(len(traj))
         ],

@@ -426,40 +426,52 @@ def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
     return coverage_spacing_mm(spec.sensor.with_points(points_per_profile))
 
 
-def join_views(part: Part, plans: list[ViewPlan], spec: ScanSpec) -> Trajectory:
+def join_views(
+    part: Part, plans: list[ViewPlan], spec: ScanSpec
+) -> tuple[list[ViewPlan], Trajectory]:
     """One trajectory: each view's swaths renumbered into a block of its own (view k's
     swaths follow view k−1's), joined by `view_transition`s clear of the part by
     `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
     (first, last), which is how a CSV reader tells the views apart: a view is the block of
-    consecutive swaths whose scanning poses look along its axis."""
+    consecutive swaths whose scanning poses look along its axis. A view no clear move
+    reaches is left out and counted (`meta["views_unreachable"]`). Returns the views kept,
+    renumbered, and the trajectory."""
     checker = checker_for(part, spec.sensor)
     centre = 0.5 * (part.bounds[0] + part.bounds[1])
     # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
     reach = max(float(np.linalg.norm(vp.traj.positions_mm - centre, axis=1).max()) for vp in plans)
     radius = max(0.5 * float(np.linalg.norm(part.extents)) + spec.clearance_mm, reach)
     pieces: list[Trajectory] = []
-    views = []
+    views: list[dict] = []
+    kept: list[ViewPlan] = []
+    unreachable = 0
     first = 0
-    for k, vp in enumerate(plans):
+    prev_axis = plans[0].view.axis
+    for vp in plans:
         traj = vp.traj
         swath = traj.swath - traj.swath.min() + first
-        if k > 0:
-            prev = plans[k - 1]
-            moves = view_transition(
-                checker,
-                pieces[-1].poses[-1],
-                prev.view.axis,
-                traj.poses[0],
-                vp.view.axis,
-                centre,
-                radius,
-                spec.clearance_mm,
-            )[:-1]  # without the next view's first pose, which its trajectory holds
+        if pieces:
+            try:
+                moves = view_transition(
+                    checker,
+                    pieces[-1].poses[-1],
+                    prev_axis,
+                    traj.poses[0],
+                    vp.view.axis,
+                    centre,
+                    radius,
+                    spec.clearance_mm,
+                )[:-1]  # without the next view's first pose, which its trajectory holds
+            except ValueError:  # no clear way in: the scan goes on without this view
+                unreachable += 1
+                continue
             pieces.append(Trajectory(moves, np.full(len(moves), first), np.zeros(len(moves), bool)))
         pieces.append(replace(traj, swath=swath))
+        kept.append(replace(vp, view=replace(vp.view, index=len(kept))))
+        prev_axis = vp.view.axis
         views.append(
             {
-                "index": k,
+                "index": len(views),
                 "axis": [float(c) for c in vp.view.axis],
                 "first_swath": int(swath.min()),
                 "last_swath": int(swath.max()),
@@ -470,7 +482,9 @@ def join_views(part: Part, plans: list[ViewPlan], spec: ScanSpec) -> Trajectory:
     out = Trajectory.concatenate(pieces)
     meta = dict(out.meta)
     meta["views"] = views
-    return replace(out, meta=meta)
+    if unreachable:
+        meta["views_unreachable"] = unreachable
+    return kept, replace(out, meta=meta)
 
 
 def default_views(planner: Planner) -> str:
@@ -512,6 +526,5 @@ def plan_views(
         plans = [plan_view(part, View.looking_along(UP, 0), plan)]
     else:
         plans = choose_views(part, spec, plan, coverage_target).plans
-    plans = [replace(vp, view=replace(vp.view, index=k)) for k, vp in enumerate(order_views(plans))]
-    traj = join_views(part, plans, spec)
+    plans, traj = join_views(part, order_views(plans), spec)
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
