@@ -243,3 +243,29 @@ def test_the_door_inspects_its_skin_not_the_solid_sides():
     sides = np.abs(normals[:, 2]) < 1e-6
     assert sides.any() and not door.inspect_faces[sides].any()
     assert load_part("drone").inspect_faces is None
+
+
+def test_a_view_no_clear_move_reaches_is_left_out_and_counted(monkeypatch):
+    import scanplan.views as views_module
+
+    part = sloped_housing()
+    plans, _ = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    assert len(plans) >= 3
+    real = views_module.view_transition
+    calls = {"n": 0}
+
+    def blocked_once(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise ValueError("no collision-free move between views")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(views_module, "view_transition", blocked_once)
+    kept, joined = views_module.join_views(part, plans, SPEC)
+    assert joined.meta["views_unreachable"] == 1
+    assert len(kept) == len(plans) - 1 and [v.view.index for v in kept] == list(range(len(kept)))
+    assert [v["index"] for v in joined.meta["views"]] == list(range(len(kept)))
+    assert np.allclose(kept[1].view.axis, plans[2].view.axis)  # the second view was skipped
+    assert (
+        checker_for(part, SPEC.sensor).check(joined.poses, SPEC.clearance_mm).colliding.sum() == 0
+    )
