@@ -66,7 +66,8 @@ def main() -> None:
         eval_rate = len(poses) / eval_s
         print(
             f"{label:>12}: plan {plan_s:6.2f} s (x{plan_s / reference:4.2f} geometric-v0) | "
-            f"{len(plans)} view(s), {sum(p.passes for p in plans)} passes, {len(poses)} profiles x {sensor.points_per_profile} | "
+            f"{len(plans)} view(s), {sum(p.passes for p in plans)} passes, "
+            f"{len(poses)} profiles x {sensor.points_per_profile} | "
             f"evaluate {eval_rate:6.0f} profiles/s, bare {bare_rate:6.0f} "
             f"(ratio {eval_rate / bare_rate:.2f}) | in-spec {metrics.in_spec_coverage:.3f}"
         )
