@@ -14,20 +14,12 @@ import math
 from pathlib import Path
 
 import numpy as np
+from compare_views import PARTS  # the shared parts and their units (benchmarks/)
 
 from scanplan.metrics import hemisphere_visible_samples
 from scanplan.part import load_part
 from scanplan.quantities import ScanSpec
 from scanplan.views import VIEW_AXIS_MAX_TILT_DEG, oriented_normals
-
-PARTS = {  # file: units (PARTS.md)
-    "tum_ardrone_quadrotor_4.stl": "m",
-    "nist_pmi1_stepped_plate.stl": "mm",
-    "nist_pmi3_sheet_metal.stl": "mm",
-    "nist_pmi4_pocket_plate.stl": "mm",
-    "trimesh_featuretype.stl": "in",
-    "reach_curved_panel_up.ply": "m",
-}
 
 
 def ceiling(part, tol_rad: float, max_tilt_deg: float, beams: int, seed: int = 0) -> float:

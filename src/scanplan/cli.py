@@ -20,7 +20,7 @@ from typing import Annotated, Any, TypeVar
 import typer
 import typer.core
 
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import COVERAGE_TARGET, ScanSpec
 from scanplan.sensor import SensorSpec
 
 
@@ -395,7 +395,7 @@ def plan_cmd(
     ] = None,
     coverage_target: Annotated[
         float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
-    ] = 0.9,
+    ] = COVERAGE_TARGET,
 ):
     """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
     from scanplan.part import load_part

@@ -34,6 +34,12 @@ def _poses(rotation: np.ndarray, positions: np.ndarray) -> np.ndarray:
     return poses
 
 
+def straight_move(start: np.ndarray, end_mm: np.ndarray, step_mm: float = 20.0) -> np.ndarray:
+    """Poses (k, 4, 4) from `start` (excluded) straight to the position `end_mm` (included),
+    orientation kept, at most step_mm apart: every place the body passes gets checked."""
+    return _poses(start[:3, :3], _line(start[:3, 3], np.asarray(end_mm, float), step_mm))
+
+
 def lift_cross_descend(
     start: np.ndarray,
     end: np.ndarray,

@@ -15,6 +15,9 @@ import numpy as np
 
 from scanplan.sensor import SensorSpec
 
+# In-spec coverage at which `--views auto` stops adding views (SPEC §3b).
+COVERAGE_TARGET = 0.9
+
 
 @dataclass(frozen=True)
 class ScanSpec:

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 from scanplan.collision import CollisionChecker, checker_for
 from scanplan.part import Part
 from scanplan.planners import Planner
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import COVERAGE_TARGET, ScanSpec
 from scanplan.trajectory import Trajectory
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -33,6 +33,9 @@ HEMISPHERE_MAX_TILT_DEG = 75.0
 # A view's axis at most this far from +Z: a vertical wall is then seen 10° off its normal,
 # inside the 15° tolerance with room for tracking, and the sensor stays above it.
 VIEW_AXIS_MAX_TILT_DEG = 80.0
+# A region (and a view's slab) smaller than this share of the surface gets no view of its
+# own: it still counts in coverage, but a view for it would add nothing measurable.
+MIN_REGION_AREA_FRACTION = 0.005
 
 
 def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) -> np.ndarray:
@@ -82,7 +85,9 @@ class Region:
 
 
 def segment_regions(
-    part: Part, directions: np.ndarray | None = None, min_area_fraction: float = 0.005
+    part: Part,
+    directions: np.ndarray | None = None,
+    min_area_fraction: float = MIN_REGION_AREA_FRACTION,
 ) -> list[Region]:
     """The surface to inspect (the part's region of interest, else every face that faces the
     upper hemisphere) cut into regions: each face goes to the nearest of `directions` by its
@@ -190,7 +195,7 @@ def view_transition(
     above the part, down). Where going straight up from a pose is not clear (a view under an
     overhang), the move first backs out along the view's axis to the sphere of `radius_mm`
     around the part and comes in the same way. Raises ValueError if neither is clear."""
-    from scanplan.motion import plan_transition
+    from scanplan.motion import plan_transition, straight_move
 
     try:
         moves = plan_transition(checker, prev_pose, next_pose, clearance_mm)
@@ -208,7 +213,11 @@ def view_transition(
 
     a, b = backed_out(prev_pose, prev_axis), backed_out(next_pose, next_axis)
     moves = np.concatenate(
-        [a[None], plan_transition(checker, a, b, clearance_mm), b[None], next_pose[None]]
+        [
+            straight_move(prev_pose, a[:3, 3]),
+            plan_transition(checker, a, b, clearance_mm),
+            straight_move(b, next_pose[:3, 3]),
+        ]
     )
     report = checker.check(moves, clearance_mm)
     if report.colliding.any():
@@ -294,7 +303,7 @@ def candidate_views(
     spec: ScanSpec,
     max_candidates: int = 32,
     merge_deg: float = 10.0,
-    min_area_fraction: float = 0.005,
+    min_area_fraction: float = MIN_REGION_AREA_FRACTION,
 ) -> list[View]:
     """Views for the largest regions (their axes, `view_axis`); regions whose axes lie within
     `merge_deg` of each other share one view axis, and their faces are cut into depth slabs
@@ -343,7 +352,7 @@ def choose_views(
     part: Part,
     spec: ScanSpec,
     plan: PlanView,
-    coverage_target: float = 0.9,
+    coverage_target: float = COVERAGE_TARGET,
     min_gain: float = 0.01,
     min_yield: float = 0.25,
     max_views: int = 16,
@@ -499,7 +508,7 @@ def plan_views(
     spec: ScanSpec,
     planner: Planner,
     views: str | None = None,
-    coverage_target: float = 0.9,
+    coverage_target: float = COVERAGE_TARGET,
     raster: str = "auto",
     direction: str = "auto",
     overlap: float = 0.2,

@@ -176,7 +176,7 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
         scene={"aspectmode": "data", "camera": {"eye": {"x": 1.3, "y": -1.3, "z": 1.0}}},
         legend={"x": 0, "y": 1},
-        updatemenus=[{"type": "buttons", "direction": "right", "x": 0.5, "y": 1.08,
+        updatemenus=[{"type": "buttons", "direction": "right", "x": 0.32, "xanchor": "left", "y": 1.08,
                       "buttons": buttons}],
     )  # fmt: skip
     return fig
@@ -200,7 +200,8 @@ def _coverage_trace(coverage: CoverageMap):
 
     keep = _subsample(len(coverage.state), MAX_POINTS_PER_PLANNER)
     p, state = coverage.points_part[keep], coverage.state[keep]
-    colours = np.array([COVERAGE_COLOURS[SurfaceState(int(s))][0] for s in state])
+    palette = np.array([COVERAGE_COLOURS[s][0] for s in SurfaceState])  # indexed by state
+    colours = palette[state]
     return go.Scatter3d(
         x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", name="surface: in spec / out / not seen",
         marker={"size": 2.0, "color": colours}, visible=False, hoverinfo="skip",
