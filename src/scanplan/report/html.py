@@ -176,8 +176,8 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
         scene={"aspectmode": "data", "camera": {"eye": {"x": 1.3, "y": -1.3, "z": 1.0}}},
         legend={"x": 0, "y": 1},
-        updatemenus=[{"type": "buttons", "direction": "right", "x": 0.32, "xanchor": "left", "y": 1.08,
-                      "buttons": buttons}],
+        updatemenus=[{"type": "buttons", "direction": "right", "x": 0.32, "xanchor": "left",
+                      "y": 1.08, "buttons": buttons}],
     )  # fmt: skip
     return fig
 
