@@ -3,7 +3,14 @@ foundation refactor (tests/data/make_golden_plans.py): a change of structure, no
 
 The recording has the old three-pose transitions (lift 50 mm, cross, descend); transitions
 are now planned clear of the part (`motion.plan_transition`), so the scanning poses are
-compared exactly and the transitions are checked for keeping the sensor body clear."""
+compared and the transitions are checked for keeping the sensor body clear.
+
+The recording is exact only on the ray engine it was made with: Embree's float32 hits differ
+by an ulp (~1e-5 mm at these coordinates) between Embree builds (embreex 2 and 4), the fixed
+planner's height converges on quantized depths, and the closed-loop planners amplify an ulp
+into up to ~0.6 mm at a single pose (a profile whose valid columns change at a shadow edge).
+So every pose must lie within 1 mm and 0.2° of the recording, and 99 % of them within
+0.05 mm: a changed planner moves whole passes by millimetres."""
 
 from __future__ import annotations
 
@@ -68,8 +75,12 @@ def test_plan_matches_the_recorded_one(plans, part, planner):
     order = np.cumsum(scanning_rec) - 1  # recorded index -> index among scanning poses
     got = traj.scan_poses[order[sampled[keep]]]
     want = recorded[f"{key}/poses"][keep]
-    np.testing.assert_allclose(got[:, :3, 3], want[:, :3, 3], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(got[:, :3, :3], want[:, :3, :3], rtol=0, atol=1e-12)
+    offset = np.abs(got[:, :3, 3] - want[:, :3, 3]).max(axis=1)
+    assert offset.max() <= 1.0, f"a pose {offset.max():.3f} mm from the recording"
+    assert np.quantile(offset, 0.99) <= 0.05, f"p99 offset {np.quantile(offset, 0.99):.4f} mm"
+    turn = np.einsum("kji,kjl->kil", got[:, :3, :3], want[:, :3, :3])  # R_got^T R_want
+    cos_angle = np.clip((np.trace(turn, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    assert np.degrees(np.arccos(cos_angle)).max() <= 0.2
     # Transitions (where there is more than one pass): clear of the part by the clearance.
     moving = ~traj.scanning
     assert moving.any() == (len(np.unique(swath_rec)) > 1)

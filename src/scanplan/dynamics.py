@@ -92,6 +92,34 @@ def limit_action(
     return step
 
 
+def _rolled_step(
+    s: float,
+    h: float,
+    th: float,
+    phi: float,
+    lat: float,
+    dy: float,
+    dz: float,
+    dth: float,
+    dphi: float,
+    pivot_mm: float,
+) -> tuple[float, float, float, float, float]:
+    """The rolled step of `apply_step` on plain floats (the tracker's recurrence calls it
+    per station)."""
+    ct = math.cos(th)
+    s, h, lat = (
+        s + dy - dz * math.sin(th),
+        h - dz * ct * math.cos(phi),
+        lat + dz * ct * math.sin(phi),
+    )
+    th, phi2 = th + dth, phi + dphi
+    # Rolling about the pivot moves the sensor by W_d (z_s(θ', φ) − z_s(θ', φ')).
+    ct2 = pivot_mm * math.cos(th)
+    h -= ct2 * (math.cos(phi) - math.cos(phi2))
+    lat += ct2 * (math.sin(phi) - math.sin(phi2))
+    return s, h, th, phi2, lat
+
+
 def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float | None = None) -> np.ndarray:
     """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad; (s, h, θ, φ, l) after
     (Δy, Δz, Δθ, Δφ), the roll about the point `pivot_mm` (W_d) along the beam. The beam is
@@ -99,20 +127,9 @@ def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float | None = Non
     if len(state) == 5:
         if pivot_mm is None:
             raise ValueError("a rolled step needs its pivot distance (W_d)")
-        s, h, th, phi, lat = state
-        dy, dz, dth, dphi = step
-        ct = math.cos(th)
-        s, h, lat = (
-            s + dy - dz * math.sin(th),
-            h - dz * ct * math.cos(phi),
-            lat + dz * ct * math.sin(phi),
-        )
-        th, phi2 = th + dth, phi + dphi
-        # Rolling about the pivot moves the sensor by W_d (z_s(θ', φ) − z_s(θ', φ')).
-        ct2 = pivot_mm * math.cos(th)
-        h -= ct2 * (math.cos(phi) - math.cos(phi2))
-        lat += ct2 * (math.sin(phi) - math.sin(phi2))
-        return np.array([s, h, th, phi2, lat])
+        s, h, th, phi, lat = (float(x) for x in state)
+        dy, dz, dth, dphi = (float(x) for x in step)
+        return np.array(_rolled_step(s, h, th, phi, lat, dy, dz, dth, dphi, pivot_mm))
     s, h, th = state
     dy, dz, dth = step
     return np.array([s + dy - dz * math.sin(th), h - dz * math.cos(th), th + dth])
@@ -161,20 +178,25 @@ def track_rolled(
     """`track` with roll: follow the stations' (s, h, θ, φ) with steps (Δy, Δz, Δθ, Δφ)
     clipped to the limits' magnitudes, through `apply_step` (so every pose is one the step
     model can reach); the lateral offset l follows. Returns the states, (n, 5)."""
-    lim = limits.array_roll * (1 - 1e-9)
-    states = np.zeros((len(s_mm), 5))
-    states[0] = (s_mm[0], h_mm[0], pitch_rad[0], roll_rad[0], lateral0_mm)
-    for i in range(1, len(s_mm)):  # a recurrence: each step starts where the last ended
-        s, h, th, phi, _ = states[i - 1]
-        dphi = min(max(roll_rad[i] - phi, -lim[3]), lim[3])
-        dth = min(max(pitch_rad[i] - th, -lim[2]), lim[2])
+    lim_y, lim_z, lim_th, lim_phi = (float(x) for x in limits.array_roll * (1 - 1e-9))
+    # Plain floats in the recurrence: ~10x faster than array steps, the same arithmetic.
+    s_t, h_t, th_t, phi_t = (
+        np.asarray(a, dtype=np.float64).tolist() for a in (s_mm, h_mm, pitch_rad, roll_rad)
+    )
+    state = (s_t[0], h_t[0], th_t[0], phi_t[0], float(lateral0_mm))
+    out = [state]
+    for i in range(1, len(s_t)):  # a recurrence: each step starts where the last ended
+        s, h, th, phi, lat = state
+        dphi = min(max(phi_t[i] - phi, -lim_phi), lim_phi)
+        dth = min(max(th_t[i] - th, -lim_th), lim_th)
         pivot_h = pivot_mm * math.cos(th + dth) * (math.cos(phi) - math.cos(phi + dphi))
-        dz = -(h_mm[i] - h + pivot_h) / (math.cos(th) * math.cos(phi))
-        dz = min(max(dz, -lim[1]), lim[1])
-        dy = s_mm[i] - s + dz * math.sin(th)
-        dy = min(max(dy, -lim[0]), lim[0])
-        states[i] = apply_step(states[i - 1], np.array([dy, dz, dth, dphi]), pivot_mm)
-    return states
+        dz = -(h_t[i] - h + pivot_h) / (math.cos(th) * math.cos(phi))
+        dz = min(max(dz, -lim_z), lim_z)
+        dy = s_t[i] - s + dz * math.sin(th)
+        dy = min(max(dy, -lim_y), lim_y)
+        state = _rolled_step(s, h, th, phi, lat, dy, dz, dth, dphi, pivot_mm)
+        out.append(state)
+    return np.array(out, dtype=np.float64).reshape(len(s_t), 5)
 
 
 def progress_mm(state: np.ndarray, wd_mm: float) -> float:

@@ -72,9 +72,10 @@ class Part:
             return np.ones(len(self.mesh.faces), bool)
         return self.inspect_faces
 
-    @property
+    @functools.cached_property
     def inspect_vertices(self) -> np.ndarray:
-        """(k, 3) the vertices of the faces to inspect: the footprint a raster covers."""
+        """(k, 3) the vertices of the faces to inspect: the footprint a raster covers (read
+        per pass; a Part's mesh and faces are not changed after it is made)."""
         vertices = np.asarray(self.mesh.vertices)
         if self.inspect_faces is None:
             return vertices

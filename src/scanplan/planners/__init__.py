@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Protocol
 
@@ -35,6 +36,14 @@ class Planner(Protocol):
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         """The scanning poses of one pass (all flagged scanning, swath = swath.index)."""
         ...
+
+
+def pass_workers(planner: Planner, passes: int) -> int:
+    """Threads to plan passes on. A planner that measures a whole pass per ray cast
+    (`batched_passes`, the geometric planner) gains from one per core; one that steps pose
+    by pose in Python (the closed loop) only contends for the GIL: one thread."""
+    batched = bool(getattr(planner, "batched_passes", False))
+    return max(1, min(passes, os.cpu_count() or 1)) if batched else 1
 
 
 PLANNERS = ("fixed", "feedback", "geometric", "rl")
@@ -91,28 +100,37 @@ def plan_path(
     pieces: list[Trajectory] = []
     dropped = 0
     last_pose: np.ndarray | None = None
-    for i, swath in enumerate(swaths):
-        planned = planner.plan(part, swath, spec)
-        colliding = checker.check(planned.poses, spec.clearance_mm).colliding
-        dropped += int(colliding.sum())
-        for k, run in enumerate(_runs(~colliding)):
-            poses = planned.poses[run]
-            if last_pose is not None:
-                moves = plan_transition(checker, last_pose, poses[0], spec.clearance_mm)
+    # Passes are planned independently, on `pass_workers` threads (the ray casts and much of
+    # numpy release the GIL), and taken in order as they finish.
+    pool = ThreadPoolExecutor(max_workers=pass_workers(planner, len(swaths)))
+    try:
+        jobs = [pool.submit(planner.plan, part, swath, spec) for swath in swaths]
+        for i, (swath, job) in enumerate(zip(swaths, jobs, strict=True)):
+            planned = job.result()
+            colliding = checker.check(planned.poses, spec.clearance_mm).colliding
+            dropped += int(colliding.sum())
+            for k, run in enumerate(_runs(~colliding)):
+                poses = planned.poses[run]
+                if last_pose is not None:
+                    moves = plan_transition(checker, last_pose, poses[0], spec.clearance_mm)
+                    pieces.append(
+                        Trajectory(
+                            moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool)
+                        )
+                    )
                 pieces.append(
-                    Trajectory(moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool))
+                    Trajectory(
+                        poses,
+                        planned.swath[run],
+                        planned.scanning[run],
+                        meta=planned.meta if k == 0 else {},  # the pass's counters once
+                    )
                 )
-            pieces.append(
-                Trajectory(
-                    poses,
-                    planned.swath[run],
-                    planned.scanning[run],
-                    meta=planned.meta if k == 0 else {},  # the pass's counters once
-                )
-            )
-            last_pose = poses[-1]
-        if progress is not None:
-            progress(i + 1, len(swaths))
+                last_pose = poses[-1]
+            if progress is not None:
+                progress(i + 1, len(swaths))
+    finally:
+        pool.shutdown(cancel_futures=True)
     if not pieces:
         raise ValueError(
             f"every scanning pose on part {part.name} brings the sensor body within "

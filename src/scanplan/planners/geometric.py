@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 
 from scanplan.dynamics import StepLimits, aligning_angles, probe_line, track, track_rolled
 from scanplan.part import Part
@@ -115,19 +115,20 @@ class RobustLookahead:
         miss = np.abs(levels[None, :] - values[:, None])
         # Beyond the cap, a slight pull towards the target still breaks ties.
         cost = np.minimum(miss**2, self.cap**2) + 1e-3 * self.cap * miss
-        total = cost[0].copy()
-        back = np.zeros((len(values), len(levels)), np.int8)
-        for i in range(1, len(values)):  # each level comes from itself or a neighbour
-            options = np.stack(
-                [np.r_[np.inf, total[:-1]], total, np.r_[total[1:], np.inf]]
-            )  # from level −1, 0, +1
-            pick = np.argmin(options, axis=0)
-            back[i] = pick - 1
-            total = options[pick, np.arange(len(levels))] + cost[i]
+        # Forward: the best total reaching each level, from itself or a neighbour (the
+        # 3-wide running minimum); backward: the neighbour each step came from, earliest
+        # of the tied (level −1, 0, +1).
+        totals = np.empty((len(values), len(levels)))
+        totals[0] = cost[0]
+        for i in range(1, len(values)):
+            totals[i] = minimum_filter1d(totals[i - 1], 3, mode="constant", cval=np.inf)
+            totals[i] += cost[i]
         path = np.zeros(len(values), np.int64)
-        path[-1] = int(np.argmin(total))
+        path[-1] = int(np.argmin(totals[-1]))
+        padded = np.pad(totals, ((0, 0), (1, 1)), constant_values=np.inf)
         for i in range(len(values) - 1, 0, -1):
-            path[i - 1] = path[i] + back[i, path[i]]
+            j = path[i]
+            path[i - 1] = j - 1 + int(np.argmin(padded[i - 1, j : j + 3]))
         return levels[path]
 
 
@@ -261,6 +262,7 @@ class GeometricPlanner:
     refinements: int = 2
     roll: bool = False
     name: str = "geometric"
+    batched_passes: bool = True  # a pass's candidates are measured in whole batches
 
     @classmethod
     def with_roll(cls) -> GeometricPlanner:
