@@ -27,8 +27,8 @@ from scanplan.part import Part
 from scanplan.quantities import (
     ScanSpec,
     advance,
-    beam_angle,
     mean_distance,
+    profile_angles,
     signed_alpha,
     signed_beta,
 )
@@ -362,11 +362,16 @@ class PassDynamics:
         """Signed cross angle β of a profile (the roll that aligns; NaN with no valid point)."""
         return float(signed_beta(profile.normals_part, profile.valid, profile.T_part_sensor))
 
-    def _roll_terms(self, profile: Profile) -> None:
-        self.beta_rad = self.beta(profile)
-        self.tilt_rad = float(
-            beam_angle(profile.normals_part, profile.valid, profile.T_part_sensor)
-        )
+    def _take(self, profile: Profile) -> None:
+        """D, α (and with roll β and the beam angle) of the profile the sensor is now at,
+        from one mean normal (`profile_angles`; the same numbers as `d_alpha`, `beta`)."""
+        self.d_mm = float(mean_distance(profile.z_sensor, profile.valid))
+        normals, valid, pose = profile.normals_part, profile.valid, profile.T_part_sensor
+        if self.roll:
+            alpha, beta, tilt = profile_angles(normals, valid, pose)
+            self.alpha_rad, self.beta_rad, self.tilt_rad = float(alpha), float(beta), float(tilt)
+        else:
+            self.alpha_rad = float(signed_alpha(normals, valid, pose))
 
     def advance_to(self, profile: Profile) -> float:
         """Δs from the current profile to `profile` (NaN if no column is valid in both)."""
@@ -380,9 +385,7 @@ class PassDynamics:
         """Put the sensor at `state` and measure there."""
         self.state = np.asarray(state, dtype=np.float64)
         self.profile = self.measure(self.state)
-        self.d_mm, self.alpha_rad = self.d_alpha(self.profile)
-        if self.roll:
-            self._roll_terms(self.profile)
+        self._take(self.profile)
         self.delta_s_mm = float("nan")
 
     def propose(self, action: np.ndarray) -> Step:
@@ -397,13 +400,12 @@ class PassDynamics:
         )
         return Step(limited, apply_step(self.state, limited, self.spec.working_distance_mm))
 
-    def accept(self, step: Step, profile: Profile) -> None:
-        """Move to `step.state`, where `profile` was measured."""
-        self.delta_s_mm = self.advance_to(profile)
+    def accept(self, step: Step, profile: Profile, delta_s_mm: float | None = None) -> None:
+        """Move to `step.state`, where `profile` was measured; `delta_s_mm`: its
+        `advance_to`, if the caller has it already."""
+        self.delta_s_mm = self.advance_to(profile) if delta_s_mm is None else delta_s_mm
         self.state, self.profile = step.state, profile
-        self.d_mm, self.alpha_rad = self.d_alpha(profile)
-        if self.roll:
-            self._roll_terms(profile)
+        self._take(profile)
 
     @property
     def progress_mm(self) -> float:

@@ -82,6 +82,7 @@ def drive_pass(
             stall_overrides += 1
         proposed = dyn.propose(action)
         profile = dyn.measure(proposed.state)
+        ds: float | None = None  # the accepted profile's advance, where already known
         if guards.min_advance is not None:
             ds = dyn.advance_to(profile)  # unknown (no column valid in both) is not backwards
             if np.isfinite(ds) and ds < guards.min_advance * ds_opt:
@@ -89,9 +90,10 @@ def drive_pass(
                 proposed = dyn.propose(action)
                 profile = dyn.measure(proposed.state)
                 backward_overrides += 1
-        dyn.accept(proposed, profile)
+                ds = None
+        dyn.accept(proposed, profile, ds)
         steps += 1
-        poses.append(dyn.pose())
+        poses.append(profile.T_part_sensor)  # the pose it was measured at: dyn.pose()
         progress.append(dyn.progress_mm)
         if dyn.progress_mm >= geo.s_last_mm or steps >= step_limit:
             break
