@@ -72,28 +72,9 @@ class Swath:
         lateral_mm: np.ndarray | None = None,
     ) -> np.ndarray:
         """Vectorized `pose`: (k,) x3 (+ roll, lateral) -> (k, 4, 4)."""
-        s, h, th = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (s_mm, h_mm, pitch_rad))
-        c, sn = np.cos(th), np.sin(th)
-        poses = np.zeros((len(s), 4, 4))
-        poses[:, 3, 3] = 1.0
-        poses[:, :3, 0] = self.v  # x_s: along the laser line
-        poses[:, :3, 1] = c[:, None] * self.u - sn[:, None] * UP  # y_s: forward
-        poses[:, :3, 2] = -sn[:, None] * self.u - c[:, None] * UP  # z_s: the beam
-        poses[:, :3, 3] = self.start_mm + s[:, None] * self.u + h[:, None] * UP
-        if roll_rad is not None and np.any(np.asarray(roll_rad) != 0):
-            # Roll about u first, then pitch about the rolled x_s: on a steep flank the big
-            # rotation is the roll and the pitch stays small (pitch-then-roll would need a
-            # pitch that swings with every small change of the normal along the pass).
-            phi = np.broadcast_to(np.asarray(roll_rad, dtype=np.float64).reshape(-1), s.shape)
-            cp, sp = np.cos(phi)[:, None], np.sin(phi)[:, None]
-            z1 = sp * self.v - cp * UP
-            poses[:, :3, 0] = cp * self.v + sp * UP
-            poses[:, :3, 1] = c[:, None] * self.u + sn[:, None] * z1
-            poses[:, :3, 2] = -sn[:, None] * self.u + c[:, None] * z1
-        if lateral_mm is not None and np.any(np.asarray(lateral_mm) != 0):
-            lat = np.broadcast_to(np.asarray(lateral_mm, dtype=np.float64).reshape(-1), s.shape)
-            poses[:, :3, 3] += lat[:, None] * self.v
-        return poses
+        return frame_poses(
+            self.start_mm, self.u, self.v, s_mm, h_mm, pitch_rad, roll_rad, lateral_mm
+        )
 
     def to_swath_frame(self, T_part_sensor: np.ndarray) -> tuple[float, float, float]:
         """(s, h, theta) of a pose of this pass; inverse of `pose`."""
@@ -101,6 +82,42 @@ class Swath:
         z_s = T_part_sensor[:3, 2]
         theta = math.atan2(-float(np.dot(z_s, self.u)), -float(np.dot(z_s, UP)))
         return float(np.dot(d, self.u)), float(np.dot(d, UP)), theta
+
+
+def frame_poses(
+    start_mm: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    s_mm: np.ndarray,
+    h_mm: np.ndarray,
+    pitch_rad: np.ndarray,
+    roll_rad: np.ndarray | None = None,
+    lateral_mm: np.ndarray | None = None,
+) -> np.ndarray:
+    """`Swath.poses` of a pass from `start_mm` along `u`, `v` ((3,) each, or (k, 3): one
+    pass per pose, so that poses of several passes are made in one call) -> (k, 4, 4)."""
+    s, h, th = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (s_mm, h_mm, pitch_rad))
+    c, sn = np.cos(th), np.sin(th)
+    poses = np.zeros((len(s), 4, 4))
+    poses[:, 3, 3] = 1.0
+    poses[:, :3, 0] = v  # x_s: along the laser line
+    poses[:, :3, 1] = c[:, None] * u - sn[:, None] * UP  # y_s: forward
+    poses[:, :3, 2] = -sn[:, None] * u - c[:, None] * UP  # z_s: the beam
+    poses[:, :3, 3] = start_mm + s[:, None] * u + h[:, None] * UP
+    if roll_rad is not None and np.any(np.asarray(roll_rad) != 0):
+        # Roll about u first, then pitch about the rolled x_s: on a steep flank the big
+        # rotation is the roll and the pitch stays small (pitch-then-roll would need a
+        # pitch that swings with every small change of the normal along the pass).
+        phi = np.broadcast_to(np.asarray(roll_rad, dtype=np.float64).reshape(-1), s.shape)
+        cp, sp = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        z1 = sp * v - cp * UP
+        poses[:, :3, 0] = cp * v + sp * UP
+        poses[:, :3, 1] = c[:, None] * u + sn[:, None] * z1
+        poses[:, :3, 2] = -sn[:, None] * u + c[:, None] * z1
+    if lateral_mm is not None and np.any(np.asarray(lateral_mm) != 0):
+        lat = np.broadcast_to(np.asarray(lateral_mm, dtype=np.float64).reshape(-1), s.shape)
+        poses[:, :3, 3] += lat[:, None] * v
+    return poses
 
 
 def rectangle_axes(part: Part) -> tuple[np.ndarray, np.ndarray]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Protocol
 
@@ -102,9 +102,15 @@ def plan_path(
     last_pose: np.ndarray | None = None
     # Passes are planned independently, on `pass_workers` threads (the ray casts and much of
     # numpy release the GIL), and taken in order as they finish.
+    # A planner that steps all passes together (`plan_passes`, the closed loop) plans them in
+    # one call.
+    plan_passes = getattr(planner, "plan_passes", None)
     pool = ThreadPoolExecutor(max_workers=pass_workers(planner, len(swaths)))
     try:
-        jobs = [pool.submit(planner.plan, part, swath, spec) for swath in swaths]
+        if plan_passes is not None:
+            jobs = [_done(t) for t in plan_passes(part, swaths, spec)]
+        else:
+            jobs = [pool.submit(planner.plan, part, swath, spec) for swath in swaths]
         for i, (swath, job) in enumerate(zip(swaths, jobs, strict=True)):
             planned = job.result()
             colliding = checker.check(planned.poses, spec.clearance_mm).colliding
@@ -145,6 +151,13 @@ def plan_path(
         planner=planner.name,
         meta={**traj.meta, "collisions_dropped": dropped},
     )
+
+
+def _done(result: Trajectory) -> Future[Trajectory]:
+    """A future that already holds `result`."""
+    future: Future[Trajectory] = Future()
+    future.set_result(result)
+    return future
 
 
 def _runs(keep: np.ndarray) -> list[slice]:

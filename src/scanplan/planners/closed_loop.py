@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.dynamics import PassDynamics, StepLimits, pass_geometry, step_budget
+from scanplan.dynamics import PassDynamics, Step, StepLimits, pass_geometry, step_budget
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
-from scanplan.sensor import LineProfilometer
-from scanplan.swaths import Swath
+from scanplan.sensor import LineProfilometer, Profile
+from scanplan.swaths import Swath, frame_poses
 from scanplan.trajectory import Trajectory
 
 # (the sensor on the pass, the state it started the pass at) -> action in [-1, 1]^3 (^4 with roll)
@@ -44,9 +44,26 @@ class Guards:
     min_advance: float | None = 0.25
 
 
-def drive_pass(
+@dataclass
+class _Run:
+    """One pass in `drive_passes`: its sensor, where it ends, and what it has done."""
+
+    dyn: PassDynamics
+    s_last_mm: float
+    step_limit: int
+    start_state: np.ndarray
+    poses: list[np.ndarray]
+    progress: list[float]
+    stall_overrides: int = 0
+    backward_overrides: int = 0
+    steps: int = 0
+    plan_time_s: float = 0.0
+    done: bool = False
+
+
+def drive_passes(
     part: Part,
-    swath: Swath,
+    swaths: list[Swath],
     spec: ScanSpec,
     controller: Controller,
     name: str,
@@ -54,55 +71,96 @@ def drive_pass(
     fan_points: int = 512,
     guards: Guards | None = None,
     roll: bool = False,
-) -> Trajectory:
-    """Run `controller` over the whole pass on a noiseless sensor of `fan_points` columns,
+) -> list[Trajectory]:
+    """Run `controller` over each whole pass on a noiseless sensor of `fan_points` columns,
     from an aligned start at the first station that sees the part to the last (SPEC §5's
     episode, planning form); every station becomes a scanning pose. roll: the controller
-    gives 4-D actions (env v1's step model)."""
-    start_time = time.perf_counter()
+    gives 4-D actions (env v1's step model). The passes are independent and step in
+    lockstep, so that each step measures every pass's proposed pose in one batch (a single
+    pose's ray cast is mostly overhead); each pass's poses are those it would have alone."""
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
     plan_spec = spec.with_sensor(sensor)
-    dyn = PassDynamics(part, swath, plan_spec, LineProfilometer(part, sensor), limits, roll=roll)
-    geo = pass_geometry(part, swath, plan_spec)
-    _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
-    dyn.start(dyn.aligned_start(geo.s_first_mm))
-    start_state = dyn.state.copy()
+    sim = LineProfilometer(part, sensor)
     ds_opt = spec.delta_s_opt_mm
     hold = ds_opt / limits.dy_max_mm  # the action "advance Δs_opt"
-    poses = [dyn.pose()]
-    progress = [dyn.progress_mm]
-    stall_overrides = backward_overrides = steps = 0
-    while True:
-        action = np.array(controller(dyn, start_state), dtype=np.float64)
-        w = guards.stall_window
-        if w and len(progress) > w and progress[-1] - progress[-1 - w] < 0.25 * ds_opt * w:
-            action[0], action[2] = hold, 0.0
-            stall_overrides += 1
-        proposed = dyn.propose(action)
-        profile = dyn.measure(proposed.state)
-        ds: float | None = None  # the accepted profile's advance, where already known
-        if guards.min_advance is not None:
-            ds = dyn.advance_to(profile)  # unknown (no column valid in both) is not backwards
-            if np.isfinite(ds) and ds < guards.min_advance * ds_opt:
+    runs: list[_Run] = []
+    for swath in swaths:
+        start_time = time.perf_counter()
+        dyn = PassDynamics(part, swath, plan_spec, sim, limits, roll=roll)
+        geo = pass_geometry(part, swath, plan_spec)
+        _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
+        dyn.start(dyn.aligned_start(geo.s_first_mm))
+        run = _Run(dyn, geo.s_last_mm, step_limit, dyn.state.copy(), [dyn.pose()], [])
+        run.progress.append(dyn.progress_mm)
+        run.plan_time_s = time.perf_counter() - start_time
+        runs.append(run)
+
+    def measure(batch: list[tuple[_Run, Step]]) -> list[Profile]:
+        swaths = [run.dyn.swath for run, _ in batch]
+        states = np.stack([step.state for _, step in batch]).T  # (s, h, θ[, φ, l]) rows
+        poses = frame_poses(
+            np.stack([sw.start_mm for sw in swaths]),
+            np.stack([sw.u for sw in swaths]),
+            np.stack([sw.v for sw in swaths]),
+            *states,
+        )
+        scan = sim.measure_many(poses)
+        return [scan.profile(k) for k in range(len(batch))]
+
+    w = guards.stall_window
+    while active := [run for run in runs if not run.done]:
+        start_time = time.perf_counter()
+        actions, proposed = [], []
+        for run in active:
+            action = np.array(controller(run.dyn, run.start_state), dtype=np.float64)
+            p = run.progress
+            if w and len(p) > w and p[-1] - p[-1 - w] < 0.25 * ds_opt * w:
                 action[0], action[2] = hold, 0.0
-                proposed = dyn.propose(action)
-                profile = dyn.measure(proposed.state)
-                backward_overrides += 1
-                ds = None
-        dyn.accept(proposed, profile, ds)
-        steps += 1
-        poses.append(profile.T_part_sensor)  # the pose it was measured at: dyn.pose()
-        progress.append(dyn.progress_mm)
-        if dyn.progress_mm >= geo.s_last_mm or steps >= step_limit:
-            break
-    poses_arr = np.stack(poses)
-    return Trajectory(
-        poses_arr,
-        np.full(len(poses_arr), swath.index),
-        np.ones(len(poses_arr), bool),
-        plan_time_s=time.perf_counter() - start_time,
-        planner=name,
-        meta={"stall_overrides": stall_overrides, "backward_overrides": backward_overrides},
-    )
+                run.stall_overrides += 1
+            actions.append(action)
+            proposed.append(run.dyn.propose(action))
+        profiles = measure(list(zip(active, proposed, strict=True)))
+        # The accepted profile's advance, where already known.
+        advances: list[float | None] = [None] * len(active)
+        if guards.min_advance is not None:
+            redo = []
+            for k, run in enumerate(active):
+                ds = run.dyn.advance_to(profiles[k])  # unknown (no valid pair) is not backwards
+                advances[k] = ds
+                if np.isfinite(ds) and ds < guards.min_advance * ds_opt:
+                    actions[k][0], actions[k][2] = hold, 0.0
+                    proposed[k] = run.dyn.propose(actions[k])
+                    run.backward_overrides += 1
+                    advances[k] = None
+                    redo.append(k)
+            if redo:
+                again = measure([(active[k], proposed[k]) for k in redo])
+                for k, profile in zip(redo, again, strict=True):
+                    profiles[k] = profile
+        share = (time.perf_counter() - start_time) / len(active)
+        for run, step, profile, known in zip(active, proposed, profiles, advances, strict=True):
+            run.dyn.accept(step, profile, known)
+            run.steps += 1
+            run.poses.append(profile.T_part_sensor)  # the pose it was measured at
+            run.progress.append(run.dyn.progress_mm)
+            run.plan_time_s += share
+            run.done = run.dyn.progress_mm >= run.s_last_mm or run.steps >= run.step_limit
+    out = []
+    for run in runs:
+        poses_arr = np.stack(run.poses)
+        out.append(
+            Trajectory(
+                poses_arr,
+                np.full(len(poses_arr), run.dyn.swath.index),
+                np.ones(len(poses_arr), bool),
+                plan_time_s=run.plan_time_s,
+                planner=name,
+                meta={
+                    "stall_overrides": run.stall_overrides,
+                    "backward_overrides": run.backward_overrides,
+                },
+            )
+        )
+    return out

@@ -12,7 +12,7 @@ import numpy as np
 
 from scanplan.dynamics import PassDynamics
 from scanplan.part import Part
-from scanplan.planners.closed_loop import Guards, drive_pass
+from scanplan.planners.closed_loop import Guards, drive_passes
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -51,7 +51,7 @@ class FeedbackController:
 
 @dataclass(frozen=True)
 class FeedbackPlanner:
-    """`FeedbackController` in the loop of `closed_loop.drive_pass`, with the rl planner's
+    """`FeedbackController` in the loop of `closed_loop.drive_passes`, with the rl planner's
     guards and planning fan, so the two are compared like for like."""
 
     controller: FeedbackController = field(default_factory=FeedbackController)
@@ -61,9 +61,13 @@ class FeedbackPlanner:
     name: str = "feedback"
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
-        return drive_pass(
+        return self.plan_passes(part, [swath], spec)[0]
+
+    def plan_passes(self, part: Part, swaths: list[Swath], spec: ScanSpec) -> list[Trajectory]:
+        """Every pass at once, in lockstep (`closed_loop.drive_passes`)."""
+        return drive_passes(
             part,
-            swath,
+            swaths,
             spec,
             self.controller,
             self.name,

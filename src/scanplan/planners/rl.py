@@ -18,7 +18,7 @@ from torch import nn
 from scanplan.dynamics import PassDynamics, StepLimits
 from scanplan.env import observe
 from scanplan.part import Part
-from scanplan.planners.closed_loop import Guards, drive_pass
+from scanplan.planners.closed_loop import Guards, drive_passes
 from scanplan.policy import load_policy
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
@@ -34,7 +34,7 @@ _LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad")
 
 @dataclass
 class RLPlanner:
-    """The deterministic actor in the loop of `closed_loop.drive_pass` on each swath
+    """The deterministic actor in the loop of `closed_loop.drive_passes` on each swath
     (noiseless sensor): the observation is the env's (`env.observe`, with the options the
     policy was trained with), every station of the pass becomes a scanning pose.
 
@@ -86,6 +86,10 @@ class RLPlanner:
         return StepLimits(**{k: env_cfg[k] for k in _LIMIT_KEYS if k in env_cfg})
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
+        return self.plan_passes(part, [swath], spec)[0]
+
+    def plan_passes(self, part: Part, swaths: list[Swath], spec: ScanSpec) -> list[Trajectory]:
+        """Every pass at once, in lockstep (`closed_loop.drive_passes`)."""
         env_cfg = self.config.get("env", {})
         use_position = bool(env_cfg.get("use_position", True))
         lookahead = bool(env_cfg.get("lookahead", False))
@@ -93,9 +97,9 @@ class RLPlanner:
         def policy(dyn: PassDynamics, start_state: np.ndarray) -> np.ndarray:
             return self.act(observe(dyn, start_state, use_position, lookahead))
 
-        return drive_pass(
+        return drive_passes(
             part,
-            swath,
+            swaths,
             spec,
             policy,
             self.name,
