@@ -2,7 +2,10 @@
 its samples (`metrics.hemisphere_visible_samples`) that some beam within the angle
 tolerance of the normal, and no more than `views.VIEW_AXIS_MAX_TILT_DEG` (or 90°) from +Z,
 reaches without hitting the part. A bound, not a plan: it ignores the depth window, the
-camera's own line of sight and tracking, so real plans stay below it.
+sensor body and tracking, so real plans stay below it. The last column also asks for the
+camera's line of sight, as the simulator does: a triangulation sensor sees a point only if
+its camera, at the triangulation angle from the beam (on any side: the sensor may turn
+about its beam), sees it too, from in front of the face.
 
     PYTHONPATH=src python benchmarks/visibility_ceiling.py [PARTS_DIR] [--beams 24]
 """
@@ -22,7 +25,24 @@ from scanplan.quantities import ScanSpec
 from scanplan.views import VIEW_AXIS_MAX_TILT_DEG, oriented_normals
 
 
-def ceiling(part, tol_rad: float, max_tilt_deg: float, beams: int, seed: int = 0) -> float:
+def _unit_perpendicular(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(k, 3) random unit vectors perpendicular to the rows of v."""
+    side = rng.normal(size=v.shape)
+    side -= np.sum(side * v, axis=1, keepdims=True) * v
+    return side / np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
+
+
+def ceiling(
+    part,
+    tol_rad: float,
+    max_tilt_deg: float,
+    beams: int,
+    seed: int = 0,
+    camera_rad: float | None = None,
+    camera_sides: int = 8,
+) -> float:
+    """The share of the samples some beam reaches (see the module); with `camera_rad`, the
+    camera at that angle from the beam must see the point too (`camera_sides` azimuths)."""
     rng = np.random.default_rng(seed)
     surface = hemisphere_visible_samples(part, 3.0, seed)
     n = oriented_normals(part)[surface.faces]
@@ -30,17 +50,35 @@ def ceiling(part, tol_rad: float, max_tilt_deg: float, beams: int, seed: int = 0
     lowest = math.cos(math.radians(max_tilt_deg)) - 1e-9
     for k in range(beams):
         # A beam direction (towards the sensor) uniform in the tolerance cone; first the normal.
-        side = rng.normal(size=n.shape)
-        side -= np.sum(side * n, axis=1, keepdims=True) * n
-        side /= np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
+        side = _unit_perpendicular(n, rng)
         angle = 0.0 if k == 0 else tol_rad * np.sqrt(rng.random(len(n)))[:, None]
         beam = np.cos(angle) * n + np.sin(angle) * side
         todo = np.flatnonzero(~seen & (beam[:, 2] >= lowest))
         if len(todo):
             start = surface.points[todo] + 0.05 * n[todo]
             escapes = ~part.ray_engine.occluded(start, beam[todo], np.full(len(todo), 1e6))
+            if camera_rad is not None:
+                escapes &= _camera_sees(part, start, n[todo], beam[todo], camera_rad, camera_sides)
             seen[todo] = escapes
     return float(seen.mean()) if len(seen) else 0.0
+
+
+def _camera_sees(part, start, n, beam, camera_rad: float, sides: int) -> np.ndarray:
+    """(k,) bool: a camera `camera_rad` from the beam, on one of `sides` azimuths about it,
+    is in front of the face and sees the point unobstructed."""
+    first = _unit_perpendicular(beam, np.random.default_rng(1))
+    second = np.cross(beam, first)
+    sees = np.zeros(len(beam), bool)
+    for k in range(sides):
+        az = 2 * math.pi * k / sides
+        look = math.cos(camera_rad) * beam + math.sin(camera_rad) * (
+            math.cos(az) * first + math.sin(az) * second
+        )
+        todo = np.flatnonzero(~sees & (np.sum(look * n, axis=1) > 0))
+        if len(todo):
+            far = np.full(len(todo), 1e6)
+            sees[todo] = ~part.ray_engine.occluded(start[todo], look[todo], far)
+    return sees
 
 
 def main() -> None:
@@ -49,12 +87,17 @@ def main() -> None:
     ap.add_argument("--beams", type=int, default=24)
     args = ap.parse_args()
     tol = ScanSpec().tol_angle_rad
-    print(f"part | ceiling, axis <= {VIEW_AXIS_MAX_TILT_DEG:g}° | ceiling, axis <= 90°")
+    camera = ScanSpec().sensor.triangulation_angle_rad
+    print(
+        f"part | ceiling, axis <= {VIEW_AXIS_MAX_TILT_DEG:g}° | ceiling, axis <= 90° | "
+        f"with the camera, axis <= {VIEW_AXIS_MAX_TILT_DEG:g}°"
+    )
     for name, units in PARTS.items():
         part = load_part(Path(args.parts_dir) / name, units)
         low = ceiling(part, tol, VIEW_AXIS_MAX_TILT_DEG, args.beams)
         high = ceiling(part, tol, 90.0, args.beams)
-        print(f"{name} | {low:.3f} | {high:.3f}", flush=True)
+        seen = ceiling(part, tol, VIEW_AXIS_MAX_TILT_DEG, args.beams, camera_rad=camera)
+        print(f"{name} | {low:.3f} | {high:.3f} | {seen:.3f}", flush=True)
 
 
 if __name__ == "__main__":
