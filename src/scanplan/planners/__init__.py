@@ -39,9 +39,10 @@ class Planner(Protocol):
 
 
 def pass_workers(planner: Planner, passes: int) -> int:
-    """Threads to plan passes on. A planner that measures a whole pass per ray cast
-    (`batched_passes`, the geometric planner) gains from one per core; one that steps pose
-    by pose in Python (the closed loop) only contends for the GIL: one thread."""
+    """Threads to plan passes on: one per core for a planner that measures a whole pass per
+    ray cast (`batched_passes`, the geometric planner; the ray casts and much of numpy
+    release the GIL), else one. (The closed loop steps all passes together instead,
+    `plan_passes`.)"""
     batched = bool(getattr(planner, "batched_passes", False))
     return max(1, min(passes, os.cpu_count() or 1)) if batched else 1
 
@@ -100,10 +101,8 @@ def plan_path(
     pieces: list[Trajectory] = []
     dropped = 0
     last_pose: np.ndarray | None = None
-    # Passes are planned independently, on `pass_workers` threads (the ray casts and much of
-    # numpy release the GIL), and taken in order as they finish.
-    # A planner that steps all passes together (`plan_passes`, the closed loop) plans them in
-    # one call.
+    # Passes are independent: planned all in one call by a planner that steps them together
+    # (`plan_passes`, the closed loop), else on `pass_workers` threads; taken in order.
     plan_passes = getattr(planner, "plan_passes", None)
     pool = ThreadPoolExecutor(max_workers=pass_workers(planner, len(swaths)))
     try:

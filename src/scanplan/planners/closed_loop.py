@@ -92,18 +92,19 @@ def drive_passes(
         geo = pass_geometry(part, swath, plan_spec)
         _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
         dyn.start(dyn.aligned_start(geo.s_first_mm))
-        run = _Run(dyn, geo.s_last_mm, step_limit, dyn.state.copy(), [dyn.pose()], [])
-        run.progress.append(dyn.progress_mm)
+        run = _Run(
+            dyn, geo.s_last_mm, step_limit, dyn.state.copy(), [dyn.pose()], [dyn.progress_mm]
+        )
         run.plan_time_s = time.perf_counter() - start_time
         runs.append(run)
 
     def measure(batch: list[tuple[_Run, Step]]) -> list[Profile]:
-        swaths = [run.dyn.swath for run, _ in batch]
+        passes = [run.dyn.swath for run, _ in batch]
         states = np.stack([step.state for _, step in batch]).T  # (s, h, θ[, φ, l]) rows
         poses = frame_poses(
-            np.stack([sw.start_mm for sw in swaths]),
-            np.stack([sw.u for sw in swaths]),
-            np.stack([sw.v for sw in swaths]),
+            np.stack([sw.start_mm for sw in passes]),
+            np.stack([sw.u for sw in passes]),
+            np.stack([sw.v for sw in passes]),
             *states,
         )
         scan = sim.measure_many(poses)
