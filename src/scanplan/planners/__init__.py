@@ -25,6 +25,10 @@ from scanplan.trajectory import Trajectory
 
 
 class Planner(Protocol):
+    """A pass planner. Two optional hooks `plan_path` looks for: `plan_passes(part, swaths,
+    spec)`, every pass in one call (the closed loop steps them in lockstep), and
+    `batched_passes = True`, passes planned on a thread per core (`pass_workers`)."""
+
     @property
     def name(self) -> str: ...
 

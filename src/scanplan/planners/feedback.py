@@ -12,7 +12,7 @@ import numpy as np
 
 from scanplan.dynamics import PassDynamics
 from scanplan.part import Part
-from scanplan.planners.closed_loop import Guards, drive_passes
+from scanplan.planners.closed_loop import PLANNING_FAN_POINTS, Guards, drive_passes
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -55,7 +55,7 @@ class FeedbackPlanner:
     guards and planning fan, so the two are compared like for like."""
 
     controller: FeedbackController = field(default_factory=FeedbackController)
-    fan_points: int = 512
+    fan_points: int = PLANNING_FAN_POINTS
     guards: Guards = field(default_factory=Guards)
     roll: bool = False
     name: str = "feedback"

@@ -18,7 +18,7 @@ from torch import nn
 from scanplan.dynamics import PassDynamics, StepLimits
 from scanplan.env import observe
 from scanplan.part import Part
-from scanplan.planners.closed_loop import Guards, drive_passes
+from scanplan.planners.closed_loop import PLANNING_FAN_POINTS, Guards, drive_passes
 from scanplan.policy import load_policy
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
@@ -38,14 +38,13 @@ class RLPlanner:
     (noiseless sensor): the observation is the env's (`env.observe`, with the options the
     policy was trained with), every station of the pass becomes a scanning pose.
 
-    fan_points: columns of the planning sensor. More than training's 128: on narrow curved
-    parts (the drone) 128 columns put D off by ~1 mm; 512 agree with the full fan to ~0.2 mm.
+    fan_points: columns of the planning sensor (`closed_loop.PLANNING_FAN_POINTS`).
     guards: the stall and forward-only guards (`closed_loop.Guards`).
     """
 
     actor: nn.Sequential
     config: dict[str, Any] = field(default_factory=dict)
-    fan_points: int = 512
+    fan_points: int = PLANNING_FAN_POINTS
     guards: Guards = field(default_factory=Guards)
     name: str = "rl"
 
