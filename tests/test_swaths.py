@@ -9,8 +9,9 @@ import pytest
 import trimesh
 
 from scanplan.part import part_from_mesh
+from scanplan.quantities import UP
 from scanplan.sensor import SensorSpec
-from scanplan.swaths import UP, plan_swaths
+from scanplan.swaths import plan_swaths
 
 SENSOR = SensorSpec()
 W = SENSOR.line_width_mm  # 495 mm

@@ -28,7 +28,7 @@ from scanplan.dynamics import (
     Step as PassStep,
 )
 from scanplan.part import Part, part_from_mesh
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import TRAINING_FAN_POINTS, ScanSpec
 from scanplan.reward import reward_terms
 from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, plan_swaths
@@ -37,9 +37,7 @@ ENV_ID = "scanplan/SwathScan-v0"
 ENV_ID_ROLL = "scanplan/SwathScan-v1"
 OBS_LIMIT = 10.0  # every normalized observation is clipped to [-OBS_LIMIT, OBS_LIMIT]
 LOOKAHEAD_MM = (10.0, 30.0, 60.0, 120.0, 200.0)
-# Training defaults of the env, also the trainer's (learn.config): a 128-column fan agrees
-# with the full one to 0.1 mm / 0.3° on the training piece; 100-400 mm sub-segments of passes.
-TRAINING_FAN_POINTS = 128
+# The trainer's (learn.config) default too: 100-400 mm sub-segments of passes.
 TRAINING_SEGMENT_MM = (100.0, 400.0)
 _LOOKAHEAD_COLUMNS = 16
 

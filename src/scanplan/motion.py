@@ -13,8 +13,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from scanplan.collision import CollisionChecker
-
-UP = np.array([0.0, 0.0, 1.0])
+from scanplan.quantities import UP
 
 
 def _line(a: np.ndarray, b: np.ndarray, step_mm: float) -> np.ndarray:

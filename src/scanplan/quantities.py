@@ -15,8 +15,20 @@ import numpy as np
 
 from scanplan.sensor import SensorSpec
 
-# In-spec coverage at which `--views auto` stops adding views (SPEC §3b).
+# In-spec coverage at which `--views auto` stops adding views.
 COVERAGE_TARGET = 0.9
+# The part frame's up: the top view looks along −UP.
+UP = np.array([0.0, 0.0, 1.0])
+UP.flags.writeable = False
+# The paper's raster: neighbouring passes share this share of the nominal line width.
+OVERLAP = 0.2
+# Fans (pixel columns) a simulated sensor is sub-sampled to, one name per purpose:
+# The closed-loop planners' sensor (feedback, rl): on narrow curved parts (the drone) 128
+# columns put D off by ~1 mm; 512 agree with the full fan to ~0.2 mm.
+PLANNING_FAN_POINTS = 512
+TRAINING_FAN_POINTS = 128  # the training env's (agrees with the full fan to 0.1 mm / 0.3°)
+PROBE_FAN_POINTS = 128  # the fixed planner's probe of the surface under a pass
+VIEW_CHOICE_FAN_POINTS = 128  # the evaluation that chooses views (finds the same samples)
 
 
 @dataclass(frozen=True)

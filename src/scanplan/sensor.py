@@ -169,7 +169,9 @@ class SensorSpec:
         return replace(self, points_per_profile=points_per_profile)
 
 
-PRESETS: dict[str, SensorSpec] = {"at-c5-4090cs30-495": SensorSpec()}
+PRESETS: dict[str, SensorSpec] = {SensorSpec().name: SensorSpec()}
+# The sensor a command uses when none is given: the paper's.
+DEFAULT_SENSOR = SensorSpec().name
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,8 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import OVERLAP, UP, ScanSpec
 from scanplan.sensor import SensorSpec
-
-UP = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -140,7 +138,7 @@ def rectangle_axes(part: Part) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cross_line_residual_mm(
-    part: Part, u: np.ndarray, line_width_mm: float, overlap: float = 0.2, grid_mm: float = 10.0
+    part: Part, u: np.ndarray, line_width_mm: float, overlap: float = OVERLAP, grid_mm: float = 10.0
 ) -> float:
     """Mean |height - mean height| across the laser line, over passes along u.
 
@@ -205,7 +203,7 @@ class LeastCrossResidual:
     is clearly (`margin`, 25 %) better — so a plate or a training piece scans along its
     length, a car door across the tumblehome."""
 
-    overlap: float = 0.2
+    overlap: float = OVERLAP
     margin: float = 0.25
 
     def direction(self, part: Part, sensor: SensorSpec) -> np.ndarray:
@@ -216,7 +214,7 @@ class LeastCrossResidual:
         return short_axis if along_short < (1 - self.margin) * along_long else long_axis
 
 
-def direction_rule(direction: str | np.ndarray | DirectionRule, overlap: float = 0.2):
+def direction_rule(direction: str | np.ndarray | DirectionRule, overlap: float = OVERLAP):
     """The rule for a CLI-style direction: 'x', 'y', 'long', 'auto', a vector, or a rule."""
     if isinstance(direction, str):
         rules: dict[str, DirectionRule] = {
@@ -241,7 +239,7 @@ def scan_direction(
     part: Part,
     sensor: SensorSpec,
     direction: str | np.ndarray | DirectionRule = "auto",
-    overlap: float = 0.2,
+    overlap: float = OVERLAP,
 ) -> np.ndarray:
     """Unit horizontal scan direction from a direction rule (see `direction_rule`), with a
     canonical sign (first non-zero component positive) so plans are reproducible."""
@@ -261,7 +259,7 @@ def plan_swaths(
     part: Part,
     sensor: SensorSpec,
     direction: str | np.ndarray | DirectionRule = "auto",
-    overlap: float = 0.2,
+    overlap: float = OVERLAP,
     run_in_mm: float = 20.0,
 ) -> list[Swath]:
     """Passes covering the part's footprint (its region of interest's, if it has one),

@@ -22,10 +22,9 @@ from scipy.spatial.transform import Rotation
 from scanplan.collision import CollisionChecker, checker_for
 from scanplan.part import Part
 from scanplan.planners import Planner
-from scanplan.quantities import COVERAGE_TARGET, ScanSpec
+from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
 from scanplan.trajectory import Trajectory
 
-UP = np.array([0.0, 0.0, 1.0])
 VIEW_MODES = ("top", "auto")
 # The directions that define what the upper hemisphere sees (the surface `--views auto`
 # inspects, `metrics.hemisphere_visible_samples`): +Z and rings up to this tilt.
@@ -355,7 +354,7 @@ def choose_views(
     coverage_target: float = COVERAGE_TARGET,
     min_gain: float = 0.01,
     max_views: int = 16,
-    points_per_profile: int = 128,
+    points_per_profile: int = VIEW_CHOICE_FAN_POINTS,
     seed: int = 0,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
@@ -506,7 +505,7 @@ def plan_views(
     coverage_target: float = COVERAGE_TARGET,
     raster: str = "auto",
     direction: str = "auto",
-    overlap: float = 0.2,
+    overlap: float = OVERLAP,
 ) -> tuple[list[ViewPlan], Trajectory]:
     """Plan a scan by views: 'top' the paper's single top raster, 'auto' `choose_views`,
     None the planner's default (`default_views`);

@@ -8,7 +8,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from scanplan.env import TRAINING_FAN_POINTS, TRAINING_SEGMENT_MM
+from scanplan.env import TRAINING_SEGMENT_MM
+from scanplan.quantities import TRAINING_FAN_POINTS
 
 VEC_ENVS = ("batched", "subproc")
 ACTIVATIONS = ("relu", "tanh")

@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import OVERLAP, ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
@@ -175,7 +175,7 @@ def plan_scan(
     planner: Planner,
     raster: str = "auto",
     direction: str = "auto",
-    overlap: float = 0.2,
+    overlap: float = OVERLAP,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[list[Swath], Trajectory]:
     """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral

@@ -18,10 +18,6 @@ from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, frame_poses
 from scanplan.trajectory import Trajectory
 
-# Columns of the closed loop's planning sensor. More than training's 128: on narrow curved
-# parts (the drone) 128 columns put D off by ~1 mm; 512 agree with the full fan to ~0.2 mm.
-PLANNING_FAN_POINTS = 512
-
 # (the sensor on the pass, the state it started the pass at) -> action in [-1, 1]^3 (^4 with roll)
 Controller = Callable[[PassDynamics, np.ndarray], np.ndarray]
 

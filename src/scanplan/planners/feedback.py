@@ -12,8 +12,8 @@ import numpy as np
 
 from scanplan.dynamics import PassDynamics
 from scanplan.part import Part
-from scanplan.planners.closed_loop import PLANNING_FAN_POINTS, Guards, drive_passes
-from scanplan.quantities import ScanSpec
+from scanplan.planners.closed_loop import Guards, drive_passes
+from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 

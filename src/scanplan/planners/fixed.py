@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec, mean_distance
+from scanplan.quantities import PROBE_FAN_POINTS, ScanSpec, mean_distance
 from scanplan.sensor import LineProfilometer
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -36,7 +36,7 @@ class FixedPlanner:
     """
 
     probe_step_mm: float = 5.0
-    probe_points: int = 128
+    probe_points: int = PROBE_FAN_POINTS
     height_iterations: int = 3
     name: str = "fixed"
 

@@ -18,9 +18,9 @@ from torch import nn
 from scanplan.dynamics import PassDynamics, StepLimits
 from scanplan.env import observe
 from scanplan.part import Part
-from scanplan.planners.closed_loop import PLANNING_FAN_POINTS, Guards, drive_passes
+from scanplan.planners.closed_loop import Guards, drive_passes
 from scanplan.policy import load_policy
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
