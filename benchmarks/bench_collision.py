@@ -16,7 +16,8 @@ import fcl
 
 from scanplan.collision import CollisionChecker
 from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_path
+from scanplan.pipeline import plan_path
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import plan_swaths
 

@@ -19,10 +19,10 @@ import time
 
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
+from scanplan.pipeline import plan_views
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import LineProfilometer
-from scanplan.views import plan_views
 
 CONFIGS = {  # label: (planner, roll, raster)
     "geometric-v0": ("geometric", False, "nominal"),

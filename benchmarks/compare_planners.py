@@ -27,12 +27,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scanplan.cloud import simulate_cloud
-from scanplan.metrics import Metrics, evaluate, upward_visible_samples
+from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
+from scanplan.pipeline import plan_views
 from scanplan.planners import Planner, make_planner
 from scanplan.quantities import ScanSpec
+from scanplan.surface import upward_visible_samples
 from scanplan.trajectory import Trajectory
-from scanplan.views import plan_views
 
 PLANNERS: dict[str, tuple[str, bool, str]] = {  # label: (planner, roll, raster)
     "fixed": ("fixed", False, "nominal"),

@@ -13,9 +13,9 @@ from pathlib import Path
 
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_scan
+from scanplan.pipeline import plan_scan, plan_views
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
-from scanplan.views import plan_views
 
 PARTS = {  # file: units (PARTS.md)
     "tum_ardrone_quadrotor_4.stl": "m",

@@ -19,13 +19,12 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.dynamics import StepLimits
 from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import load_part
 from scanplan.parts import door
+from scanplan.pipeline import plan_views
 from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
-from scanplan.views import plan_views
+from scanplan.quantities import ScanSpec, StepLimits
 
 SLOPES_DEG = (0, 30, 45, 60, 90)
 WALL_BAND_MM = 2.0  # beyond the recess's smoothstep wall, each side

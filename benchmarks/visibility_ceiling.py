@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 from compare_views import PARTS  # the shared parts and their units (benchmarks/)
 
-from scanplan.metrics import hemisphere_visible_samples
 from scanplan.part import load_part
 from scanplan.quantities import ScanSpec
-from scanplan.views import VIEW_AXIS_MAX_TILT_DEG, oriented_normals
+from scanplan.surface import hemisphere_visible_samples, oriented_normals
+from scanplan.views import VIEW_AXIS_MAX_TILT_DEG
 
 
 def _unit_perpendicular(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -21,7 +21,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from scanplan.cli import app, progress_bar
+from scanplan.cli import app
+from scanplan.cli.common import progress_bar
 from scanplan.trajectory import Trajectory, write_csv
 
 runner = CliRunner()
@@ -182,7 +183,8 @@ def test_interrupted_write_leaves_no_file(files, tmp_path, monkeypatch, command)
 def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, monkeypatch):
     from scanplan.cloud import simulate_cloud
     from scanplan.part import load_part
-    from scanplan.planners import make_planner, plan_scan
+    from scanplan.pipeline import plan_scan
+    from scanplan.planners import make_planner
     from scanplan.quantities import ScanSpec
     from scanplan.trajectory import read_csv
 

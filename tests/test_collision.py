@@ -12,7 +12,8 @@ import trimesh
 from scanplan.collision import CollisionChecker
 from scanplan.metrics import evaluate
 from scanplan.part import Part, load_part
-from scanplan.planners import make_planner, plan_path
+from scanplan.pipeline import plan_path
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths

@@ -248,7 +248,8 @@ def test_sensor_spec_refuses_non_finite_and_implausible_values():
 
 
 def test_a_single_triangle_plate_loads_and_plans(tmp_path):
-    from scanplan.planners import make_planner, plan_path
+    from scanplan.pipeline import plan_path
+    from scanplan.planners import make_planner
     from scanplan.quantities import ScanSpec
     from scanplan.swaths import plan_swaths
 

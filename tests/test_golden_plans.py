@@ -23,7 +23,8 @@ import pytest
 from data.make_golden_plans import PARTS, PLANNERS, STRIDE
 from scanplan.collision import CollisionChecker
 from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_path
+from scanplan.pipeline import plan_path
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import plan_swaths
 

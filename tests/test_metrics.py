@@ -289,7 +289,8 @@ def test_the_table_leads_with_in_spec_coverage(plate):
 @pytest.mark.slow
 def test_door_in_spec_coverage_by_planner():
     from scanplan.part import load_part
-    from scanplan.planners import make_planner, plan_path
+    from scanplan.pipeline import plan_path
+    from scanplan.planners import make_planner
     from scanplan.swaths import plan_swaths
 
     door = load_part("door")

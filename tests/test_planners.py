@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from scanplan.dynamics import StepLimits, steps_between
+from scanplan.dynamics import steps_between
 from scanplan.metrics import evaluate
 from scanplan.part import load_part, part_from_mesh
-from scanplan.planners import plan_path
+from scanplan.pipeline import plan_path
 from scanplan.planners.fixed import FixedPlanner
 from scanplan.planners.geometric import GeometricPlanner
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import ScanSpec, StepLimits
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths
 

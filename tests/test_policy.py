@@ -18,6 +18,8 @@ from safetensors.torch import save_file
 from typer.testing import CliRunner
 
 from scanplan.cli import app
+from scanplan.learn.config import env_options
+from scanplan.observation import observation_size
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
 from scanplan.policy import (
     FORMAT,
@@ -27,7 +29,6 @@ from scanplan.policy import (
     TrainingRecord,
     build_actor,
     load_policy,
-    observation_size,
     save_policy,
 )
 
@@ -95,15 +96,15 @@ def test_round_trip_gives_identical_actor_outputs(saved):
 def test_observation_size_agrees_with_the_env(use_position, lookahead):
     from scanplan.env import SwathScanEnv
 
-    env = SwathScanEnv(use_position=use_position, lookahead=lookahead)
-    assert env.observation_space.shape == (observation_size(use_position, lookahead, 3),)
-    assert env.action_space.shape == (3,)
+    for roll in (False, True):
+        env = SwathScanEnv(use_position=use_position, lookahead=lookahead, roll=roll)
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == (observation_size(use_position, lookahead, roll),)
+        assert env.action_space.shape == (4 if roll else 3,)
     assert (
-        observation_size(use_position, lookahead, 4)
-        == observation_size(use_position, lookahead, 3) + 2
+        observation_size(use_position, lookahead, True)
+        == observation_size(use_position, lookahead, False) + 2
     )  # v1 adds φ and β
-    with pytest.raises(ValueError, match="action_dim"):
-        observation_size(use_position, lookahead, 2)
 
 
 def _one_line_error(path: Path, *fragments: str, named: Path | None = None) -> str:
@@ -265,9 +266,9 @@ def test_saving_checks_the_tensors_too(tmp_path):
         save_policy(state, meta, tmp_path)
     assert not (tmp_path / "policy.json").exists()
     with pytest.raises(ValueError, match="env options: env_option_that_does_not_exist"):
-        EnvOptions.from_env_kwargs({"env_option_that_does_not_exist": 1})
+        env_options({"env_option_that_does_not_exist": 1})
     # Options not given are recorded with the env's own defaults.
-    options = EnvOptions.from_env_kwargs({"fan_points": 64})
+    options = env_options({"fan_points": 64})
     assert options.use_position is True and options.noise is True and options.dy_max_mm is None
 
 

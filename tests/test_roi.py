@@ -9,12 +9,15 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
+from scanplan.bands import plan_adaptive_swaths
 from scanplan.cli import app
-from scanplan.metrics import evaluate, upward_visible_samples
+from scanplan.metrics import evaluate
 from scanplan.part import BodyTerm, BoxTerm, ConeTerm, parse_roi, part_from_mesh
-from scanplan.planners import make_planner, plan_scan
+from scanplan.pipeline import plan_scan
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
-from scanplan.swaths import plan_adaptive_swaths, plan_swaths
+from scanplan.surface import upward_visible_samples
+from scanplan.swaths import plan_swaths
 
 SPEC = ScanSpec()
 BLOCK_BOX = "box:-160,-110,50,160,110,70"  # around the block's top (z = 60)

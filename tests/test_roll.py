@@ -13,15 +13,16 @@ import trimesh
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-from scanplan.dynamics import StepLimits, apply_step, limit_action, progress_mm, track_rolled
+from scanplan.bands import plan_adaptive_swaths
+from scanplan.dynamics import apply_step, limit_action, progress_mm, track_rolled
 from scanplan.env import ENV_ID_ROLL, SwathScanEnv
 from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
-from scanplan.planners import plan_path
+from scanplan.pipeline import plan_path
 from scanplan.planners.feedback import FeedbackPlanner
 from scanplan.planners.geometric import GeometricPlanner
-from scanplan.quantities import ScanSpec
-from scanplan.swaths import Swath, plan_adaptive_swaths, plan_swaths
+from scanplan.quantities import ScanSpec, StepLimits
+from scanplan.swaths import Swath, plan_swaths
 
 WD = 400.0
 SPEC = ScanSpec()

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_path
+from scanplan.pipeline import plan_path
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths

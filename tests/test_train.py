@@ -13,7 +13,7 @@ import torch
 from safetensors.torch import load_file
 
 from scanplan.learn.checkpoint import save_checkpoint
-from scanplan.learn.config import TrainConfig
+from scanplan.learn.config import TrainConfig, env_options
 from scanplan.learn.train import train
 from scanplan.planners.rl import RLPlanner
 from scanplan.quantities import ScanSpec
@@ -297,9 +297,8 @@ def test_same_config_and_seed_train_bit_identical_weights(tmp_path):
 def test_step_limits_in_the_config_reach_the_envs_and_the_policy_file():
     import math
 
-    from scanplan.dynamics import StepLimits
     from scanplan.learn.vec_env import make_vec_env, swath_env_kwargs
-    from scanplan.policy import EnvOptions
+    from scanplan.quantities import StepLimits
 
     limits = {"dy_max_mm": 0.5, "dz_max_mm": 0.8, "dtheta_max_rad": math.radians(0.5)}
     env = {"fan_points": 32, "noise": False, "segment_mm": [20.0, 40.0], **limits}
@@ -309,7 +308,7 @@ def test_step_limits_in_the_config_reach_the_envs_and_the_policy_file():
     obs = vec.reset()
     assert obs.shape == (2, 7) and vec.action_space.shape == (3,)
     # What policy.json records gives the same env back (the rl planner's side).
-    recorded = EnvOptions.from_env_kwargs(env).env_kwargs()
+    recorded = env_options(env).env_kwargs()
     assert swath_env_kwargs(recorded)["limits"] == want
     assert "limits" not in swath_env_kwargs({"fan_points": 32})  # the env's defaults
 

@@ -12,20 +12,18 @@ from typer.testing import CliRunner
 
 from scanplan.cli import app
 from scanplan.collision import checker_for
-from scanplan.metrics import evaluate, hemisphere_visible_samples, upward_visible_samples
+from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
-from scanplan.planners import make_planner, plan_scan
-from scanplan.quantities import ScanSpec
+from scanplan.pipeline import default_views, order_views, plan_scan, plan_views
+from scanplan.planners import make_planner
+from scanplan.quantities import UP, ScanSpec
+from scanplan.surface import hemisphere_visible_samples, upward_visible_samples
 from scanplan.trajectory import read_json, read_trajectory, write_json
 from scanplan.views import (
-    UP,
     VIEW_AXIS_MAX_TILT_DEG,
     View,
     candidate_views,
-    default_views,
     depth_slabs,
-    order_views,
-    plan_views,
     segment_regions,
     view_axis,
 )
@@ -246,12 +244,12 @@ def test_the_door_inspects_its_skin_not_the_solid_sides():
 
 
 def test_a_view_no_clear_move_reaches_is_left_out_and_counted(monkeypatch):
-    import scanplan.views as views_module
+    import scanplan.pipeline as pipeline_module
 
     part = sloped_housing()
     plans, _ = plan_views(part, SPEC, make_planner("geometric"), "auto")
     assert len(plans) >= 3
-    real = views_module.view_transition
+    real = pipeline_module.view_transition
     calls = {"n": 0}
 
     def blocked_once(*args, **kwargs):
@@ -260,8 +258,8 @@ def test_a_view_no_clear_move_reaches_is_left_out_and_counted(monkeypatch):
             raise ValueError("no collision-free move between views")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(views_module, "view_transition", blocked_once)
-    kept, joined = views_module.join_views(part, plans, SPEC)
+    monkeypatch.setattr(pipeline_module, "view_transition", blocked_once)
+    kept, joined = pipeline_module.join_views(part, plans, SPEC)
     assert joined.meta["views_unreachable"] == 1
     assert len(kept) == len(plans) - 1 and [v.view.index for v in kept] == list(range(len(kept)))
     assert [v["index"] for v in joined.meta["views"]] == list(range(len(kept)))

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.dynamics import StepLimits, aligning_angles, probe_grid
-from scanplan.metrics import COVERAGE_MAX_SLOPE_DEG
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec
-from scanplan.swaths import Swath
+from scanplan.quantities import UP, ScanSpec, StepLimits
+from scanplan.shaping import PITCH_LEVER, ROLL_RATE, CentredLookahead, RobustLookahead
+from scanplan.surface import COVERAGE_MAX_SLOPE_DEG, aligning_angles, probe_grid
+from scanplan.swaths import DirectionRule, Swath, scan_direction, swaths_at
 
 
 @dataclass(frozen=True)
@@ -85,14 +85,12 @@ def in_spec_band(
     """The band around `centre_mm` where the surface would be in spec, per grid row, with the
     beam W_d from the centre point and aligned to the mean normal near it as far as the step
     limits allow, as the geometric planner shapes them: the pitch follows that normal along
-    the pass only at its `pitch_lever`/W_d rad per mm (its `RobustLookahead`), the roll at
-    its `roll_rate` Δφ_max per Δs_opt.
+    the pass only at `shaping.PITCH_LEVER`/W_d rad per mm (its `RobustLookahead`), the roll
+    at `shaping.ROLL_RATE` Δφ_max per Δs_opt.
     The pass's band is a robust envelope over the rows (`row_quantile` of the rows may be
     narrower: a local feature must not shrink a whole pass). `margin` scales both
     tolerances: tracking and noise leave less than the full tolerance. Columns without
     surface count as in spec (nothing there to measure)."""
-    from scanplan.planners.geometric import CentredLookahead, GeometricPlanner, RobustLookahead
-
     lim = limits or StepLimits()
 
     tol_d = margin * spec.tolerance_mm
@@ -116,11 +114,11 @@ def in_spec_band(
         pitch_c, roll_c = aligning_angles(n_c, u, v)
         pitch = np.interp(surface.along_mm, grid, pitch_c[rows])
         roll = np.interp(surface.along_mm, grid, roll_c[rows])
-        pitch = RobustLookahead().shape(surface.along_mm, pitch, GeometricPlanner.pitch_lever / wd)
+        pitch = RobustLookahead().shape(surface.along_mm, pitch, PITCH_LEVER / wd)
         roll = CentredLookahead().shape(
             surface.along_mm,
             roll,
-            GeometricPlanner.roll_rate * lim.dphi_max_rad / spec.delta_s_opt_mm,
+            ROLL_RATE * lim.dphi_max_rad / spec.delta_s_opt_mm,
         )
         # −z_s of those poses: from the surface towards the sensor (the normal, if aligned)
         frame = Swath(0, np.zeros(3), np.zeros(3), u, v)
@@ -215,3 +213,22 @@ def adaptive_offsets(
         chosen.append(best)
         covered |= cells[best]
     return [bands[i] for i in sorted(chosen)]
+
+
+def plan_adaptive_swaths(
+    part: Part,
+    spec: ScanSpec,
+    direction: str | np.ndarray | DirectionRule = "auto",
+    run_in_mm: float = 20.0,
+) -> list[Swath]:
+    """Passes that adapt to the surface (SPEC §3b): pass centres chosen so that their
+    predicted in-spec bands (`in_spec_band`) cover the surface (a greedy set cover,
+    `adaptive_offsets`); the band goes with the swath (`Swath.band_mm`) so planners
+    align the line to it. The direction rule is the nominal raster's ('auto': less
+    variation across the line): ranking the two directions by predicted in-spec coverage
+    picked the worse one on two of three real parts (benchmarks/compare_planners.py)."""
+    u = scan_direction(part, spec.sensor, direction)
+    bands = adaptive_offsets(top_surface(part, u, np.cross(UP, u)), spec)
+    offsets = [b.centre_mm for b in bands]
+    rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
+    return swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, adaptive=True)

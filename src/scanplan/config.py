@@ -142,12 +142,12 @@ class SensorFile(BaseModel):
         return replace(spec, body_min_mm=(x0, y0, z0), body_max_mm=(x1, y1, z1))
 
 
-def _first_error(path: Path, exc: ValidationError) -> str:
+def _first_error(what: str, exc: ValidationError) -> str:
     err = exc.errors()[0]
     # A union (noise: table | bool) names its branch in the location: drop those.
     parts = [str(p) for p in err["loc"] if p not in ("NoiseFile", "bool", "BodyFile")]
     where = ".".join(parts) or "file"
-    return f"sensor file {path}: {where}: {err['msg'].removeprefix('Value error, ')}"
+    return f"{what}: {where}: {err['msg'].removeprefix('Value error, ')}"
 
 
 def load_sensor(spec: str | Path) -> SensorSpec:
@@ -174,11 +174,47 @@ def load_sensor(spec: str | Path) -> SensorSpec:
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, yaml.YAMLError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(f"sensor file {path} cannot be parsed: {first}") from None
+    return sensor_from_datasheet(data, f"sensor file {path}")
+
+
+def sensor_datasheet(spec: SensorSpec) -> dict:
+    """The sensor as a sensor file would give it (datasheet units): what a plan file records,
+    read back by `sensor_from_datasheet` into the same sensor."""
+    data: dict = {
+        "name": spec.name,
+        "working_distance_mm": spec.working_distance_mm,
+        "z_range_mm": spec.z_range_mm,
+        "fov_deg": math.degrees(spec.fov_rad),
+        "points_per_profile": spec.points_per_profile,
+        "z_resolution_um": spec.z_resolution_mm * 1000,
+        "triangulation_angle_deg": math.degrees(spec.triangulation_angle_rad),
+        "camera_side": "+y" if spec.camera_side > 0 else "-y",
+        "incidence_cutoff_deg": math.degrees(spec.incidence_cutoff_rad),
+        "noise": False,
+    }
+    if spec.body_min_mm is not None and spec.body_max_mm is not None:
+        data["body"] = {
+            f"{axis}_mm": [float(spec.body_min_mm[i]), float(spec.body_max_mm[i])]
+            for i, axis in enumerate("xyz")
+        }
+    if spec.noise is not None:
+        data["noise"] = {
+            "sigma0_um": spec.noise.sigma0_mm * 1000,
+            "speckle_amplitude_um": spec.noise.speckle_amplitude_mm * 1000,
+            "speckle_scale_mm": spec.noise.speckle_scale_mm,
+            "seed": spec.noise.seed,
+        }
+    return data
+
+
+def sensor_from_datasheet(data: object, where: str) -> SensorSpec:
+    """A sensor from its datasheet values (as `sensor_datasheet` gives them, or a parsed
+    sensor file); ValueError naming `where` and the field."""
     if not isinstance(data, dict):
-        raise ValueError(f"sensor file {path}: expected a table of datasheet values")
+        raise ValueError(f"{where}: expected a table of datasheet values")
     try:
         return SensorFile.model_validate(data).to_spec()
     except ValidationError as exc:
-        raise ValueError(_first_error(path, exc)) from None
+        raise ValueError(_first_error(where, exc)) from None
     except ValueError as exc:  # SensorSpec's own checks
-        raise ValueError(f"sensor file {path}: {exc}") from None
+        raise ValueError(f"{where}: {exc}") from None

@@ -16,11 +16,11 @@ import numpy as np
 
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
+from scanplan.pipeline import plan_views
 from scanplan.planners import Planner, make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.report import Evaluated, write_report
 from scanplan.trajectory import Trajectory, to_csv_text
-from scanplan.views import plan_views
 
 PLANNER_ORDER = ("fixed", "geometric", "rl")
 

@@ -12,8 +12,7 @@ while the line tilts; pitch keeps the paper's pivot, the sensor origin.
 
 The Gymnasium environment is a thin wrapper over `PassDynamics`; the rl and feedback planners
 drive the same object with a controller, and the geometric planner uses the inverse
-(`steps_between`) and the tracker (`track`) to choose poses directly. `probe_line` is the
-one top-down CAD probe of "the surface under the line".
+(`steps_between`) and the tracker (`track`) to choose poses directly.
 """
 
 from __future__ import annotations
@@ -26,6 +25,7 @@ import numpy as np
 from scanplan.part import Part
 from scanplan.quantities import (
     ScanSpec,
+    StepLimits,
     advance,
     mean_distance,
     profile_angles,
@@ -34,33 +34,6 @@ from scanplan.quantities import (
 )
 from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath
-
-
-@dataclass(frozen=True)
-class StepLimits:
-    """The per-step limits (SPEC §4, §5): Δy along u (mm), Δz along z_s (mm), Δθ about x_s
-    (rad) and, with roll, Δφ about the scan direction (rad)."""
-
-    dy_max_mm: float = 1.0
-    dz_max_mm: float = 1.0
-    dtheta_max_rad: float = math.radians(1.0)
-    dphi_max_rad: float = math.radians(1.0)
-
-    def __post_init__(self) -> None:
-        for name in ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"step limit {name} must be a finite number > 0, got {value!r}")
-
-    @property
-    def array(self) -> np.ndarray:
-        """(Δy_max, Δz_max, Δθ_max), the scale of an action in [−1, 1]³."""
-        return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad])
-
-    @property
-    def array_roll(self) -> np.ndarray:
-        """(Δy_max, Δz_max, Δθ_max, Δφ_max), the scale of an action in [−1, 1]⁴."""
-        return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad, self.dphi_max_rad])
 
 
 def _towards(value: float, limit: float) -> tuple[float, float]:
@@ -204,65 +177,6 @@ def progress_mm(state: np.ndarray, wd_mm: float) -> float:
     looks W_d·sinθ behind itself; ending on the sensor's own advance would leave the end of the
     pass unscanned)."""
     return float(state[0] - wd_mm * math.sin(state[2]))  # with roll too: z_s·u = −sinθ
-
-
-# ---- the CAD under a pass -----------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class LineProbe:
-    """The CAD surface under a pass by vertical rays: k advances x c lateral columns.
-
-    hit: (k, c) bool; z_mm: (k, c) surface height (part frame; meaningless where no hit);
-    normals_up: (k, c, 3) face normals turned up (0 where no hit).
-    """
-
-    hit: np.ndarray
-    z_mm: np.ndarray
-    normals_up: np.ndarray
-
-
-def probe_line(
-    part: Part, swath: Swath, advances_mm: np.ndarray, lateral_mm: np.ndarray
-) -> LineProbe:
-    """Cast vertical rays at the given advances along u (from `swath.start_mm`) and lateral
-    offsets along v, from 10 mm above the part, in one batch. Of a part with a region of
-    interest, a ray whose first hit is not on it counts as no hit: the pass follows the ROI."""
-    return probe_grid(part, swath.start_mm, swath.u, swath.v, advances_mm, lateral_mm)
-
-
-def probe_grid(
-    part: Part,
-    origin: np.ndarray,
-    u: np.ndarray,
-    v: np.ndarray,
-    advances_mm: np.ndarray,
-    lateral_mm: np.ndarray,
-) -> LineProbe:
-    """`probe_line` on any horizontal grid: origin + a·u + l·v (the raster's own frame)."""
-    top = float(part.bounds[1, 2]) + 10.0
-    base = (
-        origin
-        + np.asarray(advances_mm)[:, None, None] * u
-        + np.asarray(lateral_mm)[None, :, None] * v
-    )
-    origins = base.reshape(-1, 3).copy()
-    origins[:, 2] = top
-    t, face, normals = part.ray_engine.cast_down(origins)
-    shape = (len(advances_mm), len(lateral_mm))
-    hit = (face >= 0) & part.inspect_mask[face]
-    return LineProbe(hit.reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
-
-
-def aligning_angles(normals: np.ndarray, u: np.ndarray, v: np.ndarray, roll: bool = True):
-    """The pitch θ and roll φ that turn the beam against `normals` (..., 3) in a swath frame
-    (u, v, up). With roll, beam = −normal gives sinθ = n_u, cosθ·sinφ = −n_v,
-    cosθ·cosφ = n_w (`Swath.poses`); without (the paper's model), the pitch that faces the
-    normal's projection on the u-w plane, and φ = 0."""
-    n_u, n_v, n_w = normals @ u, normals @ v, normals[..., 2]
-    if not roll:
-        return np.arctan2(n_u, np.maximum(n_w, 1e-9)), np.zeros_like(n_u)
-    return np.arctan2(n_u, np.hypot(n_v, n_w)), np.arctan2(-n_v, np.maximum(n_w, 1e-9))
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """The paper's RL environment (SPEC §5): one Boustrophedon pass per episode, PPO-ready.
 
 A thin `gym.Env` over the pass step model (`dynamics.PassDynamics`): this module adds what
-makes it an MDP — which pass an episode runs, the observation (`observe`, also what the rl
-planner feeds its policy), the reward (`reward.reward_terms`) and when an episode ends.
+makes it an MDP — which pass an episode runs, the observation (`observation.observe`, also
+what the rl planner feeds its policy), the reward (`reward.reward_terms`) and when an episode ends.
 """
 
 from __future__ import annotations
@@ -16,89 +16,25 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from scanplan.dynamics import (
-    PassDynamics,
-    StepLimits,
-    aligning_angles,
-    pass_geometry,
-    probe_line,
-    step_budget,
-)
-from scanplan.dynamics import (
-    Step as PassStep,
-)
-from scanplan.part import Part, part_from_mesh
-from scanplan.quantities import TRAINING_FAN_POINTS, ScanSpec
+from scanplan.dynamics import PassDynamics, pass_geometry, step_budget
+from scanplan.dynamics import Step as PassStep
+from scanplan.observation import OBS_LIMIT, observation_size, observe
+from scanplan.part import Part, load_part, part_from_mesh
+from scanplan.parts import heightfield_solid
+from scanplan.quantities import TRAINING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.reward import reward_terms
 from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, plan_swaths
 
 ENV_ID = "scanplan/SwathScan-v0"
 ENV_ID_ROLL = "scanplan/SwathScan-v1"
-OBS_LIMIT = 10.0  # every normalized observation is clipped to [-OBS_LIMIT, OBS_LIMIT]
-LOOKAHEAD_MM = (10.0, 30.0, 60.0, 120.0, 200.0)
 # The trainer's (learn.config) default too: 100-400 mm sub-segments of passes.
 TRAINING_SEGMENT_MM = (100.0, 400.0)
-_LOOKAHEAD_COLUMNS = 16
-
-
-def observation_size(use_position: bool, lookahead: bool, roll: bool = False) -> int:
-    """Entries of the observation (see `SwathScanEnv`): P, then θ, D, α, Δs, then φ, β with
-    roll, then look-ahead."""
-    return (3 if use_position else 0) + 4 + 2 * roll + (2 * len(LOOKAHEAD_MM) if lookahead else 0)
-
-
-def observe(
-    dyn: PassDynamics, start_state: np.ndarray, use_position: bool, lookahead: bool
-) -> np.ndarray:
-    """The normalized observation of a sensor on a pass (table in `SwathScanEnv`); φ and β
-    are added when `dyn.roll`."""
-    spec = dyn.spec
-    half = spec.half_range_mm
-    s, h, th = dyn.state[:3]
-    d = (dyn.d_mm - spec.working_distance_mm) / half if np.isfinite(dyn.d_mm) else 0.0
-    a = dyn.alpha_rad / spec.alpha_max_rad if np.isfinite(dyn.alpha_rad) else 0.0
-    ds = dyn.delta_s_mm / spec.delta_s_opt_mm if np.isfinite(dyn.delta_s_mm) else 1.0
-    obs = [th / spec.alpha_max_rad, d, a, ds]
-    if dyn.roll:
-        b = dyn.beta_rad / spec.alpha_max_rad if np.isfinite(dyn.beta_rad) else 0.0
-        obs += [dyn.state[3] / spec.alpha_max_rad, b]
-    if use_position:
-        # The paper's P; its lateral entry is 0 by construction (a pass moves in the u-w plane).
-        obs = [(s - start_state[0]) / 1000.0, 0.0, (h - start_state[1]) / half, *obs]
-    if lookahead:
-        obs += list(_lookahead_features(dyn))
-    return np.clip(np.asarray(obs, dtype=np.float32), -OBS_LIMIT, OBS_LIMIT)
-
-
-def _lookahead_features(dyn: PassDynamics) -> np.ndarray:
-    """From the CAD (planning is offline): mean surface height and the pitch that faces its
-    mean normal under the line at the footprint and at `LOOKAHEAD_MM` ahead; returned
-    relative to the footprint's height and to θ."""
-    th = dyn.state[2]
-    sw, spec = dyn.swath, dyn.spec
-    half_line = spec.sensor.line_width_mm / 2
-    foot = dyn.progress_mm  # the footprint's advance: where the beam meets W_d
-    ahead = foot + np.array((0.0, *LOOKAHEAD_MM))
-    lateral = np.linspace(-half_line, half_line, _LOOKAHEAD_COLUMNS)
-    probe = probe_line(dyn.part, sw, ahead, lateral)
-    hit = probe.hit
-    z = np.where(hit, probe.z_mm, 0.0).sum(1) / np.maximum(hit.sum(1), 1)
-    n_mean = probe.normals_up.sum(1)
-    pitch, _ = aligning_angles(n_mean, sw.u, sw.v, roll=False)
-    seen: np.ndarray = np.asarray(hit.any(axis=1))
-    z = np.where(seen, z, z[0] if seen[0] else 0.0)
-    pitch = np.where(seen, pitch, th)
-    dh = (z[1:] - z[0]) / spec.half_range_mm if seen[0] else 0 * z[1:]
-    dp = (pitch[1:] - th) / spec.alpha_max_rad
-    return np.concatenate([dh, dp])
 
 
 def random_part(rng: np.random.Generator) -> Part:
     """A procedural training part (beyond the paper): a heightfield strip of random flats,
     ramps (5-50°), steps, bumps and dips, with a random cross slope and waviness."""
-    from scanplan.parts import heightfield_solid
-
     length = float(rng.uniform(500.0, 1100.0))
     width = float(rng.uniform(100.0, 400.0))
     xs = np.linspace(-length / 2, length / 2, int(length / 2) + 1)
@@ -254,8 +190,6 @@ class SwathScanEnv(gym.Env):
         if self._fixed_parts is not None:
             parts = self._fixed_parts
         else:
-            from scanplan.part import load_part
-
             parts = [load_part("training-piece")]
         if self._fixed_swaths is not None:
             parts = parts[:1]

@@ -126,3 +126,50 @@ def plan_transition(
 
 def _turns(start: np.ndarray, end: np.ndarray) -> bool:
     return not np.allclose(start[:3, :3], end[:3, :3], atol=1e-9)
+
+
+def view_transition(
+    checker: CollisionChecker,
+    prev_pose: np.ndarray,
+    prev_axis: np.ndarray,
+    next_pose: np.ndarray,
+    next_axis: np.ndarray,
+    centre_mm: np.ndarray,
+    radius_mm: float,
+    clearance_mm: float,
+) -> np.ndarray:
+    """Non-scanning poses (k, 4, 4) from the last pose of one view to the first of the next,
+    ending on it, clear of the part by `clearance_mm` (`motion.plan_transition`: up, across
+    above the part, down). Where going straight up from a pose is not clear (a view under an
+    overhang), the move first backs out along the view's axis to the sphere of `radius_mm`
+    around the part and comes in the same way. Raises ValueError if neither is clear."""
+    try:
+        moves = plan_transition(checker, prev_pose, next_pose, clearance_mm)
+        return np.concatenate([moves, next_pose[None]])
+    except ValueError:
+        pass
+
+    def backed_out(pose: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        out = pose.copy()
+        p = pose[:3, 3] - centre_mm
+        b = float(p @ axis)
+        c = float(p @ p) - radius_mm**2
+        out[:3, 3] = pose[:3, 3] + max(0.0, -b + math.sqrt(max(b * b - c, 0.0))) * axis
+        return out
+
+    a, b = backed_out(prev_pose, prev_axis), backed_out(next_pose, next_axis)
+    moves = np.concatenate(
+        [
+            straight_move(prev_pose, a[:3, 3]),
+            plan_transition(checker, a, b, clearance_mm),
+            straight_move(b, next_pose[:3, 3]),
+        ]
+    )
+    report = checker.check(moves, clearance_mm)
+    if report.colliding.any():
+        where = moves[np.flatnonzero(report.colliding)[0], :3, 3]
+        raise ValueError(
+            f"no collision-free move between views: the sensor body comes within "
+            f"{clearance_mm:g} mm of the part at {np.round(where, 1).tolist()} mm"
+        )
+    return moves

@@ -17,6 +17,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic import model_validator as _model_validator
 from torch import nn
 
+from scanplan.observation import observation_size
+
 FORMAT: Literal["scanplan-policy/2"] = "scanplan-policy/2"
 POLICY_JSON = "policy.json"
 WEIGHTS = "policy.safetensors"
@@ -27,29 +29,10 @@ OBSERVATION = (
     "SwathScanEnv observation (see scanplan.env docstring): normalized P (if use_position), "
     "theta, D, alpha, delta-s (+ look-ahead if lookahead)"
 )
-# Observation layout of `SwathScanEnv` (tests/test_policy.py checks that both agree).
-POSITION_FEATURES = 3  # P relative to the pass start
-CORE_FEATURES = 4  # θ, D, α, Δs
-LOOKAHEAD_FEATURES = 10  # (Δh, slope) at 5 distances ahead
-ROLL_FEATURES = 2  # v1: φ and β
-
 StrictBool = Annotated[bool, Field(strict=True)]
 PositiveInt = Annotated[int, Field(strict=True, gt=0)]
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
-
-
-def observation_size(use_position: bool, lookahead: bool, action_dim: int = 3) -> int:
-    """Length of the env's observation for these options; action_dim 4 is the roll-capable
-    v1 env, whose state adds φ and β."""
-    if action_dim not in (3, 4):
-        raise ValueError(f"action_dim must be 3 or 4, got {action_dim}")
-    return (
-        (POSITION_FEATURES if use_position else 0)
-        + CORE_FEATURES
-        + (LOOKAHEAD_FEATURES if lookahead else 0)
-        + (ROLL_FEATURES if action_dim == 4 else 0)
-    )
 
 
 class _Model(BaseModel):
@@ -105,24 +88,6 @@ class EnvOptions(_Model):
         if v is not None and v[0] > v[1]:
             raise ValueError(f"[lo, hi] needs lo <= hi, got {list(v)}")
         return v
-
-    @classmethod
-    def from_env_kwargs(cls, kwargs: Mapping[str, Any]) -> EnvOptions:
-        """From `SwathScanEnv` keyword arguments; an option not given is recorded with the
-        env's own default (read from its signature, so no default is declared twice)."""
-        import inspect
-
-        from scanplan.env import SwathScanEnv
-
-        params = inspect.signature(SwathScanEnv.__init__).parameters
-        required = [k for k, f in cls.model_fields.items() if f.is_required()]
-        data = {k: params[k].default for k in required if k in params} | dict(kwargs)
-        if data.get("segment_mm") is not None:
-            data["segment_mm"] = tuple(data["segment_mm"])
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            raise ValueError(f"env options: {_first_error(exc)}") from None
 
     def env_kwargs(self) -> dict[str, Any]:
         """The options as `SwathScanEnv` keyword arguments (limits left out when None)."""
@@ -187,7 +152,7 @@ class PolicyMeta(_Model):
     @_model_validator(mode="after")
     def _consistent(self) -> PolicyMeta:
         arch, env = self.architecture, self.env
-        n = observation_size(env.use_position, env.lookahead, arch.action_dim)
+        n = observation_size(env.use_position, env.lookahead, roll=arch.action_dim == 4)
         if env.roll != (arch.action_dim == 4):
             raise ValueError(
                 f"env.roll {env.roll} does not match architecture.action_dim "
@@ -223,7 +188,7 @@ def build_actor(arch: Architecture | Mapping[str, Any]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
-def _first_error(exc: ValidationError) -> str:
+def first_error(exc: ValidationError) -> str:
     """One line: the field's dotted location and what is wrong with it."""
     err = exc.errors()[0]
     loc = ".".join(str(p) for p in err["loc"])
@@ -295,7 +260,7 @@ def read_meta(path: str | Path) -> tuple[Path, PolicyMeta]:
     try:
         return json_path, PolicyMeta.model_validate(data)
     except ValidationError as exc:
-        raise ValueError(f"policy {json_path}: {_first_error(exc)}") from None
+        raise ValueError(f"policy {json_path}: {first_error(exc)}") from None
     except RecursionError:
         raise ValueError(f"policy {json_path}: nested too deeply") from None
 

@@ -197,3 +197,30 @@ def advance(
     signed = np.sign(np.sum(d * u, axis=-1)) * np.linalg.norm(d, axis=-1)
     count = both.sum(axis=-1)
     return np.where(count > 0, signed.sum(axis=-1) / np.maximum(count, 1), np.nan)
+
+
+@dataclass(frozen=True)
+class StepLimits:
+    """The per-step limits (SPEC §4, §5): Δy along u (mm), Δz along z_s (mm), Δθ about x_s
+    (rad) and, with roll, Δφ about the scan direction (rad)."""
+
+    dy_max_mm: float = 1.0
+    dz_max_mm: float = 1.0
+    dtheta_max_rad: float = math.radians(1.0)
+    dphi_max_rad: float = math.radians(1.0)
+
+    def __post_init__(self) -> None:
+        for name in ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"step limit {name} must be a finite number > 0, got {value!r}")
+
+    @property
+    def array(self) -> np.ndarray:
+        """(Δy_max, Δz_max, Δθ_max), the scale of an action in [−1, 1]³."""
+        return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad])
+
+    @property
+    def array_roll(self) -> np.ndarray:
+        """(Δy_max, Δz_max, Δθ_max, Δφ_max), the scale of an action in [−1, 1]⁴."""
+        return np.array([self.dy_max_mm, self.dz_max_mm, self.dtheta_max_rad, self.dphi_max_rad])

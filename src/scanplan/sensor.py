@@ -205,6 +205,23 @@ class Scan:
     def __len__(self) -> int:
         return len(self.poses)
 
+    def on_faces(self, faces: np.ndarray) -> Scan:
+        """Only the points on `faces` ((f,) bool: a region of interest); a column that hits
+        another face reads as no hit, so every statistic of the scan is the region's."""
+        off = (self.face >= 0) & ~faces[np.maximum(self.face, 0)]
+        if not off.any():
+            return self
+        return Scan(
+            poses=self.poses,
+            z_sensor=np.where(off, np.nan, self.z_sensor),
+            x_sensor=np.where(off, np.nan, self.x_sensor),
+            points_part=np.where(off[..., None], np.nan, self.points_part),
+            true_z_sensor=np.where(off, np.inf, self.true_z_sensor),
+            normals_part=np.where(off[..., None], 0.0, self.normals_part),
+            face=np.where(off, -1, self.face),
+            status=np.where(off, PointStatus.NO_HIT, self.status).astype(self.status.dtype),
+        )
+
     def profile(self, i: int) -> Profile:
         return Profile(
             T_part_sensor=self.poses[i],

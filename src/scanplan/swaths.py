@@ -16,8 +16,9 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from scanplan.part import Part
-from scanplan.quantities import OVERLAP, UP, ScanSpec
+from scanplan.quantities import OVERLAP, UP
 from scanplan.sensor import SensorSpec
+from scanplan.surface import LineProbe, probe_grid
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,13 @@ class Swath:
         return frame_poses(
             self.start_mm, self.u, self.v, s_mm, h_mm, pitch_rad, roll_rad, lateral_mm
         )
+
+    def probe(self, part: Part, advances_mm: np.ndarray, lateral_mm: np.ndarray) -> LineProbe:
+        """The CAD under this pass: vertical rays at the given advances along u (from
+        `start_mm`) and lateral offsets along v, from 10 mm above the part, in one batch. Of a
+        part with a region of interest, a ray whose first hit is not on it counts as no hit:
+        the pass follows the ROI."""
+        return probe_grid(part, self.start_mm, self.u, self.v, advances_mm, lateral_mm)
 
     def to_swath_frame(self, T_part_sensor: np.ndarray) -> tuple[float, float, float]:
         """(s, h, theta) of a pose of this pass; inverse of `pose`."""
@@ -280,10 +288,10 @@ def plan_swaths(
     n_pass = 1 if span <= width else 1 + math.ceil((span - width) / step - 1e-9)
     centre = 0.5 * (across.max() + across.min())
     offsets = centre + (np.arange(n_pass) - (n_pass - 1) / 2) * step
-    return _swaths_at(part, sensor, u, offsets, [(-width / 2, width / 2)] * n_pass, run_in_mm)
+    return swaths_at(part, sensor, u, offsets, [(-width / 2, width / 2)] * n_pass, run_in_mm)
 
 
-def _swaths_at(
+def swaths_at(
     part: Part,
     sensor: SensorSpec,
     u: np.ndarray,
@@ -311,24 +319,3 @@ def _swaths_at(
         else:
             swaths.append(Swath(i, a, b, u, v, band))
     return swaths
-
-
-def plan_adaptive_swaths(
-    part: Part,
-    spec: ScanSpec,
-    direction: str | np.ndarray | DirectionRule = "auto",
-    run_in_mm: float = 20.0,
-) -> list[Swath]:
-    """Passes that adapt to the surface (SPEC §3b): pass centres chosen so that their
-    predicted in-spec bands (`bands.in_spec_band`) cover the surface (a greedy set cover,
-    `bands.adaptive_offsets`); the band goes with the swath (`Swath.band_mm`) so planners
-    align the line to it. The direction rule is the nominal raster's ('auto': less
-    variation across the line): ranking the two directions by predicted in-spec coverage
-    picked the worse one on two of three real parts (benchmarks/compare_planners.py)."""
-    from scanplan.bands import adaptive_offsets, top_surface
-
-    u = scan_direction(part, spec.sensor, direction)
-    bands = adaptive_offsets(top_surface(part, u, np.cross(UP, u)), spec)
-    offsets = [b.centre_mm for b in bands]
-    rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
-    return _swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, adaptive=True)

@@ -1,7 +1,9 @@
 """The Trajectory type every planner produces, and its CSV / JSON files.
 
-Poses are sensor poses in the part frame (`T_part_sensor`, millimetres). The CSV is the
-contract of SPEC §8: `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`.
+Poses are sensor poses in the part frame (`T_part_sensor`, millimetres). The CSV's columns
+are `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`; what the plan was made under (its context,
+its views) rides along: top-level keys of the JSON, `# key: <JSON>` comment lines above the
+CSV's header (which CSV tools skip as comments).
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.spatial.transform import Rotation
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
+# The records of `Trajectory.meta` a plan file carries (JSON-able values).
+FILE_RECORDS = ("context", "views")
+CSV_COMMENT = "#"
 
 
 @dataclass(frozen=True)
@@ -31,10 +36,9 @@ class Trajectory:
     scanning: (n,) bool, True where the sensor records profiles.
     plan_time_s: wall time the planner took.
     planner:  name of the planner that made it.
-    meta:     extra records; `meta["views"]` (a scan of several views, `views.join_views`):
-              per view its `axis` and its block of swath indices `first_swath..last_swath` —
-              the views' swaths are consecutive blocks, which is how a CSV (which has no
-              views column) is read back into views; the JSON carries the record.
+    meta:     extra records; those named in FILE_RECORDS go into the files: `context` (what
+              it was planned under, `context.PlanContext`) and `views` (per view its `axis`
+              and its block of swath indices `first_swath..last_swath`).
     """
 
     poses: np.ndarray
@@ -191,7 +195,12 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def to_csv_text(traj: Trajectory) -> str:
     q = traj.quaternions_wxyz
     p = traj.positions_mm
-    lines = [",".join(CSV_COLUMNS)]
+    lines = [
+        f"{CSV_COMMENT} {key}: {dumps_json(traj.meta[key])}"
+        for key in FILE_RECORDS
+        if traj.meta.get(key)
+    ]
+    lines.append(",".join(CSV_COLUMNS))
     for i in range(len(traj)):
         lines.append(
             f"{traj.swath[i]},{int(traj.scanning[i])},"
@@ -236,6 +245,8 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
     text = _read_text(path)
     lines = text.splitlines()
     numbers = [i for i, r in enumerate(lines, start=1) if r.strip()]
+    meta = _csv_records(path, lines, numbers)
+    numbers = [i for i in numbers if not lines[i - 1].lstrip().startswith(CSV_COMMENT)]
     if not numbers:
         raise ValueError(f"trajectory file {path} is empty")
     first = numbers[0]
@@ -294,7 +305,35 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
             "quaternion of zero length"
         )
     poses = poses_from_xyz_quat(values[:, 2:5], values[:, 5:9])
-    return Trajectory(poses=poses, swath=swath.astype(np.int64), scanning=values[:, 1] > 0.5)
+    planner = str(meta.get("context", {}).get("planner", "")) if meta.get("context") else ""
+    return Trajectory(
+        poses=poses,
+        swath=swath.astype(np.int64),
+        scanning=values[:, 1] > 0.5,
+        planner=planner,
+        meta=meta,
+    )
+
+
+def _csv_records(path: Path, lines: list[str], numbers: list[int]) -> dict[str, Any]:
+    """The `# key: <JSON>` lines above the header (FILE_RECORDS; other comments are free)."""
+    meta: dict[str, Any] = {}
+    for i in numbers:
+        line = lines[i - 1].lstrip()
+        if not line.startswith(CSV_COMMENT):
+            break
+        key, sep, value = line[len(CSV_COMMENT) :].partition(":")
+        if not sep or key.strip() not in FILE_RECORDS:
+            continue
+        try:
+            meta[key.strip()] = json.loads(value)
+        except (ValueError, RecursionError):
+            raise ValueError(
+                f"trajectory file {path} line {i}: the {key.strip()} record is not valid JSON"
+            ) from None
+    if "views" in meta:
+        meta["views"] = _validated_views(path, meta["views"])
+    return meta
 
 
 def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -> np.ndarray:
@@ -319,7 +358,7 @@ def to_json_dict(traj: Trajectory) -> dict:
         "part, x = along the laser line, y = scan direction)",
         "planner": traj.planner,
         "plan_time_s": traj.plan_time_s,
-        **({"views": traj.meta["views"]} if traj.meta.get("views") else {}),
+        **{key: traj.meta[key] for key in FILE_RECORDS if traj.meta.get(key)},
         "poses": [
             {
                 "swath": int(traj.swath[i]),
@@ -362,6 +401,7 @@ class _TrajectoryJson(BaseModel):
     model_config = ConfigDict(extra="ignore", strict=True)
     planner: str = ""
     plan_time_s: float = Field(0.0, ge=0, allow_inf_nan=False)
+    context: dict[str, Any] | None = None
     views: list[_ViewJson] | None = None
     poses: list[_PoseJson] = Field(min_length=1)
 
@@ -404,8 +444,21 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         np.array([p.scanning for p in model.poses], dtype=bool),
         plan_time_s=model.plan_time_s,
         planner=model.planner,
-        meta={"views": [v.model_dump() for v in model.views]} if model.views else {},
+        meta=(
+            ({"views": [v.model_dump() for v in model.views]} if model.views else {})
+            | ({"context": model.context} if model.context else {})
+        ),
     )
+
+
+def _validated_views(path: Path, views: object) -> list[dict]:
+    """A CSV's views record, checked as the JSON's is."""
+    if not isinstance(views, list):
+        raise ValueError(f"trajectory file {path}: the views record must be a JSON list")
+    try:
+        return [_ViewJson.model_validate(v).model_dump() for v in views]
+    except ValidationError as exc:
+        raise ValueError(f"trajectory file {path}: views: {_pydantic_where(exc)}") from None
 
 
 def read_trajectory(path: str | os.PathLike) -> Trajectory:

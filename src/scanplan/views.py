@@ -1,16 +1,15 @@
-"""Views and regions (SPEC §3b): the surface to inspect cut into regions by normal direction,
-a view (a top-view raster of the part rotated so the view's up is +Z) per region, and the
-greedy choice of views toward in-spec coverage.
+"""Views and regions, geometry only: the surface to inspect cut into regions by normal
+direction, and a view (a top-view raster of the part rotated so the view's up is +Z) per
+region. `pipeline` chooses among them and joins the chosen.
 
 A view is planned with the top-view machinery unchanged: the part is rotated by the view's
 R (the view's up axis to +Z), restricted to the region's faces as a region of interest, and
-planned with `plan_scan`; the poses come back as R⁻¹ @ T.
+planned as a top view; the poses come back as R⁻¹ @ T.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -19,55 +18,17 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.transform import Rotation
 
-from scanplan.collision import CollisionChecker, checker_for
 from scanplan.part import Part
-from scanplan.planners import Planner
-from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
+from scanplan.quantities import UP, ScanSpec
+from scanplan.surface import hemisphere_directions, oriented_normals
 from scanplan.trajectory import Trajectory
 
-VIEW_MODES = ("top", "auto")
-# The directions that define what the upper hemisphere sees (the surface `--views auto`
-# inspects, `metrics.hemisphere_visible_samples`): +Z and rings up to this tilt.
-HEMISPHERE_MAX_TILT_DEG = 75.0
 # A view's axis at most this far from +Z: a vertical wall is then seen 10° off its normal,
 # inside the 15° tolerance with room for tracking, and the sensor stays above it.
 VIEW_AXIS_MAX_TILT_DEG = 80.0
 # A region (and a view's slab) smaller than this share of the surface gets no view of its
 # own: it still counts in coverage, but a view for it would add nothing measurable.
 MIN_REGION_AREA_FRACTION = 0.005
-
-
-def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) -> np.ndarray:
-    """(k, 3) unit directions on the upper hemisphere: +Z and rings (tilt deg, count), each
-    ring's azimuths offset by half a step from the previous one. Default 28 directions."""
-    rings = rings or ((30.0, 6), (55.0, 9), (HEMISPHERE_MAX_TILT_DEG, 12))
-    out = [UP]
-    for i, (tilt, count) in enumerate(rings):
-        az = (np.arange(count) + 0.5 * (i % 2)) * 2 * math.pi / count
-        t = math.radians(tilt)
-        out.append(
-            np.stack(
-                [math.sin(t) * np.cos(az), math.sin(t) * np.sin(az), 0 * az + math.cos(t)], axis=1
-            )
-        )
-    return np.vstack(out)
-
-
-def oriented_normals(part: Part) -> np.ndarray:
-    """(f, 3) face normals pointing out of the part, towards where a sensor could be. A closed,
-    consistently wound mesh's own normals; otherwise (real CAD exports) each face's normal
-    is turned to the side from which a ray escapes the part (if both, upwards)."""
-    mesh = part.mesh
-    normals = np.asarray(part.ray_engine.face_normals)
-    if mesh.is_watertight and mesh.is_winding_consistent:
-        return normals * (1.0 if mesh.volume >= 0 else -1.0)
-    centre = np.asarray(mesh.triangles_center)
-    far = np.full(len(normals), 1e6)
-    eps = 1e-3 * float(np.linalg.norm(part.extents)) + 0.05
-    front = ~part.ray_engine.occluded(centre + eps * normals, normals, far)
-    back = ~part.ray_engine.occluded(centre - eps * normals, -normals, far)
-    flip = (back & ~front) | (back & front & (normals[:, 2] < 0))
-    return np.where(flip[:, None], -normals, normals)
 
 
 @dataclass(frozen=True)
@@ -179,80 +140,6 @@ class View:
         return replace(traj, poses=poses)
 
 
-def view_transition(
-    checker: CollisionChecker,
-    prev_pose: np.ndarray,
-    prev_axis: np.ndarray,
-    next_pose: np.ndarray,
-    next_axis: np.ndarray,
-    centre_mm: np.ndarray,
-    radius_mm: float,
-    clearance_mm: float,
-) -> np.ndarray:
-    """Non-scanning poses (k, 4, 4) from the last pose of one view to the first of the next,
-    ending on it, clear of the part by `clearance_mm` (`motion.plan_transition`: up, across
-    above the part, down). Where going straight up from a pose is not clear (a view under an
-    overhang), the move first backs out along the view's axis to the sphere of `radius_mm`
-    around the part and comes in the same way. Raises ValueError if neither is clear."""
-    from scanplan.motion import plan_transition, straight_move
-
-    try:
-        moves = plan_transition(checker, prev_pose, next_pose, clearance_mm)
-        return np.concatenate([moves, next_pose[None]])
-    except ValueError:
-        pass
-
-    def backed_out(pose: np.ndarray, axis: np.ndarray) -> np.ndarray:
-        out = pose.copy()
-        p = pose[:3, 3] - centre_mm
-        b = float(p @ axis)
-        c = float(p @ p) - radius_mm**2
-        out[:3, 3] = pose[:3, 3] + max(0.0, -b + math.sqrt(max(b * b - c, 0.0))) * axis
-        return out
-
-    a, b = backed_out(prev_pose, prev_axis), backed_out(next_pose, next_axis)
-    moves = np.concatenate(
-        [
-            straight_move(prev_pose, a[:3, 3]),
-            plan_transition(checker, a, b, clearance_mm),
-            straight_move(b, next_pose[:3, 3]),
-        ]
-    )
-    report = checker.check(moves, clearance_mm)
-    if report.colliding.any():
-        where = moves[np.flatnonzero(report.colliding)[0], :3, 3]
-        raise ValueError(
-            f"no collision-free move between views: the sensor body comes within "
-            f"{clearance_mm:g} mm of the part at {np.round(where, 1).tolist()} mm"
-        )
-    return moves
-
-
-def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
-    """The views in an order that keeps the moves between them short: the first (the top
-    view) stays first, the rest follow a travelling-salesman tour (networkx's threshold
-    accepting from a greedy tour, seeded) over the distance from one view's last pose to
-    the next one's first (averaged both ways: the tour is symmetric)."""
-    if len(plans) <= 2:
-        return list(plans)
-    import networkx as nx
-
-    first = np.stack([vp.traj.poses[0, :3, 3] for vp in plans])
-    last = np.stack([vp.traj.poses[-1, :3, 3] for vp in plans])
-    gap = np.linalg.norm(last[:, None] - first[None], axis=-1)
-    graph = nx.Graph()
-    for i in range(len(plans)):
-        for j in range(i + 1, len(plans)):
-            graph.add_edge(i, j, weight=0.5 * float(gap[i, j] + gap[j, i]))
-    tour = nx.approximation.threshold_accepting_tsp(graph, "greedy", seed=0)[:-1]
-    start = tour.index(0)
-    order = tour[start:] + tour[:start]
-    # Either direction around the tour: the one with the shorter directed moves.
-    reverse = [0] + order[1:][::-1]
-    cost = [sum(gap[a, b] for a, b in zip(o[:-1], o[1:], strict=True)) for o in (order, reverse)]
-    return [plans[i] for i in (order if cost[0] <= cost[1] else reverse)]
-
-
 @dataclass(frozen=True)
 class ViewPlan:
     """A view planned: its trajectory (part frame, swath indices from 0) and passes."""
@@ -336,198 +223,3 @@ def candidate_views(
         View.looking_along(axis, k + 1, faces)
         for k, (_, axis, faces) in enumerate(slabs[:max_candidates])
     ]
-
-
-@dataclass(frozen=True)
-class ViewSelection:
-    """The views chosen and their estimated in-spec coverage after each (`coverage`)."""
-
-    plans: list[ViewPlan]
-    coverage: list[float]
-    candidates: int
-
-
-def choose_views(
-    part: Part,
-    spec: ScanSpec,
-    plan: PlanView,
-    coverage_target: float = COVERAGE_TARGET,
-    min_gain: float = 0.01,
-    max_views: int = 16,
-    points_per_profile: int = VIEW_CHOICE_FAN_POINTS,
-    seed: int = 0,
-) -> ViewSelection:
-    """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
-    view first (the paper's raster; on a panel it is all there is), then, while in-spec
-    coverage is below `coverage_target`, the candidate view (`candidate_views`) that adds
-    the most, unless it adds less than `min_gain` (the "useful amount" of SPEC §3b: 1 % of
-    the surface). A panel whose top view reaches the target (the door) stays one view.
-    Weighing a view's gain against its profiles as well (at least a quarter of the top
-    view's in-spec share per profile) was tried and left out: it cost the machined parts
-    1-3 points of hemisphere coverage (`benchmarks/compare_views.py`) for views that each
-    add more than 1 %.
-
-    Each view's gain is estimated by evaluating its own trajectory alone on the whole part
-    with a sub-sampled fan. That is sound because a surface sample's in-spec state depends
-    only on the points of one pass (the in-spec test and the density rule look at a point,
-    its profile's columns and its neighbouring profiles of the same pass): the in-spec set
-    of several views is the union of their in-spec sets on the same (seeded) samples, so the
-    set cover is computed exactly on these sets, and a fan of 128 columns finds the same
-    samples (the search radius grows with the evaluated column pitch; density is judged on
-    the real sensor's columns). Candidates are tried largest possible gain first (their
-    region's area not yet in spec) and skipped once that bound is below the best gain found
-    (lazy greedy: a view's gain only shrinks as others are chosen)."""
-    from scanplan.metrics import SurfaceState, evaluate
-
-    def in_spec_set(vp: ViewPlan) -> np.ndarray:
-        m = evaluate(part, spec, vp.traj, seed, points_per_profile, visible="hemisphere")
-        assert m.coverage_map is not None
-        return m.coverage_map.state == SurfaceState.IN_SPEC
-
-    top = plan_view(part, View.looking_along(UP, 0), plan)
-    covered = in_spec_set(top)
-    plans, coverage = [top], [float(covered.mean())]
-    if coverage[-1] >= coverage_target:
-        return ViewSelection(plans, coverage, 0)
-    from scanplan.metrics import hemisphere_visible_samples
-
-    candidates = candidate_views(part, spec)
-    # The samples on each candidate's faces: the bound on its gain.
-    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
-    on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
-    evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
-    while len(plans) < max_views and coverage[-1] < coverage_target:
-        bounds = [float((m & ~covered).mean()) for m in on_faces]
-        best: tuple[float, int] | None = None
-        for i in np.argsort(bounds)[::-1]:
-            if bounds[i] < min_gain or (best is not None and bounds[i] <= best[0]):
-                break
-            if i not in evaluated:
-                try:
-                    vp = plan_view(part, replace(candidates[i], index=len(plans)), plan)
-                    evaluated[i] = (vp, in_spec_set(vp))
-                except ValueError:  # a view whose passes see nothing of the part
-                    on_faces[i] = np.zeros_like(on_faces[i])
-                    continue
-            gain = float((evaluated[i][1] & ~covered).mean())
-            if best is None or gain > best[0]:
-                best = (gain, int(i))
-        if best is None or best[0] < min_gain:
-            break
-        vp, cov = evaluated.pop(best[1])
-        on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
-        plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
-        covered |= cov
-        coverage.append(float(covered.mean()))
-    return ViewSelection(plans, coverage, len(candidates))
-
-
-def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
-    """The sample spacing `metrics.evaluate` uses with that fan (the same samples)."""
-    from scanplan.metrics import coverage_spacing_mm
-
-    return coverage_spacing_mm(spec.sensor.with_points(points_per_profile))
-
-
-def join_views(
-    part: Part, plans: list[ViewPlan], spec: ScanSpec
-) -> tuple[list[ViewPlan], Trajectory]:
-    """One trajectory: each view's swaths renumbered into a block of its own (view k's
-    swaths follow view k−1's), joined by `view_transition`s clear of the part by
-    `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
-    (first, last), which is how a CSV reader tells the views apart: a view is the block of
-    consecutive swaths whose scanning poses look along its axis. A view no clear move
-    reaches is left out and counted (`meta["views_unreachable"]`). Returns the views kept,
-    renumbered, and the trajectory."""
-    checker = checker_for(part, spec.sensor)
-    centre = 0.5 * (part.bounds[0] + part.bounds[1])
-    # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
-    reach = max(float(np.linalg.norm(vp.traj.positions_mm - centre, axis=1).max()) for vp in plans)
-    radius = max(0.5 * float(np.linalg.norm(part.extents)) + spec.clearance_mm, reach)
-    pieces: list[Trajectory] = []
-    views: list[dict] = []
-    kept: list[ViewPlan] = []
-    unreachable = 0
-    first = 0
-    prev_axis = plans[0].view.axis
-    for vp in plans:
-        traj = vp.traj
-        swath = traj.swath - traj.swath.min() + first
-        if pieces:
-            try:
-                moves = view_transition(
-                    checker,
-                    pieces[-1].poses[-1],
-                    prev_axis,
-                    traj.poses[0],
-                    vp.view.axis,
-                    centre,
-                    radius,
-                    spec.clearance_mm,
-                )[:-1]  # without the next view's first pose, which its trajectory holds
-            except ValueError:  # no clear way in: the scan goes on without this view
-                unreachable += 1
-                continue
-            pieces.append(Trajectory(moves, np.full(len(moves), first), np.zeros(len(moves), bool)))
-        pieces.append(replace(traj, swath=swath))
-        kept.append(replace(vp, view=replace(vp.view, index=len(kept))))
-        prev_axis = vp.view.axis
-        views.append(
-            {
-                "index": len(views),
-                "axis": [float(c) for c in vp.view.axis],
-                "first_swath": int(swath.min()),
-                "last_swath": int(swath.max()),
-                "passes": vp.passes,
-            }
-        )
-        first = int(swath.max()) + 1
-    out = Trajectory.concatenate(pieces)
-    meta = dict(out.meta)
-    meta["views"] = views
-    if unreachable:
-        meta["views_unreachable"] = unreachable
-    return kept, replace(out, meta=meta)
-
-
-def default_views(planner: Planner) -> str:
-    """`--views` when none is given: auto for a planner that rolls (as `--raster auto`
-    adapts its passes), top for the paper's pitch-only planners and a v0 policy, so the
-    baselines stay the paper's single raster."""
-    return "auto" if planner.roll else "top"
-
-
-def plan_views(
-    part: Part,
-    spec: ScanSpec,
-    planner: Planner,
-    views: str | None = None,
-    coverage_target: float = COVERAGE_TARGET,
-    raster: str = "auto",
-    direction: str = "auto",
-    overlap: float = OVERLAP,
-) -> tuple[list[ViewPlan], Trajectory]:
-    """Plan a scan by views: 'top' the paper's single top raster, 'auto' `choose_views`,
-    None the planner's default (`default_views`);
-    each view is planned by `planners.plan_scan` (raster, direction, overlap as there) on
-    the rotated part. Returns the views and the joined trajectory (`join_views`; its plan
-    time: the whole choice)."""
-    from scanplan.planners import plan_scan
-
-    views = default_views(planner) if views is None else views
-    if views not in VIEW_MODES:
-        raise ValueError(f"unknown --views {views!r}; use top or auto")
-    if not 0.0 < coverage_target <= 1.0:
-        raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
-
-    def plan(view_part: Part) -> tuple[int, Trajectory]:
-        swaths, traj = plan_scan(view_part, spec, planner, raster, direction, overlap)
-        return len(swaths), traj
-
-    start = time.perf_counter()
-    if views == "top":
-        plans = [plan_view(part, View.looking_along(UP, 0), plan)]
-    else:
-        plans = choose_views(part, spec, plan, coverage_target).plans
-    plans, traj = join_views(part, order_views(plans), spec)
-    return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.part import load_part
-from scanplan.planners import make_planner, plan_path
+from scanplan.pipeline import plan_path
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import plan_swaths
 

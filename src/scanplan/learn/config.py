@@ -4,11 +4,16 @@
 
 from __future__ import annotations
 
+import inspect
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from scanplan.env import TRAINING_SEGMENT_MM
+from pydantic import ValidationError
+
+from scanplan.env import TRAINING_SEGMENT_MM, SwathScanEnv
+from scanplan.policy import EnvOptions, first_error
 from scanplan.quantities import TRAINING_FAN_POINTS
 
 VEC_ENVS = ("batched", "subproc")
@@ -155,3 +160,18 @@ def recipe_config(
         progress_bar=progress_bar,
         command=command,
     )
+
+
+def env_options(kwargs: Mapping[str, Any]) -> EnvOptions:
+    """The policy file's record of `SwathScanEnv` keyword arguments; an option not given is
+    recorded with the env's own default (read from its signature, so no default is declared
+    twice)."""
+    params = inspect.signature(SwathScanEnv.__init__).parameters
+    required = [k for k, f in EnvOptions.model_fields.items() if f.is_required()]
+    data = {k: params[k].default for k in required if k in params} | dict(kwargs)
+    if data.get("segment_mm") is not None:
+        data["segment_mm"] = tuple(data["segment_mm"])
+    try:
+        return EnvOptions.model_validate(data)
+    except ValidationError as exc:
+        raise ValueError(f"env options: {first_error(exc)}") from None

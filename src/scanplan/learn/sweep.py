@@ -165,7 +165,8 @@ def run_task(
     (torch runs on one thread while training)."""
     from scanplan.metrics import evaluate
     from scanplan.part import load_part
-    from scanplan.planners import make_planner, plan_scan
+    from scanplan.pipeline import plan_scan
+    from scanplan.planners import make_planner
     from scanplan.quantities import ScanSpec
 
     timesteps, wall, cpu, policy_dir = 0, 0.0, 0.0, ""

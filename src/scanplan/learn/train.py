@@ -22,12 +22,11 @@ from scanplan.learn.checkpoint import (
     resumed_config,
     save_checkpoint,
 )
-from scanplan.learn.config import TrainConfig
+from scanplan.learn.config import TrainConfig, env_options
 from scanplan.policy import FORMAT as POLICY_FORMAT
 from scanplan.policy import (
     WEIGHTS,
     Architecture,
-    EnvOptions,
     PolicyMeta,
     TrainingRecord,
     save_policy,
@@ -78,7 +77,7 @@ def policy_meta(model: Any, config: TrainConfig, training: dict[str, Any]) -> Po
             activation=config.activation,  # type: ignore[arg-type]
             action_dim=int(model.action_space.shape[0]),
         ),
-        env=EnvOptions.from_env_kwargs(config.env),
+        env=env_options(config.env),
         training=TrainingRecord.model_validate(training),
     )
 
@@ -167,7 +166,7 @@ def train(config: TrainConfig) -> TrainResult:
     if config.resume:
         ckpt = load_checkpoint(latest_checkpoint(config.resume))
         config = resumed_config(ckpt, config)
-    EnvOptions.from_env_kwargs(config.env)  # fail before training, not when saving
+    env_options(config.env)  # fail before training, not when saving
     out = Path(config.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     log_csv = out / PROGRESS_CSV

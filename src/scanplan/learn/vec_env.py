@@ -19,10 +19,10 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from scanplan.dynamics import StepLimits
 from scanplan.env import SwathScanEnv, random_part
 from scanplan.learn.config import TrainConfig
 from scanplan.part import Part, load_part
+from scanplan.quantities import StepLimits
 
 _LIMIT_FIELDS = tuple(f.name for f in dataclasses.fields(StepLimits))
 

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.dynamics import PassDynamics, Step, StepLimits, pass_geometry, step_budget
+from scanplan.dynamics import PassDynamics, Step, pass_geometry, step_budget
 from scanplan.part import Part
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import ScanSpec, StepLimits
 from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, frame_poses
 from scanplan.trajectory import Trajectory

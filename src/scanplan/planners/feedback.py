@@ -13,7 +13,7 @@ import numpy as np
 from scanplan.dynamics import PassDynamics
 from scanplan.part import Part
 from scanplan.planners.closed_loop import Guards, drive_passes
-from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec
+from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
@@ -58,6 +58,7 @@ class FeedbackPlanner:
     fan_points: int = PLANNING_FAN_POINTS
     guards: Guards = field(default_factory=Guards)
     roll: bool = False
+    limits: StepLimits = field(default_factory=StepLimits)
     name: str = "feedback"
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
@@ -73,5 +74,6 @@ class FeedbackPlanner:
             self.name,
             fan_points=self.fan_points,
             guards=self.guards,
+            limits=self.limits,
             roll=self.roll,
         )

@@ -7,12 +7,12 @@ the mean of the profiles' D (`quantities.mean_distance`) equals W_d.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from scanplan.part import Part
-from scanplan.quantities import PROBE_FAN_POINTS, ScanSpec, mean_distance
+from scanplan.quantities import PROBE_FAN_POINTS, ScanSpec, StepLimits, mean_distance
 from scanplan.sensor import LineProfilometer
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -39,6 +39,8 @@ class FixedPlanner:
     probe_points: int = PROBE_FAN_POINTS
     height_iterations: int = 3
     name: str = "fixed"
+    # Recorded with its plans like any planner's; a straight pass takes no step to limit.
+    limits: StepLimits = field(default_factory=StepLimits)
 
     @property
     def roll(self) -> bool:

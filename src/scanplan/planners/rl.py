@@ -15,12 +15,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from scanplan.dynamics import PassDynamics, StepLimits
-from scanplan.env import observe
+from scanplan.dynamics import PassDynamics
+from scanplan.observation import observe
 from scanplan.part import Part
 from scanplan.planners.closed_loop import Guards, drive_passes
 from scanplan.policy import load_policy
-from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec
+from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
@@ -35,7 +35,7 @@ _LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad")
 @dataclass
 class RLPlanner:
     """The deterministic actor in the loop of `closed_loop.drive_passes` on each swath
-    (noiseless sensor): the observation is the env's (`env.observe`, with the options the
+    (noiseless sensor): the observation is the env's (`observation.observe`, with the options the
     policy was trained with), every station of the pass becomes a scanning pose.
 
     fan_points: columns of the planning sensor (`closed_loop.PLANNING_FAN_POINTS`).

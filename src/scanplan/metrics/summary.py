@@ -1,0 +1,202 @@
+"""What `evaluate` reports: the summary of one trajectory's simulated scan, the in-spec map
+of the surface to inspect, and the definitions the JSON carries beside the figures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+from scanplan.cloud import PointCloud
+from scanplan.surface import COVERAGE_MAX_SLOPE_DEG
+from scanplan.trajectory import json_safe
+
+COVERAGE_DEFINITION = (
+    "fraction of the part's upward-visible area sampled by valid points: the surface is "
+    "sampled uniformly by area (seeded); a sample is upward-visible if its face is within "
+    f"{COVERAGE_MAX_SLOPE_DEG:.0f} deg of horizontal and a vertical ray from it escapes the part "
+    "(what a top-down raster can possibly see); it is covered if a valid measured point lies "
+    "within `coverage_radius_mm` of it (about the spacing of the measured columns)"
+)
+IN_SPEC_COVERAGE_DEFINITION = (
+    "fraction of the same upward-visible area samples that have, within `in_spec_radius_mm`, "
+    "a measured point that is valid, has |z_s - W_d| <= tol_d and alpha_i <= tol_alpha "
+    "(`tolerance`), and lies where the real scan samples the surface at least once per "
+    "(2 delta_s_opt)^2: on the surface, at the point's distance, the real sensor's spacing is "
+    "<= 2 delta_s_opt both along the pass (the column's displacement to its neighbouring "
+    "profiles of the pass, the larger of the two) and across it (the real sensor's column "
+    "pitch, not the evaluation's sub-sampled fan). The radius is half the diagonal of a cell "
+    "2 delta_s_opt long and one evaluated column pitch wide (at the far tolerance depth and "
+    "tilt), so a sub-sampled fan still reaches every sample between its columns, while "
+    "profiles sparser than 2 delta_s_opt fail however wide the radius"
+)
+CYCLE_TIME_ASSUMPTIONS = (
+    "one profile per station at the sensor's profile rate (scan speed = rate x spacing); "
+    "non-scanning moves at the travel speed along straight segments; no acceleration or "
+    "settling time"
+)
+
+
+class SurfaceState(IntEnum):
+    """What the scan did to one sample of the surface to inspect."""
+
+    UNSEEN = 0  # no valid point near it
+    OUT_OF_SPEC = 1  # seen, but by no in-spec point (distance, angle or density)
+    IN_SPEC = 2
+
+
+@dataclass(frozen=True)
+class CoverageMap:
+    """The in-spec map: area-uniform samples of the surface to inspect and their state.
+
+    points_part: (k, 3) float64, mm.  state: (k,) int8, a `SurfaceState` per sample.
+    """
+
+    points_part: np.ndarray
+    state: np.ndarray
+
+    def fraction(self, state: SurfaceState) -> float:
+        return float((self.state == state).mean()) if len(self.state) else 0.0
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """SPEC §7 summary of one trajectory's simulated scan. Lengths mm, angles degrees.
+
+    Distance error per point: z_s − W_d; orientation error per point: α_i = acos(−z_s·n_i).
+    Spacing: Δs (`quantities.advance`) between consecutive profiles of the same pass;
+    `pairs_without_overlap` pairs share no valid column and are left out of the spacing stats.
+    Rewards: per step (a profile and its predecessor in the pass), `reward.reward_terms`.
+    Coverage: see `COVERAGE_DEFINITION`; in-spec coverage (the headline figure): see
+    `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg` and at
+    least one point per `in_spec_cell_mm`² (2·Δs_opt).
+    Cycle time: see `CYCLE_TIME_ASSUMPTIONS`; split into scanning (profiles at the profile
+    rate) and moving (the rest of the path at the travel speed).
+    Collisions (every pose, scanning or not; `collision.CollisionChecker`): poses whose sensor
+    body comes closer to the part than `clearance_mm`, those touching it (0 mm), and the
+    deepest penetration.
+    `cloud`: a bounded sample of the valid points with their errors, for the maps;
+    `coverage_map`: the surface samples and their `SurfaceState`, for the in-spec map.
+    """
+
+    part: str
+    planner: str
+    sensor: str
+    profiles: int
+    points_per_profile: int
+    valid_fraction: float
+    in_range_fraction: float
+    distance_error_mean_abs_mm: float
+    distance_error_rms_mm: float
+    distance_error_p95_abs_mm: float
+    distance_error_mean_mm: float
+    profile_distance_error_mean_abs_mm: float
+    orientation_error_mean_deg: float
+    orientation_error_p95_deg: float
+    spacing_mean_mm: float
+    spacing_cv: float
+    spacing_max_gap_mm: float
+    backward_steps: int
+    spacing_pairs: int
+    pairs_without_overlap: int
+    coverage_fraction: float
+    coverage_radius_mm: float
+    surface: str
+    visible_area_mm2: float
+    in_spec_coverage: float
+    in_spec_radius_mm: float
+    in_spec_cell_mm: float
+    tolerance_mm: float
+    tolerance_deg: float
+    path_length_mm: float
+    scan_length_mm: float
+    move_length_mm: float
+    cycle_time_s: float
+    scan_time_s: float
+    move_time_s: float
+    profile_rate_hz: float
+    travel_speed_mm_s: float
+    plan_time_s: float
+    eval_time_s: float
+    reward_mean: float
+    r_d_mean: float
+    r_alpha_mean: float
+    r_delta_s_mean: float
+    collisions_count: int
+    collisions_touching: int
+    worst_penetration_mm: float
+    clearance_mm: float
+    cloud: PointCloud | None = field(default=None, repr=False, compare=False)
+    coverage_map: CoverageMap | None = field(default=None, repr=False, compare=False)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The SPEC §8 keys (and more): plain floats and ints, None where a number is not
+        finite, so `json.dumps(..., allow_nan=False)` always succeeds."""
+        return json_safe(
+            {
+                "part": self.part,
+                "planner": self.planner,
+                "sensor": self.sensor,
+                "profiles": self.profiles,
+                "points_per_profile": self.points_per_profile,
+                "in_spec_coverage": self.in_spec_coverage,
+                "tolerance": {"mm": self.tolerance_mm, "deg": self.tolerance_deg},
+                "in_spec_definition": IN_SPEC_COVERAGE_DEFINITION,
+                "in_spec_radius_mm": self.in_spec_radius_mm,
+                "in_spec_cell_mm": self.in_spec_cell_mm,
+                "distance_error_mm": {
+                    "mean_abs": self.distance_error_mean_abs_mm,
+                    "rms": self.distance_error_rms_mm,
+                    "p95_abs": self.distance_error_p95_abs_mm,
+                    "mean": self.distance_error_mean_mm,
+                    "profile_mean_abs": self.profile_distance_error_mean_abs_mm,
+                },
+                "orientation_error_deg": {
+                    "mean": self.orientation_error_mean_deg,
+                    "p95": self.orientation_error_p95_deg,
+                },
+                "in_range_fraction": self.in_range_fraction,
+                "valid_fraction": self.valid_fraction,
+                "coverage_fraction": self.coverage_fraction,
+                "coverage_definition": COVERAGE_DEFINITION,
+                "coverage_radius_mm": self.coverage_radius_mm,
+                "surface": {"name": self.surface, "area_mm2": self.visible_area_mm2},
+                "visible_area_mm2": self.visible_area_mm2,
+                "spacing_mm": {
+                    "mean": self.spacing_mean_mm,
+                    "cv": self.spacing_cv,
+                    "max_gap": self.spacing_max_gap_mm,
+                    "backward_steps": self.backward_steps,
+                    "pairs": self.spacing_pairs,
+                    "pairs_without_overlap": self.pairs_without_overlap,
+                },
+                "path_length_mm": self.path_length_mm,
+                "scan_length_mm": self.scan_length_mm,
+                "move_length_mm": self.move_length_mm,
+                "cycle_time_s": self.cycle_time_s,
+                "scan_time_s": self.scan_time_s,
+                "move_time_s": self.move_time_s,
+                "cycle_time_assumptions": {
+                    "profile_rate_hz": self.profile_rate_hz,
+                    "travel_speed_mm_s": self.travel_speed_mm_s,
+                    "model": CYCLE_TIME_ASSUMPTIONS,
+                },
+                "plan_time_s": self.plan_time_s,
+                "eval_time_s": self.eval_time_s,
+                "reward": {
+                    "mean": self.reward_mean,
+                    "r_d": self.r_d_mean,
+                    "r_alpha": self.r_alpha_mean,
+                    "r_delta_s": self.r_delta_s_mean,
+                },
+                "collisions": {
+                    "count": self.collisions_count,
+                    "count_touching": self.collisions_touching,
+                    "worst_penetration_mm": self.worst_penetration_mm,
+                    "clearance_mm": self.clearance_mm,
+                },
+            }
+        )

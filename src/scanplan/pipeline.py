@@ -1,0 +1,359 @@
+"""Plan a part, from its surface to one trajectory: choose the views, lay out each view's
+raster, plan every pass, drop what would collide, join passes and views with clear moves.
+The one module that knows views, planners and metrics together; each stage below it knows
+only its own.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from functools import partial
+
+import networkx as nx
+import numpy as np
+
+from scanplan.bands import plan_adaptive_swaths
+from scanplan.collision import checker_for
+from scanplan.context import PlanContext
+from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
+from scanplan.motion import plan_transition, view_transition
+from scanplan.part import Part
+from scanplan.planners import Planner, pass_workers
+from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
+from scanplan.surface import hemisphere_visible_samples
+from scanplan.swaths import Swath, plan_swaths
+from scanplan.trajectory import Trajectory
+from scanplan.views import PlanView, View, ViewPlan, candidate_views, plan_view
+
+RASTERS = ("auto", "adaptive", "nominal")
+
+
+def plan_path(
+    part: Part,
+    spec: ScanSpec,
+    planner: Planner,
+    swaths: list[Swath],
+    progress: Callable[[int, int], None] | None = None,
+) -> Trajectory:
+    """All passes in snake order, joined by non-scanning transitions that keep the sensor
+    body `spec.clearance_mm` from the part (SPEC §3b).
+
+    A scanning pose whose body would come closer than the clearance is not emitted: the pass
+    is cut there and its pieces are joined like passes (lift over, descend).
+    meta["collisions_dropped"] counts the dropped poses. progress(done, total) is called
+    after each pass (a caller's progress bar).
+    """
+    if not swaths:
+        raise ValueError("no swath to plan")
+    start = time.perf_counter()
+    checker = checker_for(part, spec.sensor)
+    pieces: list[Trajectory] = []
+    dropped = 0
+    last_pose: np.ndarray | None = None
+    # Passes are independent: planned all in one call by a planner that steps them together
+    # (`plan_passes`, the closed loop), else on `pass_workers` threads; taken in order.
+    plan_passes = getattr(planner, "plan_passes", None)
+    pool = ThreadPoolExecutor(max_workers=pass_workers(planner, len(swaths)))
+    try:
+        if plan_passes is not None:
+            jobs = [_done(t) for t in plan_passes(part, swaths, spec)]
+        else:
+            jobs = [pool.submit(planner.plan, part, swath, spec) for swath in swaths]
+        for i, (swath, job) in enumerate(zip(swaths, jobs, strict=True)):
+            planned = job.result()
+            colliding = checker.check(planned.poses, spec.clearance_mm).colliding
+            dropped += int(colliding.sum())
+            for k, run in enumerate(_runs(~colliding)):
+                poses = planned.poses[run]
+                if last_pose is not None:
+                    moves = plan_transition(checker, last_pose, poses[0], spec.clearance_mm)
+                    pieces.append(
+                        Trajectory(
+                            moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool)
+                        )
+                    )
+                pieces.append(
+                    Trajectory(
+                        poses,
+                        planned.swath[run],
+                        planned.scanning[run],
+                        meta=planned.meta if k == 0 else {},  # the pass's counters once
+                    )
+                )
+                last_pose = poses[-1]
+            if progress is not None:
+                progress(i + 1, len(swaths))
+    finally:
+        pool.shutdown(cancel_futures=True)
+    if not pieces:
+        raise ValueError(
+            f"every scanning pose on part {part.name} brings the sensor body within "
+            f"{spec.clearance_mm:g} mm of the part"
+        )
+    traj = Trajectory.concatenate(pieces, planner=planner.name)
+    return Trajectory(
+        traj.poses,
+        traj.swath,
+        traj.scanning,
+        plan_time_s=time.perf_counter() - start,
+        planner=planner.name,
+        meta={**traj.meta, "collisions_dropped": dropped},
+    )
+
+
+def _done(result: Trajectory) -> Future[Trajectory]:
+    """A future that already holds `result`."""
+    future: Future[Trajectory] = Future()
+    future.set_result(result)
+    return future
+
+
+def _runs(keep: np.ndarray) -> list[slice]:
+    """The maximal runs of True in `keep`, as slices."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], keep.astype(np.int8), [0]])))
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def plan_scan(
+    part: Part,
+    spec: ScanSpec,
+    planner: Planner,
+    raster: str = "auto",
+    direction: str = "auto",
+    overlap: float = OVERLAP,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[list[Swath], Trajectory]:
+    """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral
+    step = line width x (1 − overlap)); 'adaptive' spaces passes by the band of the line that
+    stays in spec (SPEC §3b) — it assumes the line rolls with the surface; 'auto' takes
+    adaptive for a planner that rolls, else nominal."""
+    if raster not in RASTERS:
+        raise ValueError(f"unknown raster {raster!r}; use one of {', '.join(RASTERS)}")
+    if raster == "adaptive" or (raster == "auto" and planner.roll):
+        swaths = plan_adaptive_swaths(part, spec, direction)
+    else:
+        swaths = plan_swaths(part, spec.sensor, direction, overlap)
+    return swaths, plan_path(part, spec, planner, swaths, progress)
+
+
+def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
+    """The views in an order that keeps the moves between them short: the first (the top
+    view) stays first, the rest follow a travelling-salesman tour (networkx's threshold
+    accepting from a greedy tour, seeded) over the distance from one view's last pose to
+    the next one's first (averaged both ways: the tour is symmetric)."""
+    if len(plans) <= 2:
+        return list(plans)
+    first = np.stack([vp.traj.poses[0, :3, 3] for vp in plans])
+    last = np.stack([vp.traj.poses[-1, :3, 3] for vp in plans])
+    gap = np.linalg.norm(last[:, None] - first[None], axis=-1)
+    graph = nx.Graph()
+    for i in range(len(plans)):
+        for j in range(i + 1, len(plans)):
+            graph.add_edge(i, j, weight=0.5 * float(gap[i, j] + gap[j, i]))
+    tour = nx.approximation.threshold_accepting_tsp(graph, "greedy", seed=0)[:-1]
+    start = tour.index(0)
+    order = tour[start:] + tour[:start]
+    # Either direction around the tour: the one with the shorter directed moves.
+    reverse = [0] + order[1:][::-1]
+    cost = [sum(gap[a, b] for a, b in zip(o[:-1], o[1:], strict=True)) for o in (order, reverse)]
+    return [plans[i] for i in (order if cost[0] <= cost[1] else reverse)]
+
+
+@dataclass(frozen=True)
+class ViewSelection:
+    """The views chosen and their estimated in-spec coverage after each (`coverage`)."""
+
+    plans: list[ViewPlan]
+    coverage: list[float]
+    candidates: int
+
+
+def choose_views(
+    part: Part,
+    spec: ScanSpec,
+    plan: PlanView,
+    coverage_target: float = COVERAGE_TARGET,
+    min_gain: float = 0.01,
+    max_views: int = 16,
+    points_per_profile: int = VIEW_CHOICE_FAN_POINTS,
+    seed: int = 0,
+) -> ViewSelection:
+    """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
+    view first (the paper's raster; on a panel it is all there is), then, while in-spec
+    coverage is below `coverage_target`, the candidate view (`candidate_views`) that adds
+    the most, unless it adds less than `min_gain` (the "useful amount" of SPEC §3b: 1 % of
+    the surface). A panel whose top view reaches the target (the door) stays one view.
+    Weighing a view's gain against its profiles as well (at least a quarter of the top
+    view's in-spec share per profile) was tried and left out: it cost the machined parts
+    1-3 points of hemisphere coverage (`benchmarks/compare_views.py`) for views that each
+    add more than 1 %.
+
+    Each view's gain is estimated by evaluating its own trajectory alone on the whole part
+    with a sub-sampled fan. That is sound because a surface sample's in-spec state depends
+    only on the points of one pass (the in-spec test and the density rule look at a point,
+    its profile's columns and its neighbouring profiles of the same pass): the in-spec set
+    of several views is the union of their in-spec sets on the same (seeded) samples, so the
+    set cover is computed exactly on these sets, and a fan of 128 columns finds the same
+    samples (the search radius grows with the evaluated column pitch; density is judged on
+    the real sensor's columns). Candidates are tried largest possible gain first (their
+    region's area not yet in spec) and skipped once that bound is below the best gain found
+    (lazy greedy: a view's gain only shrinks as others are chosen)."""
+
+    hemisphere = PlanContext(spec, views="auto")
+
+    def in_spec_set(vp: ViewPlan) -> np.ndarray:
+        m = evaluate(part, spec, vp.traj, seed, points_per_profile, context=hemisphere)
+        assert m.coverage_map is not None
+        return m.coverage_map.state == SurfaceState.IN_SPEC
+
+    top = plan_view(part, View.looking_along(UP, 0), plan)
+    covered = in_spec_set(top)
+    plans, coverage = [top], [float(covered.mean())]
+    if coverage[-1] >= coverage_target:
+        return ViewSelection(plans, coverage, 0)
+    candidates = candidate_views(part, spec)
+    # The samples on each candidate's faces: the bound on its gain.
+    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
+    on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
+    evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
+    while len(plans) < max_views and coverage[-1] < coverage_target:
+        bounds = [float((m & ~covered).mean()) for m in on_faces]
+        best: tuple[float, int] | None = None
+        for i in np.argsort(bounds)[::-1]:
+            if bounds[i] < min_gain or (best is not None and bounds[i] <= best[0]):
+                break
+            if i not in evaluated:
+                try:
+                    vp = plan_view(part, replace(candidates[i], index=len(plans)), plan)
+                    evaluated[i] = (vp, in_spec_set(vp))
+                except ValueError:  # a view whose passes see nothing of the part
+                    on_faces[i] = np.zeros_like(on_faces[i])
+                    continue
+            gain = float((evaluated[i][1] & ~covered).mean())
+            if best is None or gain > best[0]:
+                best = (gain, int(i))
+        if best is None or best[0] < min_gain:
+            break
+        vp, cov = evaluated.pop(best[1])
+        on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
+        plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
+        covered |= cov
+        coverage.append(float(covered.mean()))
+    return ViewSelection(plans, coverage, len(candidates))
+
+
+def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
+    """The sample spacing `metrics.evaluate` uses with that fan (the same samples)."""
+    return coverage_spacing_mm(spec.sensor.with_points(points_per_profile))
+
+
+def join_views(
+    part: Part, plans: list[ViewPlan], spec: ScanSpec
+) -> tuple[list[ViewPlan], Trajectory]:
+    """One trajectory: each view's swaths renumbered into a block of its own (view k's
+    swaths follow view k−1's), joined by `view_transition`s clear of the part by
+    `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
+    (first, last), which is how a CSV reader tells the views apart: a view is the block of
+    consecutive swaths whose scanning poses look along its axis. A view no clear move
+    reaches is left out and counted (`meta["views_unreachable"]`). Returns the views kept,
+    renumbered, and the trajectory."""
+    checker = checker_for(part, spec.sensor)
+    centre = 0.5 * (part.bounds[0] + part.bounds[1])
+    # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
+    reach = max(float(np.linalg.norm(vp.traj.positions_mm - centre, axis=1).max()) for vp in plans)
+    radius = max(0.5 * float(np.linalg.norm(part.extents)) + spec.clearance_mm, reach)
+    pieces: list[Trajectory] = []
+    views: list[dict] = []
+    kept: list[ViewPlan] = []
+    unreachable = 0
+    first = 0
+    prev_axis = plans[0].view.axis
+    for vp in plans:
+        traj = vp.traj
+        swath = traj.swath - traj.swath.min() + first
+        if pieces:
+            try:
+                moves = view_transition(
+                    checker,
+                    pieces[-1].poses[-1],
+                    prev_axis,
+                    traj.poses[0],
+                    vp.view.axis,
+                    centre,
+                    radius,
+                    spec.clearance_mm,
+                )[:-1]  # without the next view's first pose, which its trajectory holds
+            except ValueError:  # no clear way in: the scan goes on without this view
+                unreachable += 1
+                continue
+            pieces.append(Trajectory(moves, np.full(len(moves), first), np.zeros(len(moves), bool)))
+        pieces.append(replace(traj, swath=swath))
+        kept.append(replace(vp, view=replace(vp.view, index=len(kept))))
+        prev_axis = vp.view.axis
+        views.append(
+            {
+                "index": len(views),
+                "axis": [float(c) for c in vp.view.axis],
+                "first_swath": int(swath.min()),
+                "last_swath": int(swath.max()),
+                "passes": vp.passes,
+            }
+        )
+        first = int(swath.max()) + 1
+    out = Trajectory.concatenate(pieces)
+    meta = dict(out.meta)
+    meta["views"] = views
+    if unreachable:
+        meta["views_unreachable"] = unreachable
+    return kept, replace(out, meta=meta)
+
+
+def default_views(planner: Planner) -> str:
+    """`--views` when none is given: auto for a planner that rolls (as `--raster auto`
+    adapts its passes), top for the paper's pitch-only planners and a v0 policy, so the
+    baselines stay the paper's single raster."""
+    return "auto" if planner.roll else "top"
+
+
+def plan_views(
+    part: Part,
+    spec: ScanSpec,
+    planner: Planner,
+    views: str | None = None,
+    coverage_target: float = COVERAGE_TARGET,
+    raster: str = "auto",
+    direction: str = "auto",
+    overlap: float = OVERLAP,
+    roi: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[list[ViewPlan], Trajectory]:
+    """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text)
+    by views: 'top' the paper's single top raster, 'auto' `choose_views`, None the planner's
+    default (`default_views`); each view is planned by `plan_scan` (raster, direction,
+    overlap as there) on the rotated part. Returns the views and the joined trajectory
+    (`join_views`), whose plan time is the whole choice's and whose `meta["context"]` records
+    what it was planned under (`context.PlanContext`). progress(done, total): the top
+    view's passes."""
+    views = default_views(planner) if views is None else views
+    context = PlanContext(spec, planner.limits, planner.name, views, roi or None, planner.roll)
+    if not 0.0 < coverage_target <= 1.0:
+        raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
+    part = part.with_roi(roi)
+
+    def plan(view_part: Part, progress=None) -> tuple[int, Trajectory]:
+        swaths, traj = plan_scan(view_part, spec, planner, raster, direction, overlap, progress)
+        return len(swaths), traj
+
+    start = time.perf_counter()
+    if views == "top":
+        plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
+    else:
+        plans = choose_views(part, spec, plan, coverage_target).plans
+    plans, traj = join_views(part, order_views(plans), spec)
+    meta = traj.meta | {"context": context.to_json_dict()}
+    return plans, replace(
+        traj, plan_time_s=time.perf_counter() - start, planner=planner.name, meta=meta
+    )

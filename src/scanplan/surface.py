@@ -1,0 +1,173 @@
+"""The part's surface as the planners and the metrics see it, in one place: vertical probes of
+the CAD, the normals that face out of the part, the directions of the upper hemisphere, and
+area samples of the surface a top or a hemisphere of views can see.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+from scanplan.part import Part
+from scanplan.quantities import UP
+
+# A face steeper than this (from facing the view) returns too little light to count as seen.
+COVERAGE_MAX_SLOPE_DEG = 80.0
+# The directions that define what the upper hemisphere sees (the surface `--views auto`
+# inspects): +Z and rings up to this tilt.
+HEMISPHERE_MAX_TILT_DEG = 75.0
+
+
+def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) -> np.ndarray:
+    """(k, 3) unit directions on the upper hemisphere: +Z and rings (tilt deg, count), each
+    ring's azimuths offset by half a step from the previous one. Default 28 directions."""
+    rings = rings or ((30.0, 6), (55.0, 9), (HEMISPHERE_MAX_TILT_DEG, 12))
+    out = [UP]
+    for i, (tilt, count) in enumerate(rings):
+        az = (np.arange(count) + 0.5 * (i % 2)) * 2 * math.pi / count
+        t = math.radians(tilt)
+        out.append(
+            np.stack(
+                [math.sin(t) * np.cos(az), math.sin(t) * np.sin(az), 0 * az + math.cos(t)], axis=1
+            )
+        )
+    return np.vstack(out)
+
+
+def oriented_normals(part: Part) -> np.ndarray:
+    """(f, 3) face normals pointing out of the part, towards where a sensor could be. A closed,
+    consistently wound mesh's own normals; otherwise (real CAD exports) each face's normal
+    is turned to the side from which a ray escapes the part (if both, upwards)."""
+    mesh = part.mesh
+    normals = np.asarray(part.ray_engine.face_normals)
+    if mesh.is_watertight and mesh.is_winding_consistent:
+        return normals * (1.0 if mesh.volume >= 0 else -1.0)
+    centre = np.asarray(mesh.triangles_center)
+    far = np.full(len(normals), 1e6)
+    eps = 1e-3 * float(np.linalg.norm(part.extents)) + 0.05
+    front = ~part.ray_engine.occluded(centre + eps * normals, normals, far)
+    back = ~part.ray_engine.occluded(centre - eps * normals, -normals, far)
+    flip = (back & ~front) | (back & front & (normals[:, 2] < 0))
+    return np.where(flip[:, None], -normals, normals)
+
+
+@dataclass(frozen=True)
+class LineProbe:
+    """The CAD surface under a pass by vertical rays: k advances x c lateral columns.
+
+    hit: (k, c) bool; z_mm: (k, c) surface height (part frame; meaningless where no hit);
+    normals_up: (k, c, 3) face normals turned up (0 where no hit).
+    """
+
+    hit: np.ndarray
+    z_mm: np.ndarray
+    normals_up: np.ndarray
+
+
+def probe_grid(
+    part: Part,
+    origin: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    advances_mm: np.ndarray,
+    lateral_mm: np.ndarray,
+) -> LineProbe:
+    """Vertical rays on a horizontal grid, origin + a·u + l·v (a raster's own frame), from
+    10 mm above the part, in one batch; of a part with a region of interest, a ray whose
+    first hit is not on it counts as no hit."""
+    top = float(part.bounds[1, 2]) + 10.0
+    base = (
+        origin
+        + np.asarray(advances_mm)[:, None, None] * u
+        + np.asarray(lateral_mm)[None, :, None] * v
+    )
+    origins = base.reshape(-1, 3).copy()
+    origins[:, 2] = top
+    t, face, normals = part.ray_engine.cast_down(origins)
+    shape = (len(advances_mm), len(lateral_mm))
+    hit = (face >= 0) & part.inspect_mask[face]
+    return LineProbe(hit.reshape(shape), top - t.reshape(shape), normals.reshape(*shape, 3))
+
+
+def aligning_angles(normals: np.ndarray, u: np.ndarray, v: np.ndarray, roll: bool = True):
+    """The pitch θ and roll φ that turn the beam against `normals` (..., 3) in a swath frame
+    (u, v, up). With roll, beam = −normal gives sinθ = n_u, cosθ·sinφ = −n_v,
+    cosθ·cosφ = n_w (`Swath.poses`); without (the paper's model), the pitch that faces the
+    normal's projection on the u-w plane, and φ = 0."""
+    n_u, n_v, n_w = normals @ u, normals @ v, normals[..., 2]
+    if not roll:
+        return np.arctan2(n_u, np.maximum(n_w, 1e-9)), np.zeros_like(n_u)
+    return np.arctan2(n_u, np.hypot(n_v, n_w)), np.arctan2(-n_v, np.maximum(n_w, 1e-9))
+
+
+@dataclass(frozen=True)
+class VisibleSurface:
+    """Area-uniform samples of the visible surface to inspect. points: (k, 3); area_mm2:
+    total; faces: (k,) the face each sample lies on."""
+
+    points: np.ndarray
+    area_mm2: float
+    faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+def area_samples(
+    part: Part, candidate: np.ndarray, spacing_mm: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """About one point per spacing² of the `candidate` faces' area (20 000..400 000),
+    uniform by area, seeded (`trimesh.sample.sample_surface`): (points (k, 3), faces (k,),
+    candidate area)."""
+    area = np.asarray(part.mesh.area_faces)
+    cand_area = float(area[candidate].sum())
+    if cand_area <= 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64), 0.0
+    count = int(np.clip(cand_area / spacing_mm**2, 20_000, 400_000))
+    weight = np.where(candidate, area, 0.0)
+    points, faces = trimesh.sample.sample_surface(part.mesh, count, face_weight=weight, seed=seed)
+    return np.asarray(points, np.float64), np.asarray(faces, np.int64), cand_area
+
+
+def hemisphere_visible_samples(
+    part: Part, spacing_mm: float, seed: int = 0, directions: np.ndarray | None = None
+) -> VisibleSurface:
+    """The surface a sensor can see from the upper hemisphere (`--views auto`): samples of
+    the faces to inspect (any slope) kept if, along at least one of `directions` (default
+    `hemisphere_directions`, 28 directions up to 75° from +Z), the face is within
+    COVERAGE_MAX_SLOPE_DEG of facing it (either winding) and a ray from it escapes the part."""
+
+    dirs = hemisphere_directions() if directions is None else np.asarray(directions, float)
+    points, faces, cand_area = area_samples(part, part.inspect_mask, spacing_mm, seed)
+    n = part.ray_engine.face_normals[faces]
+    facing_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
+    visible = np.zeros(len(points), bool)
+    for d in dirs:
+        cos = n @ d
+        todo = np.flatnonzero(~visible & (np.abs(cos) > facing_cos))
+        if len(todo) == 0:
+            continue
+        start = points[todo] + np.sign(cos[todo])[:, None] * n[todo] * 0.05
+        ray = np.broadcast_to(d, start.shape)
+        visible[todo] = ~part.ray_engine.occluded(start, ray, np.full(len(todo), 1e6))
+    frac = float(visible.mean()) if len(visible) else 0.0
+    return VisibleSurface(points[visible], cand_area * frac, faces[visible])
+
+
+def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> VisibleSurface:
+    """Sample faces within COVERAGE_MAX_SLOPE_DEG of horizontal (either winding) at about one
+    point per spacing² of area; keep the samples from which a vertical ray escapes. Only the
+    part's faces to inspect (its region of interest) are sampled; the whole part occludes."""
+    normals = part.ray_engine.face_normals
+    steep_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
+    candidate = (np.abs(normals[:, 2]) > steep_cos) & part.inspect_mask
+    points, faces, cand_area = area_samples(part, candidate, spacing_mm, seed)
+    if cand_area <= 0:
+        return VisibleSurface(np.zeros((0, 3)), 0.0)
+    count = len(points)
+    up_normal = normals[faces] * np.sign(normals[faces, 2:3])
+    start = points + up_normal * 0.05  # off the face, above float32 error at part scale
+    up = np.tile([0.0, 0.0, 1.0], (count, 1))
+    blocked = part.ray_engine.occluded(start, up, np.full(count, 1e6))
+    visible = ~blocked
+    return VisibleSurface(points[visible], cand_area * float(visible.mean()), faces[visible])
