@@ -1,0 +1,43 @@
+"""The `scanplan` command line (SPEC §8): parses, calls the library, prints. One module per
+command group, shared options in `options`; every user mistake ends as one line on stderr and
+exit code 2, with no partial output file (`common`; the library's writers are atomic).
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from scanplan.cli.common import OneLineErrors
+from scanplan.cli.demo import demo_cmd
+from scanplan.cli.parts import part_cmd
+from scanplan.cli.planning import evaluate_cmd, plan_cmd, scan_cmd
+from scanplan.cli.robot import export_cmd, place_cmd
+from scanplan.cli.training import sweep_cmd, train_cmd
+
+__all__ = ["app", "main"]
+
+app = typer.Typer(
+    cls=OneLineErrors,
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="Plan, simulate, evaluate and export laser-profilometer scan trajectories.",
+)
+
+# The order `scanplan --help` lists them in.
+app.command("part")(part_cmd)
+app.command("scan")(scan_cmd)
+app.command("plan")(plan_cmd)
+app.command("evaluate")(evaluate_cmd)
+app.command("train")(train_cmd)
+app.command("sweep")(sweep_cmd)
+app.command("export")(export_cmd)
+app.command("place")(place_cmd)
+app.command("demo")(demo_cmd)
+
+
+def main() -> None:  # pragma: no cover - console entry for `python -m scanplan`
+    app()
+    sys.exit(0)

@@ -1,0 +1,142 @@
+"""What every command shares: one-line user errors and exit codes (2 for a mistake, 130 for
+Ctrl-C), the progress bar on a terminal, and no half-made output directory after a failure.
+"""
+
+from __future__ import annotations
+
+import functools
+import shutil
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, TypeVar
+
+import typer
+import typer.core
+
+
+class OneLineErrors(typer.core.TyperGroup):
+    """The app's Click group: a usage error (unknown option or command, missing argument, a
+    value that does not convert or is out of bounds) is one line on stderr and exit 2, not
+    Typer's boxed panel; --help stays rich."""
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
+        from typer._click.exceptions import ClickException
+
+        try:
+            rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+        except ClickException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":  # bare `scanplan`: the help
+                exc.show()
+                code = 2
+            else:
+                typer.echo(f"error: {usage_message(exc)}", err=True)
+                code = exc.exit_code
+            if not standalone_mode:
+                return code
+            sys.exit(code)
+        except typer.Abort:
+            typer.echo("interrupted", err=True)
+            if not standalone_mode:
+                return 130
+            sys.exit(130)
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def usage_message(exc: Exception) -> str:
+    """A Click usage error as one line naming the option or argument."""
+    message = getattr(exc, "message", str(exc))
+    param = getattr(exc, "param", None)
+    hint = getattr(exc, "param_hint", None)
+    if hint is None and param is not None:
+        hint = param.get_error_hint()
+    if isinstance(hint, list | tuple):
+        hint = " / ".join(hint)
+    errors = getattr(exc.__cause__, "errors", None)
+    if callable(errors):  # a pydantic conversion error
+        first = (errors() or [{}])[0]
+        kind = str(first.get("type", ""))
+        value = first.get("input")
+        if kind.startswith("int_"):
+            message = f"{value!r} is not a valid integer"
+        elif kind.startswith("float_"):
+            message = f"{value!r} is not a valid number"
+        elif "input" in first:
+            message = f"{value!r}: {first.get('msg', message)}"
+    if type(exc).__name__ == "MissingParameter" or not hint:
+        text = exc.format_message() if hasattr(exc, "format_message") else message
+    else:
+        text = f"{str(hint).replace(chr(39), '')}: {message}"
+    ctx = getattr(exc, "ctx", None)
+    where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+    return " ".join(f"{text}{where}".split())
+
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def user_errors(fn: F) -> F:
+    """Turn the library's ValueError (and file errors) into one clear line and exit 2."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (ValueError, OSError) as exc:
+            message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            typer.echo(f"error: {message}", err=True)
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(130) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+@contextmanager
+def progress_bar(label: str, quiet: bool) -> Iterator[Callable[[int, int], None] | None]:
+    """A transient rich progress bar on stderr, fed by the library's progress(done, total);
+    None (no output at all) with --quiet or when stderr is not a terminal."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    # Deferred: rich loads only when a bar is drawn.
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(label, total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+@contextmanager
+def removed_on_error(directory: Path, keep: Callable[[Path], bool]) -> Iterator[None]:
+    """Remove `directory` (and the parents made for it) if the block fails and it did not
+    exist before, unless keep(directory) says it holds something worth resuming from."""
+    created = None
+    for candidate in (directory, *directory.parents):
+        if candidate.exists():
+            break
+        created = candidate
+    try:
+        yield
+    except BaseException:
+        if created is not None and created.exists() and not keep(directory):
+            shutil.rmtree(created, ignore_errors=True)
+        raise

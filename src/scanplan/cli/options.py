@@ -1,0 +1,179 @@
+"""Options declared once for every command that takes them: part, sensor, tolerance, seed,
+poses, and the training group `train` and `sweep` share; plus the checks and parsers of
+their values.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from scanplan.quantities import ScanSpec
+from scanplan.sensor import SensorSpec
+
+
+def bounded(
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> Callable[[Any], Any]:
+    """A Typer callback refusing a number outside [lo, hi] (open ends on request), NaN and
+    infinities; Click names the option in the error."""
+    interval = (
+        f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        if lo is not None and hi is not None
+        else f"{'>' if lo_open else '>='} {lo:g}"
+        if lo is not None
+        else f"{'<' if hi_open else '<='} {hi:g}"
+        if hi is not None
+        else "finite"
+    )
+
+    def check(value: Any) -> Any:
+        if value is None:
+            return value
+        if not math.isfinite(value):
+            raise typer.BadParameter(f"{value} is not a finite number")
+        below = lo is not None and (value <= lo if lo_open else value < lo)
+        above = hi is not None and (value >= hi if hi_open else value > hi)
+        if below or above:
+            verb = "is not in" if lo is not None and hi is not None else "must be"
+            raise typer.BadParameter(f"{value:g} {verb} {interval}")
+        return value
+
+    return check
+
+
+def pose_option(value: str) -> str:
+    """--tcp / --part-pose: six finite numbers, checked before any work."""
+    # Deferred: export loads the writers of every dialect.
+    from scanplan.export import parse_pose_arg
+
+    try:
+        parse_pose_arg(value)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+    return value
+
+
+def parse_floats(text: str, option: str) -> tuple[float, ...]:
+    """A comma-separated list of numbers, e.g. --log-std-init=-2,-2,-4."""
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"{option} {text!r}: expected numbers") from None
+
+
+def parse_tolerance(text: str | None) -> dict[str, float]:
+    """--tolerance MM,DEG as ScanSpec keyword arguments (none when not given)."""
+    if text is None:
+        return {}
+    parts = text.split(",")
+    try:
+        mm, deg = (float(p) for p in parts) if len(parts) == 2 else (math.nan, math.nan)
+    except ValueError:
+        mm = deg = math.nan
+    if not (math.isfinite(mm) and math.isfinite(deg) and mm > 0 and 0 < deg <= 90):
+        raise ValueError(
+            f"--tolerance {text!r}: expected MM,DEG with MM > 0 and 0 < DEG <= 90, e.g. 12.5,15"
+        )
+    return {"tol_distance_mm": mm, "tol_angle_rad": math.radians(deg)}
+
+
+def scan_spec(sensor: str, tolerance: str | None = None) -> ScanSpec:
+    """The ScanSpec of the --sensor and --tolerance options."""
+    # Deferred: config reads TOML/YAML datasheets.
+    from scanplan.config import load_sensor
+
+    tol = parse_tolerance(tolerance)  # before the sensor file: the cheaper check first
+    return ScanSpec(load_sensor(sensor), **tol)
+
+
+SEED_CHECK = bounded(0)
+POSITIVE = bounded(0, lo_open=True)
+POINTS_CHECK = bounded(2, SensorSpec.MAX_POINTS)
+
+# ---- part, sensor, output -----------------------------------------------------------------
+PartArg = Annotated[
+    str, typer.Argument(help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB) or STEP file")
+]
+UnitsOpt = Annotated[str, typer.Option("--units", help="units of a mesh file: mm, m or in")]
+RoiOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--roi",
+        help="region of interest: box:x0,y0,z0,x1,y1,z1 (mm), +z:30 (a normal cone; any of "
+        "±x ±y ±z or n:X,Y,Z:DEG), body:I (the I-th connected body); ';' joins terms (AND)",
+    ),
+]
+# Default: scanplan.sensor.DEFAULT_SENSOR (Typer wants an Annotated option's default on the
+# parameter, not here).
+SensorOpt = Annotated[
+    str, typer.Option("--sensor", help="sensor preset name or TOML/YAML datasheet file")
+]
+ToleranceOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--tolerance",
+        help="in-spec tolerance MM,DEG: |z_s - W_d| in mm and orientation error in degrees "
+        "(default Z_r/20 and 15)",
+    ),
+]
+OutOpt = Annotated[Path, typer.Option("-o", "--output", help="output file")]
+SeedOpt = Annotated[int, typer.Option(help="noise seed, >= 0", callback=SEED_CHECK)]
+QuietOpt = Annotated[
+    bool, typer.Option("--quiet", "-q", help="no progress bar (none either off a terminal)")
+]
+TrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV or JSON")]
+
+# ---- poses (export, place) ----------------------------------------------------------------
+POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
+TcpOpt = Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option)]
+PartPoseOpt = Annotated[
+    str,
+    typer.Option(
+        "--part-pose", help=f"part in the robot base frame: {POSE_HELP}", callback=pose_option
+    ),
+]
+
+# ---- training (train, sweep) --------------------------------------------------------------
+# Each declared once; training.training_config turns them into the trainer's config.
+NEnvsOpt = Annotated[
+    int,
+    typer.Option("--n-envs", help="parallel environments, 1 to 1024", callback=bounded(1, 1024)),
+]
+StateOpt = Annotated[str, typer.Option(help="paper (P, θ, D, α, Δs) | no-position | lookahead")]
+EnvVersionOpt = Annotated[
+    str, typer.Option("--env", help="v0 (the paper's) | v1 (with roll: Δφ, φ and β)")
+]
+ProceduralOpt = Annotated[
+    int,
+    typer.Option(help="also train on N randomized procedural parts, >= 0", callback=SEED_CHECK),
+]
+FanPointsOpt = Annotated[
+    int | None,
+    typer.Option(
+        help=f"sub-sampled fan for training, 2 to {SensorSpec.MAX_POINTS} "
+        "(default: the env's training fan, 128)",
+        callback=POINTS_CHECK,
+    ),
+]
+LogStdInitOpt = Annotated[
+    str, typer.Option(help="initial log std: one value, or Δy,Δz,Δθ (SB3 default 0)")
+]
+InitAdvanceOpt = Annotated[
+    float | None,
+    typer.Option(help="initial mean Δy action (0.5 = Δs_opt); default none", callback=bounded()),
+]
+BcSamplesOpt = Annotated[
+    int,
+    typer.Option(
+        help="warm start: behaviour-clone a P-controller on N states first", callback=SEED_CHECK
+    ),
+]

@@ -1,0 +1,38 @@
+"""`scanplan part`: write a built-in procedural part as a mesh file."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from scanplan.cli.common import user_errors
+from scanplan.cli.options import OutOpt
+
+
+@user_errors
+def part_cmd(name: Annotated[str, typer.Argument(help="built-in part name")], output: OutOpt):
+    """Write a built-in procedural part as a mesh file (STL, PLY, OBJ, ...)."""
+    # Deferred: parts load trimesh and Embree.
+    from scanplan.part import load_part
+    from scanplan.parts import PART_NAMES
+    from scanplan.trajectory import atomic_write_bytes
+
+    if name not in PART_NAMES:
+        raise ValueError(f"unknown part {name!r}; built-in parts: {', '.join(PART_NAMES)}")
+    part = load_part(name)
+    file_type = output.suffix.lower().lstrip(".") or "stl"
+    try:
+        data = part.mesh.export(file_type=file_type)
+    except (ValueError, KeyError, NotImplementedError):
+        raise ValueError(
+            f"cannot write mesh format {output.suffix!r}; use .stl, .ply or .obj"
+        ) from None
+    if not isinstance(data, bytes | str):
+        raise ValueError(f"cannot write mesh format {output.suffix!r}; use .stl, .ply or .obj")
+    atomic_write_bytes(output, data if isinstance(data, bytes) else data.encode())
+    e = part.extents
+    typer.echo(
+        f"{name}: {len(part.mesh.faces)} triangles, {e[0]:.0f} x {e[1]:.0f} x {e[2]:.0f} mm "
+        f"-> {output}"
+    )

@@ -1,0 +1,281 @@
+"""`scanplan plan`, `scan` and `evaluate`: a trajectory over a part, the point cloud it
+measures, and the quality of that scan.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from scanplan.cli.common import progress_bar, user_errors
+from scanplan.cli.options import (
+    POINTS_CHECK,
+    OutOpt,
+    PartArg,
+    QuietOpt,
+    RoiOpt,
+    SeedOpt,
+    SensorOpt,
+    ToleranceOpt,
+    TrajectoryArg,
+    UnitsOpt,
+    bounded,
+    scan_spec,
+)
+from scanplan.quantities import COVERAGE_TARGET, ScanSpec
+from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
+
+if TYPE_CHECKING:
+    from scanplan.metrics import Metrics
+    from scanplan.trajectory import Trajectory
+
+# ---- scan ---------------------------------------------------------------------------------
+ScanTrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV (SPEC §8 columns)")]
+NoNoiseOpt = Annotated[bool, typer.Option("--no-noise", help="switch noise off")]
+
+
+@user_errors
+def scan_cmd(
+    part: PartArg,
+    trajectory: ScanTrajectoryArg,
+    output: OutOpt,
+    sensor: SensorOpt = DEFAULT_SENSOR,
+    units: UnitsOpt = "mm",
+    seed: SeedOpt = 0,
+    no_noise: NoNoiseOpt = False,
+    quiet: QuietOpt = False,
+    roi: RoiOpt = None,
+):
+    """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields."""
+    # Deferred: the simulator loads trimesh, Embree and scipy.
+    from scanplan.cloud import simulate_cloud, write_ply
+    from scanplan.config import load_sensor
+    from scanplan.part import load_part
+    from scanplan.trajectory import read_trajectory
+
+    if output.suffix.lower() != ".ply":
+        raise ValueError(f"output {output} must be a .ply file")
+    spec = load_sensor(sensor)
+    if no_noise:
+        spec = spec.without_noise()
+    the_part = load_part(part, units).with_roi(roi)
+    traj = read_trajectory(trajectory)
+    if not traj.scanning.any():
+        raise ValueError(f"trajectory {trajectory} has no scanning pose")
+    with progress_bar("scanning", quiet) as progress:
+        cloud = simulate_cloud(the_part, spec, traj, seed=seed, progress=progress)
+    if len(cloud.points_part) == 0:
+        raise ValueError(
+            f"no valid point: part {part} is outside the sensor's reach along {trajectory}"
+        )
+    write_ply(cloud, output)
+    typer.echo(
+        f"{len(cloud.points_part)} points from {int(traj.scanning.sum())} profiles -> {output}"
+    )
+
+
+# ---- plan ---------------------------------------------------------------------------------
+PlannerOpt = Annotated[str, typer.Option(help="fixed, feedback, geometric or rl")]
+PolicyOpt = Annotated[Path | None, typer.Option(help="trained policy file for --planner rl")]
+DirectionOpt = Annotated[
+    str,
+    typer.Option(
+        help="scan direction: x, y, long (the footprint's long side) or auto "
+        "(the long side unless scanning across leaves clearly less cross-line error)"
+    ),
+]
+OverlapOpt = Annotated[
+    float,
+    typer.Option(
+        help="overlap of adjacent passes of the nominal raster, [0, 1)",
+        callback=bounded(0, 1, hi_open=True),
+    ),
+]
+RasterOpt = Annotated[
+    str,
+    typer.Option(
+        help="nominal (the paper's: line width x (1 - overlap)), adaptive (passes spaced "
+        "by the band of the line that stays in spec) or auto (adaptive if the planner rolls)"
+    ),
+]
+RollOpt = Annotated[
+    bool,
+    typer.Option(
+        "--roll/--no-roll",
+        help="geometric/feedback: roll the line with the surface (--no-roll: the paper's "
+        "pitch-only model); rl follows its policy",
+    ),
+]
+PlanViewsOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="top (the paper's single top-down raster) or auto (views chosen greedily, "
+        "each a raster of the part seen along its own axis, toward --coverage-target); "
+        "default: auto if the planner rolls, else top",
+        show_default=False,
+    ),
+]
+CoverageTargetOpt = Annotated[
+    float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
+]
+
+
+@user_errors
+def plan_cmd(
+    part: PartArg,
+    output: OutOpt,
+    planner: PlannerOpt = "geometric",
+    sensor: SensorOpt = DEFAULT_SENSOR,
+    policy: PolicyOpt = None,
+    direction: DirectionOpt = "auto",
+    overlap: OverlapOpt = 0.2,
+    raster: RasterOpt = "auto",
+    roll: RollOpt = True,
+    units: UnitsOpt = "mm",
+    tolerance: ToleranceOpt = None,
+    quiet: QuietOpt = False,
+    roi: RoiOpt = None,
+    views: PlanViewsOpt = None,
+    coverage_target: CoverageTargetOpt = COVERAGE_TARGET,
+):
+    """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
+    # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
+    from scanplan.part import load_part
+    from scanplan.planners import make_planner, plan_scan
+    from scanplan.trajectory import write_csv, write_json
+    from scanplan.views import default_views, plan_views
+
+    if output.suffix.lower() not in (".csv", ".json"):
+        raise ValueError(f"output {output} must be a .csv or .json file")
+    spec = scan_spec(sensor, tolerance)
+    the_part = load_part(part, units).with_roi(roi)
+    the_planner = make_planner(planner, policy, roll)
+    views = default_views(the_planner) if views is None else views
+    with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
+        if views == "top":
+            swaths, traj = plan_scan(
+                the_part, spec, the_planner, raster, direction, overlap, progress=progress
+            )
+            n_pass, n_view = len(swaths), ""
+        else:
+            plans, traj = plan_views(
+                the_part, spec, the_planner, views, coverage_target, raster, direction, overlap
+            )
+            n_pass, n_view = sum(p.passes for p in plans), f"{len(plans)} views, "
+    (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
+    typer.echo(
+        f"{the_planner.name}: {n_view}{n_pass} passes, {int(traj.scanning.sum())} profiles, "
+        f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
+    )
+    print_plan_notes(traj, spec)
+
+
+def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:
+    """What the planner left out or overrode, one line each (nothing when all went to plan)."""
+    if unreachable := traj.meta.get("views_unreachable", 0):
+        typer.echo(f"views: {unreachable} left out, no collision-free move reaches them")
+    if dropped := traj.meta.get("collisions_dropped", 0):
+        typer.echo(
+            f"collisions: {dropped} scanning poses dropped (sensor body within "
+            f"{spec.clearance_mm:g} mm of the part)"
+        )
+    if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
+        # The rl planner's guards replaced some of the policy's steps: say how many.
+        typer.echo("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()))
+
+
+# ---- evaluate -----------------------------------------------------------------------------
+JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
+ReportDirOpt = Annotated[
+    Path | None,
+    typer.Option("-o", "--output", help="report directory (maps, metrics, report.html)"),
+]
+EvaluatePointsOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--points",
+        help=f"sub-sample the fan to N points (faster), 2 to {SensorSpec.MAX_POINTS}",
+        callback=POINTS_CHECK,
+    ),
+]
+EvaluateViewsOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="the surface to inspect: top (upward-visible) or auto (visible from the "
+        "upper hemisphere); default: auto for a JSON trajectory of several views, else top"
+    ),
+]
+
+
+@user_errors
+def evaluate_cmd(
+    part: PartArg,
+    trajectory: TrajectoryArg,
+    as_json: JsonOpt = False,
+    output: ReportDirOpt = None,
+    sensor: SensorOpt = DEFAULT_SENSOR,
+    units: UnitsOpt = "mm",
+    points: EvaluatePointsOpt = None,
+    seed: SeedOpt = 0,
+    tolerance: ToleranceOpt = None,
+    quiet: QuietOpt = False,
+    roi: RoiOpt = None,
+    views: EvaluateViewsOpt = None,
+):
+    """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
+    # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
+    from scanplan.metrics import evaluate
+    from scanplan.part import load_part
+    from scanplan.trajectory import read_trajectory
+
+    spec = scan_spec(sensor, tolerance)
+    the_part = load_part(part, units).with_roi(roi)
+    traj = read_trajectory(trajectory)
+    if views not in (None, "top", "auto"):
+        raise ValueError(f"unknown --views {views!r}; use top or auto")
+    visible = {None: "auto", "top": "top", "auto": "hemisphere"}[views]
+    with progress_bar("evaluating", quiet) as progress:
+        metrics = evaluate(
+            the_part,
+            spec,
+            traj,
+            seed=seed,
+            points_per_profile=points,
+            visible=visible,
+            progress=progress,
+        )
+    if output is not None:
+        from scanplan.report import Evaluated, write_report
+
+        label = traj.planner or trajectory.stem
+        write_report(
+            output,
+            the_part,
+            [Evaluated(label, traj, metrics)],
+            spec,
+            title=f"{the_part.name}: {trajectory.name}",
+        )
+    data = metrics.to_json_dict()
+    if as_json:
+        typer.echo(json.dumps(data, allow_nan=False))
+        return
+    typer.echo(metrics_line(metrics, data) + (f" -> {output}" if output is not None else ""))
+
+
+def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:
+    """The scan's quality on one line: in-spec coverage first, then the errors behind it."""
+    tol = data["tolerance"]
+    return (
+        f"in-spec coverage {metrics.in_spec_coverage:.1%} (±{tol['mm']:g} mm, {tol['deg']:g}°) | "
+        f"coverage {metrics.coverage_fraction:.1%} | {data['profiles']} profiles | "
+        f"|distance error| mean {metrics.distance_error_mean_abs_mm:.3f} "
+        f"p95 {metrics.distance_error_p95_abs_mm:.3f} mm | orientation mean "
+        f"{metrics.orientation_error_mean_deg:.2f} p95 {metrics.orientation_error_p95_deg:.2f} deg"
+        f" | spacing {metrics.spacing_mean_mm:.3f} mm (cv {metrics.spacing_cv:.3f}, "
+        f"{metrics.backward_steps} backward) | reward {metrics.reward_mean:.4f}"
+        f" | collisions {metrics.collisions_count} within {metrics.clearance_mm:g} mm, "
+        f"{metrics.collisions_touching} touching (worst {metrics.worst_penetration_mm:.1f} mm)"
+    )

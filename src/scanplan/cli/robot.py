@@ -1,0 +1,187 @@
+"""`scanplan export` and `place`: a trajectory as a robot program, and the part's pose on the
+table from which an arm reaches all of it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from scanplan.cli.common import progress_bar, user_errors
+from scanplan.cli.options import (
+    POSITIVE,
+    PartPoseOpt,
+    QuietOpt,
+    TcpOpt,
+    TrajectoryArg,
+    bounded,
+)
+from scanplan.quantities import ScanSpec
+
+if TYPE_CHECKING:
+    from scanplan.export import ExportOptions
+    from scanplan.trajectory import Trajectory
+
+# ---- export -------------------------------------------------------------------------------
+ROBOT_HELP = (
+    "arm to check reach on: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
+    "file of OPW parameters; 'none' to skip"
+)
+ProgramOutOpt = Annotated[
+    Path, typer.Option("-o", "--output", help="output file (a directory for rosbag2)")
+]
+FormatOpt = Annotated[
+    str, typer.Option("--format", help="urscript, rapid, krl, ros, rosbag2 or csv")
+]
+ProfileRateOpt = Annotated[
+    float,
+    typer.Option(
+        help="sensor profile rate, Hz (> 0); scan speed = rate x spacing", callback=POSITIVE
+    ),
+]
+SpacingOpt = Annotated[
+    float, typer.Option(help="profile spacing on the part, mm (> 0)", callback=POSITIVE)
+]
+TravelSpeedOpt = Annotated[
+    float, typer.Option(help="speed between passes, mm/s (> 0)", callback=POSITIVE)
+]
+ReachRobotOpt = Annotated[str, typer.Option(help=ROBOT_HELP)]
+
+
+@user_errors
+def export_cmd(
+    trajectory: TrajectoryArg,
+    output: ProgramOutOpt,
+    fmt: FormatOpt = "urscript",
+    tcp: TcpOpt = "0,0,0,0,0,0",
+    part_pose: PartPoseOpt = "0,0,0,0,0,0",
+    profile_rate: ProfileRateOpt = ScanSpec.profile_rate_hz,
+    spacing: SpacingOpt = ScanSpec.delta_s_opt_mm,
+    travel_speed: TravelSpeedOpt = ScanSpec.travel_speed_mm_s,
+    robot: ReachRobotOpt = "ur5e",
+    quiet: QuietOpt = False,
+):
+    """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV)."""
+    # Deferred: the exporters and kinematics load numpy, scipy and yaml.
+    from scanplan.export import (
+        DIRECTORY_FORMATS,
+        FORMATS,
+        ExportOptions,
+        export_program,
+        export_rosbag,
+        parse_pose_arg,
+    )
+    from scanplan.export.common import plan_motion
+    from scanplan.trajectory import atomic_write_text, read_trajectory
+
+    if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
+        choices = ", ".join([*FORMATS, *DIRECTORY_FORMATS])
+        raise ValueError(f"unknown format {fmt!r}; use one of {choices}")
+    if fmt in FORMATS and (str(output) in ("", ".") or output.is_dir()):
+        raise ValueError(f"-o {str(output)!r} is a directory: give the program's file name")
+    # KUKA wants the .src file named after its DEF.
+    name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
+    options = ExportOptions(
+        part_pose=parse_pose_arg(part_pose),
+        tcp=parse_pose_arg(tcp),
+        scan=ScanSpec(
+            delta_s_opt_mm=spacing, profile_rate_hz=profile_rate, travel_speed_mm_s=travel_speed
+        ),
+        program_name=name if name and fmt == "krl" else "scanplan_path",
+    )
+    traj = read_trajectory(trajectory)
+    text = export_program(traj, fmt, options) if fmt in FORMATS else None
+    if text is None:
+        plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
+    if robot.lower() != "none":
+        print_reach(traj, options, robot, quiet)
+    if text is not None:
+        atomic_write_text(output, text)
+    else:
+        export_rosbag(traj, output, options)
+    typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
+
+
+def print_reach(traj: Trajectory, options: ExportOptions, robot: str, quiet: bool) -> None:
+    """Whether `robot` reaches every flange pose: its summary, as a warning on stderr if not
+    (the program is written either way)."""
+    # Deferred: as in export_cmd.
+    from scanplan.export import flange_poses
+    from scanplan.robot import check_reach, get_robot
+
+    with progress_bar("reach check", quiet):
+        report = check_reach(
+            flange_poses(traj, options),
+            get_robot(robot),
+            swath=traj.swath,
+            scanning=traj.scanning,
+        )
+    if not report.ok:
+        typer.echo(f"warning: {report.summary()}", err=True)
+    else:
+        typer.echo(report.summary())
+
+
+# ---- place --------------------------------------------------------------------------------
+PlaceRobotOpt = Annotated[
+    str, typer.Option(help="ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file")
+]
+HeightRangeOpt = Annotated[
+    str | None,
+    typer.Option("--height-range", help="LO,HI mm: the part origin's z in the base frame"),
+]
+YawStepOpt = Annotated[
+    float,
+    typer.Option(
+        "--yaw-step", help="coarse yaw grid, deg, (0, 360]", callback=bounded(0, 360, lo_open=True)
+    ),
+]
+
+
+def parse_height_range(text: str | None) -> tuple[float, float] | None:
+    """--height-range LO,HI in mm (None when not given: the search picks the heights)."""
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--height-range {text!r}: expected LO,HI in mm") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        raise ValueError(f"--height-range {text!r}: expected finite LO <= HI in mm")
+    return (lo, hi)
+
+
+@user_errors
+def place_cmd(
+    trajectory: TrajectoryArg,
+    robot: PlaceRobotOpt,
+    tcp: TcpOpt = "0,0,0,0,0,0",
+    height_range: HeightRangeOpt = None,
+    yaw_step: YawStepOpt = 30.0,
+    quiet: QuietOpt = False,
+):
+    """Search the part's pose on the table (x, y, z, yaw) from which the arm reaches every
+    pose with no configuration flip in a pass; print it as --part-pose. Exit 2 if none does."""
+    # Deferred: the placement search loads the kinematics (numpy, scipy).
+    from scanplan.export import parse_pose_arg
+    from scanplan.robot.place import place
+    from scanplan.trajectory import read_trajectory
+
+    heights = parse_height_range(height_range)
+    traj = read_trajectory(trajectory)
+    with progress_bar("searching a placement", quiet):
+        result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
+    m = result.report.worst_margins()
+    typer.echo(f"--part-pose {result.pose_arg()}")
+    typer.echo(result.report.summary())
+    typer.echo(
+        f"worst margins: joint limit {m['limit_deg']:.1f} deg, wrist {m['wrist_deg']:.1f} deg, "
+        f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm "
+        f"({result.evaluated} placements in {result.seconds:.1f} s)"
+    )
+    if not result.reachable:
+        typer.echo("error: no placement reaches every pose; the best found is above", err=True)
+        raise typer.Exit(2)
