@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scanplan.cloud import simulate_cloud
+from scanplan.context import PlanContext
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
 from scanplan.pipeline import plan_views
@@ -81,7 +82,9 @@ def main() -> None:
             plans, traj = plan_views(part, spec, planner, raster=raster)  # default views
             plan_s = time.perf_counter() - t0
             passes = sum(p.passes for p in plans)
-            m: Metrics = evaluate(part, spec, traj, points_per_profile=args.points, visible="top")
+            m: Metrics = evaluate(
+                part, spec, traj, points_per_profile=args.points, context=PlanContext(spec)
+            )
             check = cloud_in_spec(part, spec, traj, args.points, args.radius)
             cells.append(
                 f"{m.in_spec_coverage:.3f} / {check:.3f} / {m.coverage_fraction:.3f} / "

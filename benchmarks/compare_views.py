@@ -11,6 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
+from scanplan.context import PlanContext
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
 from scanplan.pipeline import plan_scan, plan_views
@@ -48,8 +49,16 @@ def main() -> None:
             ("top", top, 1, len(swaths), t_top),
             ("auto", auto, len(plans), sum(p.passes for p in plans), auto.plan_time_s),
         ):
-            up = evaluate(part, spec, traj, points_per_profile=args.points, visible="top")
-            hemi = evaluate(part, spec, traj, points_per_profile=args.points, visible="hemisphere")
+            up = evaluate(
+                part, spec, traj, points_per_profile=args.points, context=PlanContext(spec)
+            )
+            hemi = evaluate(
+                part,
+                spec,
+                traj,
+                points_per_profile=args.points,
+                context=PlanContext(spec, views="auto"),
+            )
             print(
                 f"{name} {label} | {n_view} | {n_pass} | {up.in_spec_coverage:.3f} | "
                 f"{hemi.in_spec_coverage:.3f} | {t:.1f}",

@@ -19,6 +19,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from scanplan.context import PlanContext
 from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import load_part
 from scanplan.parts import door
@@ -65,7 +66,7 @@ def main() -> None:
     part = load_part("door")
     _, paper = plan_views(part, spec, make_planner("geometric", roll=False), raster="nominal")
     _, traj = plan_views(part, spec, make_planner(args.planner))
-    m = evaluate(part, spec, traj, points_per_profile=args.points, visible="top")
+    m = evaluate(part, spec, traj, points_per_profile=args.points, context=PlanContext(spec))
     assert m.coverage_map is not None
     points, state = m.coverage_map.points_part, m.coverage_map.state
     missed = state != SurfaceState.IN_SPEC

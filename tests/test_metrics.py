@@ -281,7 +281,7 @@ def test_json_never_emits_nan(plate):
 def test_the_table_leads_with_in_spec_coverage(plate):
     m = evaluate(plate, SPEC, straight(np.arange(0, 320.0, 1.0)), points_per_profile=128)
     rows = table_rows([m.to_json_dict()])
-    assert rows[0][0] == "in-spec coverage (±12.5 mm, 15°)"
+    assert rows[0][0].startswith("in-spec coverage (±12.5 mm, 15°) of the top surface, ")
     assert rows[0][1] == [f"{m.in_spec_coverage:.1%}"]
     assert rows[1][0] == "coverage (any valid point)"
 

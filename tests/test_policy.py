@@ -177,6 +177,8 @@ def _set(*keys_and_value):
         (lambda d: d["training"].pop("command"), ("training.command", "required")),
         (lambda d: d.pop("env"), ("env", "required")),
         (_set("code", "__import__('os')"), ("code", "Extra inputs")),
+        (_set("scan_spec", {"sensor": {}, "scan_spec": {}}), ("scan_spec",)),
+        (_set("scan_spec", "default"), ("scan_spec",)),
     ],
 )
 def test_bad_policy_json_is_one_line_naming_the_field(saved, edit, fragments):

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 from safetensors.torch import load_file
+from typer.testing import CliRunner
 
+from scanplan.cli import app
+from scanplan.context import scan_spec_record
 from scanplan.planners.closed_loop import Guards
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
 from scanplan.policy import load_policy
@@ -104,3 +108,26 @@ def test_forward_only_guard_removes_backward_steps(plate):  # noqa: F811
     ds = _plate_advances(plate, swath, traj)
     assert np.all(ds > 0)
     assert traj.meta["backward_overrides"] > 10
+
+
+def test_the_policy_normalizes_by_its_training_spec_and_refuses_a_sensor_it_never_saw(tmp_path):
+    planner = RLPlanner.from_file(None)
+    # The shipped policy records the ScanSpec it was trained under: the default one.
+    assert scan_spec_record(planner.trained_spec) == scan_spec_record(ScanSpec())
+    sensor = ScanSpec().sensor
+    with pytest.raises(ValueError, match="Z range of 250 mm; sensor wide has 400 mm"):
+        planner.check_sensor(ScanSpec(replace(sensor, name="wide", z_range_mm=400.0)))
+    with pytest.raises(ValueError, match="working distance of 400 mm; sensor near works at 300"):
+        planner.check_sensor(ScanSpec(replace(sensor, name="near", working_distance_mm=300.0)))
+    planner.check_sensor(ScanSpec(replace(sensor, z_range_mm=200.0)))  # inside what it saw
+    wide = tmp_path / "wide.toml"
+    wide.write_text(
+        'name = "wide"\nworking_distance_mm = 400\nz_range_mm = 400\nfov_deg = 63.5\n'
+        "points_per_profile = 512\nz_resolution_um = 4\ntriangulation_angle_deg = 30\n"
+    )
+    out = tmp_path / "plan.csv"
+    result = CliRunner().invoke(
+        app, ["plan", "training-piece", "--planner", "rl", "--sensor", str(wide), "-o", str(out)]
+    )
+    assert result.exit_code == 2 and not out.exists()
+    assert len(result.stderr.strip().splitlines()) == 1 and "Z range" in result.stderr

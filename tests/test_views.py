@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 
 from scanplan.cli import app
 from scanplan.collision import checker_for
+from scanplan.context import PlanContext
 from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
 from scanplan.pipeline import default_views, order_views, plan_scan, plan_views
@@ -29,6 +30,7 @@ from scanplan.views import (
 )
 
 SPEC = ScanSpec()
+HEMISPHERE = PlanContext(SPEC, views="auto")  # judged on what the upper hemisphere sees
 SLOPE_DEG = 60.0
 
 
@@ -100,7 +102,7 @@ def test_housing_auto_views_raise_in_spec_coverage(tmp_path):
         in_block = (scan >= v["first_swath"]) & (scan <= v["last_swath"])
         assert in_block.any()
     assert views[0]["axis"] == pytest.approx([0, 0, 1])
-    top_cov = evaluate(part, SPEC, top, points_per_profile=256, visible="hemisphere")
+    top_cov = evaluate(part, SPEC, top, points_per_profile=256, context=HEMISPHERE)
     auto_cov = evaluate(part, SPEC, auto, points_per_profile=256)  # several views: hemisphere
     assert auto_cov.visible_area_mm2 == pytest.approx(top_cov.visible_area_mm2)
     # The top raster rolls its line onto the 60° walls too (0.67), but only views hold them.
@@ -140,7 +142,7 @@ def test_door_auto_reduces_to_the_single_top_view(tmp_path):
     out = tmp_path / "door.json"
     result = CliRunner().invoke(app, ["plan", "door", "--views", "auto", "-o", str(out)])
     assert result.exit_code == 0, result.output
-    assert "1 views" in result.stdout
+    assert "1 view," in result.stdout
     data = json.loads(out.read_text())
     assert len(data["views"]) == 1 and data["views"][0]["axis"] == pytest.approx([0, 0, 1])
     # The same scan as the plain top raster: same passes, same scanning poses.
@@ -183,8 +185,8 @@ def test_vertical_walls_get_views_that_see_them_nearly_head_on():
     tilts = sorted(round(math.degrees(math.acos(a[2]))) for a in axes)
     assert tilts == [0, 80, 80, 80, 80]
     plans, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
-    top = evaluate(part, SPEC, plans[0].traj, points_per_profile=256, visible="hemisphere")
-    both = evaluate(part, SPEC, auto, points_per_profile=256, visible="hemisphere")
+    top = evaluate(part, SPEC, plans[0].traj, points_per_profile=256, context=HEMISPHERE)
+    both = evaluate(part, SPEC, auto, points_per_profile=256, context=HEMISPHERE)
     # The top view alone holds the lid (a third of the area); the side views the walls.
     assert top.in_spec_coverage < 0.4
     assert both.in_spec_coverage > 0.85

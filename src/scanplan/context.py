@@ -45,7 +45,7 @@ class PlanContext:
 
     def __post_init__(self) -> None:
         if self.views not in VIEW_MODES:
-            raise ValueError(f"unknown views {self.views!r}; use top or auto")
+            raise ValueError(f"unknown --views {self.views!r}; use top or auto")
 
     @property
     def surface(self) -> str:
@@ -65,17 +65,7 @@ class PlanContext:
             "surface": self.surface,
             "roi": self.roi,
             "reward": "full beam angle (v1)" if self.full_beam_angle else "pitch (v0)",
-            "sensor": sensor_datasheet(spec.sensor),
-            "scan_spec": {
-                "delta_s_opt_mm": spec.delta_s_opt_mm,
-                "alpha_max_deg": math.degrees(spec.alpha_max_rad),
-                "weights": [spec.w_d, spec.w_alpha, spec.w_delta_s],
-                "tolerance_mm": spec.tolerance_mm,
-                "tolerance_deg": math.degrees(spec.tol_angle_rad),
-                "profile_rate_hz": spec.profile_rate_hz,
-                "travel_speed_mm_s": spec.travel_speed_mm_s,
-                "clearance_mm": spec.clearance_mm,
-            },
+            **scan_spec_record(spec),
             "step_limits": {
                 "dy_max_mm": lim.dy_max_mm,
                 "dz_max_mm": lim.dz_max_mm,
@@ -93,22 +83,9 @@ class PlanContext:
             err = exc.errors()[0]
             loc = ".".join(str(p) for p in err["loc"]) or "context"
             raise ValueError(f"{where}: context.{loc}: {err['msg']}") from None
-        sensor = sensor_from_datasheet(model.sensor, f"{where}: context.sensor")
-        s, lim = model.scan_spec, model.step_limits
+        spec = _scan_spec(model.sensor, model.scan_spec, f"{where}: context")
+        lim = model.step_limits
         try:
-            spec = ScanSpec(
-                sensor=sensor,
-                delta_s_opt_mm=s.delta_s_opt_mm,
-                alpha_max_rad=math.radians(s.alpha_max_deg),
-                w_d=s.weights[0],
-                w_alpha=s.weights[1],
-                w_delta_s=s.weights[2],
-                tol_distance_mm=s.tolerance_mm,
-                tol_angle_rad=math.radians(s.tolerance_deg),
-                profile_rate_hz=s.profile_rate_hz,
-                travel_speed_mm_s=s.travel_speed_mm_s,
-                clearance_mm=s.clearance_mm,
-            )
             limits = StepLimits(
                 lim.dy_max_mm,
                 lim.dz_max_mm,
@@ -153,6 +130,55 @@ class PlanContext:
         )
 
 
+def scan_spec_record(spec: ScanSpec) -> dict[str, Any]:
+    """The ScanSpec as a file records it: the sensor's datasheet and the scan's parameters
+    (read back by `scan_spec_from_record`)."""
+    return {
+        "sensor": sensor_datasheet(spec.sensor),
+        "scan_spec": {
+            "delta_s_opt_mm": spec.delta_s_opt_mm,
+            "alpha_max_deg": math.degrees(spec.alpha_max_rad),
+            "weights": [spec.w_d, spec.w_alpha, spec.w_delta_s],
+            "tolerance_mm": spec.tolerance_mm,
+            "tolerance_deg": math.degrees(spec.tol_angle_rad),
+            "profile_rate_hz": spec.profile_rate_hz,
+            "travel_speed_mm_s": spec.travel_speed_mm_s,
+            "clearance_mm": spec.clearance_mm,
+        },
+    }
+
+
+def scan_spec_from_record(data: object, where: str) -> ScanSpec:
+    """The ScanSpec a file records (`scan_spec_record`); ValueError naming where and what."""
+    try:
+        model = _SpecRecordJson.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"]) or "record"
+        raise ValueError(f"{where}: {loc}: {err['msg']}") from None
+    return _scan_spec(model.sensor, model.scan_spec, where)
+
+
+def _scan_spec(sensor_data: dict[str, Any], s: _ScanSpecJson, where: str) -> ScanSpec:
+    sensor = sensor_from_datasheet(sensor_data, f"{where}: sensor")
+    try:
+        return ScanSpec(
+            sensor=sensor,
+            delta_s_opt_mm=s.delta_s_opt_mm,
+            alpha_max_rad=math.radians(s.alpha_max_deg),
+            w_d=s.weights[0],
+            w_alpha=s.weights[1],
+            w_delta_s=s.weights[2],
+            tol_distance_mm=s.tolerance_mm,
+            tol_angle_rad=math.radians(s.tolerance_deg),
+            profile_rate_hz=s.profile_rate_hz,
+            travel_speed_mm_s=s.travel_speed_mm_s,
+            clearance_mm=s.clearance_mm,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{where}: scan_spec: {exc}") from None
+
+
 _STRICT = ConfigDict(extra="forbid", strict=True)
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -178,6 +204,12 @@ class _LimitsJson(BaseModel):
     dphi_max_deg: Positive
 
 
+class _SpecRecordJson(BaseModel):
+    model_config = _STRICT
+    sensor: dict[str, Any]
+    scan_spec: _ScanSpecJson
+
+
 class _ContextJson(BaseModel):
     model_config = _STRICT
     format: Literal["scanplan-plan/1"]
@@ -189,6 +221,13 @@ class _ContextJson(BaseModel):
     sensor: dict[str, Any]
     scan_spec: _ScanSpecJson
     step_limits: _LimitsJson
+
+
+def judged_alike(contexts: list[PlanContext]) -> list[PlanContext]:
+    """Several plans of one part judged on one surface: the widest any of them inspects (what
+    the upper hemisphere sees, if any was planned with views), each keeping its own reward."""
+    views = "auto" if any(c.views == "auto" for c in contexts) else "top"
+    return [replace(c, views=views) for c in contexts]
 
 
 def recorded(traj: Trajectory, spec: ScanSpec) -> PlanContext:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scanplan.context import judged_alike, recorded
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
 from scanplan.pipeline import plan_views
@@ -58,7 +59,7 @@ def run_demo(
     sensor = spec.sensor
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
-    part: Part = load_part(part_name, units).with_roi(roi)
+    part: Part = load_part(part_name, units)
 
     metrics: dict[str, Metrics] = {}
     trajectories: dict[str, Trajectory] = {}
@@ -66,13 +67,17 @@ def run_demo(
     for name in PLANNER_ORDER:
         planner: Planner = make_planner(name)
         step(f"planning {name}")
-        plans, traj = plan_views(part, spec, planner)  # each planner's own default views
+        # Each planner with its own default views.
+        plans, traj = plan_views(part, spec, planner, roi=roi)
         passes = sum(p.passes for p in plans)
         step(f"planned {name}: {len(plans)} view{'s' * (len(plans) > 1)}, {passes} passes")
         trajectories[name] = traj
         files[f"trajectory_{name}.csv"] = to_csv_text(traj)
-        step(f"evaluating {name} ({int(traj.scanning.sum())} profiles)")
-        metrics[name] = evaluate(part, spec, traj, seed=seed, points_per_profile=points_per_profile)
+    # All judged on one surface: a table of figures over different surfaces compares nothing.
+    contexts = judged_alike([recorded(t, spec) for t in trajectories.values()])
+    for (name, traj), context in zip(trajectories.items(), contexts, strict=True):
+        step(f"evaluating {name} ({int(traj.scanning.sum())} profiles, {context.surface} surface)")
+        metrics[name] = evaluate(part, spec, traj, seed, points_per_profile, context=context)
 
     step("writing the URScript program")
     best = trajectories["rl"]
@@ -91,7 +96,7 @@ def run_demo(
     fan = f"{points_per_profile} of {sensor.points_per_profile}" if points_per_profile else "all"
     report = write_report(
         out_dir,
-        part,
+        part.with_roi(roi),
         [Evaluated(name, trajectories[name], m) for name, m in metrics.items()],
         spec,
         pictures=list(curves.values()),

@@ -17,7 +17,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic import model_validator as _model_validator
 from torch import nn
 
+from scanplan.context import scan_spec_from_record
 from scanplan.observation import observation_size
+from scanplan.quantities import ScanSpec
 
 FORMAT: Literal["scanplan-policy/2"] = "scanplan-policy/2"
 POLICY_JSON = "policy.json"
@@ -132,6 +134,16 @@ class PolicyMeta(_Model):
     observation: str = OBSERVATION
     env: EnvOptions
     training: TrainingRecord
+    # The ScanSpec it was trained under (`context.scan_spec_record`): its Z range, α_max and
+    # Δs_opt normalize the observation. Files written before it was recorded were all trained
+    # with the default sensor and parameters (training has no sensor option).
+    scan_spec: dict[str, Any] | None = None
+
+    @property
+    def trained_spec(self) -> ScanSpec:
+        if self.scan_spec is None:
+            return ScanSpec()
+        return scan_spec_from_record(self.scan_spec, "scan_spec")
 
     @field_validator("weights")
     @classmethod
@@ -164,6 +176,7 @@ class PolicyMeta(_Model):
                 f"(use_position={env.use_position}, lookahead={env.lookahead}, "
                 f"action_dim={arch.action_dim} give {n})"
             )
+        self.trained_spec  # noqa: B018 - validates the record (ValueError names the field)
         return self
 
 

@@ -2,7 +2,7 @@
 
 Poses are sensor poses in the part frame (`T_part_sensor`, millimetres). The CSV's columns
 are `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`; what the plan was made under (its context,
-its views) rides along: top-level keys of the JSON, `# key: <JSON>` comment lines above the
+its views) rides along: top-level keys of the JSON, `# key: <JSON>` comment lines under the
 CSV's header (which CSV tools skip as comments).
 """
 
@@ -195,12 +195,14 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def to_csv_text(traj: Trajectory) -> str:
     q = traj.quaternions_wxyz
     p = traj.positions_mm
-    lines = [
+    # The records right under the header: CSV tools that know comments skip them
+    # (pandas `comment="#"`, numpy `genfromtxt(names=True)`), and the header stays line 1.
+    lines = [",".join(CSV_COLUMNS)]
+    lines += [
         f"{CSV_COMMENT} {key}: {dumps_json(traj.meta[key])}"
         for key in FILE_RECORDS
         if traj.meta.get(key)
     ]
-    lines.append(",".join(CSV_COLUMNS))
     for i in range(len(traj)):
         lines.append(
             f"{traj.swath[i]},{int(traj.scanning[i])},"
@@ -316,12 +318,12 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
 
 
 def _csv_records(path: Path, lines: list[str], numbers: list[int]) -> dict[str, Any]:
-    """The `# key: <JSON>` lines above the header (FILE_RECORDS; other comments are free)."""
+    """The `# key: <JSON>` comment lines (FILE_RECORDS; other comments are free)."""
     meta: dict[str, Any] = {}
     for i in numbers:
         line = lines[i - 1].lstrip()
         if not line.startswith(CSV_COMMENT):
-            break
+            continue
         key, sep, value = line[len(CSV_COMMENT) :].partition(":")
         if not sep or key.strip() not in FILE_RECORDS:
             continue

@@ -5,6 +5,7 @@ measures, and the quality of that scan.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -23,17 +24,19 @@ from scanplan.cli.options import (
     TrajectoryArg,
     UnitsOpt,
     bounded,
+    parse_tolerance,
     scan_spec,
 )
-from scanplan.quantities import COVERAGE_TARGET, ScanSpec
+from scanplan.quantities import COVERAGE_TARGET, OVERLAP, ScanSpec
 from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
 
 if TYPE_CHECKING:
+    from scanplan.context import PlanContext
     from scanplan.metrics import Metrics
     from scanplan.trajectory import Trajectory
 
 # ---- scan ---------------------------------------------------------------------------------
-ScanTrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV (SPEC §8 columns)")]
+ScanTrajectoryArg = Annotated[Path, typer.Argument(help="trajectory file (CSV or JSON)")]
 NoNoiseOpt = Annotated[bool, typer.Option("--no-noise", help="switch noise off")]
 
 
@@ -131,7 +134,7 @@ def plan_cmd(
     sensor: SensorOpt = DEFAULT_SENSOR,
     policy: PolicyOpt = None,
     direction: DirectionOpt = "auto",
-    overlap: OverlapOpt = 0.2,
+    overlap: OverlapOpt = OVERLAP,
     raster: RasterOpt = "auto",
     roll: RollOpt = True,
     units: UnitsOpt = "mm",
@@ -141,34 +144,38 @@ def plan_cmd(
     views: PlanViewsOpt = None,
     coverage_target: CoverageTargetOpt = COVERAGE_TARGET,
 ):
-    """Plan a scan trajectory over a part; write it as CSV (SPEC §8 columns)."""
+    """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
+    under (sensor, tolerances, views, region of interest) for `evaluate` to judge it by."""
     # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
     from scanplan.part import load_part
-    from scanplan.planners import make_planner, plan_scan
+    from scanplan.pipeline import plan_views
+    from scanplan.planners import make_planner
     from scanplan.trajectory import write_csv, write_json
-    from scanplan.views import default_views, plan_views
 
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units).with_roi(roi)
+    the_part = load_part(part, units)
     the_planner = make_planner(planner, policy, roll)
-    views = default_views(the_planner) if views is None else views
     with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
-        if views == "top":
-            swaths, traj = plan_scan(
-                the_part, spec, the_planner, raster, direction, overlap, progress=progress
-            )
-            n_pass, n_view = len(swaths), ""
-        else:
-            plans, traj = plan_views(
-                the_part, spec, the_planner, views, coverage_target, raster, direction, overlap
-            )
-            n_pass, n_view = sum(p.passes for p in plans), f"{len(plans)} views, "
+        plans, traj = plan_views(
+            the_part,
+            spec,
+            the_planner,
+            views,
+            coverage_target,
+            raster,
+            direction,
+            overlap,
+            roi=roi,
+            progress=progress,
+        )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
+    n_view = f"{len(plans)} view{'s' * (len(plans) > 1)}, "
     typer.echo(
-        f"{the_planner.name}: {n_view}{n_pass} passes, {int(traj.scanning.sum())} profiles, "
-        f"{traj.path_length_mm():.0f} mm, planned in {traj.plan_time_s:.2f} s -> {output}"
+        f"{the_planner.name}: {n_view}{sum(p.passes for p in plans)} passes, "
+        f"{int(traj.scanning.sum())} profiles, {traj.path_length_mm():.0f} mm, "
+        f"planned in {traj.plan_time_s:.2f} s -> {output}"
     )
     print_plan_notes(traj, spec)
 
@@ -205,7 +212,16 @@ EvaluateViewsOpt = Annotated[
     str | None,
     typer.Option(
         help="the surface to inspect: top (upward-visible) or auto (visible from the "
-        "upper hemisphere); default: auto for a JSON trajectory of several views, else top"
+        "upper hemisphere); default: as the plan records it",
+        show_default=False,
+    ),
+]
+EvaluateSensorOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--sensor",
+        help="sensor preset name or TOML/YAML datasheet file; default: the plan's",
+        show_default=False,
     ),
 ]
 
@@ -216,7 +232,7 @@ def evaluate_cmd(
     trajectory: TrajectoryArg,
     as_json: JsonOpt = False,
     output: ReportDirOpt = None,
-    sensor: SensorOpt = DEFAULT_SENSOR,
+    sensor: EvaluateSensorOpt = None,
     units: UnitsOpt = "mm",
     points: EvaluatePointsOpt = None,
     seed: SeedOpt = 0,
@@ -225,27 +241,22 @@ def evaluate_cmd(
     roi: RoiOpt = None,
     views: EvaluateViewsOpt = None,
 ):
-    """Simulate the scan of a trajectory and report its quality (SPEC §7)."""
+    """Simulate the scan of a trajectory and report its quality, judged as the plan file
+    records it (sensor, tolerance, region of interest, surface) unless an option says
+    otherwise."""
     # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
     from scanplan.metrics import evaluate
     from scanplan.part import load_part
     from scanplan.trajectory import read_trajectory
 
-    spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
-    if views not in (None, "top", "auto"):
-        raise ValueError(f"unknown --views {views!r}; use top or auto")
-    visible = {None: "auto", "top": "top", "auto": "hemisphere"}[views]
+    context, note = judged_context(traj, sensor, tolerance, roi, views)
+    the_part = load_part(part, units)
+    if note:
+        typer.echo(note, err=True)
     with progress_bar("evaluating", quiet) as progress:
         metrics = evaluate(
-            the_part,
-            spec,
-            traj,
-            seed=seed,
-            points_per_profile=points,
-            visible=visible,
-            progress=progress,
+            the_part, context.spec, traj, seed, points, progress=progress, context=context
         )
     if output is not None:
         from scanplan.report import Evaluated, write_report
@@ -253,9 +264,9 @@ def evaluate_cmd(
         label = traj.planner or trajectory.stem
         write_report(
             output,
-            the_part,
+            the_part.with_roi(context.roi),
             [Evaluated(label, traj, metrics)],
-            spec,
+            context.spec,
             title=f"{the_part.name}: {trajectory.name}",
         )
     data = metrics.to_json_dict()
@@ -265,11 +276,41 @@ def evaluate_cmd(
     typer.echo(metrics_line(metrics, data) + (f" -> {output}" if output is not None else ""))
 
 
+def judged_context(
+    traj: Trajectory,
+    sensor: str | None,
+    tolerance: str | None,
+    roi: str | None,
+    views: str | None,
+) -> tuple[PlanContext, str]:
+    """The context to judge `traj` by: the one its file records, with what the options
+    override (a file without a record: the defaults, and the surface its views imply); and
+    one line saying where that differs from the plan ('' if nowhere)."""
+    # Deferred: config reads TOML/YAML datasheets; context pulls in the quantities.
+    from scanplan.config import load_sensor
+    from scanplan.context import VIEW_MODES, recorded
+
+    if views is not None and views not in VIEW_MODES:
+        raise ValueError(f"unknown --views {views!r}; use top or auto")
+    planned = recorded(traj, ScanSpec())
+    spec = planned.spec
+    if sensor is not None:
+        spec = replace(spec, sensor=load_sensor(sensor))
+    if tol := parse_tolerance(tolerance):
+        spec = replace(
+            spec, tol_distance_mm=tol["tol_distance_mm"], tol_angle_rad=tol["tol_angle_rad"]
+        )
+    judged = planned.with_options(spec, roi, views)
+    changes = planned.differences(judged)
+    return judged, ("note: judged with " + "; ".join(changes)) if changes else ""
+
+
 def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:
     """The scan's quality on one line: in-spec coverage first, then the errors behind it."""
     tol = data["tolerance"]
     return (
-        f"in-spec coverage {metrics.in_spec_coverage:.1%} (±{tol['mm']:g} mm, {tol['deg']:g}°) | "
+        f"in-spec coverage {metrics.in_spec_coverage:.1%} (±{tol['mm']:g} mm, {tol['deg']:g}°) "
+        f"of the {metrics.surface} surface ({metrics.visible_area_mm2:,.0f} mm²) | "
         f"coverage {metrics.coverage_fraction:.1%} | {data['profiles']} profiles | "
         f"|distance error| mean {metrics.distance_error_mean_abs_mm:.3f} "
         f"p95 {metrics.distance_error_p95_abs_mm:.3f} mm | orientation mean "

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from scanplan.context import scan_spec_record
 from scanplan.learn.checkpoint import (
     latest_checkpoint,
     load_checkpoint,
@@ -31,6 +32,7 @@ from scanplan.policy import (
     TrainingRecord,
     save_policy,
 )
+from scanplan.quantities import ScanSpec
 from scanplan.report.training import (
     CURVES,
     PROGRESS_CSV,
@@ -79,6 +81,8 @@ def policy_meta(model: Any, config: TrainConfig, training: dict[str, Any]) -> Po
         ),
         env=env_options(config.env),
         training=TrainingRecord.model_validate(training),
+        # The training env's: every run trains with the default sensor and parameters.
+        scan_spec=scan_spec_record(ScanSpec()),
     )
 
 

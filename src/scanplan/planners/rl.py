@@ -30,6 +30,8 @@ DEFAULT_POLICY = _SHIPPED / "default"
 SHIPPED_POLICIES = {"default": DEFAULT_POLICY, "v1": _SHIPPED / "v1"}
 # Step limits a planning run takes from the policy file's env options.
 _LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad")
+# The most a planning sensor's working distance may differ from the policy's, as a share.
+MAX_WORKING_DISTANCE_CHANGE = 0.1
 
 
 @dataclass
@@ -40,10 +42,14 @@ class RLPlanner:
 
     fan_points: columns of the planning sensor (`closed_loop.PLANNING_FAN_POINTS`).
     guards: the stall and forward-only guards (`closed_loop.Guards`).
+    trained_spec: the ScanSpec the policy was trained under: its Z range, α_max and Δs_opt
+    normalize the observation, and a sensor it never saw is refused (`check_sensor`).
     """
 
     actor: nn.Sequential
     config: dict[str, Any] = field(default_factory=dict)
+    trained_spec: ScanSpec = field(default_factory=ScanSpec)
+    source: str = "the policy"
     fan_points: int = PLANNING_FAN_POINTS
     guards: Guards = field(default_factory=Guards)
     name: str = "rl"
@@ -61,7 +67,7 @@ class RLPlanner:
         # `SwathScanEnv` keyword arguments.
         config = policy.meta.model_dump(mode="json")
         config["env"] = policy.meta.env.env_kwargs()
-        return cls(actor=policy.actor, config=config)
+        return cls(policy.actor, config, policy.meta.trained_spec, f"policy {path}")
 
     @classmethod
     def default(cls) -> RLPlanner:
@@ -87,14 +93,37 @@ class RLPlanner:
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         return self.plan_passes(part, [swath], spec)[0]
 
+    def check_sensor(self, spec: ScanSpec) -> None:
+        """Refuse (ValueError, one line) a sensor whose depth window reaches beyond the one
+        the policy was trained on (its depth error would leave the observed range), or whose
+        working distance differs by more than `MAX_WORKING_DISTANCE_CHANGE` (a pitch step
+        swings the footprint by W_d·Δθ: the dynamics it learned change with W_d)."""
+        trained, given = self.trained_spec.sensor, spec.sensor
+        if given.z_range_mm > trained.z_range_mm * (1 + 1e-9):
+            raise ValueError(
+                f"{self.source} was trained with a Z range of {trained.z_range_mm:g} mm; sensor "
+                f"{given.name} has {given.z_range_mm:g} mm: its depth error would reach outside "
+                "what the policy observed (use a policy trained for it, or --planner geometric)"
+            )
+        change = abs(given.working_distance_mm / trained.working_distance_mm - 1.0)
+        if change > MAX_WORKING_DISTANCE_CHANGE:
+            raise ValueError(
+                f"{self.source} was trained at a working distance of "
+                f"{trained.working_distance_mm:g} mm; sensor {given.name} works at "
+                f"{given.working_distance_mm:g} mm (use a policy trained for it, or "
+                "--planner geometric)"
+            )
+
     def plan_passes(self, part: Part, swaths: list[Swath], spec: ScanSpec) -> list[Trajectory]:
         """Every pass at once, in lockstep (`closed_loop.drive_passes`)."""
+        self.check_sensor(spec)
         env_cfg = self.config.get("env", {})
         use_position = bool(env_cfg.get("use_position", True))
         lookahead = bool(env_cfg.get("lookahead", False))
+        scale = self.trained_spec
 
         def policy(dyn: PassDynamics, start_state: np.ndarray) -> np.ndarray:
-            return self.act(observe(dyn, start_state, use_position, lookahead))
+            return self.act(observe(dyn, start_state, use_position, lookahead, scale))
 
         return drive_passes(
             part,

@@ -55,11 +55,28 @@ def table_rows(metrics: Sequence[dict[str, Any]]) -> list[tuple[str, list[str]]]
         if all(v is None for v in values):
             continue
         if path == ("in_spec_coverage",):
-            label += tolerance_label(metrics)
+            label += tolerance_label(metrics) + surface_label(metrics)
         rows.append(
             (label, [fmt.format(v) if isinstance(v, int | float) else MISSING for v in values])
         )
     return rows
+
+
+def surface_label(metrics: Sequence[dict[str, Any]]) -> str:
+    """' of the top surface, 98 690 mm²': the surface every column was judged on (a
+    comparison judges all on one; if they differ, the label says so rather than hide it)."""
+    surfaces = {
+        (s.get("name"), round(s.get("area_mm2") or 0.0))
+        for m in metrics
+        if isinstance(s := lookup(m, ("surface",)), dict)
+    }
+    if not surfaces:
+        return ""
+    if len(surfaces) > 1:
+        return " (on different surfaces: " + ", ".join(sorted(f"{n}" for n, _ in surfaces)) + ")"
+    name, area = surfaces.pop()
+    digits = f"{area:,}".replace(",", " ")  # 181 206: grouped by spaces, as in the README
+    return f" of the {name} surface, {digits} mm²"
 
 
 def tolerance_label(metrics: Sequence[dict[str, Any]]) -> str:
