@@ -46,11 +46,8 @@ def simulate_cloud(
     poses = traj.scan_poses
     swath_of_pose = traj.swath[traj.scanning]
     out: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
-    for start in range(0, len(poses), chunk_poses):
-        scan = profilometer.measure_many(poses[start : start + chunk_poses])
+    for start, scan in profilometer.measure_in_chunks(poses, chunk_poses, progress):
         valid = scan.valid
-        if part.inspect_faces is not None:
-            valid = valid & part.inspect_faces[np.maximum(scan.face, 0)]
         rows = np.nonzero(valid)[0]
         out["points_part"].append(scan.points_part[valid])
         out["distance_error_mm"].append(scan.z_sensor[valid] - sensor.working_distance_mm)
@@ -58,8 +55,6 @@ def simulate_cloud(
         out["orientation_error_rad"].append(alpha[valid])
         out["profile"].append(rows + start)
         out["swath"].append(swath_of_pose[rows + start])
-        if progress is not None:
-            progress(min(start + chunk_poses, len(poses)), len(poses))
     return PointCloud(
         **{
             k: np.concatenate(v) if v else np.zeros((0, 3) if k == "points_part" else 0)

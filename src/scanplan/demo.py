@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.context import judged_alike, recorded
+from scanplan.export import ExportOptions, export_program, parse_program
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
 from scanplan.pipeline import plan_views
@@ -52,8 +53,6 @@ def run_demo(
 
     Everything is computed first and written at the end by `report.write_report`, as one
     directory that replaces `out_dir` atomically: an interrupted demo leaves no half of one."""
-    from scanplan.export import ExportOptions, export_program, parse_program
-
     start = time.perf_counter()
     spec = spec or ScanSpec()
     sensor = spec.sensor
@@ -86,6 +85,7 @@ def run_demo(
     parsed, _ = parse_program(text, "urscript")
     error_m = float(np.abs(parsed[:, :3, 3] - best.poses[:, :3, 3]).max()) / 1000.0
 
+    # Deferred: the rl planner's module loads torch.
     from scanplan.planners.rl import DEFAULT_POLICY
 
     training_log, curves = _training_files(DEFAULT_POLICY)

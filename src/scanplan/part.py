@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from scanplan.parts import PART_NAMES, build_part, surface_to_inspect
 from scanplan.raycast import RayEngine
 
 UNITS_TO_MM = {"mm": 1.0, "m": 1000.0, "in": 25.4}
@@ -306,16 +307,12 @@ def _load_step(data: bytes, path: Path) -> trimesh.Trimesh:
 
 @functools.lru_cache(maxsize=8)
 def _builtin(name: str) -> Part:
-    from scanplan.parts import build_part, surface_to_inspect
-
     mesh = validate_mesh(build_part(name), f"built-in {name}")
     return Part(mesh, name=name, source=name, inspect_faces=surface_to_inspect(name, mesh))
 
 
 def load_part(spec: str | Path, units: str = "mm") -> Part:
     """A built-in part name (see `scanplan.parts.PART_NAMES`) or a mesh file path."""
-    from scanplan.parts import PART_NAMES
-
     text = str(spec)
     if text in PART_NAMES:
         return _builtin(text)

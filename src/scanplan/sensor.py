@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -327,6 +327,25 @@ class LineProfilometer:
             for job in jobs:
                 job.result()
         return scan
+
+    def measure_in_chunks(
+        self,
+        poses: np.ndarray,
+        chunk_poses: int = 256,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> Iterator[tuple[int, Scan]]:
+        """(index of its first pose, Scan) for each chunk of `chunk_poses` poses in order, so
+        a long trajectory is measured in bounded memory. Of a part with a region of interest,
+        only the points on its faces (`Scan.on_faces`). progress(done, total) after each."""
+        m = len(poses)
+        for lo in range(0, m, chunk_poses):
+            hi = min(m, lo + chunk_poses)
+            scan = self.measure_many(poses[lo:hi])
+            if self.part.inspect_faces is not None:
+                scan = scan.on_faces(self.part.inspect_faces)
+            yield lo, scan
+            if progress is not None:
+                progress(hi, m)
 
     def _measure_chunk(self, scan: Scan, lo: int, hi: int, rng: np.random.Generator) -> None:
         """Fill poses lo:hi of scan, drawing the Gaussian noise from rng in pose order.

@@ -12,15 +12,13 @@ import os
 import re
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
+from scanplan.learn.config import TrainConfig
 from scanplan.policy import read_tensors
-
-if TYPE_CHECKING:
-    from scanplan.learn.config import TrainConfig
 
 FORMAT: Literal["scanplan-checkpoint/1"] = "scanplan-checkpoint/1"
 CHECKPOINT_DIR = "checkpoints"
@@ -161,8 +159,6 @@ def resumed_config(ckpt: Checkpoint, config: TrainConfig) -> TrainConfig:
     """The recorded config (everything that shapes the model and its envs: parts, seed,
     PPO hyperparameters, net, env options), with this run's output, total timesteps, resume,
     checkpoint interval, progress bar and command."""
-    from scanplan.learn.config import TrainConfig
-
     try:
         recorded = TypeAdapter(TrainConfig).validate_python(ckpt.meta.config)
     except ValidationError as exc:

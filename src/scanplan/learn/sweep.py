@@ -19,6 +19,12 @@ from pathlib import Path
 from typing import Any
 
 from scanplan.learn.config import TrainConfig
+from scanplan.learn.train import train
+from scanplan.metrics import evaluate
+from scanplan.part import load_part
+from scanplan.pipeline import plan_scan
+from scanplan.planners import make_planner
+from scanplan.quantities import ScanSpec
 
 CLUSTER_HINT = "scanplan sweep needs the cluster extra: pip install 'scanplan[cluster]'"
 METRICS = (
@@ -136,8 +142,6 @@ def _config_record(config: TrainConfig) -> dict[str, Any]:
 def train_once(config: TrainConfig, reuse: bool = False) -> tuple[int, float, float]:
     """`train(config)` -> (timesteps, wall s, CPU s of this process). reuse: a directory that
     already holds a finished run of exactly this config is not trained again."""
-    from scanplan.learn.train import train
-
     done = Path(config.output_dir) / _DONE
     if reuse and done.is_file():
         record = json.loads(done.read_text())
@@ -163,12 +167,6 @@ def run_task(
     """Train (if the task does) and evaluate on each part; one row per part. Runs in a Dask
     worker, so everything it needs comes in its arguments. CPU s counts this process only
     (torch runs on one thread while training)."""
-    from scanplan.metrics import evaluate
-    from scanplan.part import load_part
-    from scanplan.pipeline import plan_scan
-    from scanplan.planners import make_planner
-    from scanplan.quantities import ScanSpec
-
     timesteps, wall, cpu, policy_dir = 0, 0.0, 0.0, ""
     if task.config is not None:
         timesteps, wall, cpu = train_once(task.config, reuse)

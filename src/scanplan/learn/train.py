@@ -160,6 +160,7 @@ def train(config: TrainConfig) -> TrainResult:
     the curve PNGs, and checkpoints/ (safetensors + JSON, for resuming only). Resuming takes
     the model's and envs' config from the checkpoint (`resumed_config`) and continues the
     count, the log and the checkpoints. Torch runs on one thread while training."""
+    # Deferred: torch's threads are set, and stable-baselines3 loads, only when a run trains.
     import torch
 
     from scanplan.learn.callbacks import PaperQuantities, make_logger

@@ -118,18 +118,12 @@ def evaluate(
     coverage = Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius)
     sample = CloudSample(m * n_cols, max_map_points, seed)
     profiler = LineProfilometer(part, spec, seed=seed)
-    for lo in range(0, m, chunk_poses):
-        hi = min(m, lo + chunk_poses)
-        scan = profiler.measure_many(poses[lo:hi])
-        if part.inspect_faces is not None:
-            scan = scan.on_faces(part.inspect_faces)
+    for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
         ori = point_orientation_error(scan.normals_part, scan.poses)
         errors.add(scan, ori)
         spacing.add(lo, scan)
-        coverage.add(scan, ori, has_prev[lo:hi])
-        sample.add(lo, scan, ori, swath[lo:hi], wd)
-        if progress is not None:
-            progress(hi, m)
+        coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
+        sample.add(lo, scan, ori, swath[lo : lo + len(scan)], wd)
 
     if errors.n_valid == 0:
         raise ValueError(

@@ -15,14 +15,17 @@ from scanplan.surface import COVERAGE_MAX_SLOPE_DEG
 from scanplan.trajectory import json_safe
 
 COVERAGE_DEFINITION = (
-    "fraction of the part's upward-visible area sampled by valid points: the surface is "
-    "sampled uniformly by area (seeded); a sample is upward-visible if its face is within "
-    f"{COVERAGE_MAX_SLOPE_DEG:.0f} deg of horizontal and a vertical ray from it escapes the part "
-    "(what a top-down raster can possibly see); it is covered if a valid measured point lies "
-    "within `coverage_radius_mm` of it (about the spacing of the measured columns)"
+    "fraction of the surface to inspect (`surface`) sampled by valid points: that surface is "
+    "sampled uniformly by area (seeded) and a sample kept if it can be seen - `top`: its face "
+    f"is within {COVERAGE_MAX_SLOPE_DEG:.0f} deg of horizontal and a vertical ray from it "
+    "escapes the part; `hemisphere`: the same along at least one direction of the upper "
+    "hemisphere; `roi`: either, on the region of interest only; it is covered if a valid "
+    "measured point lies within `coverage_radius_mm` of it (about the spacing of the "
+    "measured columns)"
 )
 IN_SPEC_COVERAGE_DEFINITION = (
-    "fraction of the same upward-visible area samples that have, within `in_spec_radius_mm`, "
+    "fraction of the same samples of the surface to inspect that have, within "
+    "`in_spec_radius_mm`, "
     "a measured point that is valid, has |z_s - W_d| <= tol_d and alpha_i <= tol_alpha "
     "(`tolerance`), and lies where the real scan samples the surface at least once per "
     "(2 delta_s_opt)^2: on the surface, at the point's distance, the real sensor's spacing is "

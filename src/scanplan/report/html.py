@@ -7,7 +7,6 @@ mailed as is. The metrics table is built from the same `to_json_dict()` the CLI 
 from __future__ import annotations
 
 import base64
-import csv
 import html
 import os
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ from scanplan.metrics import CoverageMap, SurfaceState
 from scanplan.part import Part
 from scanplan.report.maps import COVERAGE_COLOURS
 from scanplan.report.table import lookup, table_rows, tolerance_label
+from scanplan.report.training import CURVES, read_log
 from scanplan.trajectory import Trajectory, atomic_write_text
 
 # Enough for a smooth picture, small enough that the file stays a few MB.
@@ -29,7 +29,6 @@ MAX_ARROWS = 120
 # One colour per view of a scan of several views (plotly's D3 palette).
 VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
                 "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
-TRAINING_CURVES = ("ep_rew_mean", "ep_len_mean", "reward_per_step", "r_d", "r_alpha", "r_delta_s")
 
 
 @dataclass(frozen=True)
@@ -208,27 +207,14 @@ def _coverage_trace(coverage: CoverageMap):
     )  # fmt: skip
 
 
-def read_training_log(path: Path) -> dict[str, np.ndarray]:
-    """Numeric columns of a training CSV log."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    columns: dict[str, np.ndarray] = {}
-    for key in rows[0].keys() if rows else []:
-        try:
-            columns[key] = np.array([float(r[key]) for r in rows])
-        except (TypeError, ValueError):
-            continue
-    return columns
-
-
 def _training_figure(log: dict[str, np.ndarray]):
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
-    x_key = next((k for k in ("timesteps", "total_timesteps", "step") if k in log), None)
-    x = log[x_key] if x_key else np.arange(len(next(iter(log.values()))))
+    x_key = "timesteps"
+    x = log[x_key]
     # The paper's figures: episodic reward, episode length, reward per step, partial rewards.
-    keys = [k for k in TRAINING_CURVES if k in log and np.isfinite(log[k]).any()]
+    keys = [k for k in CURVES if k in log and np.isfinite(log[k]).any()]
     if not keys:
         keys = [k for k in log if k != x_key and np.isfinite(log[k]).any()]
     cols = 3
@@ -325,8 +311,8 @@ def write_html_report(
     )
     sections.extend(f"<div>{d}</div>" for d in divs)
     if training_log is not None and Path(training_log).is_file():
-        log = read_training_log(Path(training_log))
-        if log:
+        log = read_log(training_log)
+        if len(log["timesteps"]):
             sections.append("<h2>Training</h2>")
             sections.append(
                 pio.to_html(_training_figure(log), full_html=False, include_plotlyjs=False)

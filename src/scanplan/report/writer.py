@@ -88,6 +88,7 @@ def write_report(
     comparison maps at the top level and metrics.json a mapping name -> metrics.
     pictures: more PNGs for the HTML report (e.g. training curves); files: more outputs by
     relative name — text, bytes, or a Path to copy."""
+    # Deferred: matplotlib and plotly load only when a report is written.
     from scanplan.report.html import PlannerResult, write_html_report
     from scanplan.report.maps import (
         COVERAGE_MAP_NAME,
