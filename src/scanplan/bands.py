@@ -220,15 +220,17 @@ def plan_adaptive_swaths(
     spec: ScanSpec,
     direction: str | np.ndarray | DirectionRule = "auto",
     run_in_mm: float = 20.0,
+    uphill: np.ndarray | None = None,
 ) -> list[Swath]:
-    """Passes that adapt to the surface (SPEC §3b): pass centres chosen so that their
-    predicted in-spec bands (`in_spec_band`) cover the surface (a greedy set cover,
-    `adaptive_offsets`); the band goes with the swath (`Swath.band_mm`) so planners
-    align the line to it. The direction rule is the nominal raster's ('auto': less
-    variation across the line): ranking the two directions by predicted in-spec coverage
-    picked the worse one on two of three real parts (benchmarks/compare_planners.py)."""
+    """Passes that adapt to the surface (none downhill toward a table, `swaths.swaths_at`):
+    pass centres chosen so that their predicted in-spec bands (`in_spec_band`) cover the
+    surface (a greedy set cover, `adaptive_offsets`); the band goes with the swath
+    (`Swath.band_mm`) so planners align the line to it. The direction rule is the nominal
+    raster's ('auto': less variation across the line): ranking the two directions by
+    predicted in-spec coverage picked the worse one on two of three real parts
+    (benchmarks/compare_planners.py)."""
     u = scan_direction(part, spec.sensor, direction)
     bands = adaptive_offsets(top_surface(part, u, np.cross(UP, u)), spec)
     offsets = [b.centre_mm for b in bands]
     rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
-    return swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, adaptive=True)
+    return swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, True, uphill)

@@ -1,20 +1,22 @@
-"""The one place that talks to FCL: the sensor body (a box in the sensor frame, SPEC §2)
-against the part's mesh (SPEC §3b), for every pose of a trajectory, scanning or not.
+"""The one place that talks to FCL: the sensor body (a box in the sensor frame) against the
+part's mesh, the fixtures and the table, for every pose of a trajectory, scanning or not.
 
-`CollisionChecker` builds the part's BVH once; `check` answers per pose with a signed
+`CollisionChecker` builds a mesh's BVH once; `check` answers per pose with a signed
 distance (negative = penetration), after an AABB prefilter that keeps FCL for the poses near
-the part.
+the mesh. `CellChecker` (`checker_for`) takes the least distance over the part, each fixture
+and the table plane, and says which of them each pose comes nearest.
 """
 
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import fcl
 import numpy as np
 
+from scanplan.cell import Cell
 from scanplan.part import Part
 from scanplan.sensor import SensorSpec
 
@@ -39,6 +41,8 @@ class CollisionReport:
     distance_mm: np.ndarray
     exact: np.ndarray
     clearance_mm: float
+    # Per obstacle ("part", "table", "fixtures"), the signed distance to it alone.
+    by_obstacle: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.distance_mm)
@@ -71,14 +75,12 @@ class CollisionReport:
     def worst_penetration_mm(self) -> float:
         return float(self.penetration_mm.max()) if len(self) else 0.0
 
-    def summary(self) -> dict[str, float | int]:
-        """The `collisions` entry of the metrics JSON."""
-        return {
-            "count": int(self.colliding.sum()),
-            "count_touching": int(self.touching.sum()),
-            "worst_penetration_mm": self.worst_penetration_mm,
-            "clearance_mm": self.clearance_mm,
-        }
+    def colliding_with(self, obstacle: str) -> np.ndarray:
+        """(n,) bool: closer than the clearance to that obstacle (none there: all False)."""
+        d = self.by_obstacle.get(obstacle)
+        if d is None:
+            return np.zeros(len(self), bool)
+        return (d < self.clearance_mm) | (d <= 0.0)
 
 
 def body_corners(sensor: SensorSpec) -> np.ndarray:
@@ -260,11 +262,60 @@ _CHECKERS: weakref.WeakKeyDictionary[Part, dict[bytes, CollisionChecker]] = (
 )
 
 
-def checker_for(part: Part, sensor: SensorSpec) -> CollisionChecker:
-    """The checker of this part and this sensor body, built once while the part lives (the
+def mesh_checker(part: Part, sensor: SensorSpec) -> CollisionChecker:
+    """The checker of this mesh and this sensor body, built once while the part lives (the
     planner and the evaluation of one part share its BVH)."""
     by_body = _CHECKERS.setdefault(part, {})
     key = sensor.body_bounds_mm.tobytes()
     if key not in by_body:
         by_body[key] = CollisionChecker(part, sensor)
     return by_body[key]
+
+
+class CellChecker:
+    """The sensor body against the part, each fixture and the table plane: the least signed
+    distance over them, and each one's (`CollisionReport.by_obstacle`)."""
+
+    def __init__(self, part: Part, sensor: SensorSpec, cell: Cell) -> None:
+        self.sensor = sensor
+        self.part_name = part.name
+        self.meshes = [mesh_checker(part, sensor)]
+        self.meshes += [mesh_checker(f, sensor) for f in cell.fixtures]
+        self.table = cell.table
+        # Everything the body must pass above (the transitions' crossing height).
+        self.vertices = np.vstack([c.vertices for c in self.meshes])
+
+    @property
+    def body_radius_mm(self) -> float:
+        return self.meshes[0].body_radius_mm
+
+    def body_corners_part(self, poses: np.ndarray) -> np.ndarray:
+        return self.meshes[0].body_corners_part(poses)
+
+    def check(self, poses: np.ndarray, clearance_mm: float, exact: bool = False) -> CollisionReport:
+        """`CollisionChecker.check` against every obstacle; the table's distance is exact
+        (the lowest body corner's height above the plane)."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        reports = [c.check(poses, clearance_mm, exact) for c in self.meshes]
+        by_obstacle = {"part": reports[0].distance_mm}
+        distance = reports[0].distance_mm.copy()
+        measured = reports[0].exact.copy()
+        if len(reports) > 1:
+            fixtures = np.min([r.distance_mm for r in reports[1:]], axis=0)
+            by_obstacle["fixtures"] = fixtures
+            closer = fixtures < distance
+            distance = np.where(closer, fixtures, distance)
+            measured = np.where(closer, np.all([r.exact for r in reports[1:]], axis=0), measured)
+        if self.table is not None:
+            table = self.table.height_mm(self.body_corners_part(poses)).min(axis=1)
+            by_obstacle["table"] = table
+            closer = table < distance
+            distance = np.where(closer, table, distance)
+            measured |= closer
+        return CollisionReport(distance, measured, float(clearance_mm), by_obstacle)
+
+
+def checker_for(part: Part, sensor: SensorSpec, cell: Cell | None = None) -> CellChecker:
+    """The checker of this part, its cell (None: nothing around the part) and this sensor
+    body; the meshes' BVHs are built once while their parts live."""
+    return CellChecker(part, sensor, cell or Cell())

@@ -11,7 +11,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from scanplan.cell import LOWEST, Cell
 from scanplan.config import sensor_datasheet, sensor_from_datasheet
+from scanplan.part import Part
 from scanplan.quantities import ScanSpec, StepLimits
 from scanplan.trajectory import Trajectory
 
@@ -42,6 +44,10 @@ class PlanContext:
     views: str = "top"
     roi: str | None = None
     full_beam_angle: bool = False
+    # The cell, as `cell.Cell.around` takes it: the `--table` text and the fixture files.
+    table: str = LOWEST
+    fixtures: tuple[str, ...] = ()
+    fixture_units: str = "mm"
 
     def __post_init__(self) -> None:
         if self.views not in VIEW_MODES:
@@ -65,6 +71,9 @@ class PlanContext:
             "surface": self.surface,
             "roi": self.roi,
             "reward": "full beam angle (v1)" if self.full_beam_angle else "pitch (v0)",
+            "table": self.table,
+            "fixtures": list(self.fixtures),
+            "fixture_units": self.fixture_units,
             **scan_spec_record(spec),
             "step_limits": {
                 "dy_max_mm": lim.dy_max_mm,
@@ -93,7 +102,15 @@ class PlanContext:
                 math.radians(lim.dphi_max_deg),
             )
             return cls(
-                spec, limits, model.planner, model.views, model.roi, model.reward.startswith("full")
+                spec,
+                limits,
+                model.planner,
+                model.views,
+                model.roi,
+                model.reward.startswith("full"),
+                model.table,
+                tuple(model.fixtures),
+                model.fixture_units,
             )
         except ValueError as exc:
             raise ValueError(f"{where}: context: {exc}") from None
@@ -113,6 +130,11 @@ class PlanContext:
             out.append(f"region of interest {other.roi or 'none'} (planned: {self.roi or 'none'})")
         if other.surface != self.surface:
             out.append(f"surface {other.surface} (planned: {self.surface})")
+        if (other.table, other.fixtures) != (self.table, self.fixtures):
+            out.append(
+                f"table {other.table}, fixtures {list(other.fixtures)} (planned: table "
+                f"{self.table}, fixtures {list(self.fixtures)})"
+            )
         return out
 
     def with_options(
@@ -120,6 +142,8 @@ class PlanContext:
         spec: ScanSpec | None = None,
         roi: str | None = None,
         views: str | None = None,
+        table: str | None = None,
+        fixtures: tuple[str, ...] | None = None,
     ) -> PlanContext:
         """This context with what a command's options override (None: as planned)."""
         return replace(
@@ -127,7 +151,13 @@ class PlanContext:
             spec=self.spec if spec is None else spec,
             roi=self.roi if roi is None else (roi or None),
             views=self.views if views is None else views,
+            table=self.table if table is None else table,
+            fixtures=self.fixtures if fixtures is None else fixtures,
         )
+
+    def cell(self, part: Part) -> Cell:
+        """The cell the plan was made in, around `part` (its fixtures read from their files)."""
+        return Cell.around(part, self.table, self.fixtures, self.fixture_units)
 
 
 def scan_spec_record(spec: ScanSpec) -> dict[str, Any]:
@@ -218,6 +248,9 @@ class _ContextJson(BaseModel):
     surface: Literal["top", "hemisphere", "roi"]
     roi: str | None
     reward: str
+    table: str = LOWEST
+    fixtures: list[str] = []
+    fixture_units: Literal["mm", "m", "in"] = "mm"
     sensor: dict[str, Any]
     scan_spec: _ScanSpecJson
     step_limits: _LimitsJson

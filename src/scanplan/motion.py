@@ -12,7 +12,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from scanplan.collision import CollisionChecker
+from scanplan.collision import CellChecker, CollisionChecker
 from scanplan.quantities import UP
 
 
@@ -73,7 +73,7 @@ def lift_cross_descend(
 
 
 def plan_transition(
-    checker: CollisionChecker,
+    checker: CollisionChecker | CellChecker,
     start: np.ndarray,
     end: np.ndarray,
     clearance_mm: float,
@@ -129,7 +129,7 @@ def _turns(start: np.ndarray, end: np.ndarray) -> bool:
 
 
 def view_transition(
-    checker: CollisionChecker,
+    checker: CollisionChecker | CellChecker,
     prev_pose: np.ndarray,
     prev_axis: np.ndarray,
     next_pose: np.ndarray,

@@ -7,7 +7,7 @@ only its own.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import partial
@@ -16,6 +16,7 @@ import networkx as nx
 import numpy as np
 
 from scanplan.bands import plan_adaptive_swaths
+from scanplan.cell import LOWEST, Cell
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext
 from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
@@ -37,9 +38,11 @@ def plan_path(
     planner: Planner,
     swaths: list[Swath],
     progress: Callable[[int, int], None] | None = None,
+    cell: Cell | None = None,
 ) -> Trajectory:
     """All passes in snake order, joined by non-scanning transitions that keep the sensor
-    body `spec.clearance_mm` from the part (SPEC §3b).
+    body `spec.clearance_mm` from the part and its `cell` (table, fixtures; None: nothing
+    around the part).
 
     A scanning pose whose body would come closer than the clearance is not emitted: the pass
     is cut there and its pieces are joined like passes (lift over, descend).
@@ -49,7 +52,7 @@ def plan_path(
     if not swaths:
         raise ValueError("no swath to plan")
     start = time.perf_counter()
-    checker = checker_for(part, spec.sensor)
+    checker = checker_for(part, spec.sensor, cell)
     pieces: list[Trajectory] = []
     dropped = 0
     last_pose: np.ndarray | None = None
@@ -125,6 +128,7 @@ def plan_scan(
     direction: str = "auto",
     overlap: float = OVERLAP,
     progress: Callable[[int, int], None] | None = None,
+    cell: Cell | None = None,
 ) -> tuple[list[Swath], Trajectory]:
     """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral
     step = line width x (1 − overlap)); 'adaptive' spaces passes by the band of the line that
@@ -132,11 +136,12 @@ def plan_scan(
     adaptive for a planner that rolls, else nominal."""
     if raster not in RASTERS:
         raise ValueError(f"unknown raster {raster!r}; use one of {', '.join(RASTERS)}")
+    uphill = None if cell is None or cell.table is None else cell.table.normal
     if raster == "adaptive" or (raster == "auto" and planner.roll):
-        swaths = plan_adaptive_swaths(part, spec, direction)
+        swaths = plan_adaptive_swaths(part, spec, direction, uphill=uphill)
     else:
-        swaths = plan_swaths(part, spec.sensor, direction, overlap)
-    return swaths, plan_path(part, spec, planner, swaths, progress)
+        swaths = plan_swaths(part, spec.sensor, direction, overlap, uphill=uphill)
+    return swaths, plan_path(part, spec, planner, swaths, progress, cell)
 
 
 def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
@@ -251,16 +256,16 @@ def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
 
 
 def join_views(
-    part: Part, plans: list[ViewPlan], spec: ScanSpec
+    part: Part, plans: list[ViewPlan], spec: ScanSpec, cell: Cell | None = None
 ) -> tuple[list[ViewPlan], Trajectory]:
     """One trajectory: each view's swaths renumbered into a block of its own (view k's
-    swaths follow view k−1's), joined by `view_transition`s clear of the part by
-    `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
+    swaths follow view k−1's), joined by `view_transition`s clear of the part and its cell
+    by `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
     (first, last), which is how a CSV reader tells the views apart: a view is the block of
     consecutive swaths whose scanning poses look along its axis. A view no clear move
     reaches is left out and counted (`meta["views_unreachable"]`). Returns the views kept,
     renumbered, and the trajectory."""
-    checker = checker_for(part, spec.sensor)
+    checker = checker_for(part, spec.sensor, cell)
     centre = 0.5 * (part.bounds[0] + part.bounds[1])
     # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
     reach = max(float(np.linalg.norm(vp.traj.positions_mm - centre, axis=1).max()) for vp in plans)
@@ -329,22 +334,39 @@ def plan_views(
     overlap: float = OVERLAP,
     roi: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    table: str = LOWEST,
+    fixtures: Sequence[str] = (),
+    fixture_units: str = "mm",
 ) -> tuple[list[ViewPlan], Trajectory]:
-    """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text)
-    by views: 'top' the paper's single top raster, 'auto' `choose_views`, None the planner's
-    default (`default_views`); each view is planned by `plan_scan` (raster, direction,
+    """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text),
+    in its cell (`cell.Cell.around`: the table and the fixture files), by views: 'top' the
+    paper's single top raster, 'auto' `choose_views`, None the planner's default
+    (`default_views`); each view is planned by `plan_scan` (raster, direction,
     overlap as there) on the rotated part. Returns the views and the joined trajectory
     (`join_views`), whose plan time is the whole choice's and whose `meta["context"]` records
     what it was planned under (`context.PlanContext`). progress(done, total): the top
     view's passes."""
     views = default_views(planner) if views is None else views
-    context = PlanContext(spec, planner.limits, planner.name, views, roi or None, planner.roll)
+    context = PlanContext(
+        spec,
+        planner.limits,
+        planner.name,
+        views,
+        roi or None,
+        planner.roll,
+        table,
+        tuple(str(f) for f in fixtures),
+        fixture_units,
+    )
     if not 0.0 < coverage_target <= 1.0:
         raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
     part = part.with_roi(roi)
+    cell = context.cell(part)
 
-    def plan(view_part: Part, progress=None) -> tuple[int, Trajectory]:
-        swaths, traj = plan_scan(view_part, spec, planner, raster, direction, overlap, progress)
+    def plan(view_part: Part, view: View, progress=None) -> tuple[int, Trajectory]:
+        swaths, traj = plan_scan(
+            view_part, spec, planner, raster, direction, overlap, progress, cell.rotated(view.R)
+        )
         return len(swaths), traj
 
     start = time.perf_counter()
@@ -352,7 +374,7 @@ def plan_views(
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
         plans = choose_views(part, spec, plan, coverage_target).plans
-    plans, traj = join_views(part, order_views(plans), spec)
+    plans, traj = join_views(part, order_views(plans), spec, cell)
     meta = traj.meta | {"context": context.to_json_dict()}
     return plans, replace(
         traj, plan_time_s=time.perf_counter() - start, planner=planner.name, meta=meta

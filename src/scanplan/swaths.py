@@ -269,9 +269,10 @@ def plan_swaths(
     direction: str | np.ndarray | DirectionRule = "auto",
     overlap: float = OVERLAP,
     run_in_mm: float = 20.0,
+    uphill: np.ndarray | None = None,
 ) -> list[Swath]:
     """Passes covering the part's footprint (its region of interest's, if it has one),
-    centred on it, in snake order.
+    centred on it, in snake order (none downhill toward a table: `swaths_at`).
 
     Lateral step d = w * (1 - overlap), w the line width at W_d; a part narrower than w gets
     one pass along its centre line. Each pass spans the part's extent along u plus `run_in_mm`
@@ -288,7 +289,14 @@ def plan_swaths(
     n_pass = 1 if span <= width else 1 + math.ceil((span - width) / step - 1e-9)
     centre = 0.5 * (across.max() + across.min())
     offsets = centre + (np.arange(n_pass) - (n_pass - 1) / 2) * step
-    return swaths_at(part, sensor, u, offsets, [(-width / 2, width / 2)] * n_pass, run_in_mm)
+    return swaths_at(
+        part, sensor, u, offsets, [(-width / 2, width / 2)] * n_pass, run_in_mm, uphill=uphill
+    )
+
+
+# A pass whose direction descends toward the table by more than this (sin 10°) is flown the
+# other way (`swaths_at`).
+DOWNHILL_SIN = 0.17
 
 
 def swaths_at(
@@ -299,9 +307,13 @@ def swaths_at(
     bands: list[tuple[float, float]],
     run_in_mm: float,
     adaptive: bool = False,
+    uphill: np.ndarray | None = None,
 ) -> list[Swath]:
     """Passes along u at the lateral `offsets`, each at (highest point under its band) + W_d,
-    spanning the part's extent along u plus `run_in_mm` at each end, in snake order."""
+    spanning the part's extent along u plus `run_in_mm` at each end, in snake order. With
+    `uphill` (away from the table, in this frame), a pass that would run downhill by more
+    than `DOWNHILL_SIN` runs the other way: the sensor body reaches far ahead on its camera
+    side, which must not lead it into the table (a side view of a wall)."""
     v = np.cross(UP, u)
     vertices = part.inspect_vertices
     along, across = vertices @ u, vertices @ v
@@ -313,7 +325,10 @@ def swaths_at(
         a = s0 * u + offset * v + (top + sensor.working_distance_mm) * UP
         b = s1 * u + offset * v + (top + sensor.working_distance_mm) * UP
         band = (lo, hi) if adaptive else None
-        if i % 2 == 1:  # snake order: every other pass runs backwards (v flips with u)
+        backwards = i % 2 == 1  # snake order: every other pass runs backwards
+        if uphill is not None and abs(float(u @ uphill)) > DOWNHILL_SIN:
+            backwards = float(u @ uphill) < 0  # every pass uphill
+        if backwards:  # v flips with u
             flipped = (-hi, -lo) if band is not None else None
             swaths.append(Swath(i, b, a, -u, -v, flipped))
         else:

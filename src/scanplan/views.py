@@ -149,13 +149,14 @@ class ViewPlan:
     passes: int
 
 
-PlanView = Callable[[Part], tuple[int, Trajectory]]
+# The top-view planner: (the part in a view's frame, that view) -> (passes, trajectory).
+PlanView = Callable[[Part, "View"], tuple[int, Trajectory]]
 
 
 def plan_view(part: Part, view: View, plan: PlanView) -> ViewPlan:
-    """Plan one view with `plan` (the top-view planner: part -> (passes, trajectory)) on the
-    rotated, region-restricted part; the trajectory comes back in the part frame."""
-    passes, traj = plan(view.part(part))
+    """Plan one view with `plan` on the rotated, region-restricted part; the trajectory
+    comes back in the part frame."""
+    passes, traj = plan(view.part(part), view)
     return ViewPlan(view, view.to_part_frame(traj), passes)
 
 

@@ -177,3 +177,22 @@ BcSamplesOpt = Annotated[
         help="warm start: behaviour-clone a P-controller on N states first", callback=SEED_CHECK
     ),
 ]
+TableOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--table",
+        metavar="Z|none",
+        help="the table under the part: its height Z in part coordinates (mm), or none for a "
+        "part held in the air; default: at the part's lowest point",
+        show_default=False,
+    ),
+]
+FixtureOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--fixture",
+        metavar="FILE",
+        help="a fixture mesh in part coordinates (repeatable): kept clear like the part",
+        show_default=False,
+    ),
+]

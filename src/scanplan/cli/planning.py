@@ -14,12 +14,14 @@ import typer
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.options import (
     POINTS_CHECK,
+    FixtureOpt,
     OutOpt,
     PartArg,
     QuietOpt,
     RoiOpt,
     SeedOpt,
     SensorOpt,
+    TableOpt,
     ToleranceOpt,
     TrajectoryArg,
     UnitsOpt,
@@ -143,10 +145,14 @@ def plan_cmd(
     roi: RoiOpt = None,
     views: PlanViewsOpt = None,
     coverage_target: CoverageTargetOpt = COVERAGE_TARGET,
+    table: TableOpt = None,
+    fixture: FixtureOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
-    under (sensor, tolerances, views, region of interest) for `evaluate` to judge it by."""
+    under (sensor, tolerances, views, region of interest, table and fixtures) for `evaluate`
+    to judge it by."""
     # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
+    from scanplan.cell import LOWEST
     from scanplan.part import load_part
     from scanplan.pipeline import plan_views
     from scanplan.planners import make_planner
@@ -169,6 +175,9 @@ def plan_cmd(
             overlap,
             roi=roi,
             progress=progress,
+            table=table or LOWEST,
+            fixtures=fixture or (),
+            fixture_units=units,
         )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     n_view = f"{len(plans)} view{'s' * (len(plans) > 1)}, "
@@ -240,6 +249,8 @@ def evaluate_cmd(
     quiet: QuietOpt = False,
     roi: RoiOpt = None,
     views: EvaluateViewsOpt = None,
+    table: TableOpt = None,
+    fixture: FixtureOpt = None,
 ):
     """Simulate the scan of a trajectory and report its quality, judged as the plan file
     records it (sensor, tolerance, region of interest, surface) unless an option says
@@ -250,7 +261,7 @@ def evaluate_cmd(
     from scanplan.trajectory import read_trajectory
 
     traj = read_trajectory(trajectory)
-    context, note = judged_context(traj, sensor, tolerance, roi, views)
+    context, note = judged_context(traj, sensor, tolerance, roi, views, table, fixture)
     the_part = load_part(part, units)
     if note:
         typer.echo(note, err=True)
@@ -282,6 +293,8 @@ def judged_context(
     tolerance: str | None,
     roi: str | None,
     views: str | None,
+    table: str | None = None,
+    fixtures: list[str] | None = None,
 ) -> tuple[PlanContext, str]:
     """The context to judge `traj` by: the one its file records, with what the options
     override (a file without a record: the defaults, and the surface its views imply); and
@@ -300,7 +313,9 @@ def judged_context(
         spec = replace(
             spec, tol_distance_mm=tol["tol_distance_mm"], tol_angle_rad=tol["tol_angle_rad"]
         )
-    judged = planned.with_options(spec, roi, views)
+    judged = planned.with_options(
+        spec, roi, views, table, None if fixtures is None else tuple(fixtures)
+    )
     changes = planned.differences(judged)
     return judged, ("note: judged with " + "; ".join(changes)) if changes else ""
 

@@ -130,7 +130,8 @@ def evaluate(
             f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
         )
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
-    collisions = checker_for(part, sensor).check(traj.poses, scan_spec.clearance_mm)
+    checker = checker_for(part, sensor, context.cell(part))
+    collisions = checker.check(traj.poses, scan_spec.clearance_mm)
     return Metrics(
         part=part.name,
         planner=traj.planner,
@@ -151,6 +152,8 @@ def evaluate(
         coverage_map=coverage_map,
         collisions_count=int(collisions.colliding.sum()),
         collisions_touching=int(collisions.touching.sum()),
+        collisions_table=int(collisions.colliding_with("table").sum()),
+        collisions_fixtures=int(collisions.colliding_with("fixtures").sum()),
         worst_penetration_mm=collisions.worst_penetration_mm,
         clearance_mm=collisions.clearance_mm,
         **errors.summary(),

@@ -78,9 +78,9 @@ class Metrics:
     least one point per `in_spec_cell_mm`² (2·Δs_opt).
     Cycle time: see `CYCLE_TIME_ASSUMPTIONS`; split into scanning (profiles at the profile
     rate) and moving (the rest of the path at the travel speed).
-    Collisions (every pose, scanning or not; `collision.CollisionChecker`): poses whose sensor
-    body comes closer to the part than `clearance_mm`, those touching it (0 mm), and the
-    deepest penetration.
+    Collisions (every pose, scanning or not; `collision.CellChecker`): poses whose sensor
+    body comes closer than `clearance_mm` to the part, the table or a fixture (and of those,
+    to the table, to a fixture), those touching (0 mm), and the deepest penetration.
     `cloud`: a bounded sample of the valid points with their errors, for the maps;
     `coverage_map`: the surface samples and their `SurfaceState`, for the in-spec map.
     """
@@ -130,6 +130,8 @@ class Metrics:
     r_delta_s_mean: float
     collisions_count: int
     collisions_touching: int
+    collisions_table: int
+    collisions_fixtures: int
     worst_penetration_mm: float
     clearance_mm: float
     cloud: PointCloud | None = field(default=None, repr=False, compare=False)
@@ -198,6 +200,8 @@ class Metrics:
                 "collisions": {
                     "count": self.collisions_count,
                     "count_touching": self.collisions_touching,
+                    "table": self.collisions_table,
+                    "fixtures": self.collisions_fixtures,
                     "worst_penetration_mm": self.worst_penetration_mm,
                     "clearance_mm": self.clearance_mm,
                 },
