@@ -50,11 +50,13 @@ def bounded(
     return check
 
 
-def pose_option(value: str) -> str:
-    """--tcp / --part-pose: six finite numbers, checked before any work."""
+def pose_option(value: str | None) -> str | None:
+    """--tcp / --part-pose: six finite numbers, checked before any work (None: not given)."""
     # Deferred: export loads the writers of every dialect.
     from scanplan.export import parse_pose_arg
 
+    if value is None:
+        return None
     try:
         parse_pose_arg(value)
     except ValueError as exc:
@@ -134,9 +136,11 @@ TrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV or JSON")]
 
 # ---- poses (export, place) ----------------------------------------------------------------
 POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
-TcpOpt = Annotated[str, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option)]
+TcpOpt = Annotated[
+    str | None, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option)
+]
 PartPoseOpt = Annotated[
-    str,
+    str | None,
     typer.Option(
         "--part-pose", help=f"part in the robot base frame: {POSE_HELP}", callback=pose_option
     ),

@@ -49,22 +49,35 @@ TravelSpeedOpt = Annotated[
     float, typer.Option(help="speed between passes, mm/s (> 0)", callback=POSITIVE)
 ]
 ReachRobotOpt = Annotated[str, typer.Option(help=ROBOT_HELP)]
+AllowUnreachableOpt = Annotated[
+    bool,
+    typer.Option(
+        "--allow-unreachable",
+        help="write the program even if the arm cannot fly it (unreachable poses, joint "
+        "limits, configuration flips in a pass); the problems are still printed",
+    ),
+]
+# A pose not given is the identity: said in the output, never silently.
+IDENTITY_POSE = "0,0,0,0,0,0"
 
 
 @user_errors
 def export_cmd(
     trajectory: TrajectoryArg,
     output: ProgramOutOpt,
+    robot: ReachRobotOpt,
     fmt: FormatOpt = "urscript",
-    tcp: TcpOpt = "0,0,0,0,0,0",
-    part_pose: PartPoseOpt = "0,0,0,0,0,0",
+    tcp: TcpOpt = None,
+    part_pose: PartPoseOpt = None,
     profile_rate: ProfileRateOpt = ScanSpec.profile_rate_hz,
     spacing: SpacingOpt = ScanSpec.delta_s_opt_mm,
     travel_speed: TravelSpeedOpt = ScanSpec.travel_speed_mm_s,
-    robot: ReachRobotOpt = "ur5e",
+    allow_unreachable: AllowUnreachableOpt = False,
     quiet: QuietOpt = False,
 ):
-    """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV)."""
+    """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV) once
+    the arm is shown to fly it: nothing is written if a pose is unreachable, beyond the
+    joint limits or flips configuration within a pass (unless --allow-unreachable)."""
     # Deferred: the exporters and kinematics load numpy, scipy and yaml.
     from scanplan.export import (
         DIRECTORY_FORMATS,
@@ -84,9 +97,15 @@ def export_cmd(
         raise ValueError(f"-o {str(output)!r} is a directory: give the program's file name")
     # KUKA wants the .src file named after its DEF.
     name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
+    for option, value, meaning in (
+        ("--part-pose", part_pose, "the part frame is the robot's base frame"),
+        ("--tcp", tcp, "the sensor origin is the flange"),
+    ):
+        if value is None:
+            typer.echo(f"{option} not given: {IDENTITY_POSE} ({meaning})")
     options = ExportOptions(
-        part_pose=parse_pose_arg(part_pose),
-        tcp=parse_pose_arg(tcp),
+        part_pose=parse_pose_arg(part_pose or IDENTITY_POSE),
+        tcp=parse_pose_arg(tcp or IDENTITY_POSE),
         scan=ScanSpec(
             delta_s_opt_mm=spacing, profile_rate_hz=profile_rate, travel_speed_mm_s=travel_speed
         ),
@@ -96,8 +115,10 @@ def export_cmd(
     text = export_program(traj, fmt, options) if fmt in FORMATS else None
     if text is None:
         plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
-    if robot.lower() != "none":
-        print_reach(traj, options, robot, quiet)
+    if robot.lower() == "none":
+        typer.echo("--robot none: no reach check; the program is not known to be flyable")
+    else:
+        check_flyable(traj, options, robot, quiet, allow_unreachable)
     if text is not None:
         atomic_write_text(output, text)
     else:
@@ -105,9 +126,11 @@ def export_cmd(
     typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
 
 
-def print_reach(traj: Trajectory, options: ExportOptions, robot: str, quiet: bool) -> None:
-    """Whether `robot` reaches every flange pose: its summary, as a warning on stderr if not
-    (the program is written either way)."""
+def check_flyable(
+    traj: Trajectory, options: ExportOptions, robot: str, quiet: bool, allow: bool
+) -> None:
+    """Whether `robot` flies every flange pose: its summary; if not, a ValueError naming the
+    first offending pass and pose (nothing is written), or with `allow` a warning."""
     # Deferred: as in export_cmd.
     from scanplan.export import flange_poses
     from scanplan.robot import check_reach, get_robot
@@ -119,10 +142,18 @@ def print_reach(traj: Trajectory, options: ExportOptions, robot: str, quiet: boo
             swath=traj.swath,
             scanning=traj.scanning,
         )
-    if not report.ok:
-        typer.echo(f"warning: {report.summary()}", err=True)
-    else:
-        typer.echo(report.summary())
+    if report.reachable:
+        warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
+        typer.echo(("warning: " if warn else "") + report.summary(), err=warn)
+        return
+    first = report.first_problem()
+    where = f"pose {first[0]} (pass {int(traj.swath[first[0]])}) {first[1]}"
+    if not allow:
+        raise ValueError(
+            f"{report.model} cannot fly this plan: {where}; {report.summary()} — place the part "
+            "(scanplan place) or give --allow-unreachable"
+        )
+    typer.echo(f"warning: {where}; {report.summary()}", err=True)
 
 
 # ---- place --------------------------------------------------------------------------------
@@ -158,7 +189,7 @@ def parse_height_range(text: str | None) -> tuple[float, float] | None:
 def place_cmd(
     trajectory: TrajectoryArg,
     robot: PlaceRobotOpt,
-    tcp: TcpOpt = "0,0,0,0,0,0",
+    tcp: TcpOpt = None,
     height_range: HeightRangeOpt = None,
     yaw_step: YawStepOpt = 30.0,
     quiet: QuietOpt = False,
@@ -172,8 +203,10 @@ def place_cmd(
 
     heights = parse_height_range(height_range)
     traj = read_trajectory(trajectory)
+    if tcp is None:
+        typer.echo(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
     with progress_bar("searching a placement", quiet):
-        result = place(traj, robot, parse_pose_arg(tcp), heights, yaw_step)
+        result = place(traj, robot, parse_pose_arg(tcp or IDENTITY_POSE), heights, yaw_step)
     m = result.report.worst_margins()
     typer.echo(f"--part-pose {result.pose_arg()}")
     typer.echo(result.report.summary())

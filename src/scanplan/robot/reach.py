@@ -83,6 +83,20 @@ class ReachReport:
     def ok(self) -> bool:
         return self.reachable and not (len(self.near_singular) or len(self.joint_jumps))
 
+    def first_problem(self) -> tuple[int, str]:
+        """(pose index, what) of the first pose that stops the arm: unreachable, beyond the
+        joint limits or flipping configuration within a pass; (-1, '') if none does."""
+        found = [
+            (int(a[0]), what)
+            for a, what in (
+                (self.unreachable, "is unreachable"),
+                (self.limit_violations, "is beyond the joint limits"),
+                (self.config_flips, "flips the arm's configuration within its pass"),
+            )
+            if len(a)
+        ]
+        return min(found) if found else (-1, "")
+
     def worst_margins(self) -> dict[str, float]:
         """The smallest margin along the path: joint limit (deg), wrist and elbow (deg from
         the singular configuration), shoulder (mm); NaN where no pose is reachable."""
