@@ -24,6 +24,7 @@ from scanplan.motion import plan_transition, view_transition
 from scanplan.part import Part
 from scanplan.planners import Planner, pass_workers
 from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
+from scanplan.robot.fit import fit_to_robot
 from scanplan.surface import hemisphere_visible_samples
 from scanplan.swaths import Swath, plan_swaths
 from scanplan.trajectory import Trajectory
@@ -337,6 +338,7 @@ def plan_views(
     table: str = LOWEST,
     fixtures: Sequence[str] = (),
     fixture_units: str = "mm",
+    arm: Arm | None = None,
 ) -> tuple[list[ViewPlan], Trajectory]:
     """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text),
     in its cell (`cell.Cell.around`: the table and the fixture files), by views: 'top' the
@@ -345,7 +347,7 @@ def plan_views(
     overlap as there) on the rotated part. Returns the views and the joined trajectory
     (`join_views`), whose plan time is the whole choice's and whose `meta["context"]` records
     what it was planned under (`context.PlanContext`). progress(done, total): the top
-    view's passes."""
+    view's passes. With an `arm`, the plan is made flyable by it (`fit_arm`)."""
     views = default_views(planner) if views is None else views
     context = PlanContext(
         spec,
@@ -375,7 +377,29 @@ def plan_views(
     else:
         plans = choose_views(part, spec, plan, coverage_target).plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
-    meta = traj.meta | {"context": context.to_json_dict()}
-    return plans, replace(
-        traj, plan_time_s=time.perf_counter() - start, planner=planner.name, meta=meta
-    )
+    traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
+    if arm is not None:
+        traj = fit_arm(part, traj, arm, context)
+    return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
+
+
+@dataclass(frozen=True)
+class Arm:
+    """The robot a plan is made for: a preset name or file, the sensor on its flange
+    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`)."""
+
+    robot: str
+    tcp: np.ndarray
+    T_base_part: np.ndarray | None = None
+
+
+def fit_arm(part: Part, traj: Trajectory, arm: Arm, context: PlanContext) -> Trajectory:
+    """`traj` made flyable by the arm (`robot.fit.fit_to_robot`), with `meta["robot"]`: what
+    it gave up, per view, and the in-spec coverage of the surface to inspect before and after
+    (evaluated with the view choice's fan)."""
+    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part)
+    record = fit.record(arm.tcp)
+    for key, plan in (("in_spec_without_robot", traj), ("in_spec", fit.traj)):
+        m = evaluate(part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context=context)
+        record[key] = m.in_spec_coverage
+    return replace(fit.traj, meta=fit.traj.meta | {"robot": record})

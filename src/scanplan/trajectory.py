@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
 # The records of `Trajectory.meta` a plan file carries (JSON-able values).
-FILE_RECORDS = ("context", "views")
+FILE_RECORDS = ("context", "views", "robot")
 CSV_COMMENT = "#"
 
 
@@ -404,6 +404,7 @@ class _TrajectoryJson(BaseModel):
     planner: str = ""
     plan_time_s: float = Field(0.0, ge=0, allow_inf_nan=False)
     context: dict[str, Any] | None = None
+    robot: dict[str, Any] | None = None
     views: list[_ViewJson] | None = None
     poses: list[_PoseJson] = Field(min_length=1)
 
@@ -449,6 +450,7 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         meta=(
             ({"views": [v.model_dump() for v in model.views]} if model.views else {})
             | ({"context": model.context} if model.context else {})
+            | ({"robot": model.robot} if model.robot else {})
         ),
     )
 

@@ -17,11 +17,13 @@ from scanplan.cli.options import (
     FixtureOpt,
     OutOpt,
     PartArg,
+    PartPoseOpt,
     QuietOpt,
     RoiOpt,
     SeedOpt,
     SensorOpt,
     TableOpt,
+    TcpOpt,
     ToleranceOpt,
     TrajectoryArg,
     UnitsOpt,
@@ -35,6 +37,7 @@ from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
 if TYPE_CHECKING:
     from scanplan.context import PlanContext
     from scanplan.metrics import Metrics
+    from scanplan.pipeline import Arm
     from scanplan.trajectory import Trajectory
 
 # ---- scan ---------------------------------------------------------------------------------
@@ -123,6 +126,15 @@ PlanViewsOpt = Annotated[
         show_default=False,
     ),
 ]
+PlanRobotOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--robot",
+        help="plan for this arm (ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
+        "file): every pose reachable, no configuration flip within a pass",
+        show_default=False,
+    ),
+]
 CoverageTargetOpt = Annotated[
     float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
 ]
@@ -147,10 +159,14 @@ def plan_cmd(
     coverage_target: CoverageTargetOpt = COVERAGE_TARGET,
     table: TableOpt = None,
     fixture: FixtureOpt = None,
+    robot: PlanRobotOpt = None,
+    tcp: TcpOpt = None,
+    part_pose: PartPoseOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
     under (sensor, tolerances, views, region of interest, table and fixtures) for `evaluate`
-    to judge it by."""
+    to judge it by. With --robot, a plan that arm can fly (placed by the tool unless
+    --part-pose is given), and what that cost."""
     # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
     from scanplan.cell import LOWEST
     from scanplan.part import load_part
@@ -163,6 +179,7 @@ def plan_cmd(
     spec = scan_spec(sensor, tolerance)
     the_part = load_part(part, units)
     the_planner = make_planner(planner, policy, roll)
+    arm = robot_arm(robot, tcp, part_pose)
     with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
         plans, traj = plan_views(
             the_part,
@@ -178,6 +195,7 @@ def plan_cmd(
             table=table or LOWEST,
             fixtures=fixture or (),
             fixture_units=units,
+            arm=arm,
         )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     n_view = f"{len(plans)} view{'s' * (len(plans) > 1)}, "
@@ -189,6 +207,24 @@ def plan_cmd(
     print_plan_notes(traj, spec)
 
 
+def robot_arm(robot: str | None, tcp: str | None, part_pose: str | None) -> Arm | None:
+    """The arm `plan --robot` makes the plan for (None: no robot); a TCP not given is the
+    flange, and the output says so."""
+    # Deferred: the pipeline loads the planners; export the writers of every dialect.
+    from scanplan.export import parse_pose_arg
+    from scanplan.pipeline import Arm
+
+    if robot is None:
+        for option, value in (("--tcp", tcp), ("--part-pose", part_pose)):
+            if value is not None:
+                raise ValueError(f"{option} needs --robot: the arm it refers to")
+        return None
+    if tcp is None:
+        typer.echo("--tcp not given: 0,0,0,0,0,0 (the sensor origin is the flange)")
+    pose = None if part_pose is None else parse_pose_arg(part_pose)
+    return Arm(robot, parse_pose_arg(tcp or "0,0,0,0,0,0"), pose)
+
+
 def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:
     """What the planner left out or overrode, one line each (nothing when all went to plan)."""
     if unreachable := traj.meta.get("views_unreachable", 0):
@@ -196,7 +232,16 @@ def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:
     if dropped := traj.meta.get("collisions_dropped", 0):
         typer.echo(
             f"collisions: {dropped} scanning poses dropped (sensor body within "
-            f"{spec.clearance_mm:g} mm of the part)"
+            f"{spec.clearance_mm:g} mm of the part, the table or a fixture)"
+        )
+    if arm := traj.meta.get("robot"):
+        given_up = ", ".join(f"view {k}: {v}" for k, v in arm["scanning_poses_given_up"].items())
+        typer.echo(
+            f"{arm['robot']} at --part-pose {arm['part_pose']}: "
+            f"{sum(arm['scanning_poses_given_up'].values())} scanning poses given up"
+            f"{f' ({given_up})' if given_up else ''}, {arm['moves_given_up']} move poses, "
+            f"{arm['passes_split']} passes split at a configuration flip; in-spec coverage "
+            f"{arm['in_spec_without_robot']:.3f} without the arm, {arm['in_spec']:.3f} with it"
         )
     if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
         # The rl planner's guards replaced some of the policy's steps: say how many.

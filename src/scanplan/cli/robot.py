@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
+import numpy as np
 import typer
 
 from scanplan.cli.common import progress_bar, user_errors
@@ -48,7 +49,10 @@ SpacingOpt = Annotated[
 TravelSpeedOpt = Annotated[
     float, typer.Option(help="speed between passes, mm/s (> 0)", callback=POSITIVE)
 ]
-ReachRobotOpt = Annotated[str, typer.Option(help=ROBOT_HELP)]
+ReachRobotOpt = Annotated[
+    str | None,
+    typer.Option(help=ROBOT_HELP + "; default: the arm the plan was made for, if any"),
+]
 AllowUnreachableOpt = Annotated[
     bool,
     typer.Option(
@@ -65,7 +69,7 @@ IDENTITY_POSE = "0,0,0,0,0,0"
 def export_cmd(
     trajectory: TrajectoryArg,
     output: ProgramOutOpt,
-    robot: ReachRobotOpt,
+    robot: ReachRobotOpt = None,
     fmt: FormatOpt = "urscript",
     tcp: TcpOpt = None,
     part_pose: PartPoseOpt = None,
@@ -77,7 +81,8 @@ def export_cmd(
 ):
     """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV) once
     the arm is shown to fly it: nothing is written if a pose is unreachable, beyond the
-    joint limits or flips configuration within a pass (unless --allow-unreachable)."""
+    joint limits or flips configuration within a pass (unless --allow-unreachable). The arm,
+    part pose and TCP default to those a plan made with --robot records."""
     # Deferred: the exporters and kinematics load numpy, scipy and yaml.
     from scanplan.export import (
         DIRECTORY_FORMATS,
@@ -85,7 +90,6 @@ def export_cmd(
         ExportOptions,
         export_program,
         export_rosbag,
-        parse_pose_arg,
     )
     from scanplan.export.common import plan_motion
     from scanplan.trajectory import atomic_write_text, read_trajectory
@@ -97,21 +101,16 @@ def export_cmd(
         raise ValueError(f"-o {str(output)!r} is a directory: give the program's file name")
     # KUKA wants the .src file named after its DEF.
     name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
-    for option, value, meaning in (
-        ("--part-pose", part_pose, "the part frame is the robot's base frame"),
-        ("--tcp", tcp, "the sensor origin is the flange"),
-    ):
-        if value is None:
-            typer.echo(f"{option} not given: {IDENTITY_POSE} ({meaning})")
+    traj = read_trajectory(trajectory)
+    robot, T_base_part, T_flange_sensor = arm_of(traj, robot, part_pose, tcp)
     options = ExportOptions(
-        part_pose=parse_pose_arg(part_pose or IDENTITY_POSE),
-        tcp=parse_pose_arg(tcp or IDENTITY_POSE),
+        part_pose=T_base_part,
+        tcp=T_flange_sensor,
         scan=ScanSpec(
             delta_s_opt_mm=spacing, profile_rate_hz=profile_rate, travel_speed_mm_s=travel_speed
         ),
         program_name=name if name and fmt == "krl" else "scanplan_path",
     )
-    traj = read_trajectory(trajectory)
     text = export_program(traj, fmt, options) if fmt in FORMATS else None
     if text is None:
         plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
@@ -124,6 +123,40 @@ def export_cmd(
     else:
         export_rosbag(traj, output, options)
     typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
+
+
+def arm_of(
+    traj: Trajectory, robot: str | None, part_pose: str | None, tcp: str | None
+) -> tuple[str, np.ndarray, np.ndarray]:
+    """(robot, T_base_part, T_flange_sensor) from the options, else from the arm the plan was
+    made for (said in the output); --robot is required for a plan made for none, and a pose
+    not given there is the identity (said too)."""
+    # Deferred: as in export_cmd.
+    from scanplan.export import parse_pose_arg
+
+    recorded = traj.meta.get("robot") or {}
+    if robot is None:
+        if not recorded:
+            raise ValueError(
+                "--robot is required: the arm to check the program on (ur3e, ur5e, ur10e, "
+                "kr6-r900, irb2400, lrmate200id or a TOML file), or none to skip the check"
+            )
+        robot = str(recorded["robot"])
+        typer.echo(f"--robot {robot} (the plan's)")
+    poses = []
+    for option, value, key, arg, meaning in (
+        ("--part-pose", part_pose, "T_base_part", "part_pose", "the part frame is the base"),
+        ("--tcp", tcp, "T_flange_sensor", "tcp", "the sensor origin is the flange"),
+    ):
+        if value is not None:
+            poses.append(parse_pose_arg(value))
+        elif key in recorded and robot == recorded.get("robot"):
+            typer.echo(f"{option} {recorded.get(arg, '')} (the plan's)")
+            poses.append(np.asarray(recorded[key], dtype=np.float64))
+        else:
+            typer.echo(f"{option} not given: {IDENTITY_POSE} ({meaning})")
+            poses.append(parse_pose_arg(IDENTITY_POSE))
+    return robot, poses[0], poses[1]
 
 
 def check_flyable(

@@ -1,0 +1,158 @@
+"""A plan made flyable by an arm: `fit_to_robot` places the part (or takes its pose), then
+gives up the poses the arm cannot reach and splits passes where the arm would flip its
+configuration, so that every pass is flown on one branch and a change of configuration
+happens only between passes, as a joint move. It says what it gave up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from scanplan.robot.base import Robot
+from scanplan.robot.place import Placement, place
+from scanplan.robot.presets import get_robot
+from scanplan.robot.reach import ReachReport, check_reach
+from scanplan.trajectory import Trajectory
+
+# Rounds of dropping and splitting: a piece of a pass may start on another branch than the
+# whole pass did, and so show a flip of its own; a few rounds settle it.
+MAX_ROUNDS = 6
+
+
+@dataclass(frozen=True)
+class RobotFit:
+    """The plan flown by an arm.
+
+    traj: the plan without the poses given up, its passes split at configuration flips
+    (swaths renumbered; the views' swath blocks follow). T_base_part: (4, 4) the part's
+    pose in the arm's base frame (the placement found, or the one given). report: the
+    reach check of `traj` there. given_up: scanning poses given up, per view index;
+    moves_given_up: transition poses given up (the arm makes those moves as joint moves);
+    splits: passes cut at a configuration flip.
+    """
+
+    traj: Trajectory
+    T_base_part: np.ndarray
+    report: ReachReport
+    given_up: dict[int, int]
+    moves_given_up: int
+    splits: int
+    placement: Placement | None
+
+    def record(self, tcp: np.ndarray) -> dict:
+        """What the plan file records of the arm."""
+        return {
+            "robot": self.report.model,
+            "part_pose": pose_arg(self.T_base_part),
+            "tcp": pose_arg(tcp),
+            "T_base_part": self.T_base_part.tolist(),
+            "T_flange_sensor": np.asarray(tcp).tolist(),
+            "scanning_poses_given_up": {str(k): v for k, v in self.given_up.items()},
+            "moves_given_up": self.moves_given_up,
+            "passes_split": self.splits,
+            "reachable": self.report.reachable,
+        }
+
+
+def pose_arg(T: np.ndarray) -> str:
+    """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` and `--tcp` read it."""
+    abc = Rotation.from_matrix(np.asarray(T)[:3, :3]).as_euler("ZYX", degrees=True)
+    return ",".join(f"{v:.3f}".rstrip("0").rstrip(".") for v in (*np.asarray(T)[:3, 3], *abc))
+
+
+def fit_to_robot(
+    traj: Trajectory,
+    robot: str | Path | Robot,
+    tcp: np.ndarray,
+    T_base_part: np.ndarray | None = None,
+    height_range_mm: tuple[float, float] | None = None,
+) -> RobotFit:
+    """`traj` (part frame) made flyable by `robot` with the sensor at `tcp`
+    (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
+    unreachable or beyond the joint limits are given up (a pass continues after them as a
+    new pass) and passes are split where the arm flips its configuration, until the reach
+    check of the whole path finds neither."""
+    arm = get_robot(robot)
+    placement = None
+    if T_base_part is None:
+        placement = place(traj, arm, tcp, height_range_mm)
+        T_base_part = placement.T_base_part
+    inv_tcp = np.linalg.inv(tcp)
+    keep = np.ones(len(traj), bool)
+    swath = traj.swath.copy()
+    splits = 0
+    for _ in range(MAX_ROUNDS):
+        current = _subset(traj, keep, swath)
+        report = check_reach(
+            T_base_part @ current.poses @ inv_tcp,
+            arm,
+            swath=current.swath,
+            scanning=current.scanning,
+        )
+        if report.reachable:
+            break
+        index = np.flatnonzero(keep)
+        bad = np.union1d(report.unreachable, report.limit_violations)
+        keep[index[bad]] = False
+        # A pass goes on after a gap or a flip as a new pass: the arm reconfigures between.
+        cut = np.zeros(len(traj), bool)
+        cut[index[report.config_flips]] = True
+        splits += int(len(report.config_flips))
+        swath = _renumbered(traj, keep, swath, cut)
+    given_up: dict[int, int] = {}
+    lost = ~keep & traj.scanning
+    for view in traj.meta.get("views") or [{"index": 0, "first_swath": 0, "last_swath": 1 << 30}]:
+        in_view = (traj.swath >= view["first_swath"]) & (traj.swath <= view["last_swath"])
+        if (count := int((lost & in_view).sum())) > 0:
+            given_up[int(view["index"])] = count
+    fitted = _subset(traj, keep, swath)
+    fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
+    return RobotFit(
+        fitted,
+        T_base_part,
+        report,
+        given_up,
+        int((~keep & ~traj.scanning).sum()),
+        splits,
+        placement,
+    )
+
+
+def _subset(traj: Trajectory, keep: np.ndarray, swath: np.ndarray) -> Trajectory:
+    return replace(traj, poses=traj.poses[keep], swath=swath[keep], scanning=traj.scanning[keep])
+
+
+def _renumbered(
+    traj: Trajectory, keep: np.ndarray, swath: np.ndarray, cut: np.ndarray
+) -> np.ndarray:
+    """Swath indices in order, a new one wherever a pass resumes after a gap (given-up
+    poses) or a cut: pieces of one pass become consecutive passes."""
+    scanning = traj.scanning
+    new_pass = np.zeros(len(traj), bool)
+    new_pass[1:] = swath[1:] != swath[:-1]
+    # A kept scanning pose whose predecessor in the pass was given up starts a new pass.
+    gap = np.zeros(len(traj), bool)
+    gap[1:] = scanning[1:] & scanning[:-1] & ~keep[:-1] & (swath[1:] == swath[:-1])
+    return np.cumsum(new_pass | gap | cut) + int(swath[0])
+
+
+def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:
+    """The views' records with their swath blocks in the renumbered passes."""
+    out = []
+    for view in traj.meta.get("views") or []:
+        in_view = (traj.swath >= view["first_swath"]) & (traj.swath <= view["last_swath"])
+        kept = in_view & keep
+        if not kept.any():
+            continue
+        out.append(
+            view
+            | {
+                "first_swath": int(swath[kept].min()),
+                "last_swath": int(swath[kept].max()),
+            }
+        )
+    return out
