@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -86,12 +86,7 @@ class PlanContext:
     @classmethod
     def from_json_dict(cls, data: object, where: str) -> PlanContext:
         """The context a plan file records; ValueError naming `where` and the field."""
-        try:
-            model = _ContextJson.model_validate(data)
-        except ValidationError as exc:
-            err = exc.errors()[0]
-            loc = ".".join(str(p) for p in err["loc"]) or "context"
-            raise ValueError(f"{where}: context.{loc}: {err['msg']}") from None
+        model = _validated(_ContextJson, data, f"{where}: context")
         spec = _scan_spec(model.sensor, model.scan_spec, f"{where}: context")
         lim = model.step_limits
         try:
@@ -180,13 +175,18 @@ def scan_spec_record(spec: ScanSpec) -> dict[str, Any]:
 
 def scan_spec_from_record(data: object, where: str) -> ScanSpec:
     """The ScanSpec a file records (`scan_spec_record`); ValueError naming where and what."""
+    model = _validated(_SpecRecordJson, data, where)
+    return _scan_spec(model.sensor, model.scan_spec, where)
+
+
+def _validated(schema: type[_Json], data: object, where: str) -> _Json:
+    """`data` checked against `schema`; ValueError naming where and the first bad field."""
     try:
-        model = _SpecRecordJson.model_validate(data)
+        return schema.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"]) or "record"
-        raise ValueError(f"{where}: {loc}: {err['msg']}") from None
-    return _scan_spec(model.sensor, model.scan_spec, where)
+        loc = ".".join(str(p) for p in err["loc"])
+        raise ValueError(f"{where}{'.' + loc if loc else ''}: {err['msg']}") from None
 
 
 def _scan_spec(sensor_data: dict[str, Any], s: _ScanSpecJson, where: str) -> ScanSpec:
@@ -210,6 +210,7 @@ def _scan_spec(sensor_data: dict[str, Any], s: _ScanSpecJson, where: str) -> Sca
 
 
 _STRICT = ConfigDict(extra="forbid", strict=True)
+_Json = TypeVar("_Json", bound=BaseModel)
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
