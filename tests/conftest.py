@@ -6,12 +6,14 @@ random example must not turn an unchanged tree red)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 from hypothesis import settings
 
+from helpers import sloped_housing
 from scanplan.part import Part, part_from_mesh
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -20,6 +22,32 @@ settings.register_profile("deterministic", derandomize=True, database=None)
 settings.load_profile("deterministic")
 
 X, Y = np.eye(3)[0], np.eye(3)[1]
+
+
+@pytest.fixture(scope="session")
+def plate() -> Part:
+    """A flat plate 600 x 300 x 10 mm, top face at z = 0: a pass at W_d above it measures
+    D = W_d, α = 0 on every profile (`helpers.plate_swath`, `helpers.straight`)."""
+    mesh = trimesh.creation.box((600.0, 300.0, 10.0))
+    mesh.apply_translation((0, 0, -5.0))  # top face at z = 0
+    return part_from_mesh(mesh, "plate")
+
+
+@pytest.fixture()
+def plate_file(tmp_path) -> Path:
+    """A 400 x 200 x 10 mm plate as an STL file, for the command line."""
+    mesh = trimesh.creation.box((400.0, 200.0, 10.0))
+    path = tmp_path / "plate.stl"
+    mesh.export(path)
+    return path
+
+
+@pytest.fixture(scope="session")
+def cross_slope_plate() -> Part:
+    """A 600 x 300 plate tilted 20° about the x axis (the scan direction): a cross slope."""
+    box = trimesh.creation.box((600.0, 300.0, 10.0))
+    box.apply_transform(trimesh.transformations.rotation_matrix(math.radians(20.0), [1, 0, 0]))
+    return part_from_mesh(box, "cross-slope")
 
 
 @pytest.fixture(scope="session")
@@ -57,12 +85,4 @@ def step_block() -> Part:
 @pytest.fixture(scope="session")
 def housing() -> Part:
     """A housing 600 x 400 x 150 mm whose four side walls slope at 60°: a part of views."""
-    length, width, height, slope_deg = 600.0, 400.0, 150.0, 60.0
-    inset = height / math.tan(math.radians(slope_deg))
-    lo = [(x, y, 0.0) for x in (-length / 2, length / 2) for y in (-width / 2, width / 2)]
-    hi = [
-        (x, y, height)
-        for x in (-length / 2 + inset, length / 2 - inset)
-        for y in (-width / 2 + inset, width / 2 - inset)
-    ]
-    return part_from_mesh(trimesh.Trimesh(lo + hi).convex_hull, "housing")
+    return sloped_housing()

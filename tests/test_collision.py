@@ -4,11 +4,11 @@ planted beside a plate that the transitions must go over."""
 
 from __future__ import annotations
 
-import fcl
 import numpy as np
 import pytest
 import trimesh
 
+from helpers import fcl_distance
 from scanplan.collision import CollisionChecker
 from scanplan.metrics import evaluate
 from scanplan.part import Part, load_part
@@ -33,26 +33,6 @@ def at(x: float, y: float, z: float) -> np.ndarray:
     pose = np.eye(4)
     pose[:3, 3] = (x, y, z)
     return pose
-
-
-_BVH: dict[int, fcl.CollisionObject] = {}
-
-
-def fcl_distance(part: Part, sensor: SensorSpec, pose: np.ndarray) -> float:
-    """Body vs part straight from FCL, for an independent check."""
-    if id(part) not in _BVH:
-        bvh = fcl.BVHModel()
-        bvh.beginModel(len(part.mesh.vertices), len(part.mesh.faces))
-        vertices, faces = np.asarray(part.mesh.vertices, float), np.asarray(part.mesh.faces)
-        bvh.addSubModel(vertices, faces.astype(np.int32))
-        bvh.endModel()
-        _BVH[id(part)] = fcl.CollisionObject(bvh, fcl.Transform())
-    lo, hi = sensor.body_bounds_mm
-    rot = pose[:3, :3]
-    box = fcl.CollisionObject(
-        fcl.Box(*(hi - lo)), fcl.Transform(rot, rot @ (0.5 * (lo + hi)) + pose[:3, 3])
-    )
-    return fcl.distance(box, _BVH[id(part)], fcl.DistanceRequest(), fcl.DistanceResult())
 
 
 def test_a_box_far_from_the_part_is_clear_at_the_right_distance():

@@ -9,7 +9,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-import trimesh
 from typer.testing import CliRunner
 
 from scanplan.cli import app
@@ -155,11 +154,3 @@ def test_evaluate_takes_the_plan_context_and_names_what_an_option_changes(plate_
     assert json.loads(changed.stdout)["tolerance"]["mm"] == 6.0
     note = changed.stderr.strip().splitlines()
     assert len(note) == 1 and "tolerance 6 mm" in note[0] and "planned: 5 mm" in note[0]
-
-
-@pytest.fixture()
-def plate_file(tmp_path):
-    mesh = trimesh.creation.box((400.0, 200.0, 10.0))
-    path = tmp_path / "plate.stl"
-    mesh.export(path)
-    return path

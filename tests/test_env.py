@@ -1,4 +1,5 @@
-"""SwathScanEnv: checkers, determinism, the paper's action limitation and reward, episode ends."""
+"""SwathScanEnv v0 (the paper) and v1 (roll): checkers, determinism, the paper's action
+limitation and reward, episode ends."""
 
 from __future__ import annotations
 
@@ -8,32 +9,19 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-import trimesh
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from helpers import plate_swath
 from scanplan.dynamics import limit_action
-from scanplan.env import ENV_ID, SwathScanEnv
-from scanplan.part import Part, load_part, part_from_mesh
+from scanplan.env import ENV_ID, ENV_ID_ROLL, SwathScanEnv
+from scanplan.part import Part, load_part
 from scanplan.quantities import advance, mean_distance, signed_alpha
 from scanplan.reward import reward_terms
 from scanplan.sensor import LineProfilometer, SensorSpec
 from scanplan.swaths import Swath
 
 WD = 400.0
-
-
-@pytest.fixture(scope="module")
-def plate() -> Part:
-    """A 600 x 300 x 20 mm plate, top at z = 20."""
-    box = trimesh.creation.box((600.0, 300.0, 20.0))
-    box.apply_translation((0.0, 0.0, 10.0))
-    return part_from_mesh(box, "plate")
-
-
-def plate_swath(z_top: float = 20.0) -> Swath:
-    u, v = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
-    return Swath(0, np.array([-320.0, 0, z_top + WD]), np.array([320.0, 0, z_top + WD]), u, v)
 
 
 def plate_env(plate: Part, **kwargs) -> SwathScanEnv:
@@ -179,3 +167,26 @@ def test_subsampled_fan_agrees_with_the_full_fan_on_the_training_piece():
         err = np.abs(out[0][k] - out[1][k])
         assert np.isfinite(err).mean() > 0.9
         assert np.nanmax(err) <= tol
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"use_position": False}])
+def test_v1_env_checkers_are_clean_and_rollouts_seeded(kwargs):
+    env = gym.make(ENV_ID_ROLL, disable_env_checker=True, **kwargs).unwrapped
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gym_check_env(env)
+        sb3_check_env(env, warn=True)
+    assert env.action_space.shape == (4,)
+    assert env.observation_space.shape == (9 - 3 * (not kwargs.get("use_position", True)),)
+
+    def rollout(seed):
+        e = SwathScanEnv(roll=True)
+        obs, _ = e.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        out = [obs]
+        for _ in range(40):
+            obs, *_ = e.step(rng.uniform(-1, 1, 4).astype(np.float32))
+            out.append(obs)
+        return np.array(out)
+
+    np.testing.assert_array_equal(rollout(3), rollout(3))

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from safetensors.torch import save_file
 from typer.testing import CliRunner
 
+from helpers import Exploit, exploit_pickle, ppo, tiny_config
 from scanplan.cli import app
 from scanplan.learn.config import env_options
 from scanplan.observation import observation_size
@@ -319,20 +320,6 @@ def test_any_bad_value_is_one_line_or_loads(saved, value, where):
 # ---- a pickled payload is never executed -------------------------------------------------
 
 
-class _Exploit:
-    """Unpickling this creates `marker` (stands in for arbitrary code)."""
-
-    def __init__(self, marker: Path):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (open, (self.marker, "w"))
-
-
-def exploit_pickle(marker: Path) -> bytes:
-    return pickle.dumps(_Exploit(marker))
-
-
 def test_the_exploit_is_live(tmp_path):
     """Control: the payload used below does run when unpickled."""
     marker = tmp_path / "control"
@@ -343,9 +330,8 @@ def test_the_exploit_is_live(tmp_path):
 def test_loading_reads_no_pickle(monkeypatch, tmp_path):
     """Policy and checkpoint loading with every unpickling entry point booby-trapped."""
     from scanplan.learn.checkpoint import load_checkpoint, save_checkpoint
-    from test_train import _ppo, tiny_config
 
-    path = save_checkpoint(_ppo(0), tiny_config(tmp_path), tmp_path)
+    path = save_checkpoint(ppo(0), tiny_config(tmp_path), tmp_path)
 
     def trap(*args, **kwargs):
         raise AssertionError("unpickling attempted")
@@ -368,7 +354,7 @@ def test_cli_plan_never_unpickles_a_policy(tmp_path):
     (old / "policy.pt").write_bytes(exploit_pickle(marker))
     torch_pickled = tmp_path / "new"
     shutil.copytree(DEFAULT_POLICY, torch_pickled)
-    torch.save({"0.weight": _Exploit(marker)}, torch_pickled / "policy.safetensors")
+    torch.save({"0.weight": Exploit(marker)}, torch_pickled / "policy.safetensors")
     raw = tmp_path / "raw"
     shutil.copytree(DEFAULT_POLICY, raw)
     (raw / "policy.safetensors").write_bytes(exploit_pickle(marker))

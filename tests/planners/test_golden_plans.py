@@ -15,12 +15,12 @@ So every pose must lie within 1 mm and 0.2° of the recording, and 99 % of them 
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from data.make_golden_plans import PARTS, PLANNERS, STRIDE
+from helpers import DATA
 from scanplan.collision import CollisionChecker
 from scanplan.part import load_part
 from scanplan.pipeline import plan_path
@@ -28,7 +28,7 @@ from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.swaths import plan_swaths
 
-GOLDEN = Path(__file__).parent / "data" / "golden_plans.npz"
+GOLDEN = DATA / "golden_plans.npz"
 OLD_TRANSITION_POSES = 3
 
 

@@ -21,12 +21,13 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from helpers import ROOT
 from scanplan.cli import app
 from scanplan.cli.common import progress_bar
-from scanplan.trajectory import Trajectory, write_csv
+from scanplan.trajectory import CSV_COLUMNS, Trajectory, write_csv
 
 runner = CliRunner()
-SRC = Path(__file__).resolve().parents[1] / "src"
+SRC = ROOT / "src"
 
 
 @pytest.fixture(scope="module")
@@ -398,3 +399,84 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
         assert len(lines) == 1 and lines[0].startswith("error: "), (argv, result.stderr)
         assert list(out.iterdir()) == [], argv
     assert sorted(p.name for p in files.iterdir()) == ["good.csv", "plate.stl"], argv
+
+
+# ---- hostile input files: one line, exit 2, no output of any kind ------------------------
+@pytest.fixture(scope="module")
+def hostile(tmp_path_factory):
+    d = tmp_path_factory.mktemp("hostile")
+    files = {
+        "lying.stl": b"\0" * 80 + struct.pack("<I", 1000) + b"\0" * 50,
+        "random.obj": os.urandom(200),
+        "badidx.ply": b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+        b"property float y\nproperty float z\nelement face 1\n"
+        b"property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n",
+        "huge.stl": b"\0" * 80
+        + struct.pack("<I", 1)
+        + struct.pack("<12f", 0, 0, 1, 0, 0, 0, 1e30, 0, 0, 0, 1e30, 0)
+        + b"\0\0",
+        "empty.step": b"",
+        "bad.step": b"ISO-10303-21;\nnonsense\n",
+        "deep.json": b"[" * 50_000 + b"]" * 50_000,
+        "swath.csv": (",".join(CSV_COLUMNS) + "\n1e20,1,0,0,400,1,0,0,0\n").encode(),
+        "nanq.json": json.dumps(
+            {
+                "poses": [
+                    {
+                        "swath": 0,
+                        "scanning": True,
+                        "position_mm": [0, 0, 400],
+                        "quaternion_wxyz": [0, 0, 0, 0],
+                    }
+                ]
+            }
+        ).encode(),
+        "metres.toml": b"working_distance_mm = 0.4\nz_range_mm = 0.25\nfov_deg = 63.5\n"
+        b"points_per_profile = 64\nz_resolution_um = 3.8\ntriangulation_angle_deg = 30\n",
+        "tag.yaml": b"!!python/object/apply:os.system ['touch "
+        + str(d / "PWNED").encode()
+        + b"']\n",
+    }
+    for name, content in files.items():
+        (d / name).write_bytes(content)
+    plate = d / "plate.stl"
+    import trimesh
+
+    box = trimesh.creation.box((300, 300, 10))
+    box.export(plate)
+    poses = np.tile(np.diag([1.0, -1.0, -1.0, 1.0]), (5, 1, 1))
+    poses[:, :3, 3] = np.c_[np.linspace(-20, 20, 5), np.zeros(5), np.full(5, 405.0)]
+    write_csv(Trajectory(poses, np.zeros(5, int), np.ones(5, bool)), d / "good.csv")
+    return d
+
+
+CLI_CASES = [
+    ("plan", "{d}/lying.stl", "-o", "{out}.csv"),
+    ("plan", "{d}/random.obj", "-o", "{out}.csv"),
+    ("plan", "{d}/badidx.ply", "-o", "{out}.csv"),
+    ("plan", "{d}/huge.stl", "-o", "{out}.csv"),
+    ("plan", "{d}/empty.step", "-o", "{out}.csv"),
+    ("plan", "{d}/bad.step", "-o", "{out}.json"),
+    ("plan", "{d}/plate.stl", "--sensor", "{d}/metres.toml", "-o", "{out}.csv"),
+    ("plan", "{d}/plate.stl", "--sensor", "{d}/tag.yaml", "-o", "{out}.csv"),
+    ("plan", "{d}", "-o", "{out}.csv"),
+    ("evaluate", "{d}/plate.stl", "{d}/deep.json", "-o", "{out}"),
+    ("evaluate", "{d}/plate.stl", "{d}/swath.csv", "--json"),
+    ("scan", "{d}/plate.stl", "{d}/nanq.json", "-o", "{out}.ply"),
+    ("scan", "{d}/huge.stl", "{d}/good.csv", "-o", "{out}.ply"),
+    ("export", "{d}/swath.csv", "--format", "urscript", "-o", "{out}.script"),
+    ("export", "{d}/deep.json", "--format", "krl", "-o", "{out}.src"),
+]
+
+
+@pytest.mark.parametrize("args", CLI_CASES, ids=lambda a: "-".join(Path(x).name for x in a[:3]))
+def test_cli_hostile_input_is_one_line_exit_2_no_output(hostile, tmp_path, args):
+    out = tmp_path / "out"
+    argv = [a.format(d=hostile, out=out) for a in args]
+    result = runner.invoke(app, argv)
+    assert result.exit_code == 2, (result.stdout, result.stderr, result.exception)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "Traceback" not in result.output and "Warning" not in result.output
+    assert list(tmp_path.iterdir()) == []  # no partial output of any kind
+    assert not (hostile / "PWNED").exists()

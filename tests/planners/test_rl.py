@@ -1,4 +1,5 @@
-"""The rl planner: loads the shipped policy without unpickling code and plans sound passes."""
+"""The rl planner: loads the shipped policy without unpickling code and plans sound passes;
+the shipped v1 policy rolls a cross slope into spec."""
 
 from __future__ import annotations
 
@@ -12,14 +13,17 @@ import torch
 from safetensors.torch import load_file
 from typer.testing import CliRunner
 
+from helpers import plate_swath
 from scanplan.cli import app
 from scanplan.context import scan_spec_record
+from scanplan.metrics import evaluate
+from scanplan.pipeline import plan_path
 from scanplan.planners.closed_loop import Guards
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
 from scanplan.policy import load_policy
 from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
 from scanplan.sensor import LineProfilometer, SensorSpec
-from test_env import plate, plate_swath  # noqa: F401  (fixture)
+from scanplan.swaths import plan_swaths
 
 
 def test_shipped_policy_files_are_weights_and_json():
@@ -40,7 +44,7 @@ def test_shipped_policy_files_are_weights_and_json():
         assert torch.equal(tensor, state[name])
 
 
-def test_default_policy_follows_a_flat_plate(plate):  # noqa: F811
+def test_default_policy_follows_a_flat_plate(plate):
     """No backward step, spacing near Δs_opt, D near W_d, aligned, over a whole pass."""
     sensor = SensorSpec().without_noise()
     swath = plate_swath()
@@ -84,7 +88,7 @@ class _PitchSwing(RLPlanner):
         return np.array([0.5, 0.0, -1.0 if phase == 0 else 1.0])
 
 
-def _plate_advances(plate, swath, traj):  # noqa: F811
+def _plate_advances(plate, swath, traj):
     scan = LineProfilometer(plate, SensorSpec().without_noise().with_points(256)).measure_many(
         traj.poses
     )
@@ -94,7 +98,7 @@ def _plate_advances(plate, swath, traj):  # noqa: F811
     return ds[np.isfinite(ds)]
 
 
-def test_forward_only_guard_removes_backward_steps(plate):  # noqa: F811
+def test_forward_only_guard_removes_backward_steps(plate):
     sensor = SensorSpec().without_noise()
     swath = plate_swath()
     shipped = RLPlanner.from_file(None)
@@ -131,3 +135,17 @@ def test_the_policy_normalizes_by_its_training_spec_and_refuses_a_sensor_it_neve
     )
     assert result.exit_code == 2 and not out.exists()
     assert len(result.stderr.strip().splitlines()) == 1 and "Z range" in result.stderr
+
+
+SPEC = ScanSpec()
+
+
+def test_shipped_v1_policy_rolls_a_cross_slope_into_spec(cross_slope_plate):
+    from scanplan.planners.rl import RLPlanner
+
+    planner = RLPlanner.from_file("v1")
+    assert planner.roll and planner.config["training"]["command"].startswith("scanplan train")
+    part = cross_slope_plate
+    swaths = plan_swaths(part, SPEC.sensor, "x")
+    m = evaluate(part, SPEC, plan_path(part, SPEC, planner, swaths), points_per_profile=256)
+    assert m.in_spec_coverage >= 0.9

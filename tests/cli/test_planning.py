@@ -1,0 +1,218 @@
+"""`scanplan plan`, `scan` and `evaluate` on the command line: what they write and print, the
+options that reach the library (tolerance, views, region of interest), one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+from helpers import BLOCK_BOX, plate_with_block, run_cli, straight
+from scanplan.cli import app
+from scanplan.metrics import SurfaceState
+from scanplan.report.maps import COVERAGE_COLOURS
+from scanplan.trajectory import write_csv
+
+runner = CliRunner()
+
+
+def test_scan_writes_a_point_cloud_with_error_fields(plate_and_trajectory, tmp_path):
+    plate, traj = plate_and_trajectory
+    out = tmp_path / "cloud.ply"
+    result = run_cli("scan", str(plate), str(traj), "-o", str(out), "--no-noise")
+    assert result.exit_code == 0, result.output
+    cloud = trimesh.load(out)
+    assert len(cloud.vertices) == 21 * 4096
+    raw = cloud.metadata["_ply_raw"]["vertex"]["data"]
+    assert np.allclose(raw["distance_error_mm"], 0.0, atol=0.004)
+    assert np.allclose(raw["orientation_error_deg"], 0.0, atol=1e-3)
+    assert {"red", "green", "blue", "profile", "swath"} <= set(raw.dtype.names)
+
+
+def test_scan_out_of_reach_and_bad_trajectory(plate_and_trajectory, tmp_path):
+    plate, traj = plate_and_trajectory
+    far = tmp_path / "far.csv"
+    text = traj.read_text().replace(",400.000000,", ",900.000000,")
+    far.write_text(text)
+    out = tmp_path / "cloud.ply"
+    result = run_cli("scan", str(plate), str(far), "-o", str(out))
+    assert result.exit_code == 2
+    assert "outside the sensor's reach" in result.output
+    assert not out.exists()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("swath,scanning\n1,2\n")
+    result = run_cli("scan", str(plate), str(bad), "-o", str(out))
+    assert result.exit_code == 2
+    assert "bad.csv line 1" in result.output
+    assert "Traceback" not in result.output
+    assert not out.exists()
+    result = run_cli("scan", str(tmp_path / "nope.stl"), str(traj), "-o", str(out))
+    assert result.exit_code == 2 and "does not exist" in result.output
+
+
+def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
+    traj = tmp_path / "t.csv"
+    result = runner.invoke(app, ["plan", str(plate_file), "--planner", "fixed", "-o", str(traj)])
+    assert result.exit_code == 0, result.output
+    assert traj.read_text().startswith("swath,scanning,x_mm")
+    result = runner.invoke(
+        app, ["evaluate", str(plate_file), str(traj), "--json", "--points", "128"]
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)  # exactly one JSON object
+    assert data["profiles"] > 700 and data["coverage_fraction"] > 0.99
+    report = tmp_path / "report"
+    result = runner.invoke(
+        app, ["evaluate", str(plate_file), str(traj), "--points", "128", "-o", str(report)]
+    )
+    assert result.exit_code == 0, result.output
+    names = {p.name for p in report.iterdir()}
+    assert {"distance_error.png", "orientation_error.png", "metrics.md", "metrics.json"} <= names
+    assert "report.html" in names
+
+
+def test_cli_bad_trajectory_and_out_of_reach(plate_file, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("swath,scanning,x_mm\n1,2\n")
+    out = tmp_path / "rep"
+    result = runner.invoke(app, ["evaluate", str(plate_file), str(bad), "-o", str(out)])
+    assert result.exit_code == 2
+    assert result.output.strip().count("\n") == 0 and "bad.csv" in result.output
+    assert not out.exists()
+
+    far = tmp_path / "far.csv"
+    high = straight(np.arange(0, 20.0, 0.5), h_mm=800.0)
+
+    write_csv(high, far)
+    result = runner.invoke(app, ["evaluate", str(plate_file), str(far), "--json", "-o", str(out)])
+    assert result.exit_code == 2
+    assert "outside the sensor's reach" in result.output and not out.exists()
+
+    result = runner.invoke(
+        app, ["plan", str(plate_file), "--planner", "nope", "-o", str(tmp_path / "x.csv")]
+    )
+    assert result.exit_code == 2 and not (tmp_path / "x.csv").exists()
+
+
+@pytest.fixture()
+def strip_files(tmp_path, tilted_strip):
+
+    mesh_path = tmp_path / "strip.stl"
+    tilted_strip.mesh.export(mesh_path)
+    traj_path = tmp_path / "strip.csv"
+    write_csv(straight(np.arange(120.0, 520.0, 0.5)), traj_path)
+    return mesh_path, traj_path
+
+
+def test_cli_tolerance_puts_the_tilted_strip_in_spec(strip_files):
+    mesh, traj = strip_files
+    base = ["evaluate", str(mesh), str(traj), "--points", "256"]
+    default = json.loads(runner.invoke(app, [*base, "--json"]).stdout)
+    wide = json.loads(runner.invoke(app, [*base, "--json", "--tolerance", "12.5,25"]).stdout)
+    assert default["in_spec_coverage"] < 0.01 and wide["in_spec_coverage"] > 0.95
+    assert wide["tolerance"] == {"mm": 12.5, "deg": pytest.approx(25.0)}
+    printed = runner.invoke(app, [*base, "--tolerance", "12.5,25"]).stdout
+    assert printed.startswith("in-spec coverage 9") and "(±12.5 mm, 25°)" in printed
+
+
+@pytest.mark.parametrize("bad", ["12.5", "a,b", "-1,15", "12.5,0", "12.5,95", "nan,15", "1,2,3"])
+def test_cli_bad_tolerance_is_one_line(strip_files, bad):
+    mesh, traj = strip_files
+    result = runner.invoke(app, ["evaluate", str(mesh), str(traj), "--tolerance", bad])
+    assert result.exit_code == 2
+    assert result.output.count("\n") == 1 and "--tolerance" in result.output
+
+
+def test_report_directory_has_the_in_spec_map(plate_file, tmp_path):
+
+    traj = tmp_path / "half.csv"
+    write_csv(straight(np.arange(0, 200.0, 0.5)), traj)  # over x < -100 only: part in spec
+    out = tmp_path / "rep"
+    result = runner.invoke(
+        app, ["evaluate", str(plate_file), str(traj), "--points", "256", "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    png = out / "in_spec_coverage.png"
+    assert png.stat().st_size > 10_000
+    import matplotlib.image
+
+    rgb = (matplotlib.image.imread(png)[..., :3] * 255).astype(int)
+
+    def share(colour: str) -> float:
+        target = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+        return float((np.abs(rgb - target).sum(axis=-1) < 30).mean())
+
+    green, grey = (
+        share(COVERAGE_COLOURS[s][0]) for s in (SurfaceState.IN_SPEC, SurfaceState.UNSEEN)
+    )
+    assert green > 0.02 and grey > 0.02
+    page = (out / "report.html").read_text()
+    assert "In-spec coverage" in page and "in_spec_coverage.png" in page
+    assert "in-spec coverage" in (out / "metrics.md").read_text()
+
+
+def test_failing_report_leaves_no_directory(plate_file, tmp_path, monkeypatch):
+    import scanplan.report.html
+
+    traj = tmp_path / "t.csv"
+
+    write_csv(straight(np.arange(200, 260.0, 1.0)), traj)
+
+    def broken(*args, **kwargs):
+        raise ValueError("disk full while writing report.html")
+
+    monkeypatch.setattr(scanplan.report.html, "write_html_report", broken)
+    out = tmp_path / "reports" / "rep"
+    args = ["evaluate", str(plate_file), str(traj), "--points", "64", "-o", str(out)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and "disk full" in result.output
+    assert not out.exists() and list(out.parent.iterdir()) == []  # no temporary left either
+    # An earlier report in its place survives a failing run, and is replaced by a good one.
+    out.mkdir()
+    (out / "metrics.json").write_text("{}")
+    assert runner.invoke(app, args).exit_code == 2
+    assert (out / "metrics.json").read_text() == "{}"
+    monkeypatch.undo()
+    assert runner.invoke(app, args).exit_code == 0
+    assert json.loads((out / "metrics.json").read_text())["profiles"] == 60
+    assert sorted(p.name for p in out.parent.iterdir()) == ["rep"]
+
+
+def test_bad_views_options_are_one_line(tmp_path):
+    out = tmp_path / "t.csv"
+    for extra in (["--views", "side"], ["--views", "auto", "--coverage-target", "0"]):
+        result = CliRunner().invoke(app, ["plan", "drone", "-o", str(out), *extra])
+        assert result.exit_code == 2 and len(result.stderr.strip().splitlines()) == 1
+        assert "--views" in result.stderr or "--coverage-target" in result.stderr
+        assert not out.exists()
+
+
+def test_cli_bad_roi_is_one_line_and_no_output(tmp_path):
+    out = tmp_path / "t.csv"
+    for roi, message in [("+z:abc", "--roi"), ("box:5000,5000,0,6000,6000,10", "selects no")]:
+        result = CliRunner().invoke(app, ["plan", "drone", "-o", str(out), "--roi", roi])
+        assert result.exit_code == 2
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and message in lines[0] and "--roi" in lines[0]
+        assert not out.exists()
+
+
+def test_cli_plan_evaluate_scan_keep_to_the_roi(tmp_path):
+    import json
+
+    stl, csv, ply = tmp_path / "p.stl", tmp_path / "t.csv", tmp_path / "c.ply"
+    plate_with_block().mesh.export(stl)
+    roi = ["--roi", BLOCK_BOX + ";+z:10"]
+    run = CliRunner().invoke
+    assert run(app, ["plan", str(stl), "-o", str(csv), *roi]).exit_code == 0
+    result = run(app, ["evaluate", str(stl), str(csv), "--json", "--points", "256", *roi])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["in_spec_coverage"] > 0.97
+    assert data["visible_area_mm2"] == pytest.approx(300 * 200, rel=0.02)
+    assert run(app, ["scan", str(stl), str(csv), "-o", str(ply), *roi]).exit_code == 0
+    points = trimesh.load(ply).vertices
+    assert len(points) and np.allclose(points[:, 2], 60.0, atol=0.5)

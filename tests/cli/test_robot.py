@@ -1,0 +1,79 @@
+"""`scanplan export` on the command line: every format parsed back, a ROS 2 bag, bad options
+in one line with no output left behind."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from helpers import EXPORT_OPTIONS as OPTIONS
+from helpers import listing, run_cli, snake_trajectory
+from scanplan.cli import app
+from scanplan.export import parse_program
+from scanplan.export.common import plan_motion
+from scanplan.trajectory import write_csv
+
+TRAJ = snake_trajectory()
+
+
+@pytest.mark.parametrize("fmt", ["urscript", "rapid", "krl", "ros", "csv"])
+def test_export_every_format(plate_and_trajectory, tmp_path, fmt):
+    from scanplan.trajectory import read_csv
+
+    _, traj_path = plate_and_trajectory
+    out = tmp_path / f"prog.{fmt}"
+    result = run_cli(
+        "export", str(traj_path), "--format", fmt, "--part-pose", "500,0,-200,0,0,0", "-o", str(out)
+    )
+    assert result.exit_code == 0, result.output
+    poses, scanning = parse_program(out.read_text(), fmt)
+    expected = read_csv(traj_path).poses.copy()
+    expected[:, :3, 3] += (500, 0, -200)
+    assert np.allclose(poses[:, :3, 3], expected[:, :3, 3], atol=1e-3)
+    assert scanning.all()
+
+
+def test_export_bad_pose_leaves_no_file(plate_and_trajectory, tmp_path):
+    _, traj_path = plate_and_trajectory
+    out = tmp_path / "prog.script"
+    result = run_cli("export", str(traj_path), "--tcp", "1,2,three", "-o", str(out))
+    assert result.exit_code == 2
+    assert "error:" in result.output
+    assert not out.exists()
+
+
+def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
+    from rosbags.rosbag2 import Writer
+
+    from scanplan.export.rosbag import read_rosbag
+
+    traj_path = tmp_path / "t.csv"
+    write_csv(TRAJ, traj_path)
+    out = tmp_path / "out_bag"
+    args = ["export", str(traj_path), "--format", "rosbag2", "-o", str(out)]
+    poses = ["--part-pose", "500,-200,100,30,5,-10", "--tcp", "12,-3,180,0,-15,90"]
+    runner = CliRunner()
+    result = runner.invoke(app, [*args, *poses, "--travel-speed", "300"])
+    assert result.exit_code == 0, result.output
+    assert "reach" in result.output  # the UR5e reach check ran (ok or a warning)
+    assert f"rosbag2: {len(TRAJ)} poses" in result.output
+    contents = read_rosbag(out)
+    expected = OPTIONS.part_pose @ TRAJ.poses
+    assert np.abs(contents.poses[:, :3, 3] - expected[:, :3, 3]).max() <= 1e-6
+    np.testing.assert_array_equal(contents.speed_mm_s, plan_motion(TRAJ, OPTIONS).speed_mm_s)
+
+    # User errors: one line, exit 2, no traceback, no directory (nor staging) left behind.
+    bad = tmp_path / "bad_bag"
+    for extra in (["--tcp", "1,2,three"], ["--format", "rosbag3"]):
+        result = runner.invoke(app, [*args[:-1], str(bad), *extra])
+        assert result.exit_code == 2
+        assert result.output.startswith("error:") and result.output.strip().count("\n") == 0
+    assert "rosbag2" in result.output  # the unknown-format message lists it
+    (tmp_path / "taken").write_text("x")
+    result = runner.invoke(app, [*args[:-1], str(tmp_path / "taken"), "--robot", "none"])
+    assert result.exit_code == 2 and "not a rosbag2 directory" in result.output
+    monkeypatch.setattr(Writer, "write", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
+    result = runner.invoke(app, [*args[:-1], str(bad), "--robot", "none"])
+    assert result.exit_code == 2 and result.output == "error: disk full\n"
+    assert listing(tmp_path) == ["out_bag", "t.csv", "taken"]

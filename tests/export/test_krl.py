@@ -1,0 +1,45 @@
+"""KUKA KRL: one LIN per pose, blends, the tool, intrinsic ZYX angles."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from helpers import EXPORT_OPTIONS as OPTIONS
+from helpers import snake_trajectory
+from scanplan.export import (
+    ExportOptions,
+    export_program,
+)
+from scanplan.export.common import plan_motion
+from scanplan.trajectory import Trajectory
+
+TRAJ = snake_trajectory()
+
+
+def test_krl_structure() -> None:
+    text = export_program(TRAJ, "krl", OPTIONS)
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    assert "DEF scanplan_path( )" in lines and lines[-1] == "END"
+    lins = [ln for ln in lines if ln.startswith("LIN ")]
+    assert len(lins) == len(TRAJ)
+    m = plan_motion(TRAJ, OPTIONS)
+    blended = np.array([ln.endswith("C_DIS") for ln in lins])
+    np.testing.assert_array_equal(blended, m.blend_mm > 0)
+    assert not blended[m.pass_start | m.pass_end].any()
+    assert (
+        "$TOOL = {X 12.000000,Y -3.000000,Z 180.000000,A 0.000000,B -15.000000,C 90.000000}"
+        in lines
+    )
+    assert {ln for ln in lines if ln.startswith("$VEL.CP")} == {"$VEL.CP = 0.1", "$VEL.CP = 0.3"}
+
+
+def test_krl_angles_are_intrinsic_zyx() -> None:
+    T = np.eye(4)
+    T[:3, :3] = (
+        Rotation.from_euler("z", 30, degrees=True)
+        * Rotation.from_euler("y", 20, degrees=True)
+        * Rotation.from_euler("x", 10, degrees=True)
+    ).as_matrix()
+    text = export_program(Trajectory(T[None], [0], [True]), "krl", ExportOptions())
+    assert "LIN {X 0.000000,Y 0.000000,Z 0.000000,A 30.000000,B 20.000000,C 10.000000}" in text

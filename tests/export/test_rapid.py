@@ -1,0 +1,33 @@
+"""ABB RAPID: one MoveL per pose, fine zones at pass ends, the tool data."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from helpers import EXPORT_OPTIONS as OPTIONS
+from helpers import snake_trajectory
+from scanplan.export import export_program
+from scanplan.export.common import plan_motion
+
+TRAJ = snake_trajectory()
+
+
+def test_rapid_structure() -> None:
+    text = export_program(TRAJ, "rapid", OPTIONS)
+    assert text.startswith("MODULE scanplan_path") and text.rstrip().endswith("ENDMODULE")
+    assert "PROC main()" in text and "ENDPROC" in text
+    moves = re.findall(r"MoveL (\w+), (\w+), (\w+), tSensor\\WObj:=wobj0;", text)
+    assert len(moves) == len(TRAJ)
+    m = plan_motion(TRAJ, OPTIONS)
+    zones = np.array([z for _, _, z in moves])
+    assert np.all(zones[m.pass_start | m.pass_end | ~m.scanning] == "fine")
+    assert np.all(zones[m.blend_mm > 0] == "zScan")
+    tool = re.search(r"tooldata tSensor := \[TRUE,\[\[([^\]]*)\],\[([^\]]*)\]\]", text)
+    assert tool is not None
+    np.testing.assert_allclose([float(v) for v in tool.group(1).split(",")], [12, -3, 180])
+    q = np.array([float(v) for v in tool.group(2).split(",")])
+    R = Rotation.from_quat([*q[1:], q[0]]).as_matrix()
+    np.testing.assert_allclose(R, OPTIONS.tcp[:3, :3], atol=1e-8)

@@ -1,0 +1,40 @@
+"""URScript: one movel per pose, blends, speeds, pass markers, the TCP."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from helpers import EXPORT_OPTIONS as OPTIONS
+from helpers import snake_trajectory
+from scanplan.export import export_program
+from scanplan.export.common import plan_motion
+
+TRAJ = snake_trajectory()
+
+
+def test_urscript_structure() -> None:
+    text = export_program(TRAJ, "urscript", OPTIONS)
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    code = [ln for ln in lines if not ln.startswith("#")]
+    assert code[0] == "def scanplan_path():" and code[-2] == "end"
+    assert code[-1] == "scanplan_path()"
+    movel = re.findall(r"movel\(p\[[^\]]*\], a=([^,]+), v=([^,]+), r=([^)]+)\)", text)
+    assert len(movel) == len(TRAJ)
+    m = plan_motion(TRAJ, OPTIONS)
+    r = np.array([float(x[2]) for x in movel])
+    assert np.all(r[m.pass_start | m.pass_end | ~m.scanning] == 0)
+    np.testing.assert_allclose(r, m.blend_mm / 1000, atol=1e-9)
+    v = {float(x[1]) for x in movel}
+    assert v == {0.1, 0.3}
+    assert {float(x[0]) for x in movel} == {1.0}
+    assert len(re.findall(r"# pass \d+ start", text)) == 3
+    assert len(re.findall(r"# pass \d+ end", text)) == 3
+    tcp = re.search(r"set_tcp\(p\[([^\]]*)\]\)", text)
+    assert tcp is not None
+    vals = np.array([float(x) for x in tcp.group(1).split(",")])
+    np.testing.assert_allclose(vals[:3], OPTIONS.tcp[:3, 3] / 1000, atol=1e-9)
+    R = Rotation.from_rotvec(vals[3:]).as_matrix()
+    np.testing.assert_allclose(R, OPTIONS.tcp[:3, :3], atol=1e-8)

@@ -1,0 +1,246 @@
+"""Plain helpers several test modules share: paths, analytic passes and parts built on call,
+an independent FCL distance, tiny training configs, pickle payloads, property-test strategies,
+the export suites' snake trajectory. Fixtures (built once per session) live in conftest.py."""
+
+from __future__ import annotations
+
+import math
+import pickle
+import warnings
+from pathlib import Path
+
+import fcl
+import numpy as np
+import trimesh
+from click.testing import Result
+from hypothesis import HealthCheck, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+from typer.testing import CliRunner
+
+from scanplan.cli import app
+from scanplan.context import PlanContext
+from scanplan.export import ExportOptions, parse_pose_arg
+from scanplan.part import Part, part_from_mesh
+from scanplan.quantities import ScanSpec
+from scanplan.sensor import SensorSpec
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory
+
+TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
+DATA = TESTS / "data"
+
+WD = 400.0  # the default sensor's working distance
+X, Y = np.eye(3)[0], np.eye(3)[1]
+
+# ---- passes over the flat plate (conftest `plate`: top face at z = 0) ---------------------
+
+
+def plate_swath(z_top: float = 0.0) -> Swath:
+    """A pass along +x over the plate's middle at W_d above a top face at `z_top`."""
+    u, v = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    return Swath(0, np.array([-320.0, 0, z_top + WD]), np.array([320.0, 0, z_top + WD]), u, v)
+
+
+def straight(s_mm, h_mm=0.0, pitch=0.0, swath_index=0) -> Trajectory:
+    """Stations `s_mm` along that pass at height offset `h_mm` and pitch `pitch` (rad)."""
+    sw = Swath(0, np.array([-320.0, 0, 400.0]), np.array([320.0, 0, 400.0]), X, Y)
+    s = np.asarray(s_mm, dtype=float)
+    poses = sw.poses(s, np.full_like(s, h_mm), np.full_like(s, pitch))
+    return Trajectory(poses, np.full(len(s), swath_index), np.ones(len(s), bool), planner="t")
+
+
+# ---- parts built on call (a parameter varies, or a test changes them) ---------------------
+SLOPE_DEG = 60.0
+HEMISPHERE = PlanContext(ScanSpec(), views="auto")  # judged on what the upper hemisphere sees
+
+
+def sloped_housing(length=600.0, width=400.0, height=150.0, slope_deg=SLOPE_DEG) -> Part:
+    """A box-shaped housing whose four side walls slope at `slope_deg` from the horizontal."""
+    inset = height / math.tan(math.radians(slope_deg))
+    lo = [(x, y, 0.0) for x in (-length / 2, length / 2) for y in (-width / 2, width / 2)]
+    hi = [
+        (x, y, height)
+        for x in (-length / 2 + inset, length / 2 - inset)
+        for y in (-width / 2 + inset, width / 2 - inset)
+    ]
+    return part_from_mesh(trimesh.Trimesh(lo + hi).convex_hull, "housing")
+
+
+BLOCK_BOX = "box:-160,-110,50,160,110,70"  # around the block's top (z = 60)
+
+
+def plate_with_block() -> Part:
+    """A 1500 x 1000 x 10 plate (top at z = 10) with a 300 x 200 x 50 block on its middle."""
+    plate = trimesh.creation.box((1500.0, 1000.0, 10.0))
+    plate.apply_translation((0, 0, 5.0))
+    block = trimesh.creation.box((300.0, 200.0, 50.0))
+    block.apply_translation((0, 0, 35.0))
+    return part_from_mesh(trimesh.util.concatenate([plate, block]), "plate-block")
+
+
+# ---- the sensor body vs a part, straight from FCL ------------------------------------------
+_BVH: dict[int, fcl.CollisionObject] = {}
+
+
+def fcl_distance(part: Part, sensor: SensorSpec, pose: np.ndarray) -> float:
+    """Body vs part straight from FCL, for an independent check."""
+    if id(part) not in _BVH:
+        bvh = fcl.BVHModel()
+        bvh.beginModel(len(part.mesh.vertices), len(part.mesh.faces))
+        vertices, faces = np.asarray(part.mesh.vertices, float), np.asarray(part.mesh.faces)
+        bvh.addSubModel(vertices, faces.astype(np.int32))
+        bvh.endModel()
+        _BVH[id(part)] = fcl.CollisionObject(bvh, fcl.Transform())
+    lo, hi = sensor.body_bounds_mm
+    rot = pose[:3, :3]
+    box = fcl.CollisionObject(
+        fcl.Box(*(hi - lo)), fcl.Transform(rot, rot @ (0.5 * (lo + hi)) + pose[:3, 3])
+    )
+    return fcl.distance(box, _BVH[id(part)], fcl.DistanceRequest(), fcl.DistanceResult())
+
+
+# ---- the command line ---------------------------------------------------------------------
+
+
+def run_cli(*args: str) -> Result:
+    return CliRunner().invoke(app, list(args))
+
+
+# ---- training -----------------------------------------------------------------------------
+
+
+def tiny_config(out, **kw):
+    """A learn(256)-sized PPO run: 2 updates of 2 x 64 steps, a small fan, no noise."""
+    from scanplan.learn.config import TrainConfig  # deferred: it loads torch
+
+    base = {
+        "output_dir": str(out),
+        "total_timesteps": 256,
+        "n_envs": 2,
+        "n_steps": 64,
+        "batch_size": 32,
+        "n_epochs": 2,
+        "checkpoint_every_updates": 1,
+        "progress_bar": False,
+        "command": "pytest tiny",
+        "env": {"fan_points": 64, "noise": False, "segment_mm": (20.0, 40.0)},
+        "bc_samples": 200,  # exercise the warm start too
+    }
+    return TrainConfig(**(base | kw))
+
+
+def ppo(seed: int):
+    """A small SB3 PPO on Pendulum (a model to checkpoint, not to train well)."""
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    return PPO(
+        "MlpPolicy",
+        gym.make("Pendulum-v1"),
+        n_steps=64,
+        batch_size=32,
+        n_epochs=2,
+        seed=seed,
+        device="cpu",
+    )
+
+
+# ---- a pickled payload that must never run ------------------------------------------------
+
+
+class Exploit:
+    """Unpickling this creates `marker` (stands in for arbitrary code)."""
+
+    def __init__(self, marker: Path):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def exploit_pickle(marker: Path) -> bytes:
+    return pickle.dumps(Exploit(marker))
+
+
+# ---- loaders: bad input of any shape ends in one clear line -------------------------------
+FAST = settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+
+
+def one_line_or_ok(load, path: Path) -> None:
+    """`load(path)` returns, or raises a one-line ValueError naming the file."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy RuntimeWarning noise either
+        try:
+            load(path)
+        except ValueError as exc:
+            message = str(exc)
+            assert message and "\n" not in message, message
+            assert str(path) in message or path.name in message, message
+
+
+SCALARS = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**70), max_value=2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=8),
+)
+JSON_VALUES = st.recursive(
+    SCALARS,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=5), st.dictionaries(st.text(max_size=8), inner, max_size=5)
+    ),
+    max_leaves=30,
+)
+
+# ---- robot programs -----------------------------------------------------------------------
+
+
+def snake_trajectory() -> Trajectory:
+    """Three snake passes over a bumpy part: pitch varies along each pass, the sensor turns
+    180° about its axis between passes, transitions lift clear and are not scanned."""
+    poses, swath, scanning = [], [], []
+
+    def add(xyz, yaw, pitch, k, scan):
+        T = np.eye(4)
+        down = Rotation.from_euler("zx", [yaw, np.pi]) * Rotation.from_euler("x", pitch)
+        T[:3, :3], T[:3, 3] = down.as_matrix(), xyz
+        poses.append(T)
+        swath.append(k)
+        scanning.append(scan)
+
+    for k in range(3):
+        sign = 1 if k % 2 == 0 else -1
+        y = 400.0 * k
+        x0, x1 = (-20.0, 30.0) if sign > 0 else (30.0, -20.0)
+        add([x0, y, 600.0], 0.0 if sign > 0 else np.pi, 0.0, k, False)  # transition, lifted
+        xs = np.arange(x0, x1 + sign * 1e-9, sign * 0.5)
+        for x in xs:
+            z = 400.0 + 5.0 * np.sin(x / 7.0)
+            pitch = 0.3 * np.cos(x / 7.0)
+            add([x, y + 0.1 * x, z], 0.0 if sign > 0 else np.pi, pitch, k, True)
+        add([x1, y, 600.0], 0.0 if sign > 0 else np.pi, 0.0, k, False)
+    return Trajectory(np.array(poses), swath, scanning)
+
+
+EXPORT_OPTIONS = ExportOptions(
+    part_pose=parse_pose_arg("500,-200,100,30,5,-10"),
+    tcp=parse_pose_arg("12,-3,180,0,-15,90"),
+    scan=ScanSpec(travel_speed_mm_s=300.0),
+    blend_mm=0.2,
+)
+
+
+def rot_err(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle of a⁻¹b, immune to quaternion sign."""
+    return (
+        Rotation.from_matrix(a[:, :3, :3]).inv() * Rotation.from_matrix(b[:, :3, :3])
+    ).magnitude()
+
+
+def listing(directory) -> list[str]:
+    return sorted(p.name for p in directory.iterdir())

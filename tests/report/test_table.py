@@ -1,0 +1,22 @@
+"""The metrics table (report.table): in-spec coverage leads."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from helpers import straight
+from scanplan.metrics import evaluate
+from scanplan.quantities import ScanSpec
+from scanplan.report.table import table_rows
+from scanplan.sensor import SensorSpec
+
+SENSOR = SensorSpec()
+SPEC = ScanSpec(SENSOR)
+
+
+def test_the_table_leads_with_in_spec_coverage(plate):
+    m = evaluate(plate, SPEC, straight(np.arange(0, 320.0, 1.0)), points_per_profile=128)
+    rows = table_rows([m.to_json_dict()])
+    assert rows[0][0].startswith("in-spec coverage (±12.5 mm, 15°) of the top surface, ")
+    assert rows[0][1] == [f"{m.in_spec_coverage:.1%}"]
+    assert rows[1][0] == "coverage (any valid point)"

@@ -1,0 +1,61 @@
+"""Training logs and curves (report.training): the shipped log reads unchanged, a CSV that is no
+training log is refused, the comparison plots every run in every panel."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from scanplan.report.training import LOG_COLUMNS, read_log
+
+
+def test_read_log_reads_the_shipped_old_format_log_unchanged():
+    from scanplan.planners.rl import DEFAULT_POLICY
+
+    path = DEFAULT_POLICY / "training_log.csv"
+    log = read_log(path)
+    rows = list(csv.DictReader(path.open()))
+    assert tuple(log) == LOG_COLUMNS and len(log["timesteps"]) == len(rows) == 30
+    for column in LOG_COLUMNS:
+        assert log[column].tolist() == [float(r[column]) for r in rows], column
+
+
+def test_read_log_refuses_a_csv_that_is_no_training_log(tmp_path):
+    path = tmp_path / "x.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="x.csv: neither SB3's progress.csv"):
+        read_log(path)
+
+
+def test_training_comparison_plots_every_run_in_every_panel(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from scanplan.planners.rl import DEFAULT_POLICY
+    from scanplan.report.training import COMPARISON_PANELS, plot_training_comparison
+
+    shipped = DEFAULT_POLICY / "training_log.csv"
+    other = tmp_path / "other.csv"  # the same log at half the reward, as a second run
+    rows = list(csv.DictReader(shipped.open()))
+    with other.open("w", newline="") as f:
+        writer = csv.DictWriter(f, list(rows[0]))
+        writer.writeheader()
+        for r in rows:
+            writer.writerow(r | {"ep_rew_mean": str(float(r["ep_rew_mean"]) / 2)})
+    figures = []
+    monkeypatch.setattr(plt, "close", lambda fig: figures.append(fig))
+    out = plot_training_comparison({"shipped": shipped, "half": other}, tmp_path / "c.png")
+    assert out.is_file() and out.stat().st_size > 10_000
+    (fig,) = figures
+    assert [ax.get_title() for ax in fig.axes] == [t for _, t in COMPARISON_PANELS]
+    reward = fig.axes[0].get_lines()
+    assert len(reward) == 2 and all(len(ax.get_lines()) == 2 for ax in fig.axes)
+    ys = read_log(shipped)["ep_rew_mean"]
+    np.testing.assert_allclose(reward[0].get_ydata(), ys)
+    np.testing.assert_allclose(reward[1].get_ydata(), ys / 2)
+    with pytest.raises(ValueError, match="no log"):
+        plot_training_comparison({}, tmp_path / "none.png")

@@ -1,0 +1,145 @@
+"""Planning a part by views (pipeline.plan_views): the greedy choice raises in-spec coverage and
+reduces to the top view on a panel; views are ordered by a short tour and joined by clear
+moves; a view no clear move reaches is left out and counted."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from helpers import HEMISPHERE, fcl_distance, sloped_housing
+from scanplan.cli import app
+from scanplan.collision import checker_for
+from scanplan.metrics import evaluate
+from scanplan.pipeline import default_views, order_views, plan_scan, plan_views
+from scanplan.planners import make_planner
+from scanplan.quantities import UP, ScanSpec
+from scanplan.trajectory import read_json, read_trajectory, write_json
+
+SPEC = ScanSpec()
+
+
+def test_housing_auto_views_raise_in_spec_coverage(tmp_path):
+    part = sloped_housing()
+    planner = make_planner("geometric")
+    _, top = plan_scan(part, SPEC, planner)
+    plans, auto = plan_views(part, SPEC, planner, "auto")
+    assert len(plans) >= 2
+    views = auto.meta["views"]
+    assert [v["index"] for v in views] == list(range(len(plans)))
+    # Swath indices: one consecutive block per view.
+    for v in views:
+        scan = auto.swath[auto.scanning]
+        in_block = (scan >= v["first_swath"]) & (scan <= v["last_swath"])
+        assert in_block.any()
+    assert views[0]["axis"] == pytest.approx([0, 0, 1])
+    top_cov = evaluate(part, SPEC, top, points_per_profile=256, context=HEMISPHERE)
+    auto_cov = evaluate(part, SPEC, auto, points_per_profile=256)  # several views: hemisphere
+    assert auto_cov.visible_area_mm2 == pytest.approx(top_cov.visible_area_mm2)
+    # The top raster rolls its line onto the 60° walls too (0.67), but only views hold them.
+    assert auto_cov.in_spec_coverage >= 0.9
+    assert auto_cov.in_spec_coverage > top_cov.in_spec_coverage + 0.2
+    # Each added view looks along its axis: its scanning poses' beams point against it (the
+    # top view's passes roll onto the walls, so its beams tilt).
+    for k, v in enumerate(views[1:], start=1):
+        scan = auto.scanning & (auto.swath >= v["first_swath"]) & (auto.swath <= v["last_swath"])
+        beams = auto.poses[scan][:, :3, 2]
+        assert np.median(beams @ np.array(v["axis"])) < -0.8, k
+    # The JSON keeps the views' record.
+    write_json(auto, tmp_path / "t.json")
+    assert read_json(tmp_path / "t.json").meta["views"] == views
+
+
+def test_views_top_is_the_plain_top_raster():
+    part = sloped_housing()
+    planner = make_planner("geometric")
+    swaths, top = plan_scan(part, SPEC, planner)
+    plans, joined = plan_views(part, SPEC, planner, "top")
+    assert len(plans) == 1 and plans[0].passes == len(swaths)
+    assert np.allclose(joined.poses, top.poses) and (joined.swath == top.swath).all()
+
+
+@pytest.mark.slow
+def test_door_auto_reduces_to_the_single_top_view(tmp_path):
+    out = tmp_path / "door.json"
+    result = CliRunner().invoke(app, ["plan", "door", "--views", "auto", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "1 view," in result.stdout
+    data = json.loads(out.read_text())
+    assert len(data["views"]) == 1 and data["views"][0]["axis"] == pytest.approx([0, 0, 1])
+    # The same scan as the plain top raster: same passes, same scanning poses.
+    top = tmp_path / "top.csv"
+    assert CliRunner().invoke(app, ["plan", "door", "-o", str(top)]).exit_code == 0
+    plain, auto = read_trajectory(top), read_trajectory(out)
+    assert data["views"][0]["passes"] == len(np.unique(plain.swath))
+    np.testing.assert_allclose(
+        auto.poses[auto.scanning][:, :3, 3], plain.poses[plain.scanning][:, :3, 3], atol=1e-3
+    )
+
+
+def test_views_are_ordered_by_a_short_tour_with_the_top_first():
+    part = sloped_housing()
+    planner = make_planner("geometric")
+    plans, auto = plan_views(part, SPEC, planner, "auto")
+    assert np.allclose(plans[0].view.axis, UP)
+
+    def moving(order):
+        first = [vp.traj.poses[0, :3, 3] for vp in order]
+        last = [vp.traj.poses[-1, :3, 3] for vp in order]
+        return sum(float(np.linalg.norm(first[k + 1] - last[k])) for k in range(len(order) - 1))
+
+    ordered = order_views(plans)
+    assert np.allclose(ordered[0].view.axis, UP)
+    assert sorted(id(vp) for vp in ordered) == sorted(id(vp) for vp in plans)
+    # No worse than any order a user could have given: every permutation of the rest.
+    from itertools import permutations
+
+    best = min(moving([plans[0], *rest]) for rest in permutations(plans[1:]))
+    assert moving(ordered) <= best * 1.2
+
+
+def test_moves_between_views_keep_the_body_clear():
+    part = sloped_housing()
+    _, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    report = checker_for(part, SPEC.sensor).check(auto.poses, SPEC.clearance_mm)
+    assert not report.colliding.any()
+    # Independently of our checker: python-fcl's own distance for every non-scanning pose.
+    for pose in auto.poses[~auto.scanning][::2]:
+        assert fcl_distance(part, SPEC.sensor, pose) > 0
+
+
+def test_default_views_follow_whether_the_planner_rolls():
+    assert default_views(make_planner("geometric")) == "auto"
+    assert default_views(make_planner("feedback")) == "auto"
+    assert default_views(make_planner("fixed")) == "top"
+    assert default_views(make_planner("geometric", roll=False)) == "top"
+    assert default_views(make_planner("rl")) == "top"  # the shipped v0 policy: pitch only
+
+
+def test_a_view_no_clear_move_reaches_is_left_out_and_counted(monkeypatch):
+    import scanplan.pipeline as pipeline_module
+
+    part = sloped_housing()
+    plans, _ = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    assert len(plans) >= 3
+    real = pipeline_module.view_transition
+    calls = {"n": 0}
+
+    def blocked_once(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise ValueError("no collision-free move between views")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline_module, "view_transition", blocked_once)
+    kept, joined = pipeline_module.join_views(part, plans, SPEC)
+    assert joined.meta["views_unreachable"] == 1
+    assert len(kept) == len(plans) - 1 and [v.view.index for v in kept] == list(range(len(kept)))
+    assert [v["index"] for v in joined.meta["views"]] == list(range(len(kept)))
+    assert np.allclose(kept[1].view.axis, plans[2].view.axis)  # the second view was skipped
+    assert (
+        checker_for(part, SPEC.sensor).check(joined.poses, SPEC.clearance_mm).colliding.sum() == 0
+    )
