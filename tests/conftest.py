@@ -1,4 +1,6 @@
-"""Shared fixtures: analytic parts whose right answers are known, built once per session.
+"""Shared fixtures, each built once per session: analytic parts whose right answers are known
+(a flat plate, a plate tilted along the pass, a step, slopes across it), and the plans several
+suites judge that take seconds each (the door and the drone per planner, the housing by views).
 
 Property-based tests draw the same examples on every run, so CI is deterministic (a new
 random example must not turn an unchanged tree red)."""
@@ -13,8 +15,11 @@ import pytest
 import trimesh
 from hypothesis import settings
 
-from helpers import sloped_housing
-from scanplan.part import Part, part_from_mesh
+from helpers import PartPlans, sloped_housing
+from scanplan.part import Part, load_part, part_from_mesh
+from scanplan.pipeline import plan_views
+from scanplan.planners import make_planner
+from scanplan.quantities import ScanSpec
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 
@@ -31,6 +36,26 @@ def plate() -> Part:
     mesh = trimesh.creation.box((600.0, 300.0, 10.0))
     mesh.apply_translation((0, 0, -5.0))  # top face at z = 0
     return part_from_mesh(mesh, "plate")
+
+
+@pytest.fixture(scope="session")
+def tilted_plate() -> Part:
+    """A plate 300 x 100 x 10 mm tilted 20° about y, so that a pass along x runs down it: 20°
+    off a vertical beam, beyond the 15° in-spec tolerance, on every point."""
+    mesh = trimesh.creation.box((300.0, 100.0, 10.0))
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(math.radians(20.0), Y))
+    return part_from_mesh(mesh, "tilted")
+
+
+@pytest.fixture(scope="session")
+def stepped_plate() -> Part:
+    """A 600 x 200 plate (top at z = 0) with a block 40 mm high on its second half (x > 0): a
+    step up across the whole width of a pass along x."""
+    low = trimesh.creation.box((600.0, 200.0, 10.0))
+    low.apply_translation((0.0, 0.0, -5.0))
+    high = trimesh.creation.box((300.0, 200.0, 40.0))
+    high.apply_translation((150.0, 0.0, 20.0))
+    return part_from_mesh(trimesh.util.concatenate([low, high]), "step")
 
 
 @pytest.fixture()
@@ -86,3 +111,26 @@ def step_block() -> Part:
 def housing() -> Part:
     """A housing 600 x 400 x 150 mm whose four side walls slope at 60°: a part of views."""
     return sloped_housing()
+
+
+@pytest.fixture(scope="session")
+def housing_views(housing):
+    """The housing planned by views (`--views auto`, geometric planner): (views, trajectory)."""
+    return plan_views(housing, ScanSpec(), make_planner("geometric"), "auto")
+
+
+@pytest.fixture(scope="session")
+def door() -> Part:
+    return load_part("door")
+
+
+@pytest.fixture(scope="session")
+def door_plans(door) -> PartPlans:
+    """The door planned once per planner (and roll setting), on first use: several suites
+    judge the same plans, which take seconds each."""
+    return PartPlans(door)
+
+
+@pytest.fixture(scope="session")
+def drone_plans() -> PartPlans:
+    return PartPlans(load_part("drone"))

@@ -21,10 +21,13 @@ from typer.testing import CliRunner
 from scanplan.cli import app
 from scanplan.context import PlanContext
 from scanplan.export import ExportOptions, parse_pose_arg
+from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, part_from_mesh
+from scanplan.pipeline import plan_path
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
-from scanplan.swaths import Swath
+from scanplan.swaths import Swath, plan_swaths
 from scanplan.trajectory import Trajectory
 
 TESTS = Path(__file__).resolve().parent
@@ -78,6 +81,50 @@ def plate_with_block() -> Part:
     block = trimesh.creation.box((300.0, 200.0, 50.0))
     block.apply_translation((0, 0, 35.0))
     return part_from_mesh(trimesh.util.concatenate([plate, block]), "plate-block")
+
+
+# ---- a part planned once per planner ------------------------------------------------------
+
+
+class PartPlans:
+    """`part` planned by each planner at most once, on first use: the paper's nominal raster
+    (`plan_swaths`, auto direction) joined by `plan_path`, with `make_planner(name, roll=roll)`
+    under the default ScanSpec; and each plan's metrics (`evaluate`) per fan size. Planners
+    that do not roll (fixed, the v0 rl policy) give one plan whatever `roll` says. Tests read
+    the plans, never change them."""
+
+    def __init__(self, part: Part) -> None:
+        self.part = part
+        self.spec = ScanSpec()
+        self._swaths: list[Swath] | None = None
+        self._plans: dict[tuple[str, bool], Trajectory] = {}
+        self._metrics: dict[tuple[str, bool, int], Metrics] = {}
+
+    @property
+    def swaths(self) -> list[Swath]:
+        if self._swaths is None:
+            self._swaths = plan_swaths(self.part, self.spec.sensor)
+        return self._swaths
+
+    def _key(self, name: str, roll: bool) -> tuple[str, bool]:
+        planner = make_planner(name, roll=roll)
+        return planner.name, planner.roll
+
+    def plan(self, name: str, roll: bool = True) -> Trajectory:
+        key = self._key(name, roll)
+        if key not in self._plans:
+            planner = make_planner(name, roll=roll)
+            self._plans[key] = plan_path(self.part, self.spec, planner, self.swaths)
+        return self._plans[key]
+
+    def metrics(self, name: str, roll: bool = True, points_per_profile: int = 256) -> Metrics:
+        key = (*self._key(name, roll), points_per_profile)
+        if key not in self._metrics:
+            traj = self.plan(name, roll)
+            self._metrics[key] = evaluate(
+                self.part, self.spec, traj, points_per_profile=points_per_profile
+            )
+        return self._metrics[key]
 
 
 # ---- the sensor body vs a part, straight from FCL ------------------------------------------

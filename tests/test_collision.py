@@ -11,7 +11,7 @@ import trimesh
 from helpers import fcl_distance
 from scanplan.collision import CollisionChecker
 from scanplan.metrics import evaluate
-from scanplan.part import Part, load_part
+from scanplan.part import Part
 from scanplan.pipeline import plan_path
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
@@ -81,9 +81,9 @@ def test_a_body_wholly_inside_a_closed_part_collides():
 @pytest.mark.slow
 @pytest.mark.parametrize("part_name", ["door", "drone"])
 @pytest.mark.parametrize("planner", ["fixed", "geometric"])
-def test_default_plans_keep_the_body_clear(part_name, planner):
-    part = load_part(part_name)
-    traj = plan_path(part, SPEC, make_planner(planner, roll=False), plan_swaths(part, SPEC.sensor))
+def test_default_plans_keep_the_body_clear(part_name, planner, request):
+    plans = request.getfixturevalue(f"{part_name}_plans")  # door_plans, drone_plans
+    part, traj = plans.part, plans.plan(planner, roll=False)
     assert traj.meta["collisions_dropped"] == 0
     report = CollisionChecker(part, SPEC.sensor).check(traj.poses, 0.0)
     assert not report.touching.any()

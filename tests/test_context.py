@@ -14,8 +14,6 @@ from typer.testing import CliRunner
 from scanplan.cli import app
 from scanplan.context import PlanContext, judged_alike, recorded
 from scanplan.metrics import evaluate
-from scanplan.pipeline import plan_views
-from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory, read_trajectory, write_csv, write_json
 
@@ -48,8 +46,8 @@ def test_the_context_survives_its_json_record():
 
 
 @pytest.fixture(scope="module")
-def housing_plan(housing):
-    plans, traj = plan_views(housing, SPEC, make_planner("geometric"), "auto")
+def housing_plan(housing_views):
+    plans, traj = housing_views
     assert len(plans) > 1  # the point: a plan of several views
     return traj
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from helpers import HEMISPHERE, fcl_distance, sloped_housing
+from helpers import HEMISPHERE, fcl_distance
 from scanplan.cli import app
 from scanplan.collision import checker_for
 from scanplan.metrics import evaluate
@@ -22,11 +22,16 @@ from scanplan.trajectory import read_json, read_trajectory, write_json
 SPEC = ScanSpec()
 
 
-def test_housing_auto_views_raise_in_spec_coverage(tmp_path):
-    part = sloped_housing()
-    planner = make_planner("geometric")
-    _, top = plan_scan(part, SPEC, planner)
-    plans, auto = plan_views(part, SPEC, planner, "auto")
+@pytest.fixture(scope="module")
+def housing_top(housing):
+    """The housing's plain top raster (geometric planner): (swaths, trajectory)."""
+    return plan_scan(housing, SPEC, make_planner("geometric"))
+
+
+def test_housing_auto_views_raise_in_spec_coverage(housing, housing_top, housing_views, tmp_path):
+    part = housing
+    _, top = housing_top
+    plans, auto = housing_views
     assert len(plans) >= 2
     views = auto.meta["views"]
     assert [v["index"] for v in views] == list(range(len(plans)))
@@ -53,11 +58,9 @@ def test_housing_auto_views_raise_in_spec_coverage(tmp_path):
     assert read_json(tmp_path / "t.json").meta["views"] == views
 
 
-def test_views_top_is_the_plain_top_raster():
-    part = sloped_housing()
-    planner = make_planner("geometric")
-    swaths, top = plan_scan(part, SPEC, planner)
-    plans, joined = plan_views(part, SPEC, planner, "top")
+def test_views_top_is_the_plain_top_raster(housing, housing_top):
+    swaths, top = housing_top
+    plans, joined = plan_views(housing, SPEC, make_planner("geometric"), "top")
     assert len(plans) == 1 and plans[0].passes == len(swaths)
     assert np.allclose(joined.poses, top.poses) and (joined.swath == top.swath).all()
 
@@ -72,7 +75,8 @@ def test_door_auto_reduces_to_the_single_top_view(tmp_path):
     assert len(data["views"]) == 1 and data["views"][0]["axis"] == pytest.approx([0, 0, 1])
     # The same scan as the plain top raster: same passes, same scanning poses.
     top = tmp_path / "top.csv"
-    assert CliRunner().invoke(app, ["plan", "door", "-o", str(top)]).exit_code == 0
+    result = CliRunner().invoke(app, ["plan", "door", "--views", "top", "-o", str(top)])
+    assert result.exit_code == 0, result.output
     plain, auto = read_trajectory(top), read_trajectory(out)
     assert data["views"][0]["passes"] == len(np.unique(plain.swath))
     np.testing.assert_allclose(
@@ -80,10 +84,8 @@ def test_door_auto_reduces_to_the_single_top_view(tmp_path):
     )
 
 
-def test_views_are_ordered_by_a_short_tour_with_the_top_first():
-    part = sloped_housing()
-    planner = make_planner("geometric")
-    plans, auto = plan_views(part, SPEC, planner, "auto")
+def test_views_are_ordered_by_a_short_tour_with_the_top_first(housing_views):
+    plans, auto = housing_views
     assert np.allclose(plans[0].view.axis, UP)
 
     def moving(order):
@@ -101,9 +103,9 @@ def test_views_are_ordered_by_a_short_tour_with_the_top_first():
     assert moving(ordered) <= best * 1.2
 
 
-def test_moves_between_views_keep_the_body_clear():
-    part = sloped_housing()
-    _, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
+def test_moves_between_views_keep_the_body_clear(housing, housing_views):
+    part = housing
+    _, auto = housing_views
     report = checker_for(part, SPEC.sensor).check(auto.poses, SPEC.clearance_mm)
     assert not report.colliding.any()
     # Independently of our checker: python-fcl's own distance for every non-scanning pose.
@@ -119,11 +121,11 @@ def test_default_views_follow_whether_the_planner_rolls():
     assert default_views(make_planner("rl")) == "top"  # the shipped v0 policy: pitch only
 
 
-def test_a_view_no_clear_move_reaches_is_left_out_and_counted(monkeypatch):
+def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_views, monkeypatch):
     import scanplan.pipeline as pipeline_module
 
-    part = sloped_housing()
-    plans, _ = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    part = housing
+    plans, _ = housing_views
     assert len(plans) >= 3
     real = pipeline_module.view_transition
     calls = {"n": 0}

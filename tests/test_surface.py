@@ -10,9 +10,9 @@ from helpers import sloped_housing
 from scanplan.surface import hemisphere_visible_samples, upward_visible_samples
 
 
-def test_hemisphere_surface_adds_what_only_a_tilted_view_sees():
+def test_hemisphere_surface_adds_what_only_a_tilted_view_sees(housing):
     # 60° walls are within the top view's 80° slope limit: both surfaces hold them.
-    part = sloped_housing()
+    part = housing
     up, hemi = upward_visible_samples(part, 2.0), hemisphere_visible_samples(part, 2.0)
     assert hemi.area_mm2 == pytest.approx(up.area_mm2, rel=0.01)
     # 85° walls: only the hemisphere's tilted directions see them.

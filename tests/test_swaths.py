@@ -74,7 +74,7 @@ def test_pose_pitch_convention_and_inverse():
     assert (s, h, th) == pytest.approx((12.0, -3.0, math.radians(10)))
 
 
-def test_auto_direction_scans_across_curvature_a_pitch_only_planner_cannot_follow():
+def test_auto_direction_scans_across_curvature_a_pitch_only_planner_cannot_follow(door):
     """The door bulges across its width: passes along its length would leave ~20 mm of
     cross-line height variation, passes across it ~4 mm. A training piece varies only along
     its length, so it is scanned lengthwise."""
@@ -83,7 +83,6 @@ def test_auto_direction_scans_across_curvature_a_pitch_only_planner_cannot_follo
 
     sensor = SensorSpec()
     width = sensor.line_width_mm
-    door = load_part("door")
     assert np.allclose(np.abs(scan_direction(door, sensor, "long")), [1, 0, 0], atol=1e-6)
     assert np.allclose(np.abs(scan_direction(door, sensor, "auto")), [0, 1, 0], atol=1e-6)
     along_x = cross_line_residual_mm(door, np.array([1.0, 0, 0]), width)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from helpers import HEMISPHERE, sloped_housing
+from helpers import HEMISPHERE
 from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
 from scanplan.pipeline import plan_views
@@ -36,18 +36,18 @@ def test_view_axis_is_the_normal_clamped_to_the_upper_cone():
     assert clamped[0] > 0 and clamped[1] == pytest.approx(0)
 
 
-def test_view_rotation_maps_its_axis_up_and_back():
+def test_view_rotation_maps_its_axis_up_and_back(housing):
     axis = view_axis(np.array([0.3, -0.8, 0.5]))
     view = View.looking_along(axis)
     assert np.allclose(view.R[:3, :3] @ axis, UP)
-    part = sloped_housing()
+    part = housing
     rotated = view.part(part)
     assert np.allclose(rotated.mesh.face_normals, part.mesh.face_normals @ view.R[:3, :3].T)
     assert rotated.inspect_faces is not None and rotated.inspect_faces.all()
 
 
-def test_housing_regions_are_the_top_and_four_walls():
-    part = sloped_housing()
+def test_housing_regions_are_the_top_and_four_walls(housing):
+    part = housing
     regions = segment_regions(part)
     tilts = sorted(round(math.degrees(math.acos(r.normal[2]))) for r in regions)
     assert tilts == [0, 60, 60, 60, 60]  # the bottom faces down: not in the surface

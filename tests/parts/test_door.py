@@ -30,10 +30,9 @@ def test_door_has_its_features():
     assert np.degrees(np.arctan(below) - np.arctan(above)) > 5.0
 
 
-def test_the_door_inspects_its_skin_not_the_solid_sides():
+def test_the_door_inspects_its_skin_not_the_solid_sides(door):
     from scanplan.part import load_part
 
-    door = load_part("door")
     assert door.inspect_faces is not None
     normals = door.mesh.face_normals
     assert (normals[door.inspect_faces, 2] > 0).all()

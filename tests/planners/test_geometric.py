@@ -11,7 +11,7 @@ import trimesh
 
 from scanplan.dynamics import steps_between
 from scanplan.metrics import evaluate
-from scanplan.part import load_part, part_from_mesh
+from scanplan.part import part_from_mesh
 from scanplan.pipeline import plan_path
 from scanplan.planners.feedback import FeedbackPlanner
 from scanplan.planners.fixed import FixedPlanner
@@ -33,13 +33,6 @@ def box(length, width, height=10.0, tilt_deg=0.0, offset=(0.0, 0.0, 0.0)):
     return mesh
 
 
-def stepped_plate():
-    """A 600 x 200 plate with a 40 mm high block on its second half."""
-    low = box(600.0, 200.0, 10.0, offset=(0.0, 0.0, -5.0))
-    high = box(300.0, 200.0, 40.0, offset=(150.0, 0.0, 20.0))
-    return part_from_mesh(trimesh.util.concatenate([low, high]), "step")
-
-
 def run(part, planner, direction="auto"):
     traj = plan_path(part, SPEC, planner, plan_swaths(part, SENSOR, direction))
     return traj, evaluate(part, SPEC, traj, points_per_profile=FAN)
@@ -57,8 +50,8 @@ def test_flat_plate_both_planners_measure_zero_error_full_coverage(planner):
     assert m.backward_steps == 0
 
 
-def test_tilted_plate_fixed_shows_the_tilt_geometric_aligns():
-    part = part_from_mesh(box(300.0, 100.0, tilt_deg=20.0), "tilted")
+def test_tilted_plate_fixed_shows_the_tilt_geometric_aligns(tilted_plate):
+    part = tilted_plate
     _, fixed = run(part, FixedPlanner())
     _, geo = run(part, GeometricPlanner())
     assert fixed.orientation_error_mean_deg == pytest.approx(20.0, abs=0.5)
@@ -68,8 +61,8 @@ def test_tilted_plate_fixed_shows_the_tilt_geometric_aligns():
     assert geo.backward_steps == 0
 
 
-def test_geometric_respects_the_step_limits_and_anticipates_a_step():
-    part = stepped_plate()
+def test_geometric_respects_the_step_limits_and_anticipates_a_step(stepped_plate):
+    part = stepped_plate
     (swath,) = plan_swaths(part, SENSOR, "x")
     limits = StepLimits()
     traj = GeometricPlanner(limits=limits).plan(part, swath, SPEC)
@@ -112,18 +105,16 @@ def test_pass_that_sees_nothing_is_a_clear_error():
             planner.plan(part, far, SPEC)
 
 
-@pytest.fixture(scope="module")
-def door():
-    return load_part("door")
-
-
 @pytest.mark.slow
-def test_door_geometric_beats_fixed(door):
+def test_door_geometric_beats_fixed(door_plans):
     """Passes across the door's tumblehome (direction y) so the curvature lies along the
-    pass, where pitch and height can follow it. Along the long axis (the default) the
-    tumblehome lies across the laser line, which no planner can correct with roll fixed."""
-    _, fixed = run(door, FixedPlanner(), "y")
-    traj, geo = run(door, GeometricPlanner(), "y")
+    pass, where pitch and height can follow it. Along the long axis the tumblehome lies
+    across the laser line, which no planner can correct with roll fixed. Direction y is the
+    door's auto direction (test_swaths), so these are the door's default plans."""
+    assert all(abs(swath.u[1]) == pytest.approx(1.0) for swath in door_plans.swaths)
+    fixed = door_plans.metrics("fixed")
+    traj = door_plans.plan("geometric", roll=False)
+    geo = door_plans.metrics("geometric", roll=False)
     assert geo.distance_error_mean_abs_mm <= 0.25 * fixed.distance_error_mean_abs_mm
     assert geo.orientation_error_mean_deg <= 0.5 * fixed.orientation_error_mean_deg
     assert fixed.coverage_fraction >= 0.9 and geo.coverage_fraction >= 0.9
@@ -133,9 +124,9 @@ def test_door_geometric_beats_fixed(door):
 
 
 @pytest.mark.slow
-def test_door_default_direction_geometric_holds_the_working_distance(door):
-    _, fixed = run(door, FixedPlanner())
-    _, geo = run(door, GeometricPlanner())
+def test_door_default_direction_geometric_holds_the_working_distance(door_plans):
+    fixed = door_plans.metrics("fixed")
+    geo = door_plans.metrics("geometric", roll=False)
     assert geo.profile_distance_error_mean_abs_mm <= 0.25 * fixed.profile_distance_error_mean_abs_mm
     assert geo.coverage_fraction >= 0.9 and fixed.coverage_fraction >= 0.9
     assert geo.backward_steps == 0

@@ -20,13 +20,9 @@ import numpy as np
 import pytest
 
 from data.make_golden_plans import PARTS, PLANNERS, STRIDE
-from helpers import DATA
+from helpers import DATA, PartPlans
 from scanplan.collision import CollisionChecker
-from scanplan.part import load_part
-from scanplan.pipeline import plan_path
-from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
-from scanplan.swaths import plan_swaths
 
 GOLDEN = DATA / "golden_plans.npz"
 OLD_TRANSITION_POSES = 3
@@ -43,20 +39,11 @@ def recorded_scanning(swath: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def plans():
-    spec = ScanSpec()
-    out = {}
-    for part_name in PARTS:
-        # As recorded: the whole solid (the door now inspects only its skin, which moves
-        # the passes' ends where the skin meets the solid's sides).
-        part = replace(load_part(part_name), inspect_faces=None)
-        swaths = plan_swaths(part, spec.sensor)
-        for name in PLANNERS:
-            out[f"{part_name}/{name}"] = (
-                part,
-                plan_path(part, spec, make_planner(name, roll=False), swaths),
-            )
-    return out
+def plans(door, drone_plans):
+    """As recorded: the whole solid (the door now inspects only its skin, which moves the
+    passes' ends where the skin meets the solid's sides). The drone's surface to inspect is
+    its whole solid already: its plans are the shared ones."""
+    return {"door": PartPlans(replace(door, inspect_faces=None)), "drone": drone_plans}
 
 
 @pytest.mark.slow
@@ -65,7 +52,7 @@ def plans():
 def test_plan_matches_the_recorded_one(plans, part, planner):
     recorded = np.load(GOLDEN)
     key = f"{part}/{planner}"
-    the_part, traj = plans[key]
+    the_part, traj = plans[part].part, plans[part].plan(planner, roll=False)
     swath_rec = recorded[f"{key}/swath"]
     scanning_rec = recorded_scanning(swath_rec)
     assert int(scanning_rec.sum()) == int(recorded[f"{key}/n"][1])
