@@ -25,7 +25,6 @@ from scanplan.part import Part
 from scanplan.planners import Planner, pass_workers
 from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
 from scanplan.robot.fit import fit_to_robot
-from scanplan.robot.links import ObstacleSpec
 from scanplan.surface import hemisphere_visible_samples
 from scanplan.swaths import Swath, plan_swaths
 from scanplan.trajectory import Trajectory
@@ -395,14 +394,10 @@ class Arm:
 
 
 def fit_arm(part: Part, traj: Trajectory, arm: Arm, context: PlanContext) -> Trajectory:
-    """`traj` made flyable by the arm (`robot.fit.fit_to_robot`; its links kept clear of the
-    part, the fixtures and the table), with `meta["robot"]`: what it gave up, per view, and the in-spec coverage of the surface to inspect before and after
+    """`traj` made flyable by the arm (`robot.fit.fit_to_robot`), with `meta["robot"]`: what
+    it gave up, per view, and the in-spec coverage of the surface to inspect before and after
     (evaluated with the view choice's fan)."""
-    cell = context.cell(part)
-    obstacles = ObstacleSpec(
-        (part.mesh, *(f.mesh for f in cell.fixtures)), cell.table_z_mm, context.spec.clearance_mm
-    )
-    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
+    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part)
     record = fit.record(arm.tcp)
     for key, plan in (("in_spec_without_robot", traj), ("in_spec", fit.traj)):
         m = evaluate(part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context=context)

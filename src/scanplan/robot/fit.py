@@ -1,6 +1,5 @@
 """A plan made flyable by an arm: `fit_to_robot` places the part (or takes its pose), then
-gives up the poses the arm cannot reach or where its links come within the clearance of the
-part, the fixtures or the table, and splits passes where the arm would flip its
+gives up the poses the arm cannot reach and splits passes where the arm would flip its
 configuration, so that every pass is flown on one branch and a change of configuration
 happens only between passes, as a joint move. It says what it gave up.
 """
@@ -14,7 +13,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scanplan.robot.base import Robot
-from scanplan.robot.links import ObstacleSpec, clear_of, links_colliding
 from scanplan.robot.place import Placement, place
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach
@@ -72,21 +70,18 @@ def fit_to_robot(
     tcp: np.ndarray,
     T_base_part: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
-    obstacles: ObstacleSpec | None = None,
 ) -> RobotFit:
     """`traj` (part frame) made flyable by `robot` with the sensor at `tcp`
     (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
     unreachable or beyond the joint limits are given up (a pass continues after them as a
     new pass) and passes are split where the arm flips its configuration, until the reach
-    check of the whole path finds neither. With `obstacles`, a pose (or the way to it from
-    the previous pose) where a link comes within their clearance is given up too."""
+    check of the whole path finds neither."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
-        placement = place(traj, arm, tcp, height_range_mm, obstacles=obstacles)
+        placement = place(traj, arm, tcp, height_range_mm)
         T_base_part = placement.T_base_part
     inv_tcp = np.linalg.inv(tcp)
-    placed = None if obstacles is None else obstacles.placed(T_base_part)
     keep = np.ones(len(traj), bool)
     swath = traj.swath.copy()
     splits = 0
@@ -97,14 +92,11 @@ def fit_to_robot(
             arm,
             swath=current.swath,
             scanning=current.scanning,
-            branch_clear=None if placed is None else clear_of(arm, placed),
         )
+        if report.reachable:
+            break
         index = np.flatnonzero(keep)
         bad = np.union1d(report.unreachable, report.limit_violations)
-        if placed is not None:
-            bad = np.union1d(bad, np.flatnonzero(links_colliding(arm, report.joints, placed)))
-        if report.reachable and len(bad) == 0:
-            break
         keep[index[bad]] = False
         # A pass goes on after a gap or a flip as a new pass: the arm reconfigures between.
         cut = np.zeros(len(traj), bool)

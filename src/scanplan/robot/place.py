@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.robot.base import Robot
-from scanplan.robot.links import ObstacleSpec, clear_of, links_colliding
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, fit_limits, limit_margin
 from scanplan.trajectory import Trajectory
@@ -27,8 +26,6 @@ from scanplan.trajectory import Trajectory
 _MARGIN_REF = np.array([np.sin(np.radians(5.0)), np.sin(np.radians(5.0)), 20.0])
 _LIMIT_REF_RAD = np.radians(5.0)
 _CHUNK_POSES = 60_000  # poses per IK call: bounds memory at ~25 MB per chunk
-# Coarse placements whose link clearance is judged before the pattern search.
-_LINK_CANDIDATES = 40
 
 
 @dataclass(frozen=True)
@@ -131,14 +128,11 @@ def place(
     coarse_poses: int = 48,
     fine_poses: int = 256,
     keep: int = 6,
-    obstacles: ObstacleSpec | None = None,
 ) -> Placement:
     """The part pose on the table from which `robot` reaches every pose of `traj` with the
     most margin (or, when none does, the one reaching the most). `tcp` is `T_flange_sensor`
     (mm); `height_range_mm` bounds the part origin's z in the base frame (default: the
-    arm's reach around the workspace centre; with `obstacles` that have a table, the arm
-    stands on it). With `obstacles` (the part, fixtures and table in the part frame), of the
-    best placements the one whose links stay clear at the most poses is taken."""
+    arm's reach around the workspace centre)."""
     started = time.perf_counter()
     arm = get_robot(robot)
     if len(traj) == 0:
@@ -148,8 +142,6 @@ def place(
     tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=np.float64)
     T_part_flange = traj.poses @ np.linalg.inv(tcp)
     reach, z_mid = _reach_mm(arm)
-    if height_range_mm is None and obstacles is not None:
-        height_range_mm = obstacles.on_the_table()  # the arm stands on the part's table
     lo, hi = height_range_mm if height_range_mm is not None else (z_mid - reach, z_mid + reach)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
         raise ValueError(f"height range must be LO <= HI in mm, got {lo}, {hi}")
@@ -177,12 +169,7 @@ def place(
     # Fine: pattern search from the best few, on more poses; all candidates move at once.
     fine = _subsample(traj, fine_poses)
     starts = _groups(traj, fine)
-    ranked = np.argsort(-scores)
-    if obstacles is not None:  # the best few whose links clear the cell on the subsample
-        ranked = _links_clear_first(
-            ranked[:_LINK_CANDIDATES], grid, centre, traj, fine, arm, T_part_flange, obstacles
-        )
-    best = grid[ranked[:keep]]
+    best = grid[np.argsort(-scores)[:keep]]
     best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre))
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
     moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
@@ -202,54 +189,17 @@ def place(
             if delta[0] < 1.0:
                 break
 
-    # The answer is judged on every pose, following the branch as a controller would: the
-    # first reachable candidate with no link collision, else the one that fails least.
+    # The answer is judged on every pose, following the branch as a controller would.
+    order = np.argsort(-best_scores)
     chosen = None
-    for i in np.argsort(-best_scores):
+    for i in order:
         T_base_part = _placements(best[i : i + 1], centre)[0]
-        placed = None if obstacles is None else obstacles.placed(T_base_part)
         report = check_reach(
-            T_base_part @ T_part_flange,
-            arm,
-            swath=traj.swath,
-            scanning=traj.scanning,
-            branch_clear=None if placed is None else clear_of(arm, placed),
+            T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
         )
-        hits = 0 if placed is None else int(links_colliding(arm, report.joints, placed).sum())
-        rank = (not report.reachable, len(report.unreachable) + len(report.config_flips), hits)
-        if chosen is None or rank < chosen[0]:
-            chosen = (rank, T_base_part, report, float(best_scores[i]))
-        if rank == (False, 0, 0):
+        if chosen is None or (report.reachable and not chosen[1].reachable):
+            chosen = (T_base_part, report, float(best_scores[i]))
+        if report.reachable:
             break
     assert chosen is not None
-    _, T_base_part, report, score = chosen
-    return Placement(T_base_part, report, score, evaluated, time.perf_counter() - started)
-
-
-def _links_clear_first(
-    ranked: np.ndarray,
-    grid: np.ndarray,
-    centre: np.ndarray,
-    traj: Trajectory,
-    sample: np.ndarray,
-    arm: Robot,
-    T_part_flange: np.ndarray,
-    obstacles: ObstacleSpec,
-) -> np.ndarray:
-    """`ranked` placements reordered by how many of the `sample` poses make the arm's links
-    come within the clearance of the cell (fewest first; the ranking breaks ties)."""
-    hits = []
-    for i in ranked:
-        T_base_part = _placements(grid[i : i + 1], centre)[0]
-        placed = obstacles.placed(T_base_part)
-        report = check_reach(
-            T_base_part @ T_part_flange[sample],
-            arm,
-            swath=traj.swath[sample],
-            scanning=traj.scanning[sample],
-            branch_clear=clear_of(arm, placed),
-        )
-        colliding = links_colliding(arm, report.joints, placed)
-        unreachable = np.isnan(report.joints).any(axis=1)
-        hits.append(int(colliding.sum() + unreachable.sum()))
-    return ranked[np.argsort(hits, kind="stable")]
+    return Placement(chosen[0], chosen[1], chosen[2], evaluated, time.perf_counter() - started)

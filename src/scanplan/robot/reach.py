@@ -6,7 +6,6 @@ Works for any `Robot`; the path is `T_base_flange` (n, 4, 4) in mm, e.g. from
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -133,7 +132,6 @@ def check_reach(
     elbow_tol: float = np.sin(np.radians(5.0)),
     shoulder_tol_mm: float = 20.0,
     jump_deg: float = 30.0,
-    branch_clear: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> ReachReport:
     """Follow the path through IK and report what would stop or upset a real arm.
 
@@ -143,10 +141,7 @@ def check_reach(
     configuration flip is a sign change of a singularity term (wrist, elbow, shoulder)
     between consecutive poses of one pass (`swath`, `scanning`; without them the whole
     path is one pass): the path went through that singularity. A jump is any joint
-    turning more than `jump_deg` between consecutive poses. `branch_clear` ((k, 6) joint
-    solutions -> (k,) bool, e.g. the arm's links clear of the cell): at the first pose and
-    at the start of each pass (where the arm may reconfigure in a joint move) a clear
-    solution is taken if there is one.
+    turning more than `jump_deg` between consecutive poses.
     """
     arm = get_robot(robot)
     poses = np.asarray(T_base_flange, dtype=np.float64)
@@ -165,17 +160,6 @@ def check_reach(
         if not exists[i].any():
             continue
         cand = solutions[i][exists[i]]
-        starts_pass = i == 0 or not linked[i - 1]
-        if branch_clear is not None and starts_pass:
-            fitted, inside = fit_limits(cand if prev is None else prev + wrap(cand - prev), limits)
-            clear = inside & branch_clear(fitted)
-            if clear.any():
-                nearest = -1
-                if prev is not None and inside.any():
-                    dist = np.where(inside, ((fitted - prev) ** 2).sum(axis=1), np.inf)
-                    nearest = int(np.argmin(dist))
-                if nearest < 0 or not clear[nearest]:
-                    cand, prev = fitted[clear], None  # choose afresh among the clear branches
         if prev is None:
             cand, inside = fit_limits(cand, limits)
             if not inside.any():
