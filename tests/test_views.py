@@ -9,6 +9,7 @@ import pytest
 import trimesh
 
 from helpers import HEMISPHERE
+from scanplan.collision import checker_for
 from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
 from scanplan.pipeline import plan_views
@@ -86,9 +87,27 @@ def test_vertical_walls_get_views_that_see_them_nearly_head_on():
     axes = [v.axis for v in candidate_views(part, SPEC)]
     tilts = sorted(round(math.degrees(math.acos(a[2]))) for a in axes)
     assert tilts == [0, 80, 80, 80, 80]
-    plans, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    # Held in the air, every wall is scanned whole.
+    plans, auto = plan_views(part, SPEC, make_planner("geometric"), "auto", table="none")
     top = evaluate(part, SPEC, plans[0].traj, points_per_profile=256, context=HEMISPHERE)
     both = evaluate(part, SPEC, auto, points_per_profile=256, context=HEMISPHERE)
     # The top view alone holds the lid (a third of the area); the side views the walls.
     assert top.in_spec_coverage < 0.4
     assert both.in_spec_coverage > 0.85
+
+
+def test_on_a_table_side_views_fly_up_their_walls_and_keep_clear_of_it():
+    # The same box on a table at its lowest point: every side view keeps its passes
+    # (flown upward, the camera side leading away from the table), and no pose comes
+    # within the clearance of the table; only the walls' lowest band is lost.
+    part = part_from_mesh(trimesh.creation.box((400.0, 300.0, 150.0)), "block")
+    plans, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    assert len(plans) == 5
+    for vp in plans[1:]:
+        scanning = vp.traj.poses[vp.traj.scanning]
+        assert (scanning[:, 2, 1] > 0.9).all()  # y_s, the scan direction, points up
+    corners = checker_for(part, SPEC.sensor).body_corners_part(auto.poses)
+    assert corners[..., 2].min() >= part.bounds[0, 2] + SPEC.clearance_mm - 1e-6
+    m = evaluate(part, SPEC, auto, points_per_profile=256, context=HEMISPHERE)
+    assert m.collisions_table == 0 and m.collisions_count == 0
+    assert 0.6 < m.in_spec_coverage < 0.85

@@ -325,7 +325,7 @@ VALUES = [
     "", "abc", "nan", "-nan", "inf", "-inf", "-1", "0", "1", "2", "0.5", "1.5", "1e3", "1e400",
     "100001", "2,15", "0,0", "1,2,3", "1,2,3,4,5,6", "1,2,3,4,5,nan", "0,0,0,0,0,0", "x,y",
     "fixed", "geometric", "rl", "auto", "x", "nominal", "urscript", "krl", "csv", "none", "ur5e",
-    "v1", "paper", "-", "--", "é", "a b", "{plate}", "{good}", "{d}/missing.stl", "{d}",
+    "v1", "paper", "-", "--", "é", "a b", "{plate}", "{good}", "{out}/missing.stl", "{d}",
     "{out}/o.csv", "{out}/o.ply", "{out}/o.json", "{out}/o.script", "{out}/o.txt", "{out}/dir",
 ]  # fmt: skip
 POSITIONAL = ["{plate}", "{good}", "teapot", "{d}/missing.csv", "{d}", "nan"]

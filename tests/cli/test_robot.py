@@ -23,10 +23,13 @@ def test_export_every_format(plate_and_trajectory, tmp_path, fmt):
 
     _, traj_path = plate_and_trajectory
     out = tmp_path / f"prog.{fmt}"
+    # The format alone: the reach check (tests/robot/test_place.py) is switched off, and says so.
     result = run_cli(
-        "export", str(traj_path), "--format", fmt, "--part-pose", "500,0,-200,0,0,0", "-o", str(out)
-    )
+        "export", str(traj_path), "--format", fmt, "--robot", "none",
+        "--part-pose", "500,0,-200,0,0,0", "-o", str(out),
+    )  # fmt: skip
     assert result.exit_code == 0, result.output
+    assert "--robot none: no reach check" in result.output
     poses, scanning = parse_program(out.read_text(), fmt)
     expected = read_csv(traj_path).poses.copy()
     expected[:, :3, 3] += (500, 0, -200)
@@ -54,9 +57,10 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     args = ["export", str(traj_path), "--format", "rosbag2", "-o", str(out)]
     poses = ["--part-pose", "500,-200,100,30,5,-10", "--tcp", "12,-3,180,0,-15,90"]
     runner = CliRunner()
-    result = runner.invoke(app, [*args, *poses, "--travel-speed", "300"])
+    robot = ["--robot", "ur5e", "--allow-unreachable"]
+    result = runner.invoke(app, [*args, *poses, *robot, "--travel-speed", "300"])
     assert result.exit_code == 0, result.output
-    assert "reach" in result.output  # the UR5e reach check ran (ok or a warning)
+    assert "ur5e: " in result.output  # the UR5e reach check ran (ok or a warning)
     assert f"rosbag2: {len(TRAJ)} poses" in result.output
     contents = read_rosbag(out)
     expected = OPTIONS.part_pose @ TRAJ.poses
@@ -75,5 +79,5 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     assert result.exit_code == 2 and "not a rosbag2 directory" in result.output
     monkeypatch.setattr(Writer, "write", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
     result = runner.invoke(app, [*args[:-1], str(bad), "--robot", "none"])
-    assert result.exit_code == 2 and result.output == "error: disk full\n"
+    assert result.exit_code == 2 and result.stderr == "error: disk full\n"
     assert listing(tmp_path) == ["out_bag", "t.csv", "taken"]

@@ -30,7 +30,8 @@ def test_json_has_the_spec_keys_and_no_nan(plate):
     assert set(data["distance_error_mm"]) >= {"mean_abs", "rms", "p95_abs"}
     assert set(data["orientation_error_deg"]) >= {"mean", "p95"}
     assert set(data["spacing_mm"]) >= {"mean", "cv", "max_gap", "backward_steps"}
-    assert "top-down" in data["coverage_definition"]
+    assert all(f"`{s}`" in data["coverage_definition"] for s in ("top", "hemisphere", "roi"))
+    assert data["surface"]["name"] == "top" and data["surface"]["area_mm2"] > 0
     text = json.dumps(data, allow_nan=False)  # raises on NaN/inf
     assert "NaN" not in text
 

@@ -119,24 +119,25 @@ def test_cli_place_then_export(tmp_path) -> None:
         assert result.output.strip().count("\n") == 0
 
 
-def test_cli_export_krl_warns_on_its_own_arm(tmp_path) -> None:
-    # The KRL program is checked on the KR 6: a part 2 m away is out of its reach.
+def test_cli_export_krl_refuses_what_its_own_arm_cannot_fly(tmp_path) -> None:
+    # The KRL program is checked on the KR 6: a part 2 m away is out of its reach, so
+    # nothing is written, and the error names the first pose and its pass.
     path = tmp_path / "t.csv"
     write_csv(_raster(300.0, 2, n=20), path)
-    result = CliRunner().invoke(
-        app,
-        [
-            "export",
-            str(path),
-            "--format",
-            "krl",
-            "--robot",
-            "kr6-r900",
-            "--part-pose",
-            "2000,0,0,0,0,0",
-            "-o",
-            str(tmp_path / "p.src"),
-        ],
+    out = tmp_path / "p.src"
+    args = ["export", str(path), "--format", "krl", "--robot", "kr6-r900"]
+    args += ["--part-pose", "2000,0,0,0,0,0", "-o", str(out)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and not out.exists()
+    error = result.stderr.strip().splitlines()
+    assert len(error) == 1 and "pose 0 (pass 0) is unreachable" in error[0]
+    assert "kr6-r900: 40 poses, 40 unreachable" in error[0]
+    # --allow-unreachable writes it anyway, with the same finding as a warning.
+    result = CliRunner().invoke(app, [*args, "--allow-unreachable"])
+    assert result.exit_code == 0 and out.exists()
+    assert "warning: pose 0 (pass 0) is unreachable; kr6-r900: 40 poses, 40 unreachable" in (
+        result.stderr
     )
-    assert result.exit_code == 0, result.output
-    assert "warning: kr6-r900: 40 poses, 40 unreachable" in result.output
+    # No arm named: refused, never a silent default.
+    result = CliRunner().invoke(app, ["export", str(path), "-o", str(tmp_path / "q.src")])
+    assert result.exit_code == 2 and "--robot is required" in result.stderr

@@ -236,13 +236,13 @@ def place_cmd(
 
     heights = parse_height_range(height_range)
     traj = read_trajectory(trajectory)
-    if tcp is None:
-        typer.echo(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
     with progress_bar("searching a placement", quiet):
         result = place(traj, robot, parse_pose_arg(tcp or IDENTITY_POSE), heights, yaw_step)
     m = result.report.worst_margins()
     typer.echo(f"--part-pose {result.pose_arg()}")
     typer.echo(result.report.summary())
+    if tcp is None:
+        typer.echo(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
     typer.echo(
         f"worst margins: joint limit {m['limit_deg']:.1f} deg, wrist {m['wrist_deg']:.1f} deg, "
         f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm "

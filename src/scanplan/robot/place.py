@@ -51,7 +51,20 @@ class Placement:
         """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` reads it."""
         p = self.T_base_part[:3, 3]
         yaw = np.degrees(np.arctan2(self.T_base_part[1, 0], self.T_base_part[0, 0]))
-        return f"{p[0]:.1f},{p[1]:.1f},{p[2]:.1f},{yaw:.1f},0,0"
+        # µm and millidegrees: a pose rounded coarser can tip a pass that skirts a
+        # singularity onto the other branch when `export` checks it again.
+        return ",".join(f"{v:.3f}".rstrip("0").rstrip(".") for v in (*p, yaw)) + ",0,0"
+
+
+def _as_printed(T_base_part: np.ndarray) -> np.ndarray:
+    """The placement as `Placement.pose_arg` prints it (µm, millidegrees): the pose that is
+    checked is the one the user passes on, so `export` repeats the verdict exactly."""
+    x, y, z = np.round(T_base_part[:3, 3], 3)
+    yaw = np.radians(np.round(np.degrees(np.arctan2(T_base_part[1, 0], T_base_part[0, 0])), 3))
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    T[:3, 3] = x, y, z
+    return T
 
 
 def _reach_mm(robot: Robot) -> tuple[float, float]:
@@ -193,7 +206,7 @@ def place(
     order = np.argsort(-best_scores)
     chosen = None
     for i in order:
-        T_base_part = _placements(best[i : i + 1], centre)[0]
+        T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
         report = check_reach(
             T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
         )
