@@ -21,8 +21,8 @@ from scanplan.metrics import evaluate
 from scanplan.part import load_part
 from scanplan.pipeline import plan_views
 from scanplan.planners import make_planner
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import ScanSpec
-from scanplan.sensor import LineProfilometer
 
 CONFIGS = {  # label: (planner, roll, raster)
     "geometric-v0": ("geometric", False, "nominal"),

@@ -19,7 +19,8 @@ import numpy as np
 import trimesh
 
 from scanplan.part import part_from_mesh
-from scanplan.sensor import LineProfilometer, PointStatus, SensorSpec
+from scanplan.profilometer import LineProfilometer, PointStatus
+from scanplan.sensor import SensorSpec
 from scanplan.swaths import Swath
 
 

@@ -16,9 +16,10 @@ from helpers import plate_swath
 from scanplan.dynamics import limit_action
 from scanplan.env import ENV_ID, ENV_ID_ROLL, SwathScanEnv
 from scanplan.part import Part, load_part
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import advance, mean_distance, signed_alpha
 from scanplan.reward import reward_terms
-from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.sensor import SensorSpec
 from scanplan.swaths import Swath
 
 WD = 400.0

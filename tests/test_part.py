@@ -19,10 +19,11 @@ from hypothesis import strategies as st
 from helpers import BLOCK_BOX, DATA, FAST, one_line_or_ok, plate_with_block
 from scanplan.bands import plan_adaptive_swaths
 from scanplan.metrics import evaluate
-from scanplan.part import BodyTerm, BoxTerm, ConeTerm, load_part, parse_roi, part_from_mesh
+from scanplan.part import load_part, part_from_mesh
 from scanplan.pipeline import plan_path, plan_scan
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
+from scanplan.roi import BodyTerm, BoxTerm, ConeTerm, parse_roi
 from scanplan.sensor import PRESETS, SensorSpec
 from scanplan.surface import upward_visible_samples
 from scanplan.swaths import plan_swaths

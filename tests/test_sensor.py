@@ -12,7 +12,8 @@ import trimesh
 from scanplan import quantities
 from scanplan.noise import NoiseModel
 from scanplan.part import part_from_mesh
-from scanplan.sensor import PRESETS, LineProfilometer, PointStatus, SensorSpec
+from scanplan.profilometer import LineProfilometer, PointStatus
+from scanplan.sensor import PRESETS, SensorSpec
 from scanplan.swaths import Swath
 
 SPEC = SensorSpec()

@@ -13,10 +13,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from helpers import FAST, JSON_VALUES, one_line_or_ok
+from scanplan.files import dumps_json
 from scanplan.swaths import Swath
 from scanplan.trajectory import (
     Trajectory,
-    dumps_json,
     read_csv,
     read_json,
     read_trajectory,
@@ -67,7 +67,7 @@ def test_malformed_trajectory_files(tmp_path, body, message):
 
 def test_atomic_write_leaves_no_temporary_and_a_readable_file(tmp_path):
 
-    from scanplan.trajectory import atomic_write_text
+    from scanplan.files import atomic_write_text
 
     old = os.umask(0o022)
     try:

@@ -9,10 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from scanplan.files import atomic_write_bytes
 from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import point_orientation_error
-from scanplan.sensor import LineProfilometer, SensorSpec
-from scanplan.trajectory import Trajectory, atomic_write_bytes
+from scanplan.sensor import SensorSpec
+from scanplan.trajectory import Trajectory
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer, Profile
 from scanplan.quantities import (
     ScanSpec,
     StepLimits,
@@ -32,7 +33,6 @@ from scanplan.quantities import (
     signed_alpha,
     signed_beta,
 )
-from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath
 
 

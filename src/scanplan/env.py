@@ -21,9 +21,9 @@ from scanplan.dynamics import Step as PassStep
 from scanplan.observation import OBS_LIMIT, observation_size, observe
 from scanplan.part import Part, load_part, part_from_mesh
 from scanplan.parts import heightfield_solid
+from scanplan.profilometer import LineProfilometer, Profile
 from scanplan.quantities import TRAINING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.reward import reward_terms
-from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, plan_swaths
 
 ENV_ID = "scanplan/SwathScan-v0"

@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
@@ -19,6 +18,8 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.spatial.transform import Rotation
+
+from scanplan.files import atomic_write_text, dumps_json
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
 # The records of `Trajectory.meta` a plan file carries (JSON-able values).
@@ -124,27 +125,6 @@ def _swath_indices(values: object) -> np.ndarray:
     return raw.astype(np.int64)
 
 
-def json_safe(value: Any) -> Any:
-    """`value` with numpy scalars/arrays as Python values and non-finite floats as None, so
-    `json.dumps(..., allow_nan=False)` writes valid JSON (no NaN/Infinity literals)."""
-    if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return json_safe(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def dumps_json(value: Any, **kwargs: Any) -> str:
-    """json.dumps of `json_safe(value)`: always valid JSON."""
-    return json.dumps(json_safe(value), allow_nan=False, **kwargs)
-
-
 def _sum_counters(metas: list[dict]) -> dict:
     """The integer counters of per-pass metadata (e.g. the rl planner's guard overrides),
     summed over the passes."""
@@ -167,29 +147,6 @@ def poses_from_xyz_quat(xyz: np.ndarray, quat_wxyz: np.ndarray) -> np.ndarray:
     poses[:, :3, :3] = Rotation.from_quat(xyzw).as_matrix()
     poses[:, :3, 3] = xyz
     return poses
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write a file so that a failure never leaves a half-written one behind."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        # mkstemp makes the file private (0600); give it the mode a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Text version of `atomic_write_bytes` (UTF-8)."""
-    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def to_csv_text(traj: Trajectory) -> str:

@@ -24,8 +24,8 @@ from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part
 from scanplan.pipeline import plan_scan
 from scanplan.planners import PLANNERS, make_planner
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
-from scanplan.sensor import LineProfilometer
 from scanplan.trajectory import Trajectory
 
 SPEC = ScanSpec()

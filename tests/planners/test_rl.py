@@ -21,8 +21,9 @@ from scanplan.pipeline import plan_path
 from scanplan.planners.closed_loop import Guards
 from scanplan.planners.rl import DEFAULT_POLICY, RLPlanner
 from scanplan.policy import load_policy
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import ScanSpec, advance, mean_distance, signed_alpha
-from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths
 
 

@@ -308,6 +308,7 @@ def evaluate_cmd(
     traj = read_trajectory(trajectory)
     context, note = judged_context(traj, sensor, tolerance, roi, views, table, fixture)
     the_part = load_part(part, units)
+    context.cell(the_part.with_roi(context.roi))  # a bad ROI, table or fixture: fail first
     if note:
         typer.echo(note, err=True)
     with progress_bar("evaluating", quiet) as progress:

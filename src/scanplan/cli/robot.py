@@ -92,7 +92,8 @@ def export_cmd(
         export_rosbag,
     )
     from scanplan.export.common import plan_motion
-    from scanplan.trajectory import atomic_write_text, read_trajectory
+    from scanplan.files import atomic_write_text
+    from scanplan.trajectory import read_trajectory
 
     if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
         choices = ", ".join([*FORMATS, *DIRECTORY_FORMATS])

@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from scanplan.export.common import ExportOptions, Motion, poses_from_parts
 from scanplan.export.ros import arrival_times, ros_poses, split_stamp
+from scanplan.files import replace_directory
 
 PATH_TOPIC = "/scanplan/path"
 POSES_TOPIC = "/scanplan/poses"
@@ -118,17 +119,7 @@ def write_rosbag(motion: Motion, options: ExportOptions, path: str | os.PathLike
                     writer.write(conn, 0, store.serialize_cdr(msg, msgtype))
         except WriterError as exc:
             raise ValueError(f"cannot write rosbag2 {target}: {exc}") from None
-        if _is_bag(target):
-            # No atomic directory swap on POSIX: move the old bag aside, then the new one in.
-            old = staging / "replaced"
-            os.rename(target, old)
-            try:
-                os.rename(bag, target)
-            except BaseException:
-                os.rename(old, target)
-                raise
-        else:
-            os.rename(bag, target)
+        replace_directory(bag, target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 

@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 
 from scanplan.cloud import PointCloud
 from scanplan.metrics.summary import CoverageMap, SurfaceState
+from scanplan.profilometer import PointStatus, Scan
 from scanplan.quantities import (
     ScanSpec,
     advance,
@@ -24,7 +25,7 @@ from scanplan.quantities import (
     signed_alpha,
 )
 from scanplan.reward import reward_terms
-from scanplan.sensor import PointStatus, Scan, SensorSpec
+from scanplan.sensor import SensorSpec
 from scanplan.surface import VisibleSurface
 
 # Histogram bins for the percentiles: fine enough to be exact to well below the noise.

@@ -17,8 +17,9 @@ from scanplan.context import PlanContext, recorded
 from scanplan.metrics.accumulators import CloudSample, Coverage, PointErrors, Spacing
 from scanplan.metrics.summary import Metrics
 from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import ScanSpec, point_orientation_error
-from scanplan.sensor import LineProfilometer, SensorSpec
+from scanplan.sensor import SensorSpec
 from scanplan.surface import hemisphere_visible_samples, upward_visible_samples
 from scanplan.trajectory import Trajectory
 

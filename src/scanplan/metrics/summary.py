@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from scanplan.cloud import PointCloud
+from scanplan.files import json_safe
 from scanplan.surface import COVERAGE_MAX_SLOPE_DEG
-from scanplan.trajectory import json_safe
 
 COVERAGE_DEFINITION = (
     "fraction of the surface to inspect (`surface`) sampled by valid points: that surface is "

@@ -13,8 +13,8 @@ import numpy as np
 
 from scanplan.dynamics import PassDynamics, Step, pass_geometry, step_budget
 from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer, Profile
 from scanplan.quantities import ScanSpec, StepLimits
-from scanplan.sensor import LineProfilometer, Profile
 from scanplan.swaths import Swath, frame_poses
 from scanplan.trajectory import Trajectory
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import PROBE_FAN_POINTS, ScanSpec, StepLimits, mean_distance
-from scanplan.sensor import LineProfilometer
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
 

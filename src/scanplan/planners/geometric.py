@@ -21,6 +21,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from scanplan.dynamics import track, track_rolled
 from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import (
     ScanSpec,
     StepLimits,
@@ -30,7 +31,6 @@ from scanplan.quantities import (
     signed_alpha,
 )
 from scanplan.reward import reward_terms
-from scanplan.sensor import LineProfilometer
 from scanplan.shaping import (
     PITCH_LEVER,
     ROLL_RATE,

@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.cloud import PointCloud
+from scanplan.files import atomic_write_text
 from scanplan.metrics import CoverageMap, SurfaceState
 from scanplan.part import Part
 from scanplan.report.maps import COVERAGE_COLOURS
 from scanplan.report.table import lookup, table_rows, tolerance_label
 from scanplan.report.training import CURVES, read_log
-from scanplan.trajectory import Trajectory, atomic_write_text
+from scanplan.trajectory import Trajectory
 
 # Enough for a smooth picture, small enough that the file stays a few MB.
 MAX_POINTS_PER_PLANNER = 25_000

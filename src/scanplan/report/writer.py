@@ -6,16 +6,15 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from scanplan.files import atomic_directory, atomic_write_bytes, atomic_write_text
 from scanplan.metrics import Metrics
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
-from scanplan.trajectory import Trajectory, atomic_write_bytes, atomic_write_text
+from scanplan.trajectory import Trajectory
 
 # A directory holding one of these was written by scanplan and may be replaced.
 _REPORT_MARKERS = ("metrics.json", "report.html")
@@ -30,44 +29,9 @@ class Evaluated:
     metrics: Metrics
 
 
-@contextmanager
-def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield an empty temporary sibling of `path`; when the block ends without error, it
-    replaces `path` (an earlier report there is removed), else it is removed.
-
-    Refuses to replace a non-empty directory that holds no scanplan report, so a mistyped
-    `-o ~` cannot delete a home directory."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"output {path} exists and is not a directory")
-    if path.is_dir() and any(path.iterdir()):
-        if not any((path / marker).exists() for marker in _REPORT_MARKERS):
-            raise ValueError(
-                f"output directory {path} is not empty and holds no scanplan report; "
-                "choose another or remove it"
-            )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
-    try:
-        yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private
-        if path.exists():
-            old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".old"))
-            os.rmdir(old)
-            os.rename(path, old)
-            try:
-                os.rename(tmp, path)
-            except BaseException:
-                os.rename(old, path)
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+def is_report(path: Path) -> bool:
+    """Whether a directory holds a scanplan report (one `write_report` may replace)."""
+    return any((path / marker).exists() for marker in _REPORT_MARKERS)
 
 
 def write_report(
@@ -105,7 +69,7 @@ def write_report(
     if len(set(names)) != len(names):
         raise ValueError(f"report: trajectory names must differ, got {names}")
     out_dir = Path(out_dir)
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, is_report) as tmp:
 
         def has_map(m: Metrics) -> bool:
             return m.coverage_map is not None and len(m.coverage_map.state) > 0
