@@ -371,7 +371,7 @@ def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:
     tol = data["tolerance"]
     return (
         f"in-spec coverage {metrics.in_spec_coverage:.1%} (±{tol['mm']:g} mm, {tol['deg']:g}°) "
-        f"of the {metrics.surface} surface ({metrics.visible_area_mm2:,.0f} mm²) | "
+        f"of the {metrics.surface} surface ({_grouped(metrics.visible_area_mm2)} mm²) | "
         f"coverage {metrics.coverage_fraction:.1%} | {data['profiles']} profiles | "
         f"|distance error| mean {metrics.distance_error_mean_abs_mm:.3f} "
         f"p95 {metrics.distance_error_p95_abs_mm:.3f} mm | orientation mean "
@@ -381,3 +381,8 @@ def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:
         f" | collisions {metrics.collisions_count} within {metrics.clearance_mm:g} mm, "
         f"{metrics.collisions_touching} touching (worst {metrics.worst_penetration_mm:.1f} mm)"
     )
+
+
+def _grouped(value: float) -> str:
+    """181 206: thousands grouped by spaces, as the tables print them."""
+    return f"{value:,.0f}".replace(",", " ")
