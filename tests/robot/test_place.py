@@ -113,6 +113,7 @@ def test_cli_place_then_export(tmp_path) -> None:
     write_csv(_raster(3000.0, 1, n=50), far)
     result = runner.invoke(app, ["place", str(far), "--robot", "ur3e"])
     assert result.exit_code == 2 and result.output.startswith("--part-pose ")
+    assert "poses out of the arm's reach" in result.stderr  # the binding constraint named
     for extra in (["--height-range", "1,x"], ["--robot", "ur4e"]):
         result = runner.invoke(app, ["place", str(path), "--robot", "ur3e", *extra])
         assert result.exit_code == 2 and result.output.startswith("error:")

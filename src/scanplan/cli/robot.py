@@ -250,5 +250,8 @@ def place_cmd(
         f"({result.evaluated} placements in {result.seconds:.1f} s)"
     )
     if not result.reachable:
-        typer.echo("error: no placement reaches every pose; the best found is above", err=True)
+        typer.echo(
+            f"error: no placement reaches every pose (best found above: {result.binding()})",
+            err=True,
+        )
         raise typer.Exit(2)

@@ -47,6 +47,16 @@ class Placement:
     def reachable(self) -> bool:
         return self.report.reachable
 
+    def binding(self) -> str:
+        """What stops the best placement found, the largest count first."""
+        r = self.report
+        counts = [
+            (len(r.unreachable), "poses out of the arm's reach"),
+            (len(r.limit_violations), "poses beyond its joint limits"),
+            (len(r.config_flips), "configuration flips within a pass"),
+        ]
+        return "; ".join(f"{n} {what}" for n, what in sorted(counts, reverse=True) if n)
+
     def pose_arg(self) -> str:
         """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` reads it."""
         p = self.T_base_part[:3, 3]
