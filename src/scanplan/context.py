@@ -19,17 +19,6 @@ from scanplan.trajectory import Trajectory
 
 FORMAT = "scanplan-plan/1"
 VIEW_MODES = ("top", "auto")
-# The surface to inspect: `top` what a sensor looking straight down can see, `hemisphere`
-# what it can see from the upper hemisphere (any view), `roi` the user's region of interest
-# (seen from the views allowed).
-SURFACES = ("top", "hemisphere", "roi")
-
-
-def surface_for(views: str, roi: str | None) -> str:
-    """The surface a plan of these views and this ROI inspects."""
-    if roi:
-        return "roi"
-    return "hemisphere" if views == "auto" else "top"
 
 
 @dataclass(frozen=True)
@@ -55,7 +44,12 @@ class PlanContext:
 
     @property
     def surface(self) -> str:
-        return surface_for(self.views, self.roi)
+        """The surface to inspect: `top` what a sensor looking straight down can see,
+        `hemisphere` what it can see from the upper hemisphere, `roi` the region of interest
+        (seen from the views allowed)."""
+        if self.roi:
+            return "roi"
+        return "hemisphere" if self.views == "auto" else "top"
 
     @property
     def visible(self) -> str:

@@ -129,15 +129,18 @@ def _subset(traj: Trajectory, keep: np.ndarray, swath: np.ndarray) -> Trajectory
 def _renumbered(
     traj: Trajectory, keep: np.ndarray, swath: np.ndarray, cut: np.ndarray
 ) -> np.ndarray:
-    """Swath indices in order, a new one wherever a pass resumes after a gap (given-up
-    poses) or a cut: pieces of one pass become consecutive passes."""
-    scanning = traj.scanning
-    new_pass = np.zeros(len(traj), bool)
-    new_pass[1:] = swath[1:] != swath[:-1]
-    # A kept scanning pose whose predecessor in the pass was given up starts a new pass.
-    gap = np.zeros(len(traj), bool)
-    gap[1:] = scanning[1:] & scanning[:-1] & ~keep[:-1] & (swath[1:] == swath[:-1])
-    return np.cumsum(new_pass | gap | cut) + int(swath[0])
+    """Swath indices in order, consecutive over the kept poses: a new one wherever a pass
+    resumes after given-up poses or at a cut, so pieces of one pass become passes."""
+    index = np.flatnonzero(keep)
+    new_pass = np.zeros(len(index), bool)
+    if len(index):
+        same = swath[index[1:]] == swath[index[:-1]]
+        gap = (np.diff(index) > 1) & traj.scanning[index[1:]]
+        new_pass[1:] = ~same | gap
+    new_pass |= cut[index]
+    out = swath.copy()
+    out[index] = int(swath[index[0]]) + np.cumsum(new_pass) - int(new_pass[0]) if len(index) else 0
+    return out
 
 
 def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:
@@ -148,11 +151,6 @@ def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:
         kept = in_view & keep
         if not kept.any():
             continue
-        out.append(
-            view
-            | {
-                "first_swath": int(swath[kept].min()),
-                "last_swath": int(swath[kept].max()),
-            }
-        )
+        first, last = int(swath[kept].min()), int(swath[kept].max())
+        out.append(view | {"first_swath": first, "last_swath": last, "passes": last - first + 1})
     return out

@@ -1,0 +1,97 @@
+"""A plan fitted to an arm: what the arm cannot fly is given up or split, never hidden."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from typer.testing import CliRunner
+
+from scanplan.cli import app
+from scanplan.export import parse_pose_arg
+from scanplan.robot import check_reach
+from scanplan.robot.fit import fit_to_robot, pose_arg
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory
+
+TCP = parse_pose_arg("0,0,90,0,0,0")
+
+
+def _two_views(length_mm: float, n: int = 80) -> Trajectory:
+    """Two one-pass 'views' along x at 150 mm: a plan the arm reaches only part of once the
+    part is placed far out along x."""
+    poses, swath = [], []
+    for k, y in enumerate((-30.0, 30.0)):
+        a, b = np.array([-length_mm / 2, y, 150.0]), np.array([length_mm / 2, y, 150.0])
+        sw = Swath(k, a, b, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+        poses.append(sw.poses(np.linspace(0, length_mm, n), np.zeros(n), np.zeros(n)))
+        swath.append(np.full(n, k))
+    views = [
+        {"index": k, "axis": [0.0, 0.0, 1.0], "first_swath": k, "last_swath": k, "passes": 1}
+        for k in range(2)
+    ]
+    return Trajectory(
+        np.concatenate(poses),
+        np.concatenate(swath),
+        np.ones(2 * n, bool),
+        planner="t",
+        meta={"views": views},
+    )
+
+
+def test_unreachable_poses_are_given_up_and_the_rest_is_flyable():
+    traj = _two_views(900.0)
+    # The part's centre 450 mm out along x: a UR3e (reach 500 mm) loses the far end.
+    T_base_part = parse_pose_arg("450,0,-200,0,0,0")
+    before = check_reach(
+        T_base_part @ traj.poses @ np.linalg.inv(TCP),
+        "ur3e",
+        swath=traj.swath,
+        scanning=traj.scanning,
+    )
+    assert len(before.unreachable) > 0
+    fit = fit_to_robot(traj, "ur3e", TCP, T_base_part)
+    assert fit.report.reachable
+    assert 0 < len(fit.traj) < len(traj)
+    assert sum(fit.given_up.values()) == len(traj) - len(fit.traj)
+    assert set(fit.given_up) <= {0, 1}
+    # Checked afresh, as export does: nothing unreachable, no flip within a pass.
+    again = check_reach(
+        T_base_part @ fit.traj.poses @ np.linalg.inv(TCP),
+        "ur3e",
+        swath=fit.traj.swath,
+        scanning=fit.traj.scanning,
+    )
+    assert again.reachable
+    # The views' swath blocks follow the renumbered passes, in order and without gaps.
+    blocks = [(v["first_swath"], v["last_swath"]) for v in fit.traj.meta["views"]]
+    assert blocks[0][0] == int(fit.traj.swath.min())
+    assert all(a[1] + 1 == b[0] for a, b in zip(blocks[:-1], blocks[1:], strict=True))
+    assert np.all(np.diff(fit.traj.swath) >= 0)
+    record = fit.record(TCP)
+    assert record["robot"] == "ur3e" and record["reachable"]
+    assert np.allclose(parse_pose_arg(record["part_pose"]), T_base_part, atol=1e-3)
+    assert pose_arg(TCP) == "0,0,90,0,0,0"
+
+
+def test_plan_for_an_arm_then_export_with_what_the_plan_records(tmp_path):
+    runner = CliRunner()
+    plan = tmp_path / "plan.json"
+    result = runner.invoke(
+        app,
+        ["plan", "drone", "--planner", "fixed", "--robot", "ur3e", "--tcp", "0,0,90,0,0,0",
+         "-q", "-o", str(plan)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "ur3e at --part-pose" in result.output and "in-spec coverage" in result.output
+    recorded = json.loads(plan.read_text())["robot"]
+    assert recorded["robot"] == "ur3e" and recorded["reachable"]
+    assert 0.0 <= recorded["in_spec"] <= recorded["in_spec_without_robot"] + 1e-9
+    out = tmp_path / "scan.script"
+    result = runner.invoke(app, ["export", str(plan), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "--robot ur3e (the plan's)" in result.output and out.exists()
+    assert "0 unreachable, 0 beyond joint limits" in result.output + result.stderr
+    # An option needs the arm it refers to.
+    result = runner.invoke(app, ["plan", "drone", "--tcp", "0,0,90,0,0,0", "-o", str(plan)])
+    assert result.exit_code == 2 and "--tcp needs --robot" in result.stderr
