@@ -5,6 +5,7 @@ table from which an arm reaches all of it.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -112,13 +113,13 @@ def export_cmd(
         ),
         program_name=name if name and fmt == "krl" else "scanplan_path",
     )
-    text = export_program(traj, fmt, options) if fmt in FORMATS else None
-    if text is None:
-        plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
+    plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
     if robot.lower() == "none":
         typer.echo("--robot none: no reach check; the program is not known to be flyable")
     else:
-        check_flyable(traj, options, robot, quiet, allow_unreachable)
+        joints = check_flyable(traj, options, robot, quiet, allow_unreachable)
+        options = replace(options, joints_rad=joints)  # each pass entered by a joint move
+    text = export_program(traj, fmt, options) if fmt in FORMATS else None
     if text is not None:
         atomic_write_text(output, text)
     else:
@@ -162,9 +163,10 @@ def arm_of(
 
 def check_flyable(
     traj: Trajectory, options: ExportOptions, robot: str, quiet: bool, allow: bool
-) -> None:
+) -> np.ndarray:
     """Whether `robot` flies every flange pose: its summary; if not, a ValueError naming the
-    first offending pass and pose (nothing is written), or with `allow` a warning."""
+    first offending pass and pose (nothing is written), or with `allow` a warning. Returns
+    the joint angles the check followed (n, 6), NaN where it found none."""
     # Deferred: as in export_cmd.
     from scanplan.export import flange_poses
     from scanplan.robot import check_reach, get_robot
@@ -179,7 +181,7 @@ def check_flyable(
     if report.reachable:
         warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
         typer.echo(("warning: " if warn else "") + report.summary(), err=warn)
-        return
+        return report.joints
     first = report.first_problem()
     where = f"pose {first[0]} (pass {int(traj.swath[first[0]])}) {first[1]}"
     if not allow:
@@ -188,6 +190,7 @@ def check_flyable(
             "(scanplan place) or give --allow-unreachable"
         )
     typer.echo(f"warning: {where}; {report.summary()}", err=True)
+    return report.joints
 
 
 # ---- place --------------------------------------------------------------------------------

@@ -44,6 +44,10 @@ class ExportOptions:
     scan:      the ScanSpec: scan speed = its profile rate × Δs_opt (the speed at which
                profiles land Δs_opt apart) unless `scan_speed_mm_s` is given; its travel speed
                between passes.
+    joints_rad: (n, 6) the arm's joint angles at each target (the reach check's, as its
+               controller counts them), None: no arm checked. With them, the program reaches
+               the first target of every pass by a joint move into that configuration (the
+               arm may reconfigure only between passes), then moves linearly as before.
     """
 
     part_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -54,6 +58,7 @@ class ExportOptions:
     blend_mm: float = 1.0
     program_name: str = "scanplan_path"
     ros_frame_id: str = "base_link"
+    joints_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "part_pose", _check_rigid("part pose", self.part_pose))
@@ -224,3 +229,21 @@ class PassTracker:
 
 def floats(text: str) -> list[float]:
     return [float(v) for v in text.replace(" ", "").split(",") if v]
+
+
+# Joint moves into a pass's configuration: a moderate share of any arm's axis speed.
+JOINT_SPEED_DEG_S = 60.0
+JOINT_ACCEL_DEG_S2 = 120.0
+
+
+def joint_move_targets(motion: Motion, options: ExportOptions) -> dict[int, np.ndarray]:
+    """{target index: joint angles (6,) rad} where the program moves by joint: the first
+    target of every pass, when the options carry the arm's joints."""
+    if options.joints_rad is None:
+        return {}
+    joints = np.asarray(options.joints_rad, dtype=np.float64)
+    if joints.shape != (len(motion.poses), 6):
+        raise ValueError(f"joints must be ({len(motion.poses)}, 6), got {joints.shape}")
+    return {
+        int(i): joints[i] for i in np.flatnonzero(motion.pass_start) if np.isfinite(joints[i]).all()
+    }

@@ -13,6 +13,7 @@ from scanplan.export.common import (
     Parsed,
     PassTracker,
     euler_zyx_deg,
+    joint_move_targets,
 )
 
 SUFFIX = ".src"
@@ -52,10 +53,14 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"  $APO.CDIS = {options.blend_mm:.6g}",
     ]
     speed = None
+    joint_moves = joint_move_targets(motion, options)
     for i, frame in enumerate(_frames(motion.poses)):
         k = int(motion.swath[i])
         if motion.pass_start[i]:
             out.append(f"  ; pass {k} start")
+        if i in joint_moves:  # into the pass's configuration (axis angles, degrees)
+            axes = ",".join(f"A{j + 1} {v:.4f}" for j, v in enumerate(np.degrees(joint_moves[i])))
+            out.append(f"  PTP {{{axes}}}")
         if motion.speed_mm_s[i] != speed:
             speed = motion.speed_mm_s[i]
             out.append(f"  $VEL.CP = {speed / 1000.0:.6g}")

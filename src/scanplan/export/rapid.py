@@ -13,6 +13,7 @@ from scanplan.export.common import (
     Parsed,
     PassTracker,
     floats,
+    joint_move_targets,
     poses_from_parts,
     quat_wxyz,
 )
@@ -62,10 +63,14 @@ def write(motion: Motion, options: ExportOptions) -> str:
     for i, frame in enumerate(_frames(motion.poses)):
         out.append(f"  CONST robtarget p{i:0{width}d} := [{frame},[0,0,0,0],{_EXTAX}];")
     out += ["", "  PROC main()", "    ConfL\\Off;"]
+    joint_moves = joint_move_targets(motion, options)
     for i in range(n):
         k = int(motion.swath[i])
         if motion.pass_start[i]:
             out.append(f"    ! pass {k} start")
+        if i in joint_moves:  # into the pass's configuration (axis angles, degrees)
+            q = ",".join(f"{v:.4f}" for v in np.degrees(joint_moves[i]))
+            out.append(f"    MoveAbsJ [[{q}],{_EXTAX}], vTravel, fine, tSensor\\WObj:=wobj0;")
         speed = "vScan" if motion.scanning[i] and not motion.pass_start[i] else "vTravel"
         z_i = zone if motion.blend_mm[i] > 0 else "fine"
         out.append(f"    MoveL p{i:0{width}d}, {speed}, {z_i}, tSensor\\WObj:=wobj0;")

@@ -8,11 +8,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scanplan.export.common import (
+    JOINT_ACCEL_DEG_S2,
+    JOINT_SPEED_DEG_S,
     ExportOptions,
     Motion,
     Parsed,
     PassTracker,
     floats,
+    joint_move_targets,
     poses_from_parts,
 )
 
@@ -46,10 +49,15 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"def {name}():",
         f"  set_tcp({_poses_m(options.tcp[None])[0]})",
     ]
+    joint_moves = joint_move_targets(motion, options)
+    qa, qv = np.radians(JOINT_ACCEL_DEG_S2), np.radians(JOINT_SPEED_DEG_S)
     for i, target in enumerate(_poses_m(motion.poses)):
         k = int(motion.swath[i])
         if motion.pass_start[i]:
             out.append(f"  # pass {k} start")
+        if i in joint_moves:  # into the pass's configuration
+            q = ", ".join(f"{v:.6f}" for v in joint_moves[i])
+            out.append(f"  movej([{q}], a={qa:.6g}, v={qv:.6g})")
         v = motion.speed_mm_s[i] / 1000.0
         r = motion.blend_mm[i] / 1000.0
         out.append(f"  movel({target}, a={a:.6g}, v={v:.6g}, r={r:.6g})")
