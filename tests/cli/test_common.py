@@ -480,3 +480,42 @@ def test_cli_hostile_input_is_one_line_exit_2_no_output(hostile, tmp_path, args)
     assert "Traceback" not in result.output and "Warning" not in result.output
     assert list(tmp_path.iterdir()) == []  # no partial output of any kind
     assert not (hostile / "PWNED").exists()
+
+
+# ---- the net at the top: a bug is one line, a signal cleans up -----------------------------
+def test_an_internal_error_is_one_line_naming_it_a_bug(tmp_path, monkeypatch):
+    import scanplan.pipeline
+
+    def broken(*args, **kwargs):
+        raise TypeError("unsupported operand")
+
+    monkeypatch.setattr(scanplan.pipeline, "plan_views", broken)
+    out = tmp_path / "t.csv"
+    result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])
+    assert result.exit_code == 1 and not out.exists()
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "internal error, a bug" in lines[0]
+    assert "TypeError: unsupported operand" in lines[0] and "SCANPLAN_DEBUG=1" in lines[0]
+    assert "Traceback" not in result.output
+    monkeypatch.setenv("SCANPLAN_DEBUG", "1")
+    result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])
+    assert isinstance(result.exception, TypeError)  # the traceback, for the bug report
+
+
+def test_sigterm_exits_143_and_leaves_no_output(tmp_path, monkeypatch):
+    import os
+    import signal
+
+    import scanplan.pipeline
+
+    def killed(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        raise AssertionError("the signal did not interrupt the command")
+
+    monkeypatch.setattr(scanplan.pipeline, "plan_views", killed)
+    before = signal.getsignal(signal.SIGTERM)
+    out = tmp_path / "t.csv"
+    result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])
+    assert result.exit_code == 143 and result.stderr.strip() == "terminated"
+    assert list(tmp_path.iterdir()) == []
+    assert signal.getsignal(signal.SIGTERM) is before  # the handler is put back

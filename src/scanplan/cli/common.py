@@ -1,12 +1,16 @@
-"""What every command shares: one-line user errors and exit codes (2 for a mistake, 130 for
-Ctrl-C), the progress bar on a terminal, and no half-made output directory after a failure.
+"""What every command shares: one-line errors and exit codes (2 for a mistake, 1 for a bug,
+130 for Ctrl-C, 143 for SIGTERM), the progress bar on a terminal, and no half-made output
+directory after a failure.
 """
 
 from __future__ import annotations
 
 import functools
+import os
 import shutil
+import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -32,8 +36,17 @@ class OneLineErrors(typer.core.TyperGroup):
     ) -> Any:
         from typer._click.exceptions import ClickException
 
+        # SIGTERM unwinds like Ctrl-C (signals reach only the main thread's handlers).
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, _terminated) if main_thread else None
         try:
             rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+        except Terminated:
+            typer.echo("terminated", err=True)
+            return _exit(143, standalone_mode)
+        except KeyboardInterrupt:  # before a command's own handler: while importing, parsing
+            typer.echo("interrupted", err=True)
+            return _exit(130, standalone_mode)
         except ClickException as exc:
             if type(exc).__name__ == "NoArgsIsHelpError":  # bare `scanplan`: the help
                 exc.show()
@@ -46,12 +59,28 @@ class OneLineErrors(typer.core.TyperGroup):
             sys.exit(code)
         except typer.Abort:
             typer.echo("interrupted", err=True)
-            if not standalone_mode:
-                return 130
-            sys.exit(130)
+            return _exit(130, standalone_mode)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGTERM, previous)
         if not standalone_mode:
             return rv
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the process is so that every `finally` and temporary-file
+    clean-up runs, as for Ctrl-C."""
+
+
+def _terminated(signum: int, frame: Any) -> None:
+    raise Terminated
+
+
+def _exit(code: int, standalone_mode: bool) -> int:
+    if not standalone_mode:
+        return code
+    sys.exit(code)
 
 
 def usage_message(exc: Exception) -> str:
@@ -84,10 +113,14 @@ def usage_message(exc: Exception) -> str:
 
 
 F = TypeVar("F", bound=Callable[..., Any])
+# Set it to see the traceback of an internal error.
+DEBUG_ENV = "SCANPLAN_DEBUG"
 
 
 def user_errors(fn: F) -> F:
-    """Turn the library's ValueError (and file errors) into one clear line and exit 2."""
+    """Turn the library's ValueError (and file errors) into one clear line and exit 2, and
+    any other exception, a bug, into one line and exit 1 (the traceback with the environment
+    variable `DEBUG_ENV` set)."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -97,9 +130,24 @@ def user_errors(fn: F) -> F:
             message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             typer.echo(f"error: {message}", err=True)
             raise typer.Exit(2) from None
+        except Terminated:
+            typer.echo("terminated", err=True)
+            raise typer.Exit(143) from None
         except KeyboardInterrupt:
             typer.echo("interrupted", err=True)
             raise typer.Exit(130) from None
+        except (typer.Exit, typer.Abort):
+            raise
+        except Exception as exc:
+            if os.environ.get(DEBUG_ENV):
+                raise
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            typer.echo(
+                f"error: internal error, a bug in scanplan ({type(exc).__name__}: {first}); "
+                f"please report it, with the traceback that {DEBUG_ENV}=1 prints",
+                err=True,
+            )
+            raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]
 
