@@ -145,3 +145,22 @@ def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_v
     assert (
         checker_for(part, SPEC.sensor).check(joined.poses, SPEC.clearance_mm).colliding.sum() == 0
     )
+
+
+def test_an_roi_of_walls_only_is_planned_by_side_views():
+    # Nothing of a box's +x wall faces up: no top view, a side view sees it, and each
+    # profile advances by Δs_opt up the wall (forward is the scan direction, not the
+    # horizontal).
+    import trimesh
+
+    from scanplan.part import part_from_mesh
+
+    mesh = trimesh.creation.box((300.0, 200.0, 100.0))
+    mesh.apply_translation((0, 0, 50.0))
+    box = part_from_mesh(mesh, "box")
+    plans, traj = plan_views(box, SPEC, make_planner("geometric"), "auto", roi="+x:5")
+    assert len(plans) >= 1 and all(vp.view.axis[0] > 0.9 for vp in plans)
+    m = evaluate(box, SPEC, traj, points_per_profile=256)
+    assert m.surface == "roi" and m.in_spec_coverage > 0.3
+    assert m.spacing_mean_mm == pytest.approx(SPEC.delta_s_opt_mm, abs=0.02)
+    assert m.backward_steps == 0

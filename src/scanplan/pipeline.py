@@ -188,7 +188,8 @@ def choose_views(
     seed: int = 0,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
-    view first (the paper's raster; on a panel it is all there is), then, while in-spec
+    view first (the paper's raster; on a panel it is all there is; none if nothing to
+    inspect faces up), then, while in-spec
     coverage is below `coverage_target`, the candidate view (`candidate_views`) that adds
     the most, unless it adds less than `min_gain` (the "useful amount" of SPEC §3b: 1 % of
     the surface). A panel whose top view reaches the target (the door) stays one view.
@@ -215,14 +216,19 @@ def choose_views(
         assert m.coverage_map is not None
         return m.coverage_map.state == SurfaceState.IN_SPEC
 
-    top = plan_view(part, View.looking_along(UP, 0), plan)
-    covered = in_spec_set(top)
-    plans, coverage = [top], [float(covered.mean())]
+    # The samples the views are judged on (`evaluate` draws the same).
+    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
+    try:
+        top = plan_view(part, View.looking_along(UP, 0), plan)
+        covered = in_spec_set(top)
+        plans, coverage = [top], [float(covered.mean())]
+    except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
+        covered = np.zeros(len(samples.points), bool)
+        plans, coverage = [], [0.0]
     if coverage[-1] >= coverage_target:
         return ViewSelection(plans, coverage, 0)
     candidates = candidate_views(part, spec)
     # The samples on each candidate's faces: the bound on its gain.
-    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
     evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
     while len(plans) < max_views and coverage[-1] < coverage_target:
@@ -248,6 +254,8 @@ def choose_views(
         plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
         covered |= cov
         coverage.append(float(covered.mean()))
+    if not plans:
+        raise ValueError(f"no view of part {part.name} sees its surface to inspect")
     return ViewSelection(plans, coverage, len(candidates))
 
 

@@ -98,9 +98,9 @@ def evaluate(
     # A step: this profile and the previous pose of the trajectory, scanning in the same pass.
     has_prev = np.zeros(m, bool)
     has_prev[1:] = (swath[1:] == swath[:-1]) & (np.diff(scan_idx) == 1)
+    # The scan direction y_s says which way is forward (only the sign of Δs uses it): on a
+    # side view's pass up a wall the horizontal has no forward.
     u_dir = poses[:, :3, 1].copy()
-    u_dir[:, 2] = 0.0  # y_s projected on the horizontal is the pass direction u
-    u_dir /= np.maximum(np.linalg.norm(u_dir, axis=1, keepdims=True), 1e-12)
 
     lateral_spacing = spec.line_width_mm / max(n_cols - 1, 1)
     cover_spacing = coverage_spacing_mm(spec)
