@@ -243,6 +243,11 @@ def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:
             f"{arm['passes_split']} passes split at a configuration flip; in-spec coverage "
             f"{arm['in_spec_without_robot']:.3f} without the arm, {arm['in_spec']:.3f} with it"
         )
+        if not arm["reachable"]:
+            typer.echo(
+                f"warning: {arm['robot']} still cannot fly every pass; export will say where",
+                err=True,
+            )
     if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
         # The rl planner's guards replaced some of the policy's steps: say how many.
         typer.echo("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()))

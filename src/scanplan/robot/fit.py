@@ -110,7 +110,13 @@ def fit_to_robot(
         if (count := int((lost & in_view).sum())) > 0:
             given_up[int(view["index"])] = count
     fitted = _subset(traj, keep, swath)
+    if not fitted.scanning.any():
+        raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
+    # The verdict on what is kept, as `export` will check it (after the last round too).
+    report = check_reach(
+        T_base_part @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
+    )
     return RobotFit(
         fitted,
         T_base_part,
