@@ -367,6 +367,8 @@ def judged_context(
     judged = planned.with_options(
         spec, roi, views, table, None if fixtures is None else tuple(fixtures)
     )
+    if traj.meta.get("context") is None:  # nothing recorded to differ from
+        return judged, ""
     changes = planned.differences(judged)
     return judged, ("note: judged with " + "; ".join(changes)) if changes else ""
 
