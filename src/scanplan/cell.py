@@ -41,13 +41,12 @@ class Table:
 
 @dataclass(frozen=True)
 class Cell:
-    """The table (None: the part is held in the air) and the fixtures (each a Part, in part
-    coordinates); `table_z_mm` and `fixture_files` are what a plan file records of them."""
+    """The table (None: the part is held in the air) at the height `table_z_mm` of the part
+    frame, and the fixtures (each a Part, in part coordinates)."""
 
     table: Table | None = None
     fixtures: tuple[Part, ...] = ()
     table_z_mm: float | None = None
-    fixture_files: tuple[str, ...] = ()
 
     @classmethod
     def around(
@@ -62,12 +61,7 @@ class Cell:
         part coordinates and `units`. Raises ValueError naming the option."""
         z = _table_height(part, table)
         loaded = tuple(load_part(f, units) for f in fixtures)
-        return cls(
-            None if z is None else Table(np.array(UP), z),
-            loaded,
-            z,
-            tuple(str(f) for f in fixtures),
-        )
+        return cls(None if z is None else Table(np.array(UP), z), loaded, z)
 
     def rotated(self, R: np.ndarray) -> Cell:
         """The cell in a view's frame (rotated by R, as `views.View.part` turns the part)."""
@@ -77,7 +71,7 @@ class Cell:
             mesh.apply_transform(R)
             fixtures.append(Part(mesh, name=fixture.name, source=fixture.source))
         table = None if self.table is None else self.table.rotated(R)
-        return Cell(table, tuple(fixtures), self.table_z_mm, self.fixture_files)
+        return Cell(table, tuple(fixtures), self.table_z_mm)
 
 
 def _table_height(part: Part, table: str | float | None) -> float | None:
