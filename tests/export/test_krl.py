@@ -23,6 +23,11 @@ def test_krl_structure() -> None:
     assert "DEF scanplan_path( )" in lines and lines[-1] == "END"
     lins = [ln for ln in lines if ln.startswith("LIN ")]
     assert len(lins) == len(TRAJ)
+    # The targets are in the part's frame, $BASE the part's pose in the base frame.
+    base = next(ln for ln in lines if ln.startswith("$BASE = "))
+    assert base.startswith("$BASE = {X 500.000000,Y -200.000000,Z 100.000000,A 30.0")
+    first = [float(v.split()[1]) for v in lins[0][5:-1].split(",")[:3]]
+    np.testing.assert_allclose(first, TRAJ.poses[0, :3, 3], atol=1e-5)
     m = plan_motion(TRAJ, OPTIONS)
     blended = np.array([ln.endswith("C_DIS") for ln in lins])
     np.testing.assert_array_equal(blended, m.blend_mm > 0)

@@ -19,7 +19,13 @@ def test_rapid_structure() -> None:
     text = export_program(TRAJ, "rapid", OPTIONS)
     assert text.startswith("MODULE scanplan_path") and text.rstrip().endswith("ENDMODULE")
     assert "PROC main()" in text and "ENDPROC" in text
-    moves = re.findall(r"MoveL (\w+), (\w+), (\w+), tSensor\\WObj:=wobj0;", text)
+    # Every target in the part's work object, whose user frame is the part pose.
+    moves = re.findall(r"MoveL (\w+), (\w+), (\w+), tSensor\\WObj:=wobjPart;", text)
+    wobj = re.search(r"PERS wobjdata wobjPart := \[FALSE,TRUE,\"\",\[\[([^\]]*)\]", text)
+    assert wobj is not None
+    np.testing.assert_allclose(
+        [float(v) for v in wobj.group(1).split(",")], OPTIONS.part_pose[:3, 3], atol=1e-6
+    )
     assert len(moves) == len(TRAJ)
     m = plan_motion(TRAJ, OPTIONS)
     zones = np.array([z for _, _, z in moves])

@@ -21,8 +21,15 @@ def test_urscript_structure() -> None:
     code = [ln for ln in lines if not ln.startswith("#")]
     assert code[0] == "def scanplan_path():" and code[-2] == "end"
     assert code[-1] == "scanplan_path()"
-    movel = re.findall(r"movel\(p\[[^\]]*\], a=([^,]+), v=([^,]+), r=([^)]+)\)", text)
+    # Every target in the part's frame, flown through the feature (the part's pose).
+    movel = re.findall(
+        r"movel\(pose_trans\(feature, p\[[^\]]*\]\), a=([^,]+), v=([^,]+), r=([^)]+)\)", text
+    )
     assert len(movel) == len(TRAJ)
+    feature = re.search(r"feature = p\[([^\]]*)\]", text)
+    assert feature is not None
+    part = np.array([float(x) for x in feature.group(1).split(",")])
+    np.testing.assert_allclose(part[:3], OPTIONS.part_pose[:3, 3] / 1000, atol=1e-9)
     m = plan_motion(TRAJ, OPTIONS)
     r = np.array([float(x[2]) for x in movel])
     assert np.all(r[m.pass_start | m.pass_end | ~m.scanning] == 0)

@@ -96,6 +96,9 @@ class Motion:
     """The program every dialect writes, one entry per target pose.
 
     poses:      (n, 4, 4) `T_base_sensor`, mm.
+    poses_part: (n, 4, 4) `T_part_sensor`, mm: the targets a program writes under a work
+                object / base frame `part_pose` (`T_base_part`) calibrated on the cell, so
+                moving the part means changing one frame, not every target.
     scanning:   (n,) bool; swath: (n,) int.
     pass_start, pass_end: (n,) bool — first / last pose of each scanning run.
     speed_mm_s: (n,) speed of the move that ends at pose i.
@@ -109,6 +112,8 @@ class Motion:
     pass_end: np.ndarray
     speed_mm_s: np.ndarray
     blend_mm: np.ndarray
+    poses_part: np.ndarray
+    part_pose: np.ndarray
 
 
 def pass_bounds(scanning: np.ndarray, swath: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -133,7 +138,9 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     room = 0.5 * np.minimum(np.r_[np.inf, seg], np.r_[seg, np.inf])
     blend = np.minimum(options.blend_mm, room)
     blend = np.where(traj.scanning & ~start & ~end, blend, 0.0)
-    return Motion(poses, traj.scanning, traj.swath, start, end, speed, blend)
+    return Motion(
+        poses, traj.scanning, traj.swath, start, end, speed, blend, traj.poses, options.part_pose
+    )
 
 
 def flange_poses(traj: Trajectory, options: ExportOptions) -> np.ndarray:

@@ -14,11 +14,13 @@ from scanplan.export.common import (
     PassTracker,
     euler_zyx_deg,
     joint_move_targets,
+    pose_from_xyzabc,
 )
 
 SUFFIX = ".src"
 _AXES = ("X", "Y", "Z", "A", "B", "C")
 _LIN = re.compile(r"^LIN\s*\{([^}]*)\}\s*(C_DIS)?", re.IGNORECASE)
+_BASE = re.compile(r"^\$BASE\s*=\s*\{([^}]*)\}", re.IGNORECASE)
 _VEL = re.compile(r"^\$VEL\.CP\s*=\s*([-+0-9.eE]+)", re.IGNORECASE)
 
 
@@ -39,14 +41,15 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"DEF {name}( )",
         "; Laser-profilometer scan path written by scanplan. Save as "
         f"{name}.src (KRL wants the file named after the DEF).",
-        "; Targets are T_base_sensor (sensor pose in the robot base frame, part_pose @",
-        "; T_part_sensor): $BASE is the null frame (assumes $WORLD = $ROBROOT) and $TOOL is",
-        "; the sensor (T_flange_sensor). X,Y,Z in mm; A,B,C in degrees, A about Z, B about Y',",
+        "; Targets are T_part_sensor, the sensor pose in the part's frame: $BASE is the part",
+        "; (T_base_part; assumes $WORLD = $ROBROOT; calibrate it as a BASE_DATA and nothing",
+        "; else changes) and $TOOL is the sensor (T_flange_sensor).",
+        "; X,Y,Z in mm; A,B,C in degrees, A about Z, B about Y',"
         "; C about X''. $VEL.CP in m/s, $APO.CDIS in mm.",
         f"; {len(motion.poses)} targets, {int(motion.pass_start.sum())} scanning runs; "
         "no C_DIS (exact stop) at run starts/ends and transitions.",
         "  BAS(#INITMOV, 0)",
-        "  $BASE = {X 0,Y 0,Z 0,A 0,B 0,C 0}",
+        f"  $BASE = {_frames(motion.part_pose[None])[0]}",
         f"  $TOOL = {_frames(options.tcp[None])[0]}",
         "  $ADVANCE = 3",
         f"  $ACC.CP = {options.accel_mm_s2 / 1000.0:.6g}",
@@ -54,7 +57,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
     ]
     speed = None
     joint_moves = joint_move_targets(motion, options)
-    for i, frame in enumerate(_frames(motion.poses)):
+    for i, frame in enumerate(_frames(motion.poses_part)):
         k = int(motion.swath[i])
         if motion.pass_start[i]:
             out.append(f"  ; pass {k} start")
@@ -80,10 +83,14 @@ def parse(text: str) -> Parsed:
     blended: list[bool] = []
     tracker = PassTracker()
     speed = float("nan")
+    base = np.eye(4)
     for line in text.splitlines():
         s = line.strip()
         if s.startswith(";"):
             tracker.line(s)
+        elif m := _BASE.match(s):
+            items = dict(item.split() for item in m.group(1).split(","))
+            base = pose_from_xyzabc(float(items[k]) for k in _AXES)
         elif m := _VEL.match(s):
             speed = float(m.group(1)) * 1000.0
         elif m := _LIN.match(s):
@@ -98,4 +105,4 @@ def parse(text: str) -> Parsed:
     poses = np.tile(np.eye(4), (len(arr), 1, 1))
     poses[:, :3, :3] = Rotation.from_euler("ZYX", arr[:, 3:], degrees=True).as_matrix()
     poses[:, :3, 3] = arr[:, :3]
-    return Parsed(poses, np.array(tracker.flags), np.array(speeds), np.array(blended))
+    return Parsed(base @ poses, np.array(tracker.flags), np.array(speeds), np.array(blended))

@@ -22,6 +22,8 @@ SUFFIX = ".mod"
 _EXTAX = "[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]"
 _TARGET = re.compile(r"CONST\s+robtarget\s+(\w+)\s*:=\s*\[\[([^\]]*)\],\s*\[([^\]]*)\]")
 _SPEED = re.compile(r"CONST\s+speeddata\s+(\w+)\s*:=\s*\[([^,\]]+)")
+# The work object's user frame: wobjdata [robhold, ufprog, ufmec, uframe, oframe].
+_WOBJ = re.compile(r"wobjdata\s+\w+\s*:=\s*\[\w+,\w+,\"[^\"]*\",\[\[([^\]]*)\],\[([^\]]*)\]\]")
 _MOVEL = re.compile(r"MoveL\s+(\w+)\s*,\s*(\w+)\s*,\s*(\w+)\s*,")
 
 
@@ -42,8 +44,9 @@ def write(motion: Motion, options: ExportOptions) -> str:
     out = [
         f"MODULE {options.program_name}",
         "  ! Laser-profilometer scan path written by scanplan.",
-        "  ! Targets are T_base_sensor (sensor pose in the robot base frame, part_pose @",
-        "  ! T_part_sensor), in wobj0, for tool tSensor (T_flange_sensor). mm, quaternions",
+        "  ! Targets are T_part_sensor, the sensor pose in the part's frame, in the work object",
+        "  ! wobjPart (its user frame is T_base_part: calibrate it and nothing else changes),",
+        "  ! for tool tSensor (T_flange_sensor). mm, quaternions",
         "  ! [q1..q4] scalar first. Targets carry confdata [0,0,0,0]: ConfL\\Off lets the",
         "  ! controller choose the configuration nearest the current one.",
         "  ! tSensor's load [1 kg at 0,0,50 mm] is a placeholder: enter the real sensor load.",
@@ -51,6 +54,8 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "start/end and transition.",
         f"  PERS tooldata tSensor := [TRUE,[{_frames(options.tcp[None])[0]}],"
         "[1,[0,0,50],[1,0,0,0],0,0,0]];",
+        f'  PERS wobjdata wobjPart := [FALSE,TRUE,"",[{_frames(motion.part_pose[None])[0]}],'
+        "[[0,0,0],[1,0,0,0]]];",
         f"  CONST speeddata vScan := [{options.scan_speed:.3f},500,5000,1000];",
         f"  CONST speeddata vTravel := [{options.travel_speed_mm_s:.3f},500,5000,1000];",
     ]
@@ -60,7 +65,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         z = f"{1.5 * blend:.3f}"
         o = f"{0.15 * blend:.4f}"
         out.append(f"  CONST zonedata zScan := [FALSE,{b},{z},{z},{o},{z},{o}];")
-    for i, frame in enumerate(_frames(motion.poses)):
+    for i, frame in enumerate(_frames(motion.poses_part)):
         out.append(f"  CONST robtarget p{i:0{width}d} := [{frame},[0,0,0,0],{_EXTAX}];")
     out += ["", "  PROC main()", "    ConfL\\Off;"]
     joint_moves = joint_move_targets(motion, options)
@@ -70,10 +75,10 @@ def write(motion: Motion, options: ExportOptions) -> str:
             out.append(f"    ! pass {k} start")
         if i in joint_moves:  # into the pass's configuration (axis angles, degrees)
             q = ",".join(f"{v:.4f}" for v in np.degrees(joint_moves[i]))
-            out.append(f"    MoveAbsJ [[{q}],{_EXTAX}], vTravel, fine, tSensor\\WObj:=wobj0;")
+            out.append(f"    MoveAbsJ [[{q}],{_EXTAX}], vTravel, fine, tSensor\\WObj:=wobjPart;")
         speed = "vScan" if motion.scanning[i] and not motion.pass_start[i] else "vTravel"
         z_i = zone if motion.blend_mm[i] > 0 else "fine"
-        out.append(f"    MoveL p{i:0{width}d}, {speed}, {z_i}, tSensor\\WObj:=wobj0;")
+        out.append(f"    MoveL p{i:0{width}d}, {speed}, {z_i}, tSensor\\WObj:=wobjPart;")
         if motion.pass_start[i]:
             out.append("    ! SetDO doSensorTrigger, 1;  ! hook: start the sensor's acquisition")
         if motion.pass_end[i]:
@@ -88,11 +93,16 @@ def parse(text: str) -> Parsed:
     speeds: dict[str, float] = {}
     names: list[str] = []
     moves: list[tuple[str, bool]] = []
+    uframe = np.eye(4)
     tracker = PassTracker()
     for line in text.splitlines():
         s = line.strip()
         if s.startswith("!"):
             tracker.line(s)
+        elif m := _WOBJ.search(s):
+            xyz, wxyz = floats(m.group(1)), floats(m.group(2))
+            rot = Rotation.from_quat([*wxyz[1:], wxyz[0]])
+            uframe = poses_from_parts(np.array([xyz]), rot)[0]
         elif m := _TARGET.search(s):
             targets[m.group(1)] = (floats(m.group(2)), floats(m.group(3)))
         elif m := _SPEED.search(s):
@@ -111,5 +121,8 @@ def parse(text: str) -> Parsed:
     rot = Rotation.from_quat(np.concatenate([wxyz[:, 1:], wxyz[:, :1]], axis=1))
     speed = np.array([speeds[v] for v, _ in moves])
     return Parsed(
-        poses_from_parts(xyz, rot), np.array(tracker.flags), speed, np.array([b for _, b in moves])
+        uframe @ poses_from_parts(xyz, rot),
+        np.array(tracker.flags),
+        speed,
+        np.array([b for _, b in moves]),
     )

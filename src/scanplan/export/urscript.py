@@ -20,7 +20,11 @@ from scanplan.export.common import (
 )
 
 SUFFIX = ".script"
-_MOVEL = re.compile(r"movel\(p\[([^\]]*)\],\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)")
+# movel(pose_trans(feature, p[...]), ...): a target in the part's feature frame.
+_MOVEL = re.compile(
+    r"movel\(pose_trans\(feature,\s*p\[([^\]]*)\]\),\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)"
+)
+_FEATURE = re.compile(r"^feature\s*=\s*p\[([^\]]*)\]")
 
 
 def _poses_m(T: np.ndarray) -> list[str]:
@@ -37,8 +41,10 @@ def write(motion: Motion, options: ExportOptions) -> str:
     a = options.accel_mm_s2 / 1000.0
     out = [
         f"# {name}: laser-profilometer scan path written by scanplan",
-        "# Targets are T_base_sensor (sensor pose in the robot base frame, part_pose @",
-        "# T_part_sensor) because set_tcp below makes the sensor the TCP. Units: metres,",
+        "# Targets are T_part_sensor, the sensor pose in the part's frame, flown as",
+        "# pose_trans(feature, target): `feature` is the part's pose in the base frame",
+        "# (T_base_part); calibrate it (a feature plane on the pendant) and nothing else changes.",
+        "# set_tcp below makes the sensor the TCP. Units: metres,"
         "# rotation vectors in radians, speeds m/s, accelerations m/s^2, blend radii metres.",
         f"# {len(motion.poses)} targets, {int(motion.pass_start.sum())} scanning runs; "
         f"scan speed {options.scan_speed:g} mm/s, travel {options.travel_speed_mm_s:g} mm/s.",
@@ -48,10 +54,11 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "neighbouring targets so blends never overlap.",
         f"def {name}():",
         f"  set_tcp({_poses_m(options.tcp[None])[0]})",
+        f"  feature = {_poses_m(motion.part_pose[None])[0]}",
     ]
     joint_moves = joint_move_targets(motion, options)
     qa, qv = np.radians(JOINT_ACCEL_DEG_S2), np.radians(JOINT_SPEED_DEG_S)
-    for i, target in enumerate(_poses_m(motion.poses)):
+    for i, target in enumerate(_poses_m(motion.poses_part)):
         k = int(motion.swath[i])
         if motion.pass_start[i]:
             out.append(f"  # pass {k} start")
@@ -60,7 +67,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
             out.append(f"  movej([{q}], a={qa:.6g}, v={qv:.6g})")
         v = motion.speed_mm_s[i] / 1000.0
         r = motion.blend_mm[i] / 1000.0
-        out.append(f"  movel({target}, a={a:.6g}, v={v:.6g}, r={r:.6g})")
+        out.append(f"  movel(pose_trans(feature, {target}), a={a:.6g}, v={v:.6g}, r={r:.6g})")
         if motion.pass_start[i]:
             out.append(f'  textmsg("scanplan: pass {k} start")')
             out.append("  # set_digital_out(0, True)  # hook: start the sensor's acquisition")
@@ -74,11 +81,16 @@ def write(motion: Motion, options: ExportOptions) -> str:
 
 def parse(text: str) -> Parsed:
     values: list[list[float]] = []
+    feature = np.eye(4)
     tracker = PassTracker()
     for line in text.splitlines():
         s = line.strip()
         if s.startswith("#"):
             tracker.line(s)
+            continue
+        if f := _FEATURE.match(s):
+            x = floats(f.group(1))
+            feature = poses_from_parts(np.array([x[:3]]) * 1000.0, Rotation.from_rotvec([x[3:]]))[0]
             continue
         m = _MOVEL.search(s)
         if m:
@@ -87,5 +99,5 @@ def parse(text: str) -> Parsed:
     if not values:
         raise ValueError("URScript program holds no movel")
     arr = np.asarray(values)
-    poses = poses_from_parts(arr[:, :3] * 1000.0, Rotation.from_rotvec(arr[:, 3:6]))
+    poses = feature @ poses_from_parts(arr[:, :3] * 1000.0, Rotation.from_rotvec(arr[:, 3:6]))
     return Parsed(poses, np.array(tracker.flags), arr[:, 7] * 1000.0, arr[:, 8] > 0)
