@@ -100,9 +100,9 @@ def parse(text: str) -> Parsed:
         if s.startswith("!"):
             tracker.line(s)
         elif m := _WOBJ.search(s):
-            xyz, wxyz = floats(m.group(1)), floats(m.group(2))
-            rot = Rotation.from_quat([*wxyz[1:], wxyz[0]])
-            uframe = poses_from_parts(np.array([xyz]), rot)[0]
+            origin, q = floats(m.group(1)), floats(m.group(2))
+            turn = Rotation.from_quat([[*q[1:], q[0]]])
+            uframe = poses_from_parts(np.array([origin]), turn)[0]
         elif m := _TARGET.search(s):
             targets[m.group(1)] = (floats(m.group(2)), floats(m.group(3)))
         elif m := _SPEED.search(s):
