@@ -210,6 +210,11 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
         raise ValueError(f"trajectory file {path} is empty")
     first = numbers[0]
     header = [h.strip() for h in lines[first - 1].split(",")]
+    if tuple(header[: len(CSV_COLUMNS)]) == CSV_COLUMNS and "speed_mm_s" in header:
+        raise ValueError(
+            f"trajectory file {path} is a robot program exported as CSV (targets in the robot's "
+            "base frame, with speeds and blends), not a plan: give the plan it was exported from"
+        )
     if tuple(header) != CSV_COLUMNS:
         missing = [c for c in CSV_COLUMNS if c not in header]
         extra = [c for c in header if c not in CSV_COLUMNS]

@@ -81,3 +81,19 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     result = runner.invoke(app, [*args[:-1], str(bad), "--robot", "none"])
     assert result.exit_code == 2 and result.stderr == "error: disk full\n"
     assert listing(tmp_path) == ["out_bag", "t.csv", "taken"]
+
+
+def test_export_never_overwrites_its_plan_and_its_csv_is_not_taken_for_a_plan(tmp_path):
+    plan = tmp_path / "plan.csv"
+    write_csv(TRAJ, plan)
+    before = plan.read_text()
+    result = run_cli("export", str(plan), "--format", "csv", "--robot", "none", "-o", str(plan))
+    assert result.exit_code == 2 and "is the plan being exported" in result.stderr
+    assert plan.read_text() == before
+    program = tmp_path / "program.csv"
+    result = run_cli("export", str(plan), "--format", "csv", "--robot", "none", "-o", str(program))
+    assert result.exit_code == 0, result.output
+    result = run_cli("evaluate", "drone", str(program), "--points", "64")
+    assert result.exit_code == 2
+    assert "robot program exported as CSV" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

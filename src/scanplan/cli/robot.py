@@ -103,6 +103,8 @@ def export_cmd(
         raise ValueError(f"-o {str(output)!r} is a directory: give the program's file name")
     # KUKA wants the .src file named after its DEF.
     name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
+    if output.exists() and output.resolve() == trajectory.resolve():
+        raise ValueError(f"-o {output} is the plan being exported: give the program another name")
     traj = read_trajectory(trajectory)
     robot, T_base_part, T_flange_sensor = arm_of(traj, robot, part_pose, tcp)
     options = ExportOptions(
