@@ -25,7 +25,7 @@ from scanplan.pipeline import Arm, plan_views
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.robot import check_reach
-from scanplan.robot.fit import pose_arg
+from scanplan.robot.base import pose_arg
 
 # The sensor 90 mm out from the flange along its axis: a profilometer on a short bracket.
 TCP = np.eye(4)

@@ -10,7 +10,8 @@ from typer.testing import CliRunner
 from scanplan.cli import app
 from scanplan.export import parse_pose_arg, parse_program
 from scanplan.robot import check_reach
-from scanplan.robot.fit import fit_to_robot, pose_arg
+from scanplan.robot.base import pose_arg
+from scanplan.robot.fit import fit_to_robot
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory, read_json
 

@@ -13,6 +13,7 @@ import typer
 
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.options import (
+    IDENTITY_POSE,
     POINTS_CHECK,
     FixtureOpt,
     OutOpt,
@@ -220,9 +221,9 @@ def robot_arm(robot: str | None, tcp: str | None, part_pose: str | None) -> Arm 
                 raise ValueError(f"{option} needs --robot: the arm it refers to")
         return None
     if tcp is None:
-        typer.echo("--tcp not given: 0,0,0,0,0,0 (the sensor origin is the flange)")
+        typer.echo(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
     pose = None if part_pose is None else parse_pose_arg(part_pose)
-    return Arm(robot, parse_pose_arg(tcp or "0,0,0,0,0,0"), pose)
+    return Arm(robot, parse_pose_arg(tcp or IDENTITY_POSE), pose)
 
 
 def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:

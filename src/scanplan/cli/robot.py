@@ -14,6 +14,7 @@ import typer
 
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.options import (
+    IDENTITY_POSE,
     POSITIVE,
     PartPoseOpt,
     QuietOpt,
@@ -62,8 +63,6 @@ AllowUnreachableOpt = Annotated[
         "limits, configuration flips in a pass); the problems are still printed",
     ),
 ]
-# A pose not given is the identity: said in the output, never silently.
-IDENTITY_POSE = "0,0,0,0,0,0"
 
 
 @user_errors

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 
 @runtime_checkable
@@ -65,3 +66,15 @@ def as_poses(T: np.ndarray) -> np.ndarray:
     if T.shape[-2:] != (4, 4):
         raise ValueError(f"flange poses must be (n, 4, 4), got {T.shape}")
     return T.reshape(-1, 4, 4)
+
+
+def pose_arg(T: np.ndarray) -> str:
+    """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` and `--tcp` read them, to µm and
+    millidegrees: a pose rounded coarser can tip a pass that skirts a singularity onto the
+    other branch when `export` checks it again."""
+    T = np.asarray(T, dtype=np.float64)
+    abc = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
+    # round(..) + 0.0 turns -0.0 into 0.0, so nothing prints as "-0".
+    return ",".join(
+        f"{round(float(v), 3) + 0.0:.3f}".rstrip("0").rstrip(".") for v in (*T[:3, 3], *abc)
+    )

@@ -10,9 +10,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from scanplan.robot.base import Robot
+from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.place import Placement, place
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach
@@ -56,12 +55,6 @@ class RobotFit:
             "passes_split": self.splits,
             "reachable": self.report.reachable,
         }
-
-
-def pose_arg(T: np.ndarray) -> str:
-    """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` and `--tcp` read it."""
-    abc = Rotation.from_matrix(np.asarray(T)[:3, :3]).as_euler("ZYX", degrees=True)
-    return ",".join(f"{v:.3f}".rstrip("0").rstrip(".") for v in (*np.asarray(T)[:3, 3], *abc))
 
 
 def fit_to_robot(

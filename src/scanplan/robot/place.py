@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scanplan.robot.base import Robot
+from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, fit_limits, limit_margin
 from scanplan.trajectory import Trajectory
@@ -58,16 +58,12 @@ class Placement:
         return "; ".join(f"{n} {what}" for n, what in sorted(counts, reverse=True) if n)
 
     def pose_arg(self) -> str:
-        """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` reads it."""
-        p = self.T_base_part[:3, 3]
-        yaw = np.degrees(np.arctan2(self.T_base_part[1, 0], self.T_base_part[0, 0]))
-        # µm and millidegrees: a pose rounded coarser can tip a pass that skirts a
-        # singularity onto the other branch when `export` checks it again.
-        return ",".join(f"{v:.3f}".rstrip("0").rstrip(".") for v in (*p, yaw)) + ",0,0"
+        """The placement as `--part-pose` reads it (`base.pose_arg`)."""
+        return pose_arg(self.T_base_part)
 
 
 def _as_printed(T_base_part: np.ndarray) -> np.ndarray:
-    """The placement as `Placement.pose_arg` prints it (µm, millidegrees): the pose that is
+    """The placement as `base.pose_arg` prints it (µm, millidegrees): the pose that is
     checked is the one the user passes on, so `export` repeats the verdict exactly."""
     x, y, z = np.round(T_base_part[:3, 3], 3)
     yaw = np.radians(np.round(np.degrees(np.arctan2(T_base_part[1, 0], T_base_part[0, 0])), 3))
