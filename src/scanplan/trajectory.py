@@ -107,6 +107,16 @@ class Trajectory:
         )
 
 
+def pass_bounds(scanning: np.ndarray, swath: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(start, end) masks of scanning runs (the passes as flown); a run also breaks where the
+    swath index changes."""
+    s = np.asarray(scanning, dtype=bool)
+    new_swath = np.r_[True, swath[1:] != swath[:-1]]
+    start = s & (~np.r_[False, s[:-1]] | new_swath)
+    end = s & (~np.r_[s[1:], False] | np.r_[new_swath[1:], True])
+    return start, end
+
+
 _INT32 = np.iinfo(np.int32)
 
 

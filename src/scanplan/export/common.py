@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scanplan.quantities import ScanSpec
-from scanplan.trajectory import Trajectory
+from scanplan.trajectory import Trajectory, pass_bounds
 
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, RAPID 32
 
@@ -114,15 +114,6 @@ class Motion:
     blend_mm: np.ndarray
     poses_part: np.ndarray
     part_pose: np.ndarray
-
-
-def pass_bounds(scanning: np.ndarray, swath: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(start, end) masks of scanning runs; a run also breaks where the swath index changes."""
-    s = np.asarray(scanning, dtype=bool)
-    new_swath = np.r_[True, swath[1:] != swath[:-1]]
-    start = s & (~np.r_[False, s[:-1]] | new_swath)
-    end = s & (~np.r_[s[1:], False] | np.r_[new_swath[1:], True])
-    return start, end
 
 
 def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
