@@ -6,7 +6,14 @@ flange path with any of them; `place` (in `scanplan.robot.place`) searches the p
 
 from scanplan.robot.base import Robot
 from scanplan.robot.opw import OPWRobot
-from scanplan.robot.presets import OPW_PRESETS, ROBOT_NAMES, get_robot, load_robot_file
+from scanplan.robot.presets import (
+    MOTION_LIMITS,
+    OPW_PRESETS,
+    ROBOT_NAMES,
+    get_robot,
+    load_robot_file,
+    motion_limits,
+)
 from scanplan.robot.reach import ReachReport, check_reach
 from scanplan.robot.ur import (
     UR_MODELS,
@@ -18,6 +25,7 @@ from scanplan.robot.ur import (
 )
 
 __all__ = [
+    "MOTION_LIMITS",
     "OPW_PRESETS",
     "ROBOT_NAMES",
     "UR_MODELS",
@@ -31,5 +39,6 @@ __all__ = [
     "get_robot",
     "inverse_kinematics",
     "load_robot_file",
+    "motion_limits",
     "singularity_margins",
 ]

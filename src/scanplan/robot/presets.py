@@ -1,6 +1,7 @@
 """The arms `--robot` knows by name, and user TOML files for any other OPW arm.
 
-Each preset is the controller's own frames: `T_base_flange` as its pendant shows it.
+Each preset is the controller's own frames: `T_base_flange` as its pendant shows it, and
+its motion limits (`motion_limits`) for the cycle time.
 """
 
 from __future__ import annotations
@@ -13,6 +14,14 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from scipy.spatial.transform import Rotation
 
+from scanplan.cycle import (
+    ACCEL_MM_S2,
+    ANGULAR_ACCEL_DEG_S2,
+    ANGULAR_SPEED_DEG_S,
+    NOMINAL,
+    MotionLimits,
+    joint_accels,
+)
 from scanplan.robot.base import Robot
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.ur import UR_MODELS
@@ -100,6 +109,55 @@ OPW_PRESETS: dict[str, OPWRobot] = {
 
 ROBOT_NAMES: tuple[str, ...] = (*UR_MODELS, *OPW_PRESETS)
 
+
+def _motion(
+    name: str, speed_mm_s: float, joints_deg_s: tuple[float, ...], source: str
+) -> MotionLimits:
+    """Data-sheet speeds; the accelerations and reorientation limits no data sheet gives are
+    `scanplan.cycle`'s documented choices."""
+    return MotionLimits(
+        name,
+        speed_mm_s=speed_mm_s,
+        accel_mm_s2=ACCEL_MM_S2,
+        angular_speed_deg_s=ANGULAR_SPEED_DEG_S,
+        angular_accel_deg_s2=ANGULAR_ACCEL_DEG_S2,
+        joint_speed_deg_s=joints_deg_s,
+        joint_accel_deg_s2=joint_accels(joints_deg_s),
+        source=source,
+    )
+
+
+# Joint speeds as the makers' data sheets give them, checked against the ROS-Industrial
+# descriptions that cite those sheets: universal_robot ur_description/config/<model>/
+# joint_limits.yaml (UR e-Series user manuals 5.8), kuka_experimental kr6r900sixx_macro.xacro,
+# abb irb2400_macro.xacro, fanuc lrmate200id_macro.xacro. TCP speed: UR e-Series data sheets
+# (typical TCP speed 1 m/s); the industrial arms: 2 m/s, the linear speed their controllers
+# accept in programs (KRL $VEL.CP, FANUC linear motion), not a data-sheet figure.
+_UR = "UR e-Series data sheet (TCP 1 m/s, joint speeds)"
+MOTION_LIMITS: dict[str, MotionLimits] = {
+    "ur3e": _motion("ur3e", 1000.0, (180.0,) * 3 + (360.0,) * 3, _UR),
+    "ur5e": _motion("ur5e", 1000.0, (180.0,) * 6, _UR),
+    "ur10e": _motion("ur10e", 1000.0, (120.0,) * 2 + (180.0,) * 4, _UR),
+    "kr6-r900": _motion(
+        "kr6-r900",
+        2000.0,
+        (360.0, 300.0, 360.0, 381.0, 388.0, 615.0),
+        "KUKA KR 6 R900 sixx data sheet (axis speeds A1-A6)",
+    ),
+    "irb2400": _motion(
+        "irb2400",
+        2000.0,
+        (150.0, 150.0, 150.0, 360.0, 360.0, 450.0),
+        "ABB IRB 2400 product specification (axis speeds 1-6)",
+    ),
+    "lrmate200id": _motion(
+        "lrmate200id",
+        2000.0,
+        (450.0, 380.0, 520.0, 550.0, 545.0, 1000.0),
+        "FANUC LR Mate 200iD data sheet (J1-J6 speeds)",
+    ),
+}
+
 Six = Annotated[list[float], Field(min_length=6, max_length=6)]
 
 
@@ -124,6 +182,13 @@ class RobotFile(BaseModel):
     base: Six = Field(default_factory=lambda: [0.0] * 6)  # x,y,z mm, A,B,C deg
     flange: Six = Field(default_factory=lambda: [0.0] * 6)
     j3_from_horizontal: bool = False
+    # Motion limits for the cycle time; the nominal arm's where the file gives none.
+    speed_mm_s: float = Field(NOMINAL.speed_mm_s, gt=0, allow_inf_nan=False)
+    accel_mm_s2: float = Field(NOMINAL.accel_mm_s2, gt=0, allow_inf_nan=False)
+    angular_speed_deg_s: float = Field(NOMINAL.angular_speed_deg_s, gt=0, allow_inf_nan=False)
+    angular_accel_deg_s2: float = Field(NOMINAL.angular_accel_deg_s2, gt=0, allow_inf_nan=False)
+    joint_speed_deg_s: Six = Field(default_factory=lambda: list(NOMINAL.joint_speed_deg_s))
+    joint_accel_deg_s2: Six = Field(default_factory=lambda: list(NOMINAL.joint_accel_deg_s2))
 
     @model_validator(mode="after")
     def _finite_and_ordered(self) -> RobotFile:
@@ -136,7 +201,23 @@ class RobotFile(BaseModel):
         for name in ("offsets_deg", "base", "flange"):
             if not np.isfinite(getattr(self, name)).all():
                 raise ValueError(f"{name} must be finite")
+        for name in ("joint_speed_deg_s", "joint_accel_deg_s2"):
+            values = np.asarray(getattr(self, name))
+            if not (np.isfinite(values).all() and (values > 0).all()):
+                raise ValueError(f"{name} must be finite numbers > 0")
         return self
+
+    def motion_limits(self, source: str) -> MotionLimits:
+        return MotionLimits(
+            self.name,
+            speed_mm_s=self.speed_mm_s,
+            accel_mm_s2=self.accel_mm_s2,
+            angular_speed_deg_s=self.angular_speed_deg_s,
+            angular_accel_deg_s2=self.angular_accel_deg_s2,
+            joint_speed_deg_s=tuple(self.joint_speed_deg_s),
+            joint_accel_deg_s2=tuple(self.joint_accel_deg_s2),
+            source=source,
+        )
 
     def to_robot(self) -> OPWRobot:
         return OPWRobot(
@@ -159,6 +240,10 @@ class RobotFile(BaseModel):
 
 def load_robot_file(path: str | Path) -> OPWRobot:
     """A TOML file of OPW parameters -> OPWRobot; ValueError naming the file and field."""
+    return _robot_file(path).to_robot()
+
+
+def _robot_file(path: str | Path) -> RobotFile:
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text())
@@ -166,7 +251,7 @@ def load_robot_file(path: str | Path) -> OPWRobot:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"robot file {path} cannot be parsed: {first}") from None
     try:
-        return RobotFile.model_validate(data).to_robot()
+        return RobotFile.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
         where = ".".join(str(p) for p in err["loc"]) or "file"
@@ -188,6 +273,24 @@ def get_robot(robot: str | Path | Robot) -> Robot:
         if not Path(robot).is_file():
             raise ValueError(f"robot file {robot} does not exist")
         return load_robot_file(robot)
+    raise ValueError(
+        f"unknown robot {str(robot)!r}; choose one of {', '.join(ROBOT_NAMES)} or a .toml file"
+    )
+
+
+def motion_limits(robot: str | Path | Robot) -> MotionLimits:
+    """The arm's motion limits for the cycle time: a preset's from its data sheet, a TOML
+    file's own (the nominal arm's where it gives none); a Robot by its preset name, else the
+    nominal arm's. ValueError for a name that is neither a preset nor a file."""
+    if not isinstance(robot, str | Path):
+        return MOTION_LIMITS.get(robot.name, NOMINAL)
+    key = str(robot).lower()
+    if key in MOTION_LIMITS:
+        return MOTION_LIMITS[key]
+    if key.endswith(".toml"):
+        if not Path(robot).is_file():
+            raise ValueError(f"robot file {robot} does not exist")
+        return _robot_file(robot).motion_limits(f"robot file {robot} (nominal where not given)")
     raise ValueError(
         f"unknown robot {str(robot)!r}; choose one of {', '.join(ROBOT_NAMES)} or a .toml file"
     )

@@ -1,0 +1,60 @@
+"""Motion limits per arm: every preset has its data sheet's, a user's TOML arm its own or the
+nominal arm's."""
+
+from __future__ import annotations
+
+import pytest
+
+from scanplan.cycle import NOMINAL
+from scanplan.robot import MOTION_LIMITS, ROBOT_NAMES, get_robot, motion_limits
+
+ARM = """
+name = "my-arm"
+a1 = 25
+a2 = -35
+c1 = 400
+c2 = 455
+c3 = 420
+c4 = 80
+limits_deg = [[-170, 170], [-190, 45], [-120, 156], [-185, 185], [-120, 120], [-350, 350]]
+"""
+
+
+def test_every_preset_has_its_limits() -> None:
+    assert set(MOTION_LIMITS) == set(ROBOT_NAMES)
+    for name in ROBOT_NAMES:
+        limits = motion_limits(name)
+        assert limits.name == name and limits.source
+        assert motion_limits(get_robot(name)) is limits
+    kr6 = motion_limits("KR6-R900")
+    assert kr6.joint_speed_deg_s == (360.0, 300.0, 360.0, 381.0, 388.0, 615.0)
+    assert motion_limits("ur10e").joint_speed_deg_s[:2] == (120.0, 120.0)
+    assert motion_limits("ur5e").speed_mm_s == 1000.0
+
+
+def test_a_toml_arm_takes_its_own_limits_or_the_nominal_ones(tmp_path) -> None:
+    plain = tmp_path / "plain.toml"
+    plain.write_text(ARM)
+    limits = motion_limits(str(plain))
+    assert limits.name == "my-arm" and "nominal where not given" in limits.source
+    assert limits.joint_speed_deg_s == NOMINAL.joint_speed_deg_s
+    assert limits.speed_mm_s == NOMINAL.speed_mm_s
+    fast = tmp_path / "fast.toml"
+    fast.write_text(ARM + "speed_mm_s = 1500\njoint_speed_deg_s = [300, 300, 300, 400, 400, 600]\n")
+    limits = motion_limits(fast)
+    assert limits.speed_mm_s == 1500.0 and limits.joint_speed_deg_s[5] == 600.0
+    assert get_robot(fast).name == "my-arm"  # the kinematics read the same file
+
+
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [("speed_mm_s = 0\n", "speed_mm_s"), ("joint_speed_deg_s = [1, 2]\n", "joint_speed_deg_s")],
+)
+def test_bad_limits_in_a_toml_arm_are_one_line(tmp_path, extra, field) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(ARM + extra)
+    with pytest.raises(ValueError) as info:
+        motion_limits(path)
+    assert "\n" not in str(info.value) and field in str(info.value)
+    with pytest.raises(ValueError, match="unknown robot"):
+        motion_limits("kr16")
