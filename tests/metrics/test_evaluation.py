@@ -38,7 +38,11 @@ def test_plate_at_working_distance_is_exact(plate):
     # Off the plate a profile has no valid point: each such step is charged -1 on R_D.
     off = evaluate(plate, SPEC, straight(np.arange(0, 640.0, 0.5)), points_per_profile=128)
     assert off.r_d_mean == pytest.approx(-80 / 1279, abs=2e-3)
-    assert m.cycle_time_s == pytest.approx(len(traj) / 200.0)
+    # One pass of 599.5 mm: a trapezoid at the scan speed (200 Hz x 0.5 mm) and the nominal
+    # arm's 1 m/s², the limits named in the JSON.
+    assert m.cycle_time_s == pytest.approx(599.5 / 100.0 + 100.0 / 1000.0)
+    cycle = m.to_json_dict()["cycle_time"]
+    assert cycle["passes"] == 1 and cycle["moves"] == 0 and cycle["limits"]["name"] == "nominal"
 
 
 def test_height_error_and_tilt_are_measured(plate):

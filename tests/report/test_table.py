@@ -20,3 +20,9 @@ def test_the_table_leads_with_in_spec_coverage(plate):
     assert rows[0][0].startswith("in-spec coverage (±12.5 mm, 15°) of the top surface, ")
     assert rows[0][1] == [f"{m.in_spec_coverage:.1%}"]
     assert rows[1][0] == "coverage (any valid point)"
+
+
+def test_the_cycle_time_row_names_the_limits_it_was_timed_with(plate):
+    m = evaluate(plate, SPEC, straight(np.arange(0, 320.0, 1.0)), points_per_profile=64)
+    rows = dict(table_rows([m.to_json_dict()]))
+    assert rows["cycle time (s) (trapezoidal, nominal limits)"] == [f"{m.cycle_time_s:.1f}"]

@@ -5,7 +5,6 @@ spacing, coverage and in-spec coverage of the surface to inspect (`Metrics`).
 from scanplan.metrics.evaluation import coverage_spacing_mm, evaluate, in_spec_radius_mm
 from scanplan.metrics.summary import (
     COVERAGE_DEFINITION,
-    CYCLE_TIME_ASSUMPTIONS,
     IN_SPEC_COVERAGE_DEFINITION,
     CoverageMap,
     Metrics,
@@ -14,7 +13,6 @@ from scanplan.metrics.summary import (
 
 __all__ = [
     "COVERAGE_DEFINITION",
-    "CYCLE_TIME_ASSUMPTIONS",
     "IN_SPEC_COVERAGE_DEFINITION",
     "CoverageMap",
     "Metrics",

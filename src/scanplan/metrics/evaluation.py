@@ -14,6 +14,7 @@ import numpy as np
 
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext, recorded
+from scanplan.cycle import NOMINAL, MotionLimits, cycle_time
 from scanplan.metrics.accumulators import CloudSample, Coverage, PointErrors, Spacing
 from scanplan.metrics.summary import Metrics
 from scanplan.part import Part
@@ -30,24 +31,22 @@ def coverage_spacing_mm(sensor: SensorSpec) -> float:
     return max(2.0, 1.2 * lateral_spacing)
 
 
-def _path_summary(traj: Trajectory, profiles: int, scan_spec: ScanSpec) -> dict[str, Any]:
+def _path_summary(traj: Trajectory, scan_spec: ScanSpec, limits: MotionLimits) -> dict[str, Any]:
     scan_len = float(
         np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)[
             traj.scanning[1:] & traj.scanning[:-1] & (traj.swath[1:] == traj.swath[:-1])
         ].sum()
     )
     path_len = traj.path_length_mm()
-    scan_time = profiles / scan_spec.profile_rate_hz
-    move_time = (path_len - scan_len) / scan_spec.travel_speed_mm_s
+    cycle = cycle_time(traj, scan_spec, limits)
     return {
         "path_length_mm": path_len,
         "scan_length_mm": scan_len,
         "move_length_mm": path_len - scan_len,
-        "cycle_time_s": scan_time + move_time,
-        "scan_time_s": scan_time,
-        "move_time_s": move_time,
-        "profile_rate_hz": scan_spec.profile_rate_hz,
-        "travel_speed_mm_s": scan_spec.travel_speed_mm_s,
+        "cycle_time_s": cycle.total_s,
+        "scan_time_s": cycle.scanning_s,
+        "move_time_s": cycle.moving_s,
+        "cycle": cycle,
         "plan_time_s": float(traj.plan_time_s),
     }
 
@@ -73,6 +72,7 @@ def evaluate(
     max_map_points: int = 200_000,
     progress: Callable[[int, int], None] | None = None,
     context: PlanContext | None = None,
+    limits: MotionLimits = NOMINAL,
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
@@ -82,6 +82,7 @@ def evaluate(
     context: what the plan is judged as (its surface to inspect, region of interest and
     reward); None: as recorded in the trajectory (`context.recorded`). Every statistic is
     over the part's surface to inspect: points on other faces count as no hit.
+    limits: the arm's motion limits the cycle time is timed with (`cycle.cycle_time`).
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -159,5 +160,5 @@ def evaluate(
         clearance_mm=collisions.clearance_mm,
         **errors.summary(),
         **spacing.summary(wd, scan_spec),
-        **_path_summary(traj, m, scan_spec),
+        **_path_summary(traj, scan_spec, limits),
     )

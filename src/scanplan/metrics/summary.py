@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from scanplan.cloud import PointCloud
+from scanplan.cycle import CycleTime
 from scanplan.files import json_safe
 from scanplan.surface import COVERAGE_MAX_SLOPE_DEG
 
@@ -35,11 +36,6 @@ IN_SPEC_COVERAGE_DEFINITION = (
     "2 delta_s_opt long and one evaluated column pitch wide (at the far tolerance depth and "
     "tilt), so a sub-sampled fan still reaches every sample between its columns, while "
     "profiles sparser than 2 delta_s_opt fail however wide the radius"
-)
-CYCLE_TIME_ASSUMPTIONS = (
-    "one profile per station at the sensor's profile rate (scan speed = rate x spacing); "
-    "non-scanning moves at the travel speed along straight segments; no acceleration or "
-    "settling time"
 )
 
 
@@ -76,8 +72,8 @@ class Metrics:
     Coverage: see `COVERAGE_DEFINITION`; in-spec coverage (the headline figure): see
     `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg` and at
     least one point per `in_spec_cell_mm`² (2·Δs_opt).
-    Cycle time: see `CYCLE_TIME_ASSUMPTIONS`; split into scanning (profiles at the profile
-    rate) and moving (the rest of the path at the travel speed).
+    Cycle time: `cycle` (`scanplan.cycle.CycleTime`, its model and the arm's limits);
+    `cycle_time_s`, `scan_time_s`, `move_time_s` its total, passes and moves.
     Collisions (every pose, scanning or not; `collision.CellChecker`): poses whose sensor
     body comes closer than `clearance_mm` to the part, the table or a fixture (and of those,
     to the table, to a fixture), those touching (0 mm), and the deepest penetration.
@@ -120,8 +116,6 @@ class Metrics:
     cycle_time_s: float
     scan_time_s: float
     move_time_s: float
-    profile_rate_hz: float
-    travel_speed_mm_s: float
     plan_time_s: float
     eval_time_s: float
     reward_mean: float
@@ -136,6 +130,7 @@ class Metrics:
     clearance_mm: float
     cloud: PointCloud | None = field(default=None, repr=False, compare=False)
     coverage_map: CoverageMap | None = field(default=None, repr=False, compare=False)
+    cycle: CycleTime | None = field(default=None, repr=False, compare=False)
 
     def to_json_dict(self) -> dict[str, Any]:
         """The SPEC §8 keys (and more): plain floats and ints, None where a number is not
@@ -184,11 +179,7 @@ class Metrics:
                 "cycle_time_s": self.cycle_time_s,
                 "scan_time_s": self.scan_time_s,
                 "move_time_s": self.move_time_s,
-                "cycle_time_assumptions": {
-                    "profile_rate_hz": self.profile_rate_hz,
-                    "travel_speed_mm_s": self.travel_speed_mm_s,
-                    "model": CYCLE_TIME_ASSUMPTIONS,
-                },
+                "cycle_time": self.cycle.to_json_dict() if self.cycle else None,
                 "plan_time_s": self.plan_time_s,
                 "eval_time_s": self.eval_time_s,
                 "reward": {

@@ -56,6 +56,8 @@ def table_rows(metrics: Sequence[dict[str, Any]]) -> list[tuple[str, list[str]]]
             continue
         if path == ("in_spec_coverage",):
             label += tolerance_label(metrics) + surface_label(metrics)
+        if path == ("cycle_time_s",):
+            label += cycle_label(metrics)
         rows.append(
             (label, [fmt.format(v) if isinstance(v, int | float) else MISSING for v in values])
         )
@@ -86,3 +88,11 @@ def tolerance_label(metrics: Sequence[dict[str, Any]]) -> str:
         if isinstance(tol, dict) and tol.get("mm") is not None and tol.get("deg") is not None:
             return _TOLERANCE_LABEL.format(mm=round(tol["mm"], 3), deg=round(tol["deg"], 3))
     return ""
+
+
+def cycle_label(metrics: Sequence[dict[str, Any]]) -> str:
+    """' (trapezoidal, kr6-r900 limits)': the arm whose limits timed the cycle."""
+    names = sorted(
+        {n for m in metrics if isinstance(n := lookup(m, ("cycle_time", "limits", "name")), str)}
+    )
+    return f" (trapezoidal, {', '.join(names)} limits)" if names else ""
