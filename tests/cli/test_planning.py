@@ -19,6 +19,12 @@ from scanplan.trajectory import write_csv
 runner = CliRunner()
 
 
+def cycle_line(output: str) -> str:
+    """The one line of a command's output that gives the cycle time."""
+    (line,) = [ln for ln in output.splitlines() if ln.startswith("cycle time ")]
+    return line
+
+
 def test_scan_writes_a_point_cloud_with_error_fields(plate_and_trajectory, tmp_path):
     plate, traj = plate_and_trajectory
     out = tmp_path / "cloud.ply"
@@ -58,17 +64,25 @@ def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
     result = runner.invoke(app, ["plan", str(plate_file), "--planner", "fixed", "-o", str(traj)])
     assert result.exit_code == 0, result.output
     assert traj.read_text().startswith("swath,scanning,x_mm")
+    planned = cycle_line(result.stdout)
+    assert "; trapezoidal, nominal limits)" in planned
     result = runner.invoke(
         app, ["evaluate", str(plate_file), str(traj), "--json", "--points", "128"]
     )
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)  # exactly one JSON object
     assert data["profiles"] > 700 and data["coverage_fraction"] > 0.99
+    # plan and evaluate time the same plan with the same model and limits.
+    cycle = data["cycle_time"]
+    assert cycle["limits"]["name"] == "nominal" and cycle["total_s"] == data["cycle_time_s"]
+    assert f"cycle time {data['cycle_time_s']:.1f} s (scanning " in planned
+    assert f"in {cycle['passes']} pass" in planned
     report = tmp_path / "report"
     result = runner.invoke(
         app, ["evaluate", str(plate_file), str(traj), "--points", "128", "-o", str(report)]
     )
     assert result.exit_code == 0, result.output
+    assert cycle_line(result.stdout) == planned
     names = {p.name for p in report.iterdir()}
     assert {"distance_error.png", "orientation_error.png", "metrics.md", "metrics.json"} <= names
     assert "report.html" in names

@@ -37,6 +37,7 @@ from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
 
 if TYPE_CHECKING:
     from scanplan.context import PlanContext
+    from scanplan.cycle import MotionLimits
     from scanplan.metrics import Metrics
     from scanplan.pipeline import Arm
     from scanplan.trajectory import Trajectory
@@ -170,6 +171,7 @@ def plan_cmd(
     --part-pose is given), and what that cost."""
     # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
     from scanplan.cell import LOWEST
+    from scanplan.cycle import cycle_time
     from scanplan.part import load_part
     from scanplan.pipeline import plan_views
     from scanplan.planners import make_planner
@@ -205,7 +207,24 @@ def plan_cmd(
         f"{int(traj.scanning.sum())} profiles, {traj.path_length_mm():.0f} mm, "
         f"planned in {traj.plan_time_s:.2f} s -> {output}"
     )
+    typer.echo(cycle_time(traj, spec, arm_limits(robot, traj)).line())
     print_plan_notes(traj, spec)
+
+
+def arm_limits(robot: str | None, traj: Trajectory) -> MotionLimits:
+    """The motion limits a plan's cycle is timed with: the arm given, else the one the plan
+    records, else (and for an arm recorded only by a name no preset has) the nominal arm."""
+    # Deferred: the robot package loads the kinematics.
+    from scanplan.cycle import NOMINAL
+    from scanplan.robot import motion_limits
+
+    name = robot or (traj.meta.get("robot") or {}).get("robot")
+    if name is None:
+        return NOMINAL
+    try:
+        return motion_limits(name)
+    except ValueError:
+        return NOMINAL
 
 
 def robot_arm(robot: str | None, tcp: str | None, part_pose: str | None) -> Arm | None:
@@ -319,7 +338,14 @@ def evaluate_cmd(
         typer.echo(note, err=True)
     with progress_bar("evaluating", quiet) as progress:
         metrics = evaluate(
-            the_part, context.spec, traj, seed, points, progress=progress, context=context
+            the_part,
+            context.spec,
+            traj,
+            seed,
+            points,
+            progress=progress,
+            context=context,
+            limits=arm_limits(None, traj),
         )
     if output is not None:
         from scanplan.report import Evaluated, write_report
@@ -337,6 +363,8 @@ def evaluate_cmd(
         typer.echo(json.dumps(data, allow_nan=False))
         return
     typer.echo(metrics_line(metrics, data) + (f" -> {output}" if output is not None else ""))
+    if metrics.cycle is not None:
+        typer.echo(metrics.cycle.line())
 
 
 def judged_context(
