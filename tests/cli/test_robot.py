@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import listing, run_cli, snake_trajectory
 from scanplan.cli import app
-from scanplan.export import parse_program
+from scanplan.export import ExportOptions, parse_program
 from scanplan.export.common import plan_motion
 from scanplan.trajectory import write_csv
 
@@ -31,7 +31,10 @@ def test_export_every_format(plate_and_trajectory, tmp_path, fmt):
     assert result.exit_code == 0, result.output
     assert "--robot none: no reach check" in result.output
     poses, scanning = parse_program(out.read_text(), fmt)
-    expected = read_csv(traj_path).poses.copy()
+    traj = read_csv(traj_path)
+    motion = plan_motion(traj, ExportOptions())  # the thinned targets (in the part's frame)
+    assert f"{fmt}: {len(motion.poses)} targets from {len(traj)} planned poses" in result.output
+    expected = traj.poses[motion.source].copy()
     expected[:, :3, 3] += (500, 0, -200)
     assert np.allclose(poses[:, :3, 3], expected[:, :3, 3], atol=1e-3)
     assert scanning.all()
@@ -61,9 +64,10 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     result = runner.invoke(app, [*args, *poses, *robot, "--travel-speed", "300"])
     assert result.exit_code == 0, result.output
     assert "ur5e: " in result.output  # the UR5e reach check ran (ok or a warning)
-    assert f"rosbag2: {len(TRAJ)} poses" in result.output
+    motion = plan_motion(TRAJ, OPTIONS)
+    assert f"rosbag2: {len(motion.poses)} targets from {len(TRAJ)} planned poses" in result.output
     contents = read_rosbag(out)
-    expected = OPTIONS.part_pose @ TRAJ.poses
+    expected = motion.poses
     assert np.abs(contents.poses[:, :3, 3] - expected[:, :3, 3]).max() <= 1e-6
     np.testing.assert_array_equal(contents.speed_mm_s, plan_motion(TRAJ, OPTIONS).speed_mm_s)
 

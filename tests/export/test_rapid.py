@@ -1,4 +1,4 @@
-"""ABB RAPID: one MoveL per pose, fine zones at pass ends, the tool data."""
+"""ABB RAPID: one MoveL per thinned target, fine zones at pass ends, the tool data, SetDO."""
 
 from __future__ import annotations
 
@@ -26,11 +26,16 @@ def test_rapid_structure() -> None:
     np.testing.assert_allclose(
         [float(v) for v in wobj.group(1).split(",")], OPTIONS.part_pose[:3, 3], atol=1e-6
     )
-    assert len(moves) == len(TRAJ)
     m = plan_motion(TRAJ, OPTIONS)
+    assert len(moves) == len(m.poses) < len(TRAJ)
     zones = np.array([z for _, _, z in moves])
     assert np.all(zones[m.pass_start | m.pass_end | ~m.scanning] == "fine")
-    assert np.all(zones[m.blend_mm > 0] == "zScan")
+    # Each blend a zone of its own radius, rounded down (in 0.01 mm) so the cap still holds.
+    radii = dict(re.findall(r"CONST zonedata (\w+) := \[FALSE,([^,]+),", text))
+    for z, b in zip(zones, m.blend_mm, strict=True):
+        if z != "fine":
+            assert b - 0.01 < float(radii[z]) <= b
+    assert text.count("SetDO doScan, 1;") == text.count("SetDO doScan, 0;") == 3
     tool = re.search(r"tooldata tSensor := \[TRUE,\[\[([^\]]*)\],\[([^\]]*)\]\]", text)
     assert tool is not None
     np.testing.assert_allclose([float(v) for v in tool.group(1).split(",")], [12, -3, 180])

@@ -25,12 +25,12 @@ def test_urscript_structure() -> None:
     movel = re.findall(
         r"movel\(pose_trans\(feature, p\[[^\]]*\]\), a=([^,]+), v=([^,]+), r=([^)]+)\)", text
     )
-    assert len(movel) == len(TRAJ)
+    m = plan_motion(TRAJ, OPTIONS)
+    assert len(movel) == len(m.poses) < len(TRAJ)
     feature = re.search(r"feature = p\[([^\]]*)\]", text)
     assert feature is not None
     part = np.array([float(x) for x in feature.group(1).split(",")])
     np.testing.assert_allclose(part[:3], OPTIONS.part_pose[:3, 3] / 1000, atol=1e-9)
-    m = plan_motion(TRAJ, OPTIONS)
     r = np.array([float(x[2]) for x in movel])
     assert np.all(r[m.pass_start | m.pass_end | ~m.scanning] == 0)
     np.testing.assert_allclose(r, m.blend_mm / 1000, atol=1e-9)
@@ -39,6 +39,8 @@ def test_urscript_structure() -> None:
     assert {float(x[0]) for x in movel} == {1.0}
     assert len(re.findall(r"# pass \d+ start", text)) == 3
     assert len(re.findall(r"# pass \d+ end", text)) == 3
+    assert len(re.findall(r"set_standard_digital_out\(0, True\)", text)) == 3
+    assert len(re.findall(r"set_standard_digital_out\(0, False\)", text)) == 3
     tcp = re.search(r"set_tcp\(p\[([^\]]*)\]\)", text)
     assert tcp is not None
     vals = np.array([float(x) for x in tcp.group(1).split(",")])

@@ -8,7 +8,8 @@ import numpy as np
 from typer.testing import CliRunner
 
 from scanplan.cli import app
-from scanplan.export import parse_pose_arg, parse_program
+from scanplan.export import ExportOptions, parse_pose_arg, parse_program
+from scanplan.export.common import plan_motion
 from scanplan.robot import check_reach
 from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import fit_to_robot
@@ -93,14 +94,14 @@ def test_plan_for_an_arm_then_export_with_what_the_plan_records(tmp_path):
     assert result.exit_code == 0, result.output
     assert "--robot ur3e (the plan's)" in result.output and out.exists()
     assert "0 unreachable, 0 beyond joint limits" in result.output + result.stderr
-    # Every pass is entered by a joint move into its configuration, then flown linearly:
-    # the program still parses back to the planned poses.
+    # The program's first target and every pass are entered by a joint move into its
+    # configuration, then flown linearly: the program parses back to the thinned targets.
     text = out.read_text()
     planned = read_json(plan)
     passes = len(np.unique(planned.swath[planned.scanning]))
-    assert text.count("movej([") == passes
+    assert text.count("movej([") == passes + int(not planned.scanning[0])
     poses, _ = parse_program(text, "urscript")
-    assert len(poses) == len(planned)
+    assert len(poses) == len(plan_motion(planned, ExportOptions()).poses) < len(planned)
     # An option needs the arm it refers to.
     result = runner.invoke(app, ["plan", "drone", "--tcp", "0,0,90,0,0,0", "-o", str(plan)])
     assert result.exit_code == 2 and "--tcp needs --robot" in result.stderr

@@ -55,6 +55,35 @@ ReachRobotOpt = Annotated[
     str | None,
     typer.Option(help=ROBOT_HELP + "; default: the arm the plan was made for, if any"),
 ]
+ChordTolOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--chord-tol",
+        metavar="MM",
+        help="how far the thinned, blended path may stray from a planned pose, mm (> 0); "
+        "default 1/25 of the in-spec depth tolerance (0.5 mm)",
+        callback=POSITIVE,
+    ),
+]
+AngleTolOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--angle-tol",
+        metavar="DEG",
+        help="how far its orientation may turn from a planned pose's, degrees (> 0); "
+        "default 1/30 of the in-spec angle tolerance (0.5 deg)",
+        callback=POSITIVE,
+    ),
+]
+ScanOutputOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scan-output",
+        help="the output switched on over each pass for the sensor's acquisition: URScript "
+        "standard digital output 0-7 (default 0), KRL $OUT number (default 1), RAPID signal "
+        "name (default doScan)",
+    ),
+]
 AllowUnreachableOpt = Annotated[
     bool,
     typer.Option(
@@ -76,6 +105,9 @@ def export_cmd(
     profile_rate: ProfileRateOpt = ScanSpec.profile_rate_hz,
     spacing: SpacingOpt = ScanSpec.delta_s_opt_mm,
     travel_speed: TravelSpeedOpt = ScanSpec.travel_speed_mm_s,
+    chord_tol: ChordTolOpt = None,
+    angle_tol: AngleTolOpt = None,
+    scan_output: ScanOutputOpt = None,
     allow_unreachable: AllowUnreachableOpt = False,
     quiet: QuietOpt = False,
 ):
@@ -113,19 +145,36 @@ def export_cmd(
             delta_s_opt_mm=spacing, profile_rate_hz=profile_rate, travel_speed_mm_s=travel_speed
         ),
         program_name=name if name and fmt == "krl" else "scanplan_path",
+        chord_tol_mm=chord_tol,
+        angle_tol_deg=angle_tol,
+        scan_output=scan_output,
     )
-    plan_motion(traj, options)  # refuse an unexportable trajectory before the reach check
+    motion = plan_motion(traj, options)  # refuse an unexportable plan before the reach check
     if robot.lower() == "none":
         typer.echo("--robot none: no reach check; the program is not known to be flyable")
     else:
+        from scanplan.robot import get_robot  # deferred: as the exporters above
+
         joints = check_flyable(traj, options, robot, quiet, allow_unreachable)
-        options = replace(options, joints_rad=joints)  # each pass entered by a joint move
+        # Each pass entered by a joint move, in the configuration the arm's terms name.
+        options = replace(options, joints_rad=joints, arm=get_robot(robot))
     text = export_program(traj, fmt, options) if fmt in FORMATS else None
     if text is not None:
         atomic_write_text(output, text)
     else:
         export_rosbag(traj, output, options)
-    typer.echo(f"{fmt}: {len(traj)} poses, scan speed {options.scan_speed:.1f} mm/s -> {output}")
+    typer.echo(
+        f"{fmt}: {len(motion.poses)} targets from {motion.n_planned} planned poses, "
+        f"scan speed {options.scan_speed:.1f} mm/s -> {output}"
+    )
+    # Deferred: as the exporters above.
+    from scanplan.cycle import NOMINAL, cycle_time
+    from scanplan.robot import motion_limits
+
+    none = robot.lower() == "none"
+    limits = NOMINAL if none else motion_limits(robot)
+    cycle = cycle_time(traj, options.scan, limits, options.joints_rad)
+    typer.echo(cycle.line() + (" (--robot none: a nominal arm's limits)" if none else ""))
 
 
 def arm_of(

@@ -11,14 +11,31 @@ import re
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.export.thinning import thin
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory, pass_bounds
 
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, RAPID 32
+
+# Thinning defaults, as shares of the in-spec tolerances (ScanSpec): the flown path may stray
+# 1/25 of the depth tolerance (0.5 mm of Z_r/20 = 12.5 mm for the default sensor) and 1/30 of
+# the angle tolerance (0.5° of 15°), so a point in spec by the plan stays in spec flown unless
+# it was within a few percent of a limit, and coverage moves by well under 0.01.
+DEFAULT_CHORD_SHARE = 1.0 / 25.0
+DEFAULT_ANGLE_SHARE = 1.0 / 30.0
+
+
+class Kinematics(Protocol):
+    """What a dialect needs of the arm (`scanplan.robot.Robot` has it): (…, 3) signed terms
+    per joint vector — sin of the wrist angle, the elbow's side of the line through the
+    upper arm, the wrist centre's x in the frame turning with axis 1 (mm)."""
+
+    def singularity_terms(self, q: np.ndarray) -> np.ndarray: ...
 
 
 def _check_rigid(name: str, T: np.ndarray) -> np.ndarray:
@@ -44,10 +61,21 @@ class ExportOptions:
     scan:      the ScanSpec: scan speed = its profile rate × Δs_opt (the speed at which
                profiles land Δs_opt apart) unless `scan_speed_mm_s` is given; its travel speed
                between passes.
-    joints_rad: (n, 6) the arm's joint angles at each target (the reach check's, as its
-               controller counts them), None: no arm checked. With them, the program reaches
-               the first target of every pass by a joint move into that configuration (the
-               arm may reconfigure only between passes), then moves linearly as before.
+    joints_rad: (n, 6) the arm's joint angles at each planned pose (the reach check's, as
+               its controller counts them), None: no arm checked. With them, the program
+               reaches the first target of every pass by a joint move into that configuration
+               (the arm may reconfigure only between passes), then moves linearly as before.
+    arm:       the arm those joints are of (anything with the robot's `singularity_terms`),
+               for the configuration a dialect writes with a Cartesian target (KUKA Status,
+               ABB cfx); None: no arm.
+    chord_tol_mm, angle_tol_deg: how far the flown path may stray from the planned poses
+               once each run is thinned to few targets (`scanplan.export.thinning`); None:
+               the defaults, `DEFAULT_CHORD_SHARE` of the in-spec depth tolerance and
+               `DEFAULT_ANGLE_SHARE` of the in-spec angle tolerance.
+    blend_mm:  the largest blend radius (further capped per target, see `plan_motion`).
+    scan_output: the output that switches the sensor's acquisition on over each pass: a
+               digital output number (URScript standard output 0-7, KRL $OUT 1-4096) or a
+               RAPID signal name; None: each dialect's default (`DEFAULT_SCAN_OUTPUT`).
     """
 
     part_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -55,10 +83,14 @@ class ExportOptions:
     scan: ScanSpec = field(default_factory=ScanSpec)
     scan_speed_mm_s: float | None = None
     accel_mm_s2: float = 1000.0
-    blend_mm: float = 1.0
+    blend_mm: float = 5.0
     program_name: str = "scanplan_path"
     ros_frame_id: str = "base_link"
     joints_rad: np.ndarray | None = None
+    arm: Kinematics | None = None
+    chord_tol_mm: float | None = None
+    angle_tol_deg: float | None = None
+    scan_output: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "part_pose", _check_rigid("part pose", self.part_pose))
@@ -71,6 +103,10 @@ class ExportOptions:
             raise ValueError(
                 f"export option scan_speed_mm_s must be > 0, got {self.scan_speed_mm_s}"
             )
+        tolerances = (("chord_tol_mm", self.chord_tol_mm), ("angle_tol_deg", self.angle_tol_deg))
+        for what, tol in tolerances:
+            if tol is not None and not (np.isfinite(tol) and tol > 0):
+                raise ValueError(f"export option {what} must be a finite number > 0, got {tol}")
         if not np.isfinite(self.blend_mm) or self.blend_mm < 0:
             raise ValueError(f"export option blend_mm must be >= 0, got {self.blend_mm}")
         if not _IDENT.fullmatch(self.program_name):
@@ -90,10 +126,26 @@ class ExportOptions:
     def travel_speed_mm_s(self) -> float:
         return self.scan.travel_speed_mm_s
 
+    @property
+    def chord_tol(self) -> float:
+        """mm the thinned path may stray from a planned pose's position."""
+        if self.chord_tol_mm is not None:
+            return float(self.chord_tol_mm)
+        return DEFAULT_CHORD_SHARE * self.scan.tolerance_mm
+
+    @property
+    def angle_tol_rad(self) -> float:
+        """rad the thinned path may turn away from a planned pose's orientation."""
+        if self.angle_tol_deg is not None:
+            return float(np.radians(self.angle_tol_deg))
+        return DEFAULT_ANGLE_SHARE * self.scan.tol_angle_rad
+
 
 @dataclass(frozen=True)
 class Motion:
-    """The program every dialect writes, one entry per target pose.
+    """The program every dialect writes, one entry per target pose: the planned poses thinned
+    run by run (`scanplan.export.thinning`) to the fewest within the options' chord and angle
+    tolerances.
 
     poses:      (n, 4, 4) `T_base_sensor`, mm.
     poses_part: (n, 4, 4) `T_part_sensor`, mm: the targets a program writes under a work
@@ -103,6 +155,8 @@ class Motion:
     pass_start, pass_end: (n,) bool — first / last pose of each scanning run.
     speed_mm_s: (n,) speed of the move that ends at pose i.
     blend_mm:   (n,) blend radius at pose i; 0 = exact stop (pass ends and transitions).
+    source:     (n,) int, the index of each target among the planned poses.
+    n_planned:  how many planned poses the targets were thinned from.
     """
 
     poses: np.ndarray
@@ -114,24 +168,54 @@ class Motion:
     blend_mm: np.ndarray
     poses_part: np.ndarray
     part_pose: np.ndarray
+    source: np.ndarray
+    n_planned: int
 
 
 def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     if len(traj) == 0:
         raise ValueError("cannot export an empty trajectory")
-    poses = options.part_pose @ traj.poses
     start, end = pass_bounds(traj.scanning, traj.swath)
+    # Pass starts and ends stay targets (the acquisition switches there); every run between
+    # them, scanning or not, keeps the fewest poses within the tolerances.
+    keep = thin(traj.poses, start | end, options.chord_tol, options.angle_tol_rad)
+    poses_part = traj.poses[keep]
+    poses = options.part_pose @ poses_part
+    scanning, start, end = traj.scanning[keep], start[keep], end[keep]
     # Entering a pass is still a travel move; only moves between two recorded poses scan.
-    speed = np.where(traj.scanning & ~start, options.scan_speed, options.travel_speed_mm_s)
-    # Blends of neighbouring targets must not overlap (UR stops with an error if they do,
-    # RAPID/KRL shrink them silently): cap each radius at half the shorter adjacent segment.
-    seg = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
-    room = 0.5 * np.minimum(np.r_[np.inf, seg], np.r_[seg, np.inf])
-    blend = np.minimum(options.blend_mm, room)
-    blend = np.where(traj.scanning & ~start & ~end, blend, 0.0)
+    speed = np.where(scanning & ~start, options.scan_speed, options.travel_speed_mm_s)
     return Motion(
-        poses, traj.scanning, traj.swath, start, end, speed, blend, traj.poses, options.part_pose
+        poses,
+        scanning,
+        traj.swath[keep],
+        start,
+        end,
+        speed,
+        blend_radii(poses, scanning & ~start & ~end, options),
+        poses_part,
+        options.part_pose,
+        keep,
+        len(traj),
     )
+
+
+def blend_radii(poses: np.ndarray, inner: np.ndarray, options: ExportOptions) -> np.ndarray:
+    """(n,) blend radius at each target, mm; 0 (exact stop) where `inner` is not set.
+
+    A blend of radius r around a corner that turns the path by θ cuts it by at most
+    r·sin(θ/2): capped so that stays within the chord tolerance. Blends of neighbouring
+    targets must not overlap either (UR stops with an error if they do, RAPID/KRL shrink them
+    silently): capped at half the shorter adjacent move.
+    """
+    step = np.diff(poses[:, :3, 3], axis=0)
+    seg = np.linalg.norm(step, axis=1)
+    room = 0.5 * np.minimum(np.r_[np.inf, seg], np.r_[seg, np.inf])
+    unit = step / np.maximum(seg, 1e-12)[:, None]
+    cos_turn = np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0)
+    half_sin = np.r_[0.0, np.sqrt((1.0 - cos_turn) / 2.0), 0.0]  # sin(θ/2) at each target
+    cut = np.where(half_sin > 1e-12, options.chord_tol / np.maximum(half_sin, 1e-12), np.inf)
+    blend = np.minimum(np.minimum(options.blend_mm, room), cut)
+    return np.where(inner, blend, 0.0)
 
 
 def flange_poses(traj: Trajectory, options: ExportOptions) -> np.ndarray:
@@ -234,14 +318,38 @@ JOINT_SPEED_DEG_S = 60.0
 JOINT_ACCEL_DEG_S2 = 120.0
 
 
-def joint_move_targets(motion: Motion, options: ExportOptions) -> dict[int, np.ndarray]:
-    """{target index: joint angles (6,) rad} where the program moves by joint: the first
-    target of every pass, when the options carry the arm's joints."""
+def target_joints(motion: Motion, options: ExportOptions) -> np.ndarray | None:
+    """(n, 6) the arm's joint angles at each target (rad), None when the options carry none."""
     if options.joints_rad is None:
-        return {}
+        return None
     joints = np.asarray(options.joints_rad, dtype=np.float64)
-    if joints.shape != (len(motion.poses), 6):
-        raise ValueError(f"joints must be ({len(motion.poses)}, 6), got {joints.shape}")
-    return {
-        int(i): joints[i] for i in np.flatnonzero(motion.pass_start) if np.isfinite(joints[i]).all()
-    }
+    if joints.shape != (motion.n_planned, 6):
+        raise ValueError(f"joints must be ({motion.n_planned}, 6), got {joints.shape}")
+    return joints[motion.source]
+
+
+def joint_move_targets(motion: Motion, options: ExportOptions) -> dict[int, np.ndarray]:
+    """{target index: joint angles (6,) rad} where the program moves by joint: its first
+    target and the first of every pass, when the options carry the arm's joints."""
+    joints = target_joints(motion, options)
+    if joints is None:
+        return {}
+    where = np.flatnonzero(motion.pass_start | (np.arange(len(motion.poses)) == 0))
+    return {int(i): joints[i] for i in where if np.isfinite(joints[i]).all()}
+
+
+def scan_output(options: ExportOptions, default: str, kind: str) -> str:
+    """The acquisition output a dialect writes: `options.scan_output` or `default`, checked
+    as `kind` "number LO-HI" (a digital output number) or "name" (a signal identifier)."""
+    value = default if options.scan_output is None else str(options.scan_output).strip()
+    if kind == "name":
+        if not _IDENT.fullmatch(value):
+            raise ValueError(
+                f"scan output {value!r} must be a signal name (a letter, then letters, digits "
+                "or underscores)"
+            )
+        return value
+    lo, hi = (int(v) for v in kind.split()[1].split("-"))
+    if not (value.isdigit() and lo <= int(value) <= hi):
+        raise ValueError(f"scan output {value!r} must be a digital output number {lo}-{hi}")
+    return str(int(value))

@@ -1,4 +1,5 @@
-"""Universal Robots URScript: one `movel` per pose, metres and rotation vectors."""
+"""Universal Robots URScript: `movel` with blend radii through the thinned targets, metres and
+rotation vectors; the acquisition switched by a standard digital output around each pass."""
 
 from __future__ import annotations
 
@@ -17,9 +18,11 @@ from scanplan.export.common import (
     floats,
     joint_move_targets,
     poses_from_parts,
+    scan_output,
 )
 
 SUFFIX = ".script"
+DEFAULT_SCAN_OUTPUT = "0"  # standard digital output 0
 # movel(pose_trans(feature, p[...]), ...): a target in the part's feature frame.
 _MOVEL = re.compile(
     r"movel\(pose_trans\(feature,\s*p\[([^\]]*)\]\),\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)"
@@ -39,6 +42,7 @@ def _poses_m(T: np.ndarray) -> list[str]:
 def write(motion: Motion, options: ExportOptions) -> str:
     name = options.program_name
     a = options.accel_mm_s2 / 1000.0
+    out_n = scan_output(options, DEFAULT_SCAN_OUTPUT, "number 0-7")
     out = [
         f"# {name}: laser-profilometer scan path written by scanplan",
         "# Targets are T_part_sensor, the sensor pose in the part's frame, flown as",
@@ -46,12 +50,19 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "# (T_base_part); calibrate it (a feature plane on the pendant) and nothing else changes.",
         "# set_tcp below makes the sensor the TCP. Units: metres,"
         "# rotation vectors in radians, speeds m/s, accelerations m/s^2, blend radii metres.",
-        f"# {len(motion.poses)} targets, {int(motion.pass_start.sum())} scanning runs; "
-        f"scan speed {options.scan_speed:g} mm/s, travel {options.travel_speed_mm_s:g} mm/s.",
+        f"# {len(motion.poses)} targets from {motion.n_planned} planned poses, "
+        f"{int(motion.pass_start.sum())} scanning runs; scan speed {options.scan_speed:g} mm/s, "
+        f"travel {options.travel_speed_mm_s:g} mm/s.",
+        f"# Each run is thinned to the fewest targets within {options.chord_tol:g} mm and "
+        f"{np.degrees(options.angle_tol_rad):g} deg of the plan.",
         "# Blend r = 0 at every run start/end and transition, so the sensor triggers on a "
         "stopped robot;",
-        f"# elsewhere r = {options.blend_mm:g} mm, capped at half the distance to the "
-        "neighbouring targets so blends never overlap.",
+        f"# elsewhere r <= {options.blend_mm:g} mm, capped so a blend cuts the path by at most "
+        "the chord tolerance",
+        "# and at half the distance to the neighbouring targets so blends never overlap.",
+        f"# Acquisition: standard digital output {out_n} is set True at each run's first target "
+        "and False at its last;",
+        "# wire it to the sensor's acquisition enable.",
         f"def {name}():",
         f"  set_tcp({_poses_m(options.tcp[None])[0]})",
         f"  feature = {_poses_m(motion.part_pose[None])[0]}",
@@ -70,9 +81,9 @@ def write(motion: Motion, options: ExportOptions) -> str:
         out.append(f"  movel(pose_trans(feature, {target}), a={a:.6g}, v={v:.6g}, r={r:.6g})")
         if motion.pass_start[i]:
             out.append(f'  textmsg("scanplan: pass {k} start")')
-            out.append("  # set_digital_out(0, True)  # hook: start the sensor's acquisition")
+            out.append(f"  set_standard_digital_out({out_n}, True)  # acquisition on")
         if motion.pass_end[i]:
-            out.append("  # set_digital_out(0, False)  # hook: stop the sensor's acquisition")
+            out.append(f"  set_standard_digital_out({out_n}, False)  # acquisition off")
             out.append(f'  textmsg("scanplan: pass {k} end")')
             out.append(f"  # pass {k} end")
     out += ["end", "", f"{name}()", ""]
