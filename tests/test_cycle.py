@@ -10,9 +10,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from helpers import run_cli
 from scanplan.cycle import NOMINAL, MotionLimits, cycle_time, trapezoid_time_s
 from scanplan.quantities import ScanSpec
-from scanplan.trajectory import Trajectory
+from scanplan.robot import motion_limits
+from scanplan.swaths import Swath
+from scanplan.trajectory import Trajectory, write_csv
 
 # Limits whose rotation and joints never bind unless a test says so.
 FAST = replace(NOMINAL, name="fast", angular_speed_deg_s=1e6, angular_accel_deg_s2=1e9)
@@ -144,3 +147,39 @@ def test_json_and_limits_validation() -> None:
         replace(NOMINAL, joint_speed_deg_s=(1.0,) * 5)
     with pytest.raises(ValueError, match="accel_mm_s2"):
         MotionLimits("x", 1.0, 0.0, 1.0, 1.0, (1.0,) * 6, (1.0,) * 6)
+
+
+def raster(length_mm: float = 200.0, passes: int = 2, n: int = 30) -> Trajectory:
+    """Boustrophedon passes along x, 60 mm apart at z = 150 mm, sensor down."""
+    poses, swath = [], []
+    for k in range(passes):
+        y = (k - (passes - 1) / 2) * 60.0
+        a, b = np.array([-length_mm / 2, y, 150.0]), np.array([length_mm / 2, y, 150.0])
+        a, b = (b, a) if k % 2 else (a, b)
+        u = (b - a) / np.linalg.norm(b - a)
+        sw = Swath(k, a, b, u, np.cross([0, 0, 1.0], u))
+        poses.append(sw.poses(np.linspace(0, length_mm, n), np.zeros(n), np.zeros(n)))
+        swath.append(np.full(n, k))
+    return Trajectory(np.concatenate(poses), np.concatenate(swath), np.ones(passes * n, bool))
+
+
+def test_export_prints_the_cycle_time_on_the_chosen_arm(tmp_path) -> None:
+    """On the KR 6 (a part pose `scanplan place` found) the move into the second pass is a
+    joint move; with --robot none the nominal arm times it, and the output says so."""
+    plan = tmp_path / "t.csv"
+    traj = raster()
+    write_csv(traj, plan)
+    args = ["export", str(plan), "--format", "krl", "--tcp", "0,0,90,0,0,0"]
+    args += ["--part-pose", "355.966,0,-200,0,0,0", "-o", str(tmp_path / "p.src")]
+    result = run_cli(*args, "--robot", "kr6-r900")
+    assert result.exit_code == 0, result.output
+    (line,) = [ln for ln in result.stdout.splitlines() if ln.startswith("cycle time ")]
+    assert line.endswith("in 2 passes, moving 0.9 s, 1 joint moves; trapezoidal, kr6-r900 limits)")
+    scanning = cycle_time(traj, ScanSpec(), motion_limits("kr6-r900")).scanning_s
+    assert f"(scanning {scanning:.1f} s in 2 passes" in line
+    result = run_cli(*args, "--robot", "none")
+    assert result.exit_code == 0, result.output
+    (line,) = [ln for ln in result.stdout.splitlines() if ln.startswith("cycle time ")]
+    expected = cycle_time(traj, ScanSpec(), NOMINAL).line()
+    assert line == expected + ", --robot none: timed on a nominal arm"
+    assert "nominal limits" in line

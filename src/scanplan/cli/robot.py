@@ -174,7 +174,7 @@ def export_cmd(
     none = robot.lower() == "none"
     limits = NOMINAL if none else motion_limits(robot)
     cycle = cycle_time(traj, options.scan, limits, options.joints_rad)
-    typer.echo(cycle.line() + (" (--robot none: a nominal arm's limits)" if none else ""))
+    typer.echo(cycle.line() + (", --robot none: timed on a nominal arm" if none else ""))
 
 
 def arm_of(
