@@ -51,7 +51,7 @@ def test_straight_pass_is_the_closed_form_trapezoid(length, v, a) -> None:
     expected = length / v + v / a if length >= v * v / a else 2.0 * math.sqrt(length / a)
     assert ct.total_s == pytest.approx(expected, rel=1e-12)
     assert ct.scanning_s == ct.total_s and ct.moving_s == 0.0
-    assert ct.passes == 1 and len(ct.move_s) == 0
+    assert ct.runs == ct.swaths == 1 and len(ct.move_s) == 0
 
 
 def test_trapezoid_is_continuous_where_cruise_is_first_reached() -> None:
@@ -137,6 +137,26 @@ def test_a_joint_move_is_timed_by_its_slowest_joint() -> None:
     fallback = cycle_time(traj, spec_at(100.0), limits, joints_rad=q)
     assert fallback.joint_moves == 0
     assert fallback.move_s[0] == pytest.approx(cartesian_before + 100.0 / 250.0 + 250.0 / a)
+
+
+def test_a_program_stops_only_at_its_targets() -> None:
+    """Timed on a program's thinned targets, a straight move's via point is no stop, and a
+    pass keeps its time; runs stay apart though the poses between them are thinned away."""
+    traj = two_passes_and_a_move()
+    spec = spec_at(100.0, travel_mm_s=250.0)
+    a = FAST.accel_mm_s2
+    # Drop pass 0's middle pose and the move's second via point (200,300,100): the flown
+    # move then goes up, then diagonally down to the start of pass 1.
+    ct = cycle_time(traj, spec, FAST, targets=np.array([0, 2, 3, 5, 6, 7]))
+    np.testing.assert_allclose(ct.pass_s, [2.0 + 100.0 / a, 2.0 + 100.0 / a])
+    diagonal = math.hypot(300.0, 100.0)
+    np.testing.assert_allclose(ct.move_s, [sum(d / 250 + 250 / a for d in (100.0, diagonal))])
+    # Two runs of one pass with a gap of non-scanning poses, all thinned away.
+    xyz = np.array([[0, 0, 0], [10, 0, 0], [20, 0, 0], [30, 0, 0], [40, 0, 0]], float)
+    gap = Trajectory(poses_at(xyz), [0] * 5, [True, True, False, True, True])
+    ct = cycle_time(gap, spec, FAST, targets=np.array([0, 1, 3, 4]))
+    assert ct.runs == 2 and ct.swaths == 1 and "in 1 pass (2 runs)" in ct.line()
+    np.testing.assert_allclose(ct.move_s, [2.0 * math.sqrt(20.0 / a)])
 
 
 def test_json_and_limits_validation() -> None:

@@ -117,7 +117,8 @@ def trapezoid_time_s(distance: Any, speed: Any, accel: Any) -> np.ndarray:
 class CycleTime:
     """How long the arm takes to fly a trajectory (`CYCLE_TIME_MODEL`), in seconds.
 
-    pass_s: (p,) per pass (scanning run, as `trajectory.pass_bounds` delimits them).
+    pass_s: (p,) per scanning run (`trajectory.pass_bounds`: a pass, or a piece of one where
+    poses were dropped or the arm reconfigures); swaths: the passes they belong to.
     move_s: (m,) per move (a run of non-scanning segments: between passes or views, before
     the first, after the last). joint_moves: moves into a pass timed by the arm's joints.
     """
@@ -130,19 +131,21 @@ class CycleTime:
     scan_speed_mm_s: float
     travel_speed_mm_s: float
     joint_moves: int
+    swaths: int
     limits: MotionLimits
 
     @property
-    def passes(self) -> int:
+    def runs(self) -> int:
         return len(self.pass_s)
 
     def line(self) -> str:
         """'cycle time 83.4 s (scanning 61.2 s in 42 passes, moving 22.2 s; trapezoidal,
         kr6-r900 limits)': what `plan`, `evaluate` and `export` print."""
         joints = f", {self.joint_moves} joint moves" if self.joint_moves else ""
+        runs = f" ({self.runs} runs)" if self.runs != self.swaths else ""
         return (
             f"cycle time {self.total_s:.1f} s (scanning {self.scanning_s:.1f} s in "
-            f"{self.passes} pass{'es' * (self.passes != 1)}, moving {self.moving_s:.1f} s"
+            f"{self.swaths} pass{'es' * (self.swaths != 1)}{runs}, moving {self.moving_s:.1f} s"
             f"{joints}; trapezoidal, {self.limits.name} limits)"
         )
 
@@ -151,10 +154,11 @@ class CycleTime:
             "total_s": self.total_s,
             "scanning_s": self.scanning_s,
             "moving_s": self.moving_s,
-            "passes": self.passes,
+            "passes": self.swaths,
+            "runs": self.runs,
             "moves": len(self.move_s),
             "joint_moves": self.joint_moves,
-            "pass_s": [float(t) for t in self.pass_s],
+            "run_s": [float(t) for t in self.pass_s],
             "move_s": [float(t) for t in self.move_s],
             "scan_speed_mm_s": self.scan_speed_mm_s,
             "travel_speed_mm_s": self.travel_speed_mm_s,
@@ -175,6 +179,7 @@ def cycle_time(
     spec: ScanSpec,
     limits: MotionLimits = NOMINAL,
     joints_rad: np.ndarray | None = None,
+    targets: np.ndarray | None = None,
 ) -> CycleTime:
     """The time `traj` takes on an arm with `limits` (`CYCLE_TIME_MODEL`): passes at the
     spec's scan speed, moves at its travel speed, both capped by the arm's Cartesian speed.
@@ -182,19 +187,30 @@ def cycle_time(
     joints_rad: (n, 6) the arm's joints at each pose (the reach check's), NaN where none was
     found; with them each pass is entered by a joint move timed by its slowest joint, and
     the joints bound every other segment too.
+    targets: increasing indices of the poses a program flies between (a robot program's
+    thinned targets, every pass's first and last pose among them); None: every pose.
     """
-    n = len(traj)
-    start, _ = pass_bounds(traj.scanning, traj.swath)
+    start, _ = pass_bounds(traj.scanning, traj.swath)  # the passes as planned
+    swaths = len(np.unique(traj.swath[traj.scanning]))
+    poses, scanning = traj.poses, traj.scanning
+    if targets is not None:
+        keep = np.asarray(targets, dtype=np.intp)
+        poses, scanning, start = poses[keep], scanning[keep], start[keep]
+        if joints_rad is not None:
+            joints_rad = np.asarray(joints_rad, dtype=np.float64)[keep]
+    n = len(poses)
     n_pass = int(start.sum())
     scan_v = min(spec.scan_speed_mm_s, limits.speed_mm_s)
     travel_v = min(spec.travel_speed_mm_s, limits.speed_mm_s)
     accel = limits.accel_mm_s2
     if n < 2:
-        return CycleTime(0.0, 0.0, 0.0, np.zeros(n_pass), np.zeros(0), scan_v, travel_v, 0, limits)
-    length = np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)
-    turn = _rotation_deg(traj.poses)
+        return CycleTime(
+            0.0, 0.0, 0.0, np.zeros(n_pass), np.zeros(0), scan_v, travel_v, 0, swaths, limits
+        )
+    length = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+    turn = _rotation_deg(poses)
     # Segment i runs from pose i to pose i+1; it scans if it ends inside a pass.
-    in_pass = traj.scanning[1:] & ~start[1:]
+    in_pass = scanning[1:] & ~start[1:]
     joint_cruise = np.zeros(n - 1)  # lower bound on a segment's time from its joints
     joint_trap = np.full(n - 1, np.nan)  # rest-to-rest joint move, slowest joint
     if joints_rad is not None:
@@ -243,5 +259,6 @@ def cycle_time(
         scan_speed_mm_s=scan_v,
         travel_speed_mm_s=travel_v,
         joint_moves=int(joint_move.sum()),
+        swaths=swaths,
         limits=limits,
     )

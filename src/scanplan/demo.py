@@ -16,6 +16,7 @@ import numpy as np
 
 from scanplan.context import judged_alike, recorded
 from scanplan.export import ExportOptions, export_program, parse_program
+from scanplan.export.common import plan_motion
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, load_part
 from scanplan.pipeline import plan_views
@@ -76,7 +77,11 @@ def run_demo(
     contexts = judged_alike([recorded(t, spec) for t in trajectories.values()])
     for (name, traj), context in zip(trajectories.items(), contexts, strict=True):
         step(f"evaluating {name} ({int(traj.scanning.sum())} profiles, {context.surface} surface)")
-        metrics[name] = evaluate(part, spec, traj, seed, points_per_profile, context=context)
+        # The cycle timed as the exported program flies it: between its thinned targets.
+        targets = plan_motion(traj, ExportOptions(scan=spec)).source
+        metrics[name] = evaluate(
+            part, spec, traj, seed, points_per_profile, context=context, targets=targets
+        )
 
     step("writing the URScript program")
     best = trajectories["rl"]

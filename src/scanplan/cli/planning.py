@@ -36,6 +36,8 @@ from scanplan.quantities import COVERAGE_TARGET, OVERLAP, ScanSpec
 from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from scanplan.context import PlanContext
     from scanplan.cycle import MotionLimits
     from scanplan.metrics import Metrics
@@ -207,8 +209,18 @@ def plan_cmd(
         f"{int(traj.scanning.sum())} profiles, {traj.path_length_mm():.0f} mm, "
         f"planned in {traj.plan_time_s:.2f} s -> {output}"
     )
-    typer.echo(cycle_time(traj, spec, arm_limits(robot, traj)).line())
+    cycle = cycle_time(traj, spec, arm_limits(robot, traj), targets=program_targets(traj, spec))
+    typer.echo(cycle.line())
     print_plan_notes(traj, spec)
+
+
+def program_targets(traj: Trajectory, spec: ScanSpec) -> np.ndarray:
+    """The poses a robot program of `traj` flies between (export's thinned targets at its
+    default tolerances): where the cycle time is timed, so plan, evaluate and export agree."""
+    # Deferred: export loads the writers of every dialect.
+    from scanplan.export import ExportOptions, plan_motion
+
+    return plan_motion(traj, ExportOptions(scan=spec)).source
 
 
 def arm_limits(robot: str | None, traj: Trajectory) -> MotionLimits:
@@ -346,6 +358,7 @@ def evaluate_cmd(
             progress=progress,
             context=context,
             limits=arm_limits(None, traj),
+            targets=program_targets(traj, context.spec),
         )
     if output is not None:
         from scanplan.report import Evaluated, write_report

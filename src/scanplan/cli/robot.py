@@ -173,7 +173,7 @@ def export_cmd(
 
     none = robot.lower() == "none"
     limits = NOMINAL if none else motion_limits(robot)
-    cycle = cycle_time(traj, options.scan, limits, options.joints_rad)
+    cycle = cycle_time(traj, options.scan, limits, options.joints_rad, motion.source)
     typer.echo(cycle.line() + (", --robot none: timed on a nominal arm" if none else ""))
 
 

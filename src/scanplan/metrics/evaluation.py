@@ -31,14 +31,16 @@ def coverage_spacing_mm(sensor: SensorSpec) -> float:
     return max(2.0, 1.2 * lateral_spacing)
 
 
-def _path_summary(traj: Trajectory, scan_spec: ScanSpec, limits: MotionLimits) -> dict[str, Any]:
+def _path_summary(
+    traj: Trajectory, scan_spec: ScanSpec, limits: MotionLimits, targets: np.ndarray | None
+) -> dict[str, Any]:
     scan_len = float(
         np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)[
             traj.scanning[1:] & traj.scanning[:-1] & (traj.swath[1:] == traj.swath[:-1])
         ].sum()
     )
     path_len = traj.path_length_mm()
-    cycle = cycle_time(traj, scan_spec, limits)
+    cycle = cycle_time(traj, scan_spec, limits, targets=targets)
     return {
         "path_length_mm": path_len,
         "scan_length_mm": scan_len,
@@ -73,6 +75,7 @@ def evaluate(
     progress: Callable[[int, int], None] | None = None,
     context: PlanContext | None = None,
     limits: MotionLimits = NOMINAL,
+    targets: np.ndarray | None = None,
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
@@ -82,7 +85,8 @@ def evaluate(
     context: what the plan is judged as (its surface to inspect, region of interest and
     reward); None: as recorded in the trajectory (`context.recorded`). Every statistic is
     over the part's surface to inspect: points on other faces count as no hit.
-    limits: the arm's motion limits the cycle time is timed with (`cycle.cycle_time`).
+    limits, targets: the arm's motion limits the cycle time is timed with, and the poses a
+    program flies between (`cycle.cycle_time`; None: every planned pose).
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -160,5 +164,5 @@ def evaluate(
         clearance_mm=collisions.clearance_mm,
         **errors.summary(),
         **spacing.summary(wd, scan_spec),
-        **_path_summary(traj, scan_spec, limits),
+        **_path_summary(traj, scan_spec, limits, targets),
     )
