@@ -3,6 +3,8 @@ acquisition output, PTP into each pass with Status and Turn."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -11,8 +13,11 @@ from helpers import snake_trajectory
 from scanplan.export import (
     ExportOptions,
     export_program,
+    parse_program,
 )
-from scanplan.export.common import plan_motion
+from scanplan.export.common import plan_motion, pose_from_xyzabc
+from scanplan.export.krl import status_turn
+from scanplan.robot import get_robot
 from scanplan.trajectory import Trajectory
 
 TRAJ = snake_trajectory()
@@ -56,3 +61,40 @@ def test_krl_angles_are_intrinsic_zyx() -> None:
     ).as_matrix()
     text = export_program(Trajectory(T[None], [0], [True]), "krl", ExportOptions())
     assert "LIN {X 0.000000,Y 0.000000,Z 0.000000,A 30.000000,B 20.000000,C 10.000000}" in text
+
+
+def test_krl_enters_passes_by_ptp_with_status_and_turn() -> None:
+    arm = get_robot("kr6-r900")
+    q = np.radians([20.0, -100.0, 110.0, 30.0, 50.0, -40.0])  # in front, elbow up, A5 > 0
+    T_base_sensor = arm.forward(q) @ OPTIONS.tcp
+    poses = np.tile(np.linalg.inv(OPTIONS.part_pose) @ T_base_sensor, (3, 1, 1))
+    poses[:, 0, 3] += [0.0, 5.0, 10.0]
+    options = replace(OPTIONS, joints_rad=np.tile(q, (3, 1)), arm=arm)
+    text = export_program(Trajectory(poses, [0] * 3, [True] * 3), "krl", options)
+    moves = [ln.strip() for ln in text.splitlines() if ln.strip().startswith(("LIN", "PTP"))]
+    assert moves[0].startswith("PTP {X ") and all(m.startswith("LIN ") for m in moves[1:])
+    items = dict(item.split() for item in moves[0][5:-1].split(","))
+    # Forward kinematics of the joints reproduces the Cartesian target ($BASE, $TOOL).
+    target = pose_from_xyzabc(float(items[k]) for k in "XYZABC")
+    np.testing.assert_allclose(OPTIONS.part_pose @ target @ np.linalg.inv(OPTIONS.tcp),
+                               arm.forward(q), atol=1e-5)  # fmt: skip
+    # Basic area, A3 >= phi, A5 > 0; A2 and A6 negative.
+    assert (items["S"], items["T"]) == ("'B010'", "'B100010'")
+    assert parse_program(text, "krl")[0].shape == (2, 4, 4)  # one straight move: its ends
+
+
+def test_status_bits() -> None:
+    arm = get_robot("kr6-r900")
+    q = np.radians([20.0, -100.0, 110.0, 30.0, 50.0, -40.0])
+    s, t = status_turn(q, arm)
+    assert (s, t) == (0b010, 0b100010)
+    flip = q * [1, 1, 1, 1, -1, 1]
+    assert status_turn(flip, arm) == (s ^ 0b100, t ^ 0b010000)  # A5's sign: S bit 2, T bit 4
+    # Leaning back past the column: the wrist root point behind A1, the overhead area.
+    assert status_turn(np.radians([0.0, -150.0, 60.0, 0.0, 40.0, 0.0]), arm)[0] == 0b011
+    # A3 below phi (the arm folded back beyond stretched): bit 1 clear.
+    assert status_turn(np.radians([0.0, -60.0, -30.0, 0.0, 40.0, 0.0]), arm)[0] & 0b010 == 0
+    # The eight inverse-kinematics branches of one pose: eight different Status values.
+    branches = arm.inverse(arm.forward(q)[None])[0]
+    assert np.isfinite(branches).all()
+    assert len({status_turn(b, arm)[0] for b in branches}) == 8

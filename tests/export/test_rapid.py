@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import snake_trajectory
 from scanplan.export import export_program
 from scanplan.export.common import plan_motion
+from scanplan.export.rapid import confdata
+from scanplan.robot import get_robot
+from scanplan.trajectory import Trajectory
 
 TRAJ = snake_trajectory()
 
@@ -42,3 +47,22 @@ def test_rapid_structure() -> None:
     q = np.array([float(v) for v in tool.group(2).split(",")])
     R = Rotation.from_quat([*q[1:], q[0]]).as_matrix()
     np.testing.assert_allclose(R, OPTIONS.tcp[:3, :3], atol=1e-8)
+
+
+def test_rapid_confdata_is_the_chosen_configuration() -> None:
+    arm = get_robot("irb2400")
+    q = np.radians([100.0, 10.0, -20.0, -95.0, -40.0, 200.0])
+    # Quadrants of axes 1, 4, 6; cfx 1: wrist centre in front of axis 1 and the lower arm,
+    # axis 5 negative.
+    np.testing.assert_array_equal(confdata(q[None], arm), [[1, -2, 2, 1]])
+    branches = arm.inverse(arm.forward(q)[None])[0]
+    assert np.isfinite(branches).all()
+    assert sorted(confdata(branches, arm)[:, 3]) == list(range(8))
+    poses = np.tile(np.linalg.inv(OPTIONS.part_pose) @ arm.forward(q) @ OPTIONS.tcp, (3, 1, 1))
+    poses[:, 0, 3] += [0.0, 5.0, 10.0]
+    options = replace(OPTIONS, joints_rad=np.tile(q, (3, 1)), arm=arm)
+    text = export_program(Trajectory(poses, [0] * 3, [True] * 3), "rapid", options)
+    assert text.count(",[1,-2,2,1],[9E+09") == 2  # one straight move: its ends
+    assert "MoveAbsJ [[100.0000,10.0000,-20.0000,-95.0000,-40.0000,200.0000]" in text
+    with pytest.raises(ValueError, match="signal name"):
+        export_program(TRAJ, "rapid", replace(OPTIONS, scan_output="7"))

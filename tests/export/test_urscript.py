@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers import EXPORT_OPTIONS as OPTIONS
@@ -47,3 +49,11 @@ def test_urscript_structure() -> None:
     np.testing.assert_allclose(vals[:3], OPTIONS.tcp[:3, 3] / 1000, atol=1e-9)
     R = Rotation.from_rotvec(vals[3:]).as_matrix()
     np.testing.assert_allclose(R, OPTIONS.tcp[:3, :3], atol=1e-8)
+
+
+def test_urscript_scan_output_option() -> None:
+    text = export_program(TRAJ, "urscript", replace(OPTIONS, scan_output="3"))
+    assert text.count("set_standard_digital_out(3, True)") == 3
+    for bad in ("8", "-1", "doScan"):
+        with pytest.raises(ValueError, match="digital output number 0-7"):
+            export_program(TRAJ, "urscript", replace(OPTIONS, scan_output=bad))

@@ -68,8 +68,8 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "; Targets are T_part_sensor, the sensor pose in the part's frame: $BASE is the part",
         "; (T_base_part; assumes $WORLD = $ROBROOT; calibrate it as a BASE_DATA and nothing",
         "; else changes) and $TOOL is the sensor (T_flange_sensor).",
-        "; X,Y,Z in mm; A,B,C in degrees, A about Z, B about Y',"
-        "; C about X''. $VEL.CP in m/s, $APO.CDIS in mm.",
+        "; X,Y,Z in mm; A,B,C in degrees, A about Z, B about Y', "
+        "C about X''. $VEL.CP in m/s, $APO.CDIS in mm.",
         f"; {len(motion.poses)} targets from {motion.n_planned} planned poses, "
         f"{int(motion.pass_start.sum())} scanning runs; each run thinned to the fewest "
         f"targets within {options.chord_tol:g} mm and {np.degrees(options.angle_tol_rad):g} deg",
