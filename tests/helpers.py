@@ -247,6 +247,16 @@ JSON_VALUES = st.recursive(
 # ---- robot programs -----------------------------------------------------------------------
 
 
+def plate_file(directory: Path, x_mm: float = 400.0, y_mm: float = 300.0) -> str:
+    """An STL of a 10 mm plate whose top face is z = 0, centred on the origin: the part
+    `export --part` and `place --part` check the arm's links against."""
+    box = trimesh.creation.box((x_mm, y_mm, 10.0))
+    box.apply_translation((0, 0, -5.0))
+    path = Path(directory) / "plate.stl"
+    box.export(path)
+    return str(path)
+
+
 def snake_trajectory() -> Trajectory:
     """Three snake passes over a bumpy part: pitch varies along each pass, the sensor turns
     180° about its axis between passes, transitions lift clear and are not scanned."""

@@ -19,6 +19,11 @@ TABLE_HELP = (
 )
 # `--table` when none is given: the part rests on a table at its lowest point.
 LOWEST = "lowest"
+# The table an arm must keep clear of: a block under the part's footprint grown by this
+# margin on every side (where the table surely is), this deep (its top and what holds it).
+# The sensor keeps above the whole plane; the arm stands beside the block.
+TABLE_MARGIN_MM = 150.0
+TABLE_DEPTH_MM = 1000.0
 # A table further than this from the part is a typo (metres for millimetres), not a cell.
 MAX_TABLE_GAP_MM = 10_000.0
 
@@ -62,6 +67,19 @@ class Cell:
         z = _table_height(part, table)
         loaded = tuple(load_part(f, units) for f in fixtures)
         return cls(None if z is None else Table(np.array(UP), z), loaded, z)
+
+    def table_block(self, part: Part) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) corners in part coordinates of the table block an arm must keep clear of,
+        under the part and its fixtures (None: no table); the table is level in the part
+        frame."""
+        if self.table_z_mm is None:
+            return None
+        bounds = np.array([part.bounds, *(f.bounds for f in self.fixtures)], dtype=np.float64)
+        lo, hi = bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)
+        lo[:2] -= TABLE_MARGIN_MM
+        hi[:2] += TABLE_MARGIN_MM
+        lo[2], hi[2] = self.table_z_mm - TABLE_DEPTH_MM, self.table_z_mm
+        return lo, hi
 
     def rotated(self, R: np.ndarray) -> Cell:
         """The cell in a view's frame (rotated by R, as `views.View.part` turns the part)."""

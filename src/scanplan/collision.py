@@ -104,11 +104,7 @@ class CollisionChecker:
         self._ray_engine = part.ray_engine
         self._face_normals = np.asarray(mesh.face_normals)
         self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        bvh = fcl.BVHModel()
-        bvh.beginModel(len(self.vertices), len(mesh.faces))
-        bvh.addSubModel(self.vertices, np.asarray(mesh.faces, dtype=np.int32))
-        bvh.endModel()
-        self._part_obj = fcl.CollisionObject(bvh, fcl.Transform())
+        self._part_obj = _mesh_object(part)
         self.bounds = np.asarray(part.bounds, dtype=np.float64)
         lo, hi = sensor.body_bounds_mm
         self.body_lo, self.body_hi = lo, hi
@@ -257,6 +253,16 @@ class CollisionChecker:
         return float(min(depths)) if depths else 0.0
 
 
+def _mesh_object(part: Part) -> fcl.CollisionObject:
+    """The part's mesh as an FCL object (its BVH), in part coordinates."""
+    mesh = part.mesh
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+    bvh.addSubModel(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32))
+    bvh.endModel()
+    return fcl.CollisionObject(bvh, fcl.Transform())
+
+
 _CHECKERS: weakref.WeakKeyDictionary[Part, dict[bytes, CollisionChecker]] = (
     weakref.WeakKeyDictionary()
 )
@@ -319,3 +325,122 @@ def checker_for(part: Part, sensor: SensorSpec, cell: Cell | None = None) -> Cel
     """The checker of this part, its cell (None: nothing around the part) and this sensor
     body; the meshes' BVHs are built once while their parts live."""
     return CellChecker(part, sensor, cell or Cell())
+
+
+def _z_to(direction: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotations taking +z onto the unit vectors `direction` (n, 3)."""
+    d = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    v = np.stack([-d[:, 1], d[:, 0], np.zeros(len(d))], axis=1)  # z x d
+    c = d[:, 2]
+    vx = np.zeros((len(d), 3, 3))
+    vx[:, 0, 1], vx[:, 0, 2], vx[:, 1, 0] = -v[:, 2], v[:, 1], v[:, 2]
+    vx[:, 1, 2], vx[:, 2, 0], vx[:, 2, 1] = -v[:, 0], -v[:, 1], v[:, 0]
+    flipped = c < -1 + 1e-9  # d = -z: half a turn about x
+    k = np.where(flipped, 0.0, 1.0 / np.where(flipped, 1.0, 1.0 + c))
+    R = np.eye(3) + vx + (vx @ vx) * k[:, None, None]
+    R[flipped] = np.diag([1.0, -1.0, -1.0])
+    return R
+
+
+class _VoxelProxy:
+    """A mesh's surface as voxel centres (trimesh's voxelization, a k-d tree over them): a
+    quick test that clears capsules far from the mesh before FCL measures the rest. Every
+    surface point lies within `bound_mm` of a centre, so a capsule whose axis keeps further
+    than its radius plus that from every centre cannot touch the mesh."""
+
+    def __init__(self, part: Part) -> None:
+        from scipy.spatial import cKDTree
+
+        extent = float(np.ptp(part.bounds, axis=0).max())
+        # Fine enough to clear capsules a few mm away, coarse enough to voxelize in < 1 s.
+        self.pitch = max(extent / 128.0, 2.0)
+        centres = np.asarray(part.mesh.voxelized(self.pitch).points, dtype=np.float64)
+        self._tree = cKDTree(centres)
+        # trimesh subdivides the mesh to edges <= pitch / 2 and marks the voxels holding its
+        # vertices: a surface point is within pitch / 2 of a vertex, a vertex within
+        # pitch·√3/2 of its voxel's centre.
+        self.bound_mm = self.pitch * (0.5 + np.sqrt(3.0) / 2)
+
+    def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
+        mesh, and those that surely do (a voxel holding surface lies inside the capsule).
+        Points every `pitch` along each axis stand for it (the axis is within pitch / 2 of
+        one of them)."""
+        a, b = segments[:, 0], segments[:, 1]
+        length = np.linalg.norm(b - a, axis=1)
+        count = np.ceil(length / self.pitch).astype(int) + 1
+        owner = np.repeat(np.arange(len(segments)), count)
+        start = np.r_[0, np.cumsum(count)[:-1]]
+        t = (np.arange(count.sum()) - np.repeat(start, count)) / np.repeat(
+            np.maximum(count - 1, 1), count
+        )
+        points = a[owner] + t[:, None] * (b - a)[owner]
+        reach = radii + self.bound_mm + 0.5 * self.pitch
+        d, _ = self._tree.query(points, distance_upper_bound=float(reach.max()))
+        maybe, surely = np.zeros(len(segments), bool), np.zeros(len(segments), bool)
+        np.logical_or.at(maybe, owner, d <= reach[owner])
+        # A voxel's surface lies within pitch·√3/2 of its centre.
+        np.logical_or.at(surely, owner, d <= radii[owner] - self.pitch * np.sqrt(3.0) / 2)
+        return maybe, surely
+
+
+class CellObstacles:
+    """The part, its fixtures and the table block (`Cell.table_block`) in part coordinates,
+    for capsules that enclose a robot's links: `capsules_hit` says which obstacle, if any,
+    comes within a clearance of each capsule."""
+
+    NAMES = ("part", "fixture", "table")
+
+    def __init__(self, part: Part, cell: Cell) -> None:
+        self._objects: list[tuple[int, fcl.CollisionObject, np.ndarray, _VoxelProxy | None]] = [
+            (0, _mesh_object(part), np.asarray(part.bounds, np.float64), _VoxelProxy(part))
+        ]
+        for fixture in cell.fixtures:
+            self._objects.append(
+                (
+                    1,
+                    _mesh_object(fixture),
+                    np.asarray(fixture.bounds, np.float64),
+                    _VoxelProxy(fixture),
+                )
+            )
+        block = cell.table_block(part)
+        if block is not None:
+            lo, hi = block
+            box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(0.5 * (lo + hi)))
+            self._objects.append((2, box, np.array([lo, hi]), None))
+        self.table_block = block
+
+    def capsules_hit(self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float) -> np.ndarray:
+        """(n, k) int: for capsules (n, k, 2, 3) (segment ends in part coordinates, mm) of
+        radii (k,) or (n, k), the index into NAMES of an obstacle within `clearance_mm` of
+        the capsule, -1 where none is. An AABB test leaves FCL only the capsules near an
+        obstacle."""
+        ends = np.asarray(ends, dtype=np.float64)
+        n, k = ends.shape[:2]
+        grown = np.broadcast_to(np.asarray(radii, dtype=np.float64), (n, k)) + clearance_mm
+        hit = np.full((n, k), -1)
+        lo = ends.min(axis=2) - grown[..., None]
+        hi = ends.max(axis=2) + grown[..., None]
+        request = fcl.CollisionRequest()
+        for kind, obstacle, (olo, ohi), proxy in self._objects:
+            near = (lo <= ohi).all(axis=2) & (hi >= olo).all(axis=2) & (hit < 0)
+            rows, links = np.nonzero(near)
+            if proxy is not None and len(rows):
+                maybe, surely = proxy.within(ends[rows, links], grown[rows, links])
+                hit[rows[surely], links[surely]] = kind
+                rows, links = rows[maybe & ~surely], links[maybe & ~surely]
+            if not len(rows):
+                continue
+            seg = ends[rows, links]
+            axis = seg[:, 1] - seg[:, 0]
+            length = np.linalg.norm(axis, axis=1)
+            axis[length < 1e-9] = (0.0, 0.0, 1.0)  # a sphere: any axis will do
+            rot = _z_to(axis)
+            mid = 0.5 * (seg[:, 0] + seg[:, 1])
+            for i, j, R, c, h in zip(rows, links, rot, mid, length, strict=True):
+                shape = fcl.Capsule(float(grown[i, j]), float(max(h, 1e-6)))
+                capsule = fcl.CollisionObject(shape, fcl.Transform(R, c))
+                if fcl.collide(capsule, obstacle, request, fcl.CollisionResult()):
+                    hit[i, j] = kind
+        return hit

@@ -36,7 +36,10 @@ class PlanContext:
     # The cell, as `cell.Cell.around` takes it: the `--table` text and the fixture files.
     table: str = LOWEST
     fixtures: tuple[str, ...] = ()
-    fixture_units: str = "mm"
+    fixture_units: str = "mm"  # the --units of the part's and the fixtures' files
+    # The part planned: a built-in name or the file as given ('' where not recorded), so
+    # that `export` checks the arm's links against it.
+    part: str = ""
 
     def __post_init__(self) -> None:
         if self.views not in VIEW_MODES:
@@ -68,6 +71,7 @@ class PlanContext:
             "table": self.table,
             "fixtures": list(self.fixtures),
             "fixture_units": self.fixture_units,
+            "part": self.part,
             **scan_spec_record(spec),
             "step_limits": {
                 "dy_max_mm": lim.dy_max_mm,
@@ -100,6 +104,7 @@ class PlanContext:
                 model.table,
                 tuple(model.fixtures),
                 model.fixture_units,
+                model.part,
             )
         except ValueError as exc:
             raise ValueError(f"{where}: context: {exc}") from None
@@ -246,6 +251,7 @@ class _ContextJson(BaseModel):
     table: str = LOWEST
     fixtures: list[str] = []
     fixture_units: Literal["mm", "m", "in"] = "mm"
+    part: str = ""
     sensor: dict[str, Any]
     scan_spec: _ScanSpecJson
     step_limits: _LimitsJson

@@ -25,6 +25,7 @@ from scanplan.part import Part
 from scanplan.planners import Planner, pass_workers
 from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
 from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.links import obstacles_for
 from scanplan.surface import hemisphere_visible_samples
 from scanplan.swaths import Swath, plan_swaths
 from scanplan.trajectory import Trajectory
@@ -367,6 +368,7 @@ def plan_views(
         table,
         tuple(str(f) for f in fixtures),
         fixture_units,
+        part.source,
     )
     if not 0.0 < coverage_target <= 1.0:
         raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
@@ -405,7 +407,8 @@ def fit_arm(part: Part, traj: Trajectory, arm: Arm, context: PlanContext) -> Tra
     """`traj` made flyable by the arm (`robot.fit.fit_to_robot`), with `meta["robot"]`: what
     it gave up, per view, and the in-spec coverage of the surface to inspect before and after
     (evaluated with the view choice's fan)."""
-    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part)
+    obstacles = obstacles_for(part, context.cell(part))
+    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
     record = fit.record(arm.tcp)
     for key, plan in (("in_spec_without_robot", traj), ("in_spec", fit.traj)):
         m = evaluate(part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context=context)

@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers import EXPORT_OPTIONS as OPTIONS
-from helpers import listing, run_cli, snake_trajectory
+from helpers import listing, plate_file, run_cli, snake_trajectory
 from scanplan.cli import app
 from scanplan.export import ExportOptions, parse_program
 from scanplan.export.common import plan_motion
@@ -60,7 +60,7 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     args = ["export", str(traj_path), "--format", "rosbag2", "-o", str(out)]
     poses = ["--part-pose", "500,-200,100,30,5,-10", "--tcp", "12,-3,180,0,-15,90"]
     runner = CliRunner()
-    robot = ["--robot", "ur5e", "--allow-unreachable"]
+    robot = ["--robot", "ur5e", "--allow-unreachable", "--part", plate_file(tmp_path)]
     result = runner.invoke(app, [*args, *poses, *robot, "--travel-speed", "300"])
     assert result.exit_code == 0, result.output
     assert "ur5e: " in result.output  # the UR5e reach check ran (ok or a warning)
@@ -84,7 +84,7 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     monkeypatch.setattr(Writer, "write", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
     result = runner.invoke(app, [*args[:-1], str(bad), "--robot", "none"])
     assert result.exit_code == 2 and result.stderr == "error: disk full\n"
-    assert listing(tmp_path) == ["out_bag", "t.csv", "taken"]
+    assert listing(tmp_path) == ["out_bag", "plate.stl", "t.csv", "taken"]
 
 
 def test_export_never_overwrites_its_plan_and_its_csv_is_not_taken_for_a_plan(tmp_path):

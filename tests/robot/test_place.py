@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from helpers import plate_file
 from scanplan.cli import app
 from scanplan.export import ExportOptions, flange_poses, parse_pose_arg
 from scanplan.robot import check_reach
@@ -66,11 +67,14 @@ def test_cli_place_then_export(tmp_path) -> None:
     runner = CliRunner()
     path = tmp_path / "t.csv"
     write_csv(_raster(300.0, 3, n=40), path)
+    plate = plate_file(tmp_path)
     result = runner.invoke(
         app,
         [
             "place",
             str(path),
+            "--part",
+            plate,
             "--robot",
             "kr6-r900",
             "--tcp",
@@ -92,6 +96,8 @@ def test_cli_place_then_export(tmp_path) -> None:
         [
             "export",
             str(path),
+            "--part",
+            plate,
             "--format",
             "krl",
             "--robot",
@@ -111,11 +117,13 @@ def test_cli_place_then_export(tmp_path) -> None:
     # Unplaceable: exit 2, the best pose still printed; bad input: one line, exit 2.
     far = tmp_path / "far.csv"
     write_csv(_raster(3000.0, 1, n=50), far)
-    result = runner.invoke(app, ["place", str(far), "--robot", "ur3e"])
+    result = runner.invoke(app, ["place", str(far), "--robot", "ur3e", "--part", plate])
     assert result.exit_code == 2 and result.output.startswith("--part-pose ")
     assert "poses out of the arm's reach" in result.stderr  # the binding constraint named
     for extra in (["--height-range", "1,x"], ["--robot", "ur4e"]):
-        result = runner.invoke(app, ["place", str(path), "--robot", "ur3e", *extra])
+        result = runner.invoke(
+            app, ["place", str(path), "--robot", "ur3e", "--part", plate, *extra]
+        )
         assert result.exit_code == 2 and result.output.startswith("error:")
         assert result.output.strip().count("\n") == 0
 
@@ -127,6 +135,7 @@ def test_cli_export_krl_refuses_what_its_own_arm_cannot_fly(tmp_path) -> None:
     write_csv(_raster(300.0, 2, n=20), path)
     out = tmp_path / "p.src"
     args = ["export", str(path), "--format", "krl", "--robot", "kr6-r900"]
+    args += ["--part", plate_file(tmp_path)]
     args += ["--part-pose", "2000,0,0,0,0,0", "-o", str(out)]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 2 and not out.exists()

@@ -106,6 +106,18 @@ PartArg = Annotated[
     str, typer.Argument(help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB) or STEP file")
 ]
 UnitsOpt = Annotated[str, typer.Option("--units", help="units of a mesh file: mm, m or in")]
+PlannedPartOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--part",
+        help="the part the arm's links are checked against (built-in name, mesh or STEP "
+        "file); default: the one the plan records",
+    ),
+]
+PlannedUnitsOpt = Annotated[
+    str | None,
+    typer.Option("--units", help="units of --part's mesh file: mm, m or in; default: the plan's"),
+]
 RoiOpt = Annotated[
     str | None,
     typer.Option(

@@ -17,6 +17,8 @@ from scanplan.cli.options import (
     IDENTITY_POSE,
     POSITIVE,
     PartPoseOpt,
+    PlannedPartOpt,
+    PlannedUnitsOpt,
     QuietOpt,
     TcpOpt,
     TrajectoryArg,
@@ -25,7 +27,9 @@ from scanplan.cli.options import (
 from scanplan.quantities import ScanSpec
 
 if TYPE_CHECKING:
+    from scanplan.cell import Cell
     from scanplan.export import ExportOptions
+    from scanplan.part import Part
     from scanplan.trajectory import Trajectory
 
 # ---- export -------------------------------------------------------------------------------
@@ -89,7 +93,8 @@ AllowUnreachableOpt = Annotated[
     typer.Option(
         "--allow-unreachable",
         help="write the program even if the arm cannot fly it (unreachable poses, joint "
-        "limits, configuration flips in a pass); the problems are still printed",
+        "limits, configuration flips in a pass, links or sensor in the part, table or "
+        "fixtures); the problems are still printed",
     ),
 ]
 
@@ -109,11 +114,14 @@ def export_cmd(
     angle_tol: AngleTolOpt = None,
     scan_output: ScanOutputOpt = None,
     allow_unreachable: AllowUnreachableOpt = False,
+    part: PlannedPartOpt = None,
+    units: PlannedUnitsOpt = None,
     quiet: QuietOpt = False,
 ):
     """Write a robot program (URScript, ABB RAPID, KUKA KRL, ROS 2 YAML or bag, or CSV) once
     the arm is shown to fly it: nothing is written if a pose is unreachable, beyond the
-    joint limits or flips configuration within a pass (unless --allow-unreachable). The arm,
+    joint limits, flips configuration within a pass, puts an arm link within reach of the
+    part, table or fixtures, or the sensor into them (unless --allow-unreachable). The arm,
     part pose and TCP default to those a plan made with --robot records."""
     # Deferred: the exporters and kinematics load numpy, scipy and yaml.
     from scanplan.export import (
@@ -155,7 +163,9 @@ def export_cmd(
     else:
         from scanplan.robot import get_robot  # deferred: as the exporters above
 
-        joints = check_flyable(traj, options, robot, quiet, allow_unreachable)
+        get_robot(robot)  # a bad arm is named before a missing part
+        cell = planned_cell(traj, part, units)
+        joints = check_flyable(traj, options, robot, quiet, allow_unreachable, cell)
         # Each pass entered by a joint move, in the configuration the arm's terms name.
         options = replace(options, joints_rad=joints, arm=get_robot(robot))
     text = export_program(traj, fmt, options) if fmt in FORMATS else None
@@ -211,35 +221,91 @@ def arm_of(
     return robot, poses[0], poses[1]
 
 
+# The sensor check asks FCL only about bodies within this of the cell (exact below it).
+_TOUCH_MM = 1e-3
+
+
+def planned_cell(traj: Trajectory, part: str | None, units: str | None) -> tuple[Part, Cell]:
+    """The part (--part, else the one the plan records) and the cell the plan was made in
+    (its table and fixtures), which the arm's links and the sensor are checked against."""
+    # Deferred: the part loads trimesh (and cascadio for STEP).
+    from scanplan.context import recorded
+    from scanplan.part import load_part
+
+    context = recorded(traj, ScanSpec())
+    name = part or context.part
+    if not name:
+        raise ValueError(
+            "--part is required: the arm's links are checked against the part, and this plan "
+            "records none (planned before plans named their part)"
+        )
+    the_part = load_part(name, units or context.fixture_units)
+    return the_part, context.cell(the_part)
+
+
 def check_flyable(
-    traj: Trajectory, options: ExportOptions, robot: str, quiet: bool, allow: bool
+    traj: Trajectory,
+    options: ExportOptions,
+    robot: str,
+    quiet: bool,
+    allow: bool,
+    cell: tuple[Part, Cell],
 ) -> np.ndarray:
-    """Whether `robot` flies every flange pose: its summary; if not, a ValueError naming the
-    first offending pass and pose (nothing is written), or with `allow` a warning. Returns
-    the joint angles the check followed (n, 6), NaN where it found none."""
+    """Whether `robot` flies every flange pose: reach, joint limits, configuration flips,
+    and the arm's links and the sensor body against the part and its `cell`. Prints the
+    summaries; if the arm cannot fly the plan, a ValueError naming the first offending pass
+    and pose (nothing is written), or with `allow` a warning. Returns the joint angles the
+    check followed (n, 6), NaN where it found none."""
     # Deferred: as in export_cmd.
+    from scanplan.collision import checker_for
+    from scanplan.context import recorded
     from scanplan.export import flange_poses
     from scanplan.robot import check_reach, get_robot
+    from scanplan.robot.links import check_links, obstacles_for
+    from scanplan.robot.reach import pass_starts
 
+    part, the_cell = cell
+    arm = get_robot(robot)
     with progress_bar("reach check", quiet):
         report = check_reach(
-            flange_poses(traj, options),
-            get_robot(robot),
-            swath=traj.swath,
-            scanning=traj.scanning,
+            flange_poses(traj, options), arm, swath=traj.swath, scanning=traj.scanning
         )
-    if report.reachable:
+    with progress_bar("collision check", quiet):
+        links = check_links(
+            arm,
+            report.joints,
+            obstacles_for(part, the_cell),
+            options.part_pose,
+            pass_starts(traj.swath, traj.scanning),
+        )
+        sensor = checker_for(part, recorded(traj, ScanSpec()).spec.sensor, the_cell)
+        touching = sensor.check(traj.poses, _TOUCH_MM).touching
+    problems = [(*report.first_problem(), report.summary())] if not report.reachable else []
+    if not links.clear:
+        problems.append((links.first(), links.describe(links.first()), links.summary()))
+    if touching.any():
+        first = int(np.argmax(touching))
+        problems.append(
+            (
+                first,
+                "puts the sensor body into the part, table or a fixture",
+                f"sensor: {int(touching.sum())} poses touching the cell",
+            )
+        )
+    if not problems:
         warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
         typer.echo(("warning: " if warn else "") + report.summary(), err=warn)
+        typer.echo(links.summary())
         return report.joints
-    first = report.first_problem()
-    where = f"pose {first[0]} (pass {int(traj.swath[first[0]])}) {first[1]}"
+    first_pose, what, _ = min(problems)
+    where = f"pose {first_pose} (pass {int(traj.swath[first_pose])}) {what}"
+    summary = "; ".join(p[2] for p in problems)
     if not allow:
         raise ValueError(
-            f"{report.model} cannot fly this plan: {where}; {report.summary()} — place the part "
+            f"{report.model} cannot fly this plan: {where}; {summary} — place the part "
             "(scanplan place) or give --allow-unreachable"
         )
-    typer.echo(f"warning: {where}; {report.summary()}", err=True)
+    typer.echo(f"warning: {where}; {summary}", err=True)
     return report.joints
 
 
@@ -279,22 +345,39 @@ def place_cmd(
     tcp: TcpOpt = None,
     height_range: HeightRangeOpt = None,
     yaw_step: YawStepOpt = 30.0,
+    part: PlannedPartOpt = None,
+    units: PlannedUnitsOpt = None,
     quiet: QuietOpt = False,
 ):
     """Search the part's pose on the table (x, y, z, yaw) from which the arm reaches every
-    pose with no configuration flip in a pass; print it as --part-pose. Exit 2 if none does."""
+    pose with no configuration flip in a pass, its links clear of the part, the table and
+    the fixtures (the arm stands beside the table); print it as --part-pose. Exit 2 if none
+    does."""
     # Deferred: the placement search loads the kinematics (numpy, scipy).
     from scanplan.export import parse_pose_arg
+    from scanplan.robot import get_robot
+    from scanplan.robot.links import obstacles_for
     from scanplan.robot.place import place
     from scanplan.trajectory import read_trajectory
 
     heights = parse_height_range(height_range)
     traj = read_trajectory(trajectory)
+    arm = get_robot(robot)  # a bad arm is named before a missing part
+    obstacles = obstacles_for(*planned_cell(traj, part, units))
     with progress_bar("searching a placement", quiet):
-        result = place(traj, robot, parse_pose_arg(tcp or IDENTITY_POSE), heights, yaw_step)
+        result = place(
+            traj,
+            arm,
+            parse_pose_arg(tcp or IDENTITY_POSE),
+            heights,
+            yaw_step,
+            obstacles=obstacles,
+        )
     m = result.report.worst_margins()
     typer.echo(f"--part-pose {result.pose_arg()}")
     typer.echo(result.report.summary())
+    if result.links is not None:
+        typer.echo(result.links.summary())
     if tcp is None:
         typer.echo(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
     typer.echo(
@@ -302,9 +385,10 @@ def place_cmd(
         f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm "
         f"({result.evaluated} placements in {result.seconds:.1f} s)"
     )
-    if not result.reachable:
+    if not result.flyable:
         typer.echo(
-            f"error: no placement reaches every pose (best found above: {result.binding()})",
+            "error: no placement flies every pose with the links clear "
+            f"(best found above: {result.binding()})",
             err=True,
         )
         raise typer.Exit(2)

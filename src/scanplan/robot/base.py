@@ -40,6 +40,12 @@ class Robot(Protocol):
         signs are the arm configuration, so a sign change along a pass is a flip."""
         ...
 
+    def link_capsules(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+        """The arm's moving links as capsules that enclose them: (…, k, 2, 3) segment ends in
+        the base frame (mm), (k,) radii (mm) and the k link names. The fixed base below
+        the first joint's housing is left out: it stands where the arm is mounted."""
+        ...
+
 
 def wrap(q: np.ndarray) -> np.ndarray:
     """Angles to [-π, π)."""

@@ -11,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
+from scanplan.collision import CellObstacles
 from scanplan.robot.base import Robot, pose_arg
+from scanplan.robot.links import LinkReport, check_links
 from scanplan.robot.place import Placement, place
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import ReachReport, check_reach
+from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.trajectory import Trajectory
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
@@ -31,7 +33,8 @@ class RobotFit:
     pose in the arm's base frame (the placement found, or the one given). report: the
     reach check of `traj` there. given_up: scanning poses given up, per view index;
     moves_given_up: transition poses given up (the arm makes those moves as joint moves);
-    splits: passes cut at a configuration flip.
+    splits: passes cut at a configuration flip. links: the arm's links along what is kept
+    (None: fitted without a cell).
     """
 
     traj: Trajectory
@@ -41,6 +44,11 @@ class RobotFit:
     moves_given_up: int
     splits: int
     placement: Placement | None
+    links: LinkReport | None = None
+
+    @property
+    def flyable(self) -> bool:
+        return self.report.reachable and (self.links is None or self.links.clear)
 
     def record(self, tcp: np.ndarray) -> dict:
         """What the plan file records of the arm."""
@@ -54,6 +62,8 @@ class RobotFit:
             "moves_given_up": self.moves_given_up,
             "passes_split": self.splits,
             "reachable": self.report.reachable,
+            "links_checked": self.links is not None,
+            "flyable": self.flyable,
         }
 
 
@@ -63,16 +73,19 @@ def fit_to_robot(
     tcp: np.ndarray,
     T_base_part: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
+    obstacles: CellObstacles | None = None,
 ) -> RobotFit:
     """`traj` (part frame) made flyable by `robot` with the sensor at `tcp`
     (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
     unreachable or beyond the joint limits are given up (a pass continues after them as a
     new pass) and passes are split where the arm flips its configuration, until the reach
-    check of the whole path finds neither."""
+    check of the whole path finds neither. In a cell (`obstacles`), poses that put an arm
+    link into the part, a fixture or the table are given up too, and so is a pass whose
+    joint move in would sweep a link through them."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
-        placement = place(traj, arm, tcp, height_range_mm)
+        placement = place(traj, arm, tcp, height_range_mm, obstacles=obstacles)
         T_base_part = placement.T_base_part
     inv_tcp = np.linalg.inv(tcp)
     keep = np.ones(len(traj), bool)
@@ -86,10 +99,18 @@ def fit_to_robot(
             swath=current.swath,
             scanning=current.scanning,
         )
-        if report.reachable:
-            break
         index = np.flatnonzero(keep)
         bad = np.union1d(report.unreachable, report.limit_violations)
+        if report.reachable:
+            if obstacles is None:
+                break
+            starts = pass_starts(current.swath, current.scanning)
+            in_cell = check_links(arm, report.joints, obstacles, T_base_part, starts)
+            if in_cell.clear:
+                break
+            bad = np.flatnonzero(in_cell.colliding)
+            for i in in_cell.moves:  # the whole pass the arm cannot be brought into
+                bad = np.union1d(bad, np.flatnonzero(current.swath == current.swath[i]))
         keep[index[bad]] = False
         # A pass goes on after a gap or a flip as a new pass: the arm reconfigures between.
         cut = np.zeros(len(traj), bool)
@@ -110,6 +131,10 @@ def fit_to_robot(
     report = check_reach(
         T_base_part @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
     )
+    links: LinkReport | None = None
+    if obstacles is not None:
+        starts = pass_starts(fitted.swath, fitted.scanning)
+        links = check_links(arm, report.joints, obstacles, T_base_part, starts)
     return RobotFit(
         fitted,
         T_base_part,
@@ -118,6 +143,7 @@ def fit_to_robot(
         int((~keep & ~traj.scanning).sum()),
         splits,
         placement,
+        links,
     )
 
 

@@ -149,6 +149,45 @@ class OPWRobot:
         q[np.isnan(q).any(axis=2)] = np.nan
         return q
 
+    def link_capsules(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+        """Capsules along the kinematic chain: the column from a third of the shoulder height
+        to joint 2, the upper arm (joint 2 to 3), the forearm through its offset a2 to the
+        wrist centre, and the wrist to the flange. Radii are fractions of the arm's length
+        c2 + √(a2² + c3²), set so that they enclose the KR 6 R900 and IRB 2400 of the
+        makers' dimension drawings (column Ø ~190 / ~320 mm, upper arm ~130 / ~220 mm)."""
+        t = self._to_opw(q)
+        t1, t2, t3 = t[..., 0], t[..., 1], t[..., 2]
+        theta = t2 + t3
+        shape = t1.shape
+        zero, one = np.zeros(shape), np.ones(shape)
+
+        def planar(x: np.ndarray, z: np.ndarray) -> np.ndarray:  # arm plane -> paper base
+            c, s = np.cos(t1), np.sin(t1)
+            return np.stack([x * c - self.b * s, x * s + self.b * c, z], axis=-1)
+
+        foot = np.stack([zero, zero, one * self.c1 / 3], axis=-1)
+        top = np.stack([zero, zero, one * self.c1], axis=-1)
+        j2 = planar(one * self.a1, one * self.c1)
+        j3x, j3z = self.a1 + self.c2 * np.sin(t2), self.c1 + self.c2 * np.cos(t2)
+        j3 = planar(j3x, j3z)
+        ex, ez = j3x + self.a2 * np.cos(theta), j3z - self.a2 * np.sin(theta)
+        elbow = planar(ex, ez)
+        wrist = planar(ex + self.c3 * np.sin(theta), ez + self.c3 * np.cos(theta))
+        flange = self.forward(q)[..., :3, 3]
+        ends = np.stack(
+            [
+                np.stack(pair, axis=-2)
+                for pair in ((foot, top), (top, j2), (j2, j3), (j3, elbow), (elbow, wrist))
+            ],
+            axis=-3,
+        )
+        ends = ends @ self.base[:3, :3].T + self.base[:3, 3]
+        flange_link = np.stack([ends[..., 4, 1, :], flange], axis=-2)
+        ends = np.concatenate([ends, flange_link[..., None, :, :]], axis=-3)
+        size = self.c2 + float(np.hypot(self.a2, self.c3))
+        radii = size * np.array([0.11, 0.11, 0.075, 0.065, 0.065, 0.05])
+        return ends, radii, ("column", "shoulder", "upper arm", "elbow", "forearm", "wrist")
+
     def singularity_terms(self, q: np.ndarray) -> np.ndarray:
         """(…, 3): sin q5 (wrist: axes 4 and 6 align), sin(q3 + ψ3) (elbow: arm stretched
         or folded) and, in mm, the wrist centre's distance from the joint-1 axis in the

@@ -5,20 +5,31 @@ lies as designed, turned about the vertical and moved). A placement is feasible 
 pose has an in-limit IK solution and each scanning pass keeps one arm configuration; among
 feasible ones the worst normalized margin (joint limits, wrist, elbow, shoulder) is
 maximized. A coarse grid on a subsample of poses, then a pattern search on more of them,
-then the full `check_reach` on every pose of the best.
+then the full `check_reach` on every pose of the best. In a cell (`obstacles`), a placement
+that puts the arm's column into the table block is ranked below every other, and the
+answer is the best candidate whose links also keep clear of the part, fixtures and table
+(`links.check_links`).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from scanplan.collision import CellObstacles
 from scanplan.robot.base import Robot, pose_arg
+from scanplan.robot.links import LinkReport, check_links, column_clear
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import ReachReport, check_reach, fit_limits, limit_margin
+from scanplan.robot.reach import (
+    ReachReport,
+    check_reach,
+    fit_limits,
+    limit_margin,
+    pass_starts,
+)
 from scanplan.trajectory import Trajectory
 
 # Margins that count as "clear": 5° from a limit or a wrist/elbow singularity, 20 mm from
@@ -26,6 +37,7 @@ from scanplan.trajectory import Trajectory
 _MARGIN_REF = np.array([np.sin(np.radians(5.0)), np.sin(np.radians(5.0)), 20.0])
 _LIMIT_REF_RAD = np.radians(5.0)
 _CHUNK_POSES = 60_000  # poses per IK call: bounds memory at ~25 MB per chunk
+_LINK_RANK_POSES = 1500  # poses whose links rank the final candidates
 
 
 @dataclass(frozen=True)
@@ -35,6 +47,7 @@ class Placement:
     T_base_part: (4, 4) mm, the `--part-pose` of `scanplan export`.
     report: the full reach check of every pose there; score: worst normalized margin
     (>= 1: everything clear of the thresholds; < 0: not feasible on the search subsample).
+    links: the arm's links along the path there (None: placed without a cell).
     """
 
     T_base_part: np.ndarray
@@ -42,10 +55,17 @@ class Placement:
     score: float
     evaluated: int
     seconds: float
+    links: LinkReport | None = None
 
     @property
     def reachable(self) -> bool:
+        """Every pose reached within the joint limits, one configuration per pass."""
         return self.report.reachable
+
+    @property
+    def flyable(self) -> bool:
+        """Reachable, and no link comes into the cell."""
+        return self.reachable and (self.links is None or self.links.clear)
 
     def binding(self) -> str:
         """What stops the best placement found, the largest count first."""
@@ -55,6 +75,9 @@ class Placement:
             (len(r.limit_violations), "poses beyond its joint limits"),
             (len(r.config_flips), "configuration flips within a pass"),
         ]
+        if self.links is not None:
+            counts.append((int(self.links.colliding.sum()), "poses with an arm link in the cell"))
+            counts.append((len(self.links.moves), "joint moves sweeping a link into the cell"))
         return "; ".join(f"{n} {what}" for n, what in sorted(counts, reverse=True) if n)
 
     def pose_arg(self) -> str:
@@ -114,10 +137,15 @@ def _placements(params: np.ndarray, centre_xy: np.ndarray) -> np.ndarray:
 
 
 def _scores(
-    robot: Robot, T_part_flange: np.ndarray, starts: np.ndarray, T_base_part: np.ndarray
+    robot: Robot,
+    T_part_flange: np.ndarray,
+    starts: np.ndarray,
+    T_base_part: np.ndarray,
+    block: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """(P,) rank of each placement: the worst normalized margin (>= 0) if every pose is
-    reachable with one configuration per run, else reachable fraction - 2 (in [-2, -1])."""
+    reachable with one configuration per run, else reachable fraction - 2 (in [-2, -1]);
+    4 less where the arm's column stands in the table `block` (lo, hi in part coordinates)."""
     m = len(T_part_flange)
     limits = robot.joint_limits
     out = np.empty(len(T_base_part))
@@ -135,7 +163,7 @@ def _scores(
         worst = per_run.min(axis=1)
         fraction = inside.reshape(p, m, 8).any(axis=2).mean(axis=1)
         out[k : k + p] = np.where(np.isfinite(worst), worst, fraction - 2.0)
-    return out
+    return np.where(column_clear(robot, T_base_part, block), out, out - 4.0)
 
 
 def place(
@@ -147,11 +175,13 @@ def place(
     coarse_poses: int = 48,
     fine_poses: int = 256,
     keep: int = 6,
+    obstacles: CellObstacles | None = None,
 ) -> Placement:
     """The part pose on the table from which `robot` reaches every pose of `traj` with the
     most margin (or, when none does, the one reaching the most). `tcp` is `T_flange_sensor`
     (mm); `height_range_mm` bounds the part origin's z in the base frame (default: the
-    arm's reach around the workspace centre)."""
+    arm's reach around the workspace centre); `obstacles` the cell the links must keep
+    clear of (None: links not checked)."""
     started = time.perf_counter()
     arm = get_robot(robot)
     if len(traj) == 0:
@@ -182,21 +212,31 @@ def place(
             for a in yaws
         ]
     )
-    scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), _placements(grid, centre))
+    block = None if obstacles is None else obstacles.table_block
+    scores = _scores(
+        arm, T_part_flange[coarse], _groups(traj, coarse), _placements(grid, centre), block
+    )
     evaluated = len(grid)
 
     # Fine: pattern search from the best few, on more poses; all candidates move at once.
     fine = _subsample(traj, fine_poses)
     starts = _groups(traj, fine)
-    best = grid[np.argsort(-scores)[:keep]]
-    best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre))
+    # Seeds: the best few, and in a cell the best at each height too, since the margins
+    # favour heights from which the links may not clear the table (ranked at the end).
+    seeds = list(np.argsort(-scores)[:keep])
+    if obstacles is not None:
+        for z in heights:
+            at = np.flatnonzero(grid[:, 2] == z)
+            seeds.append(int(at[np.argmax(scores[at])]))
+    best = grid[np.unique(seeds)]
+    best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre), block)
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
     moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
     for _ in range(24):
         trial = best[:, None] + moves[None] * delta
         trial[..., 2] = np.clip(trial[..., 2], lo, hi)
         flat = trial.reshape(-1, 4)
-        s = _scores(arm, T_part_flange[fine], starts, _placements(flat, centre))
+        s = _scores(arm, T_part_flange[fine], starts, _placements(flat, centre), block)
         evaluated += len(flat)
         s = s.reshape(len(best), len(moves))
         pick = s.argmax(axis=1)
@@ -208,17 +248,33 @@ def place(
             if delta[0] < 1.0:
                 break
 
-    # The answer is judged on every pose, following the branch as a controller would.
-    order = np.argsort(-best_scores)
-    chosen = None
-    for i in order:
+    # The answer is judged on every pose, following the branch as a controller would; in a
+    # cell the arm's links too (on a subsample while ranking): the candidate that keeps
+    # the most poses flyable wins, a fully flyable one first.
+    ranked: list[tuple[bool, float, int, Placement]] = []
+    sample = _subsample(traj, _LINK_RANK_POSES)
+    for rank, i in enumerate(np.argsort(-best_scores)):
         T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
         report = check_reach(
             T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
         )
-        if chosen is None or (report.reachable and not chosen[1].reachable):
-            chosen = (T_base_part, report, float(best_scores[i]))
-        if report.reachable:
+        good = ~np.isnan(report.joints).any(axis=1)
+        if obstacles is not None:
+            hits = check_links(arm, report.joints[sample], obstacles, T_base_part).colliding
+            good = good[sample] & ~hits
+        found = Placement(T_base_part, report, float(best_scores[i]), evaluated, 0.0)
+        flyable = report.reachable and bool(good.all())
+        ranked.append((flyable, float(good.mean()), -rank, found))
+        if flyable and obstacles is None:
             break
-    assert chosen is not None
-    return Placement(chosen[0], chosen[1], chosen[2], evaluated, time.perf_counter() - started)
+    chosen = max(ranked, key=lambda r: r[:3])[3]
+    if obstacles is not None and chosen.reachable:
+        links = check_links(
+            arm,
+            chosen.report.joints,
+            obstacles,
+            chosen.T_base_part,
+            pass_starts(traj.swath, traj.scanning),
+        )
+        chosen = replace(chosen, links=links)
+    return replace(chosen, seconds=time.perf_counter() - started)

@@ -43,6 +43,12 @@ def same_pass(n: int, swath: np.ndarray | None, scanning: np.ndarray | None) -> 
     return scanning[1:] & scanning[:-1] & (swath[1:] == swath[:-1])
 
 
+def pass_starts(swath: np.ndarray, scanning: np.ndarray) -> np.ndarray:
+    """(n,) True at each pass's first pose: where a program enters the pass by a joint move."""
+    scanning = np.asarray(scanning, dtype=bool)
+    return scanning & ~np.r_[False, same_pass(len(scanning), swath, scanning)]
+
+
 @dataclass(frozen=True)
 class ReachReport:
     """Whether an arm can follow a flange path, branch by branch.

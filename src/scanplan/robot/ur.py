@@ -46,6 +46,9 @@ class URModel:
     def singularity_terms(self, q: np.ndarray) -> np.ndarray:
         return _singularity_terms(q, self)
 
+    def link_capsules(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+        return _link_capsules(q, self)
+
     @property
     def dh(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(a, d, alpha) per joint, mm and rad."""
@@ -160,3 +163,41 @@ def _singularity_terms(q: np.ndarray, m: URModel) -> np.ndarray:
     q2, q3, q234 = q[..., 1], q[..., 2], q[..., 1] + q[..., 2] + q[..., 3]
     shoulder = m.a2 * np.cos(q2) + m.a3 * np.cos(q2 + q3) + m.d5 * np.sin(q234)
     return np.stack([np.sin(q[..., 4]), np.sin(q3), shoulder], axis=-1)
+
+
+# UR5e collision capsules (mm) as MuJoCo Menagerie's universal_robots_ur5e model draws them
+# (derived from Universal Robots' URDF): the upper arm runs 138 mm along the joint-2 axis
+# from the DH line, the forearm 7 mm; the UR3e and UR10e are scaled by their upper arm.
+_UR5E_UPPER_ARM_MM = 425.0
+_UR5E_OFFSETS_MM = (138.0, 7.0)  # upper arm, forearm: along the joint-2 axis
+_UR5E_RADII_MM = (60.0, 60.0, 50.0, 55.0, 40.0, 40.0, 40.0, 40.0)
+
+
+def _link_capsules(q: np.ndarray, m: URModel) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Capsules on the DH frames: the shoulder column and housing, the upper arm and the
+    forearm at their offsets along the parallel axes 2-4, the elbow housing, the three
+    wrist links to the flange."""
+    a, d, alpha = m.dh
+    q = np.asarray(q, dtype=np.float64)
+    scale = abs(m.a2) / _UR5E_UPPER_ARM_MM
+    o1, o2 = (v * scale for v in _UR5E_OFFSETS_MM)
+    frames = [_dh(q[..., 0], d[0], a[0], alpha[0])]
+    for j in range(1, 6):
+        frames.append(frames[-1] @ _dh(q[..., j], d[j], a[j], alpha[j]))
+    p = [f[..., :3, 3] for f in frames]  # origins of frames 1..6
+    u = frames[0][..., :3, 2]  # the joint-2 axis (parallel to joints 3 and 4)
+    up = np.zeros_like(p[0])
+    up[..., 2] = 1.0
+    pairs = (
+        (p[0] - 100.0 * scale * up, p[0]),  # column below the shoulder
+        (p[0] + 0.3 * o1 * u, p[0] + (o1 + 20.0 * scale) * u),  # shoulder housing
+        (p[0] + o1 * u, p[1] + o1 * u),  # upper arm
+        (p[1] + (o2 + 20.0 * scale) * u, p[1] + (o2 + 140.0 * scale) * u),  # elbow housing
+        (p[1] + o2 * u, p[2] + o2 * u),  # forearm
+        (p[2] + o2 * u, p[3]),  # wrist 1
+        (p[3], p[4]),  # wrist 2
+        (p[4], p[5]),  # wrist 3 to the flange
+    )
+    ends = np.stack([np.stack(pair, axis=-2) for pair in pairs], axis=-3)
+    names = ("column", "shoulder", "upper arm", "elbow", "forearm", "wrist 1", "wrist 2", "wrist 3")
+    return ends, scale * np.asarray(_UR5E_RADII_MM), names

@@ -1,0 +1,189 @@
+"""The arm's links in the cell: capsules that enclose them (`Robot.link_capsules`) placed by
+forward kinematics along the joint path, checked against the part, its fixtures and the
+table block, at every target and along the joint moves into each pass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanplan.cell import Cell
+from scanplan.collision import CellObstacles
+from scanplan.part import Part
+from scanplan.robot.base import Robot, inv_rigid
+
+# Every link keeps this far from the part, a fixture and the table: the capsules already
+# enclose the links, so this is the margin for the cell's calibration, not for the shapes.
+LINK_CLEARANCE_MM = 10.0
+# Poses whose capsules lie within this of a checked pose's share its verdict (its capsules
+# grown by how far theirs moved).
+LINK_STRIDE_MM = 10.0
+_MAX_SPAN = 64  # poses one check may stand for (bounds the look-ahead's cost)
+# A joint move is checked at poses this far apart on its most turning joint.
+JOINT_MOVE_STEP_RAD = np.radians(2.0)
+
+
+@dataclass(frozen=True)
+class LinkReport:
+    """Which poses put a link of the arm within `clearance_mm` of the cell.
+
+    link, obstacle: (n,) the first colliding link's index into `links` and the obstacle's
+    into `CellObstacles.NAMES`, -1 where none collides (or the pose has no joints).
+    moves: {pose index: (link, obstacle)} of the joint moves into a pass (from the pose
+    before it) that sweep a link into the cell.
+    """
+
+    links: tuple[str, ...]
+    link: np.ndarray
+    obstacle: np.ndarray
+    moves: dict[int, tuple[int, int]]
+    clearance_mm: float
+
+    @property
+    def colliding(self) -> np.ndarray:
+        return self.link >= 0
+
+    @property
+    def clear(self) -> bool:
+        return not (self.colliding.any() or self.moves)
+
+    def describe(self, i: int) -> str:
+        """What collides at pose i (its target, else the joint move into it)."""
+        link, obstacle = (
+            (int(self.link[i]), int(self.obstacle[i])) if self.link[i] >= 0 else self.moves[i]
+        )
+        where = "" if self.link[i] >= 0 else " on the joint move into it"
+        return (
+            f"puts the arm's {self.links[link]} within {self.clearance_mm:g} mm of the "
+            f"{CellObstacles.NAMES[obstacle]}{where}"
+        )
+
+    def first(self) -> int:
+        """The first pose whose target or entry move collides; -1 if none does."""
+        found = [*np.flatnonzero(self.colliding)[:1], *sorted(self.moves)[:1]]
+        return int(min(found)) if found else -1
+
+    def summary(self) -> str:
+        hits = self.obstacle[self.obstacle >= 0]
+        by = ", ".join(
+            f"{int((hits == k).sum())} {name}"
+            for k, name in enumerate(CellObstacles.NAMES)
+            if (hits == k).any()
+        )
+        return (
+            f"arm links: {int(self.colliding.sum())} poses within {self.clearance_mm:g} mm of "
+            f"the cell{f' ({by})' if by else ''}, {len(self.moves)} joint moves"
+        )
+
+
+def obstacles_for(part: Part, cell: Cell) -> CellObstacles:
+    """What the links must keep clear of: the part, the cell's fixtures and table block."""
+    return CellObstacles(part, cell)
+
+
+def _capsules_hit(
+    robot: Robot,
+    joints: np.ndarray,
+    obstacles: CellObstacles,
+    T_base_part: np.ndarray,
+    clearance_mm: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(link, obstacle) per row of joints (m, 6): the first colliding link, -1 if none.
+
+    Consecutive poses of a pass move the links by fractions of a millimetre, so not every
+    pose goes to FCL: a checked pose stands for the poses after it whose capsule ends all
+    lie within `LINK_STRIDE_MM` of its own, each link's capsule grown by the furthest its
+    ends moved among them (a point of a capsule moves no further than its ends do), and a
+    hit is charged to all of them."""
+    ends, radii, _ = robot.link_capsules(joints)
+    T_part_base = inv_rigid(np.asarray(T_base_part, dtype=np.float64))
+    ends = ends @ T_part_base[:3, :3].T + T_part_base[:3, 3]
+    m = len(ends)
+    checked: list[int] = []
+    grown: list[np.ndarray] = []
+    covers = np.zeros(m, dtype=np.int64)
+    i = 0
+    while i < m:
+        window = ends[i : i + _MAX_SPAN]
+        moved = np.linalg.norm(window - ends[i], axis=-1).max(axis=2)  # (span, k)
+        far = moved.max(axis=1) > LINK_STRIDE_MM
+        span = max(int(np.argmax(far)) if far.any() else len(window), 1)
+        covers[i : i + span] = len(checked)
+        checked.append(i)
+        grown.append(radii + moved[:span].max(axis=0))
+        i += span
+    hit = obstacles.capsules_hit(ends[checked], np.array(grown), clearance_mm)[covers]
+    colliding = hit >= 0
+    link = np.where(colliding.any(axis=1), colliding.argmax(axis=1), -1)
+    obstacle = np.where(link >= 0, hit[np.arange(len(hit)), np.maximum(link, 0)], -1)
+    return link, obstacle
+
+
+def check_links(
+    robot: Robot,
+    joints: np.ndarray,
+    obstacles: CellObstacles,
+    T_base_part: np.ndarray,
+    pass_start: np.ndarray | None = None,
+    clearance_mm: float = LINK_CLEARANCE_MM,
+) -> LinkReport:
+    """The arm's links along `joints` (n, 6) rad (NaN rows: no joints, not checked) with the
+    part at `T_base_part`: at every pose, and, where `pass_start` (n,) is True, along the
+    joint move from the previous pose's joints into that pose's (the move a program makes
+    into each pass), at steps of `JOINT_MOVE_STEP_RAD`."""
+    joints = np.asarray(joints, dtype=np.float64)
+    n = len(joints)
+    link, obstacle = np.full(n, -1), np.full(n, -1)
+    known = np.flatnonzero(~np.isnan(joints).any(axis=1))
+    if len(known):
+        link[known], obstacle[known] = _capsules_hit(
+            robot, joints[known], obstacles, T_base_part, clearance_mm
+        )
+    moves: dict[int, tuple[int, int]] = {}
+    starts = np.flatnonzero(np.zeros(n, bool) if pass_start is None else pass_start)
+    for i in starts:
+        before = known[known < i]
+        if not len(before) or i not in known:
+            continue
+        q0, q1 = joints[before[-1]], joints[i]
+        # The controller turns each joint by the difference of its (unwrapped) angles.
+        steps = int(np.ceil(np.abs(q1 - q0).max() / JOINT_MOVE_STEP_RAD))
+        if steps < 2:
+            continue
+        path = q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
+        m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T_base_part, clearance_mm)
+        if (m_link >= 0).any():
+            first = int(np.argmax(m_link >= 0))
+            moves[int(i)] = (int(m_link[first]), int(m_obstacle[first]))
+    names = robot.link_capsules(np.zeros(6))[2]
+    return LinkReport(names, link, obstacle, moves, float(clearance_mm))
+
+
+def column_clear(
+    robot: Robot, T_base_part: np.ndarray, block: tuple[np.ndarray, np.ndarray] | None
+) -> np.ndarray:
+    """(P,) whether the links that turn with joint 1 only (the first two capsules: column
+    and shoulder), swept about the vertical, keep `LINK_CLEARANCE_MM` from the table block
+    (lo, hi in part coordinates), for placements T_base_part (P, 4, 4) that turn the part
+    about the vertical only. A cheap test the placement search runs on every candidate: the
+    arm stands beside the table, or on it."""
+    T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
+    if block is None:
+        return np.ones(len(T), bool)
+    ends, radii, _ = robot.link_capsules(np.zeros(6))
+    sweep = float((np.hypot(ends[:2, :, 0], ends[:2, :, 1]) + radii[:2, None]).max())
+    z_lo = float((ends[:2, :, 2] - radii[:2, None]).min())
+    z_hi = float((ends[:2, :, 2] + radii[:2, None]).max())
+    axis_in_part = inv_rigid(T)[:, :3, 3]  # the base origin, on the joint-1 axis
+    lo, hi = np.asarray(block[0]), np.asarray(block[1])
+    gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
+    base_z = axis_in_part[:, 2]
+    gap_z = np.maximum(lo[2] - (base_z + z_hi), (base_z + z_lo) - hi[2])
+    return (np.linalg.norm(gap_xy, axis=1) > sweep + LINK_CLEARANCE_MM) | (
+        gap_z > LINK_CLEARANCE_MM
+    )
+
+
+__all__ = ["LINK_CLEARANCE_MM", "LinkReport", "check_links", "column_clear", "obstacles_for"]
