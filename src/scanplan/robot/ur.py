@@ -189,7 +189,7 @@ def _link_capsules(q: np.ndarray, m: URModel) -> tuple[np.ndarray, np.ndarray, t
     up = np.zeros_like(p[0])
     up[..., 2] = 1.0
     pairs = (
-        (p[0] - 100.0 * scale * up, p[0]),  # column below the shoulder
+        (p[0] - 60.0 * scale * up, p[0]),  # the turning column above the fixed base
         (p[0] + 0.3 * o1 * u, p[0] + (o1 + 20.0 * scale) * u),  # shoulder housing
         (p[0] + o1 * u, p[1] + o1 * u),  # upper arm
         (p[1] + (o2 + 20.0 * scale) * u, p[1] + (o2 + 140.0 * scale) * u),  # elbow housing

@@ -1,0 +1,116 @@
+"""The arm's links in the cell: capsules that follow the kinematics, checked against the part,
+the fixtures and the table block; the quick voxel test never clears what FCL finds."""
+
+from __future__ import annotations
+
+import fcl
+import numpy as np
+import pytest
+import trimesh
+
+from scanplan.cell import TABLE_MARGIN_MM, Cell
+from scanplan.collision import CellObstacles
+from scanplan.part import part_from_mesh
+from scanplan.robot import ROBOT_NAMES, get_robot
+from scanplan.robot.links import LINK_CLEARANCE_MM, check_links, column_clear, obstacles_for
+
+RNG = np.random.default_rng(7)
+
+
+def _box_part(extents, centre):
+    box = trimesh.creation.box(extents)
+    box.apply_translation(centre)
+    return part_from_mesh(box, "box")
+
+
+@pytest.mark.parametrize("name", ROBOT_NAMES)
+def test_capsules_follow_the_chain_to_the_flange(name) -> None:
+    arm = get_robot(name)
+    q = RNG.uniform(-1.5, 1.5, (20, 6))
+    ends, radii, names = arm.link_capsules(q)
+    assert ends.shape == (20, len(names), 2, 3) and radii.shape == (len(names),)
+    assert (radii > 20).all() and (radii < 250).all()
+    # The last link ends at the flange, wherever the joints put it.
+    assert np.allclose(ends[:, -1, 1], arm.forward(q)[:, :3, 3], atol=1e-6)
+    # Rigid links: each capsule keeps its length whatever the joints.
+    length = np.linalg.norm(ends[..., 1, :] - ends[..., 0, :], axis=-1)
+    assert np.allclose(length, length[0], atol=1e-6)
+
+
+def test_a_box_in_the_forearms_way_is_named() -> None:
+    arm = get_robot("kr6-r900")
+    q = np.zeros((1, 6))  # arm stretched out along +x at 435 mm
+    ends, _, names = arm.link_capsules(q)
+    forearm = 0.5 * (ends[0, 4, 0] + ends[0, 4, 1])
+    part = _box_part((40, 40, 40), forearm + (0, 0, 80))  # just above the forearm
+    obstacles = obstacles_for(part, Cell())
+    report = check_links(arm, q, obstacles, np.eye(4))
+    assert report.colliding[0] and names[report.link[0]] in ("elbow", "forearm")
+    assert "part" in report.describe(0)
+    # Moved 300 mm higher, it is clear.
+    far = obstacles_for(_box_part((40, 40, 40), forearm + (0, 0, 380)), Cell())
+    assert check_links(arm, q, far, np.eye(4)).clear
+
+
+def test_the_table_block_and_the_arm_beside_it() -> None:
+    arm = get_robot("ur5e")
+    part = _box_part((200, 200, 50), (0, 0, 25))
+    cell = Cell.around(part)  # resting on a table at z = 0
+    lo, hi = cell.table_block(part)
+    assert np.allclose(lo[:2], -100 - TABLE_MARGIN_MM) and hi[2] == 0.0
+    T = np.eye(4)
+    # The base 300 mm from the part's centre, below the table top: the column is in the block.
+    T[:3, 3] = (-300.0, 0.0, 200.0)
+    assert not column_clear(arm, T[None], (lo, hi))[0]
+    # On the table top (the table below the column): clear; far beside it: clear.
+    T[:3, 3] = (-300.0, 0.0, -1.0)
+    assert column_clear(arm, T[None], (lo, hi))[0]
+    T[:3, 3] = (-700.0, 0.0, 200.0)
+    assert column_clear(arm, T[None], (lo, hi))[0]
+
+
+def test_a_joint_move_through_the_part_is_caught() -> None:
+    arm = get_robot("kr6-r900")
+    # Joint 1 swings the stretched arm from -60° to +60°: a post at 0° is in the way.
+    q = np.zeros((2, 6))
+    q[0, 0], q[1, 0] = np.radians(-60), np.radians(60)
+    post = _box_part((60, 60, 600), (700.0, 0.0, 300.0))
+    obstacles = obstacles_for(post, Cell())
+    report = check_links(arm, q, obstacles, np.eye(4), pass_start=np.array([False, True]))
+    assert not report.colliding.any()  # neither end touches the post
+    assert 1 in report.moves and not report.clear
+    assert "joint move" in report.describe(1)
+
+
+def test_the_voxel_test_never_clears_what_fcl_finds() -> None:
+    # A curved part: every capsule the quick test clears keeps its clearance from the mesh.
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=120.0)
+    part = part_from_mesh(mesh, "sphere")
+    obstacles = CellObstacles(part, Cell())
+    centre = RNG.uniform(-250, 250, (400, 3))
+    axis = RNG.normal(size=(400, 3))
+    axis = 60.0 * axis / np.linalg.norm(axis, axis=1, keepdims=True)
+    ends = np.stack([centre - axis, centre + axis], axis=1)[:, None]
+    radii = np.full(1, 30.0)
+    hit = obstacles.capsules_hit(ends, radii, LINK_CLEARANCE_MM)[:, 0]
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+    bvh.addSubModel(np.asarray(mesh.vertices), np.asarray(mesh.faces, np.int32))
+    bvh.endModel()
+    sphere = fcl.CollisionObject(bvh, fcl.Transform())
+    for (a, b), h in zip(ends[:, 0], hit, strict=True):
+        segment = fcl.CollisionObject(
+            fcl.Capsule(30.0, float(np.linalg.norm(b - a))),
+            fcl.Transform(_z_to(b - a), 0.5 * (a + b)),
+        )
+        d = fcl.distance(segment, sphere, fcl.DistanceRequest(), fcl.DistanceResult())
+        assert (h == 0) == (d < LINK_CLEARANCE_MM), (d, h)
+    assert 50 < (hit == 0).sum() < 350  # both verdicts are exercised
+
+
+def _z_to(d: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    d = d / np.linalg.norm(d)
+    rot, _ = Rotation.align_vectors([d], [[0.0, 0.0, 1.0]])
+    return rot.as_matrix()
