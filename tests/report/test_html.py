@@ -99,3 +99,22 @@ def test_views_get_their_own_colours_and_the_surface_its_in_spec_map(tmp_path, r
     assert "in-spec map" in page
     for colour in ("#1b9e77", "#d95f02", "#b4b4b4"):  # in spec, out of spec, not seen
         assert colour in page
+
+
+def test_a_plan_made_for_an_arm_shows_the_arm_and_the_table(tmp_path, results):
+    from dataclasses import replace
+
+    from scanplan.cell import Cell
+    from scanplan.export import parse_pose_arg
+    from scanplan.report.scene import check_arm
+
+    part, res = results
+    traj = res[1].trajectory
+    cell = Cell.around(part)
+    arm = check_arm(traj, "ur5e", parse_pose_arg("400,0,-300,0,0,0"), np.eye(4), part, cell)
+    out = tmp_path / "report.html"
+    write_html_report(out, part, [replace(res[1], cell=cell, arm=arm)], "s")
+    page = out.read_text()
+    assert '"name":"table"' in page and "ur5e base" in page
+    assert "ur5e at pose 0 (view 0, pass 0, first)" in page
+    assert '"sliders"' in page  # one arm pose at a time, or all of them

@@ -15,6 +15,7 @@ from scanplan.cli.parts import part_cmd
 from scanplan.cli.planning import evaluate_cmd, plan_cmd, scan_cmd
 from scanplan.cli.robot import export_cmd, place_cmd
 from scanplan.cli.training import sweep_cmd, train_cmd
+from scanplan.cli.view import view_cmd
 
 __all__ = ["app", "main"]
 
@@ -31,6 +32,7 @@ app.command("part")(part_cmd)
 app.command("scan")(scan_cmd)
 app.command("plan")(plan_cmd)
 app.command("evaluate")(evaluate_cmd)
+app.command("view")(view_cmd)
 app.command("train")(train_cmd)
 app.command("sweep")(sweep_cmd)
 app.command("export")(export_cmd)

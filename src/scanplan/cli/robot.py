@@ -188,11 +188,15 @@ def export_cmd(
 
 
 def arm_of(
-    traj: Trajectory, robot: str | None, part_pose: str | None, tcp: str | None
+    traj: Trajectory,
+    robot: str | None,
+    part_pose: str | None,
+    tcp: str | None,
+    say_recorded: bool = True,
 ) -> tuple[str, np.ndarray, np.ndarray]:
     """(robot, T_base_part, T_flange_sensor) from the options, else from the arm the plan was
-    made for (said in the output); --robot is required for a plan made for none, and a pose
-    not given there is the identity (said too)."""
+    made for (said in the output unless not `say_recorded`); --robot is required for a plan
+    made for none, and a pose not given there is the identity (said)."""
     # Deferred: as in export_cmd.
     from scanplan.export import parse_pose_arg
 
@@ -204,7 +208,8 @@ def arm_of(
                 "kr6-r900, irb2400, lrmate200id or a TOML file), or none to skip the check"
             )
         robot = str(recorded["robot"])
-        typer.echo(f"--robot {robot} (the plan's)")
+        if say_recorded:
+            typer.echo(f"--robot {robot} (the plan's)")
     poses = []
     for option, value, key, arg, meaning in (
         ("--part-pose", part_pose, "T_base_part", "part_pose", "the part frame is the base"),
@@ -213,7 +218,8 @@ def arm_of(
         if value is not None:
             poses.append(parse_pose_arg(value))
         elif key in recorded and robot == recorded.get("robot"):
-            typer.echo(f"{option} {recorded.get(arg, '')} (the plan's)")
+            if say_recorded:
+                typer.echo(f"{option} {recorded.get(arg, '')} (the plan's)")
             poses.append(np.asarray(recorded[key], dtype=np.float64))
         else:
             typer.echo(f"{option} not given: {IDENTITY_POSE} ({meaning})")
@@ -225,9 +231,15 @@ def arm_of(
 _TOUCH_MM = 1e-3
 
 
-def planned_cell(traj: Trajectory, part: str | None, units: str | None) -> tuple[Part, Cell]:
+def planned_cell(
+    traj: Trajectory,
+    part: str | None,
+    units: str | None,
+    needed_for: str = "the arm's links are checked against the part",
+) -> tuple[Part, Cell]:
     """The part (--part, else the one the plan records) and the cell the plan was made in
-    (its table and fixtures), which the arm's links and the sensor are checked against."""
+    (its table and fixtures), which the arm's links and the sensor are checked against;
+    `needed_for` says why in the error when there is no part."""
     # Deferred: the part loads trimesh (and cascadio for STEP).
     from scanplan.context import recorded
     from scanplan.part import load_part
@@ -236,8 +248,8 @@ def planned_cell(traj: Trajectory, part: str | None, units: str | None) -> tuple
     name = part or context.part
     if not name:
         raise ValueError(
-            "--part is required: the arm's links are checked against the part, and this plan "
-            "records none (planned before plans named their part)"
+            f"--part is required: {needed_for}, and this plan records none (planned before "
+            "plans named their part)"
         )
     the_part = load_part(name, units or context.fixture_units)
     return the_part, context.cell(the_part)

@@ -14,33 +14,41 @@ from pathlib import Path
 
 import numpy as np
 
+from scanplan.cell import Cell
 from scanplan.cloud import PointCloud
 from scanplan.files import atomic_write_text
 from scanplan.metrics import CoverageMap, SurfaceState
 from scanplan.part import Part
 from scanplan.report.maps import COVERAGE_COLOURS
+from scanplan.report.scene import (
+    VIEW_COLOURS,
+    ArmPoses,
+    add_arm,
+    cell_traces,
+    part_trace,
+    path_trace,
+)
 from scanplan.report.table import lookup, table_rows, tolerance_label
 from scanplan.report.training import CURVES, read_log
 from scanplan.trajectory import Trajectory
 
 # Enough for a smooth picture, small enough that the file stays a few MB.
 MAX_POINTS_PER_PLANNER = 25_000
-MAX_PART_FACES = 15_000
 MAX_ARROWS = 120
-# One colour per view of a scan of several views (plotly's D3 palette).
-VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
-                "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
 
 
 @dataclass(frozen=True)
 class PlannerResult:
-    """What the report shows of one planner: its path, its simulated scan, its numbers."""
+    """What the report shows of one planner: its path, its simulated scan, its numbers, and
+    for a plan made for an arm, the cell and the arm along the path."""
 
     name: str
     trajectory: Trajectory
     cloud: PointCloud
     metrics: dict
     coverage: CoverageMap | None = None
+    cell: Cell | None = None
+    arm: ArmPoses | None = None
 
 
 def metrics_table_html(results: list[PlannerResult]) -> str:
@@ -76,41 +84,23 @@ def _subsample(n: int, k: int, seed: int = 0) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(n, size=k, replace=False))
 
 
-def _part_trace(part: Part):
-    import plotly.graph_objects as go
-
-    mesh = part.mesh
-    if len(mesh.faces) > MAX_PART_FACES:
-        try:
-            mesh = mesh.simplify_quadric_decimation(face_count=MAX_PART_FACES)
-        except (ImportError, ValueError):  # decimation is cosmetic: fall back to the full mesh
-            mesh = part.mesh
-    v, f = mesh.vertices, mesh.faces
-    return go.Mesh3d(
-        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2],
-        color="lightgray", opacity=0.45, name="part", hoverinfo="skip", flatshading=True,
-    )  # fmt: skip
-
-
-def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float):
+def _planner_figure(part: Part, part_mesh, result: PlannerResult, distance_limit_mm: float):
     import plotly.graph_objects as go
 
     traj, cloud = result.trajectory, result.cloud
     pos = traj.positions_mm
-    traces = [part_trace]
+    traces = [part_mesh]
     views = traj.meta.get("views") or []
     if len(views) > 1:
         # Each view's poses in its own colour (a view is a block of swaths), moves in grey.
-        traces.append(_path_trace(pos, ~traj.scanning, "moves", "gray", 2))
+        traces.append(path_trace(pos, ~traj.scanning, "moves", "gray", 2))
         for k, v in enumerate(views):
             in_view = (traj.swath >= v["first_swath"]) & (traj.swath <= v["last_swath"])
             axis = ", ".join(f"{c:.2f}" for c in v["axis"])
             colour = VIEW_COLOURS[k % len(VIEW_COLOURS)]
-            traces.append(
-                _path_trace(pos, in_view & traj.scanning, f"view {k} ({axis})", colour, 4)
-            )
+            traces.append(path_trace(pos, in_view & traj.scanning, f"view {k} ({axis})", colour, 4))
     else:
-        traces.append(_path_trace(pos, np.ones(len(pos), bool), "sensor path", "black", 3))
+        traces.append(path_trace(pos, np.ones(len(pos), bool), "sensor path", "black", 3))
     # Sensor poses as arrows: the laser axis z_s drawn 60 mm long from the emitter.
     scan_idx = np.flatnonzero(traj.scanning)
     arrows = scan_idx[np.linspace(0, len(scan_idx) - 1, min(MAX_ARROWS, len(scan_idx))).astype(int)]
@@ -165,6 +155,11 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
     buttons = [
         {"label": label, "method": "restyle", "args": [style, targets]} for label, style in styles
     ]
+    # The cell and the arm after the points and the map, whose indices the buttons name.
+    if result.cell is not None:
+        fig.add_traces(cell_traces(part, result.cell))
+    if result.arm is not None:
+        add_arm(fig, traj, result.arm)
     if len(targets) == 2:
         buttons.append(
             {"label": "in-spec map", "method": "restyle",
@@ -180,17 +175,6 @@ def _planner_figure(part_trace, result: PlannerResult, distance_limit_mm: float)
                       "y": 1.08, "buttons": buttons}],
     )  # fmt: skip
     return fig
-
-
-def _path_trace(pos: np.ndarray, keep: np.ndarray, name: str, colour: str, width: int):
-    """The poses where `keep` as one line, broken (NaN rows) wherever `keep` is False."""
-    import plotly.graph_objects as go
-
-    line = np.where(keep[:, None], pos, np.nan)
-    return go.Scatter3d(
-        x=line[:, 0], y=line[:, 1], z=line[:, 2], mode="lines", connectgaps=False,
-        line={"color": colour, "width": width}, name=name,
-    )  # fmt: skip
 
 
 def _coverage_trace(coverage: CoverageMap):
@@ -265,7 +249,6 @@ def write_html_report(
     notes: list[str] | None = None,
 ) -> None:
     """Write the report atomically. `pictures` are PNGs embedded at the end (error maps)."""
-    import plotly
     import plotly.io as pio
 
     if not results:
@@ -273,8 +256,8 @@ def write_html_report(
     finite = [np.abs(r.cloud.distance_error_mm) for r in results if len(r.cloud.points_part)]
     limit = float(np.percentile(np.concatenate(finite), 98)) if finite else 1.0
     limit = max(limit, 0.05)
-    part_trace = _part_trace(part)
-    figures = [_planner_figure(part_trace, r, limit) for r in results]
+    part_mesh = part_trace(part)
+    figures = [_planner_figure(part, part_mesh, r, limit) for r in results]
     divs = [
         pio.to_html(f, full_html=False, include_plotlyjs=False, default_width="100%")
         for f in figures
@@ -322,12 +305,32 @@ def write_html_report(
         sections.append("<h2>Error maps and training curves</h2><div class='grid'>")
         sections.extend(_figure(Path(pic)) for pic in pictures)
         sections.append("</div>")
-    page = (
+    atomic_write_text(path, _page(f"scanplan report — {part.name}", sections))
+
+
+def _page(title: str, sections: list[str]) -> str:
+    """One self-contained page: the sections under plotly.js, inlined once."""
+    import plotly
+
+    return (
         "<!DOCTYPE html><html><head><meta charset='utf-8'>"
-        f"<title>scanplan report — {html.escape(part.name)}</title>"
+        f"<title>{html.escape(title)}</title>"
         f"<style>{_STYLE}</style>"
         f"<script>{plotly.offline.get_plotlyjs()}</script></head><body>"
         + "\n".join(sections)
         + "</body></html>"
     )
-    atomic_write_text(path, page)
+
+
+def write_scene_page(
+    path: str | os.PathLike, figure, title: str, notes: list[str] | None = None
+) -> None:
+    """Write the page of a plan's 3-D scene (`scene.scene_figure`) atomically, with `notes`
+    (one paragraph each) under its title."""
+    import plotly.io as pio
+
+    div = pio.to_html(figure, full_html=False, include_plotlyjs=False, default_width="100%")
+    sections = [f"<h1>{html.escape(title)}</h1>"]
+    sections += [f"<p class='note'>{html.escape(note)}</p>" for note in notes or []]
+    sections.append(f"<div>{div}</div>")
+    atomic_write_text(path, _page(title, sections))

@@ -9,12 +9,17 @@ import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from scanplan.files import atomic_directory, atomic_write_bytes, atomic_write_text
 from scanplan.metrics import Metrics
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from scanplan.cell import Cell
+    from scanplan.report.scene import ArmPoses
 
 # A directory holding one of these was written by scanplan and may be replaced.
 _REPORT_MARKERS = ("metrics.json", "report.html")
@@ -114,9 +119,15 @@ def write_report(
             f"# {title or part.name}\n\n"
             + metrics_table_markdown([r.metrics for r in results], names),
         )
+        notes = list(notes)
         with_cloud = [
             PlannerResult(
-                r.name, r.trajectory, cloud, r.metrics.to_json_dict(), r.metrics.coverage_map
+                r.name,
+                r.trajectory,
+                cloud,
+                r.metrics.to_json_dict(),
+                r.metrics.coverage_map,
+                *_scene(part, r, notes),
             )
             for r in results
             if (cloud := r.metrics.cloud) is not None and len(cloud.points_part)
@@ -129,6 +140,19 @@ def write_report(
                 spec.sensor.name,
                 training_log=training_log,
                 pictures=[*maps, *pictures],
-                notes=list(notes),
+                notes=notes,
             )
     return out_dir / "report.html"
+
+
+def _scene(part: Part, result: Evaluated, notes: list[str]) -> tuple[Cell | None, ArmPoses | None]:
+    """The cell and the arm the report draws with `result`'s path; where the plan's records
+    no longer rebuild them (a fixture or arm file gone), a note says so and neither is drawn."""
+    # Deferred: as in write_report (the arm loads the kinematics and FCL).
+    from scanplan.report.scene import recorded_scene
+
+    try:
+        return recorded_scene(part, result.trajectory)
+    except (ValueError, OSError) as exc:
+        notes.append(f"{result.name}: the cell and the arm are not drawn ({exc})")
+        return None, None
