@@ -2,8 +2,9 @@
 `--views auto` (geometric) for a UR5e, a KUKA KR 6 R900 and an ABB IRB 2400, each placed by
 the tool, against the same plan without an arm: in-spec coverage of the hemisphere surface
 with and without the arm, scanning poses given up, passes split at a configuration flip,
-and the planning time with the arm beside the planning time without it (a ratio: this
-machine is noisy).
+whether export's checks pass (reach, joint limits, flips, the arm's links against the part
+and the table block), and the planning time with the arm beside the planning time without
+it (a ratio: this machine is noisy).
 
     PYTHONPATH=src python benchmarks/robot_plans.py [PARTS_DIR] [--points 256] [--only NAME]
         [--robots ur5e,kr6-r900,irb2400]
@@ -24,8 +25,10 @@ from scanplan.part import load_part
 from scanplan.pipeline import Arm, plan_views
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
-from scanplan.robot import check_reach
+from scanplan.robot import check_reach, get_robot
 from scanplan.robot.base import pose_arg
+from scanplan.robot.links import check_links, obstacles_for
+from scanplan.robot.reach import pass_starts
 
 # The sensor 90 mm out from the flange along its axis: a profilometer on a short bracket.
 TCP = np.eye(4)
@@ -44,7 +47,8 @@ def main() -> None:
     parts = {"drone": "mm"} | {str(Path(args.parts_dir) / n): u for n, u in PARTS.items()}
     print(
         "part | robot | --part-pose | in-spec without / with the arm | scanning poses given up"
-        " | passes split | flyable (export's check) | plan s with / without (ratio)"
+        " | passes split | flyable: reach and links (export's checks) | plan s with / without"
+        " (ratio)"
     )
     print("---|---|---|---|---|---|---|---")
     for name, units in parts.items():
@@ -68,12 +72,21 @@ def main() -> None:
                 swath=traj.swath,
                 scanning=traj.scanning,
             )
-            assert recorded(traj, spec).surface == "hemisphere"
+            context = recorded(traj, spec)
+            assert context.surface == "hemisphere"
+            links = check_links(
+                get_robot(robot),
+                report.joints,
+                obstacles_for(part, context.cell(part)),
+                T_base_part,
+                pass_starts(traj.swath, traj.scanning),
+            )
+            flyable = report.reachable and links.clear
             print(
                 f"{part.name} | {robot} | {pose_arg(T_base_part)} | "
                 f"{without.in_spec_coverage:.3f} / {with_arm.in_spec_coverage:.3f} | "
                 f"{sum(fit['scanning_poses_given_up'].values())} of {int(free.scanning.sum())}"
-                f" | {fit['passes_split']} | {'yes' if report.reachable else 'NO'} | "
+                f" | {fit['passes_split']} | {'yes' if flyable else 'NO'} | "
                 f"{t_arm:.1f} / {t_free:.1f} ({t_arm / t_free:.1f}x)",
                 flush=True,
             )

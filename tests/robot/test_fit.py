@@ -105,3 +105,29 @@ def test_plan_for_an_arm_then_export_with_what_the_plan_records(tmp_path):
     # An option needs the arm it refers to.
     result = runner.invoke(app, ["plan", "drone", "--tcp", "0,0,90,0,0,0", "-o", str(plan)])
     assert result.exit_code == 2 and "--tcp needs --robot" in result.stderr
+
+
+def test_a_pass_the_wrist_reaches_only_turned_is_turned_not_given_up() -> None:
+    from dataclasses import replace
+
+    from scanplan.robot import get_robot
+
+    # A KR 6 whose A4 turns only over 30..120° and A6 ±60°: as planned the pass needs A4
+    # near -80° (or, wrist flipped, A6 near 180°), turned half a turn about its beam A4 near
+    # +80° and A6 near 0.
+    base = get_robot("kr6-r900")
+    a4, a6 = np.radians([30.0, 120.0]), np.radians([-60.0, 60.0])
+    arm = replace(base, limits=(*base.limits[:3], tuple(a4), base.limits[4], tuple(a6)))
+    traj = _two_views(200.0)
+    T = parse_pose_arg("500,0,0,0,0,0")
+    turn = np.diag([-1.0, -1, 1, 1])
+    reached = [
+        (~np.isnan(check_reach(T @ p @ np.linalg.inv(TCP), arm).joints).any(axis=1)).sum()
+        for p in (traj.poses, traj.poses @ turn)
+    ]
+    assert reached[0] <= len(traj) / 2 and reached[1] == len(traj)  # the premise
+    fit = fit_to_robot(traj, arm, TCP, T)
+    assert fit.report.reachable and fit.given_up == {} and fit.turned >= 1
+    flown = fit.traj.poses
+    assert np.allclose(flown[:, :3, 2], traj.poses[:, :3, 2])  # the same beam
+    assert np.allclose(flown[:, :3, 3], traj.poses[:, :3, 3])  # from the same place

@@ -272,8 +272,9 @@ def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:
             f"{arm['robot']} at --part-pose {arm['part_pose']}: "
             f"{sum(arm['scanning_poses_given_up'].values())} scanning poses given up"
             f"{f' ({given_up})' if given_up else ''}, {arm['moves_given_up']} move poses, "
-            f"{arm['passes_split']} passes split at a configuration flip (links kept clear of "
-            f"the part, table and fixtures); in-spec coverage "
+            f"{arm['passes_split']} passes split at a configuration flip, "
+            f"{arm.get('passes_turned', 0)} turned half a turn about the beam (links kept "
+            f"clear of the part, table and fixtures); in-spec coverage "
             f"{arm['in_spec_without_robot']:.3f} without the arm, {arm['in_spec']:.3f} with it"
         )
         if not arm.get("flyable", arm["reachable"]):

@@ -34,7 +34,8 @@ class RobotFit:
     reach check of `traj` there. given_up: scanning poses given up, per view index;
     moves_given_up: transition poses given up (the arm makes those moves as joint moves);
     splits: passes cut at a configuration flip. links: the arm's links along what is kept
-    (None: fitted without a cell).
+    (None: fitted without a cell). turned: passes flown with the sensor turned half a turn
+    about its beam.
     """
 
     traj: Trajectory
@@ -45,6 +46,7 @@ class RobotFit:
     splits: int
     placement: Placement | None
     links: LinkReport | None = None
+    turned: int = 0
 
     @property
     def flyable(self) -> bool:
@@ -61,6 +63,7 @@ class RobotFit:
             "scanning_poses_given_up": {str(k): v for k, v in self.given_up.items()},
             "moves_given_up": self.moves_given_up,
             "passes_split": self.splits,
+            "passes_turned": self.turned,
             "reachable": self.report.reachable,
             "links_checked": self.links is not None,
             "flyable": self.flyable,
@@ -79,15 +82,17 @@ def fit_to_robot(
     (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
     unreachable or beyond the joint limits are given up (a pass continues after them as a
     new pass) and passes are split where the arm flips its configuration, until the reach
-    check of the whole path finds neither. In a cell (`obstacles`), poses that put an arm
-    link into the part, a fixture or the table are given up too, and so is a pass whose
-    joint move in would sweep a link through them."""
+    check of the whole path finds neither. First, each pass is turned half a turn about the
+    beam where the arm keeps more of its poses that way. In a cell (`obstacles`), poses that
+    put an arm link into the part, a fixture or the table are given up too, and so is a
+    pass whose joint move in would sweep a link through them."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
         placement = place(traj, arm, tcp, height_range_mm, obstacles=obstacles)
         T_base_part = placement.T_base_part
     inv_tcp = np.linalg.inv(tcp)
+    traj, turned = _turned(traj, arm, T_base_part, inv_tcp, obstacles)
     keep = np.ones(len(traj), bool)
     swath = traj.swath.copy()
     splits = 0
@@ -144,7 +149,41 @@ def fit_to_robot(
         splits,
         placement,
         links,
+        turned,
     )
+
+
+# Half a turn about the sensor's beam (z_s): the laser line lands where it did, the camera
+# looks from the other side, and the wrist gets another way to reach the pose.
+_HALF_TURN = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def _turned(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+) -> tuple[Trajectory, int]:
+    """`traj` with each pass (and the move into it, which carries its swath index) turned
+    half a turn about the beam where more of its poses are reachable and clear that way,
+    and how many were."""
+    kept = []
+    for poses in (traj.poses, traj.poses @ _HALF_TURN):
+        report = check_reach(
+            T_base_part @ poses @ inv_tcp, arm, swath=traj.swath, scanning=traj.scanning
+        )
+        good = ~np.isnan(report.joints).any(axis=1)
+        if obstacles is not None:
+            good &= ~check_links(arm, report.joints, obstacles, T_base_part).colliding
+        kept.append(good)
+    passes = np.unique(traj.swath[traj.scanning])
+    better = [s for s in passes if kept[1][traj.swath == s].sum() > kept[0][traj.swath == s].sum()]
+    turn = np.isin(traj.swath, better)
+    if not len(better):
+        return traj, 0
+    poses = np.where(turn[:, None, None], traj.poses @ _HALF_TURN, traj.poses)
+    return replace(traj, poses=poses), len(better)
 
 
 def _subset(traj: Trajectory, keep: np.ndarray, swath: np.ndarray) -> Trajectory:
