@@ -259,13 +259,17 @@ def plate_file(directory: Path, x_mm: float = 400.0, y_mm: float = 300.0) -> str
 
 def snake_trajectory() -> Trajectory:
     """Three snake passes over a bumpy part: pitch varies along each pass, the sensor turns
-    180° about its axis between passes, transitions lift clear and are not scanned."""
+    180° about its axis between passes, transitions lift clear and are not scanned. While
+    scanning the laser line (W_d along the beam) follows the bumps 0.5 mm apart, so the
+    sensor's origin swings with the pitch, as over a real part."""
     poses, swath, scanning = [], [], []
+    wd = ScanSpec().working_distance_mm
 
     def add(xyz, yaw, pitch, k, scan):
         T = np.eye(4)
         down = Rotation.from_euler("zx", [yaw, np.pi]) * Rotation.from_euler("x", pitch)
-        T[:3, :3], T[:3, 3] = down.as_matrix(), xyz
+        R = down.as_matrix()
+        T[:3, :3], T[:3, 3] = R, np.asarray(xyz) - (wd * R[:, 2] if scan else 0.0)
         poses.append(T)
         swath.append(k)
         scanning.append(scan)
@@ -277,7 +281,7 @@ def snake_trajectory() -> Trajectory:
         add([x0, y, 600.0], 0.0 if sign > 0 else np.pi, 0.0, k, False)  # transition, lifted
         xs = np.arange(x0, x1 + sign * 1e-9, sign * 0.5)
         for x in xs:
-            z = 400.0 + 5.0 * np.sin(x / 7.0)
+            z = 5.0 * np.sin(x / 7.0)  # the line on the part
             pitch = 0.3 * np.cos(x / 7.0)
             add([x, y + 0.1 * x, z], 0.0 if sign > 0 else np.pi, pitch, k, True)
         add([x1, y, 600.0], 0.0 if sign > 0 else np.pi, 0.0, k, False)

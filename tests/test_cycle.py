@@ -54,6 +54,23 @@ def test_straight_pass_is_the_closed_form_trapezoid(length, v, a) -> None:
     assert ct.runs == ct.swaths == 1 and len(ct.move_s) == 0
 
 
+def test_a_pitching_pass_is_timed_on_the_line_the_program_flies() -> None:
+    """The line (W_d along the beam) sweeps 100 mm of a flat sheet while the sensor pitches
+    ±30°, so its origin travels ~4x farther: timed on the line, the program's TCP."""
+    spec = spec_at(100.0)
+    wd = spec.working_distance_mm
+    x = np.linspace(0.0, 100.0, 201)
+    pitch = np.radians(30.0) * np.sin(2 * np.pi * x / 100.0)
+    T = np.tile(np.eye(4), (len(x), 1, 1))
+    T[:, :3, :3] = Rotation.from_euler("y", pitch[:, None]).as_matrix() @ np.diag([1.0, -1.0, -1.0])
+    T[:, :3, 3] = np.c_[x, np.zeros_like(x), np.zeros_like(x)] - wd * T[:, :3, 2]
+    traj = Trajectory(T, np.zeros(len(x), int), np.ones(len(x), bool))
+    origin_mm = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1).sum()
+    assert origin_mm > 3 * 100.0
+    ct = cycle_time(traj, spec, FAST)
+    assert ct.scanning_s == pytest.approx(100.0 / 100.0 + 100.0 / FAST.accel_mm_s2, rel=1e-9)
+
+
 def test_trapezoid_is_continuous_where_cruise_is_first_reached() -> None:
     v, a = 100.0, 1000.0
     edge = v * v / a

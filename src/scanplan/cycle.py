@@ -3,6 +3,8 @@
 One model for `plan`, `evaluate` and `export`: a trapezoidal speed profile (accelerate,
 cruise, decelerate; triangular when too short to reach cruise) per pass at the scan speed
 and per move segment at the travel speed, and per joint for the joint move into each pass.
+Distances are those of the TCP the exported program flies: the laser line at the working
+distance (`ScanSpec.T_sensor_line`), not the sensor's origin W_d behind it.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from scanplan.trajectory import Trajectory, pass_bounds
 
 CYCLE_TIME_MODEL = (
     "trapezoidal speed profiles (accelerate, cruise, decelerate; triangular when a stretch "
-    "is too short to reach cruise speed) at the arm's Cartesian acceleration: each pass one "
+    "is too short to reach cruise speed) at the arm's Cartesian acceleration, on the path of "
+    "the TCP the program flies (the laser line at the working distance): each pass one "
     "profile at the scan speed, blended through its targets, slowed where its rotation (at "
     "the angular speed limit) or, with the arm's joints known, a joint (at its speed limit) "
     "needs longer than the scan speed allows; each segment of a move between passes or "
@@ -192,7 +195,8 @@ def cycle_time(
     """
     start, _ = pass_bounds(traj.scanning, traj.swath)  # the passes as planned
     swaths = len(np.unique(traj.swath[traj.scanning]))
-    poses, scanning = traj.poses, traj.scanning
+    # The program's TCP: its path, not the sensor origin's, is flown at the scan speed.
+    poses, scanning = traj.poses @ spec.T_sensor_line, traj.scanning
     if targets is not None:
         keep = np.asarray(targets, dtype=np.intp)
         poses, scanning, start = poses[keep], scanning[keep], start[keep]

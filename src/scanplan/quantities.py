@@ -100,6 +100,15 @@ class ScanSpec:
         """Speed while recording: the profiles land Δs_opt apart."""
         return self.profile_rate_hz * self.delta_s_opt_mm
 
+    @property
+    def T_sensor_line(self) -> np.ndarray:
+        """(4, 4) the point where the laser line meets a part at the working distance, in the
+        sensor frame (W_d along the beam, +z_s), mm: the TCP a robot program flies, so its
+        constant speed is the line's speed over the surface (export, cycle time)."""
+        T = np.eye(4)
+        T[2, 3] = self.working_distance_mm
+        return T
+
     def with_sensor(self, sensor: SensorSpec) -> ScanSpec:
         """The same scan parameters with another sensor (e.g. a sub-sampled, noiseless fan)."""
         return replace(self, sensor=sensor)

@@ -67,7 +67,7 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     motion = plan_motion(TRAJ, OPTIONS)
     assert f"rosbag2: {len(motion.poses)} targets from {len(TRAJ)} planned poses" in result.output
     contents = read_rosbag(out)
-    expected = motion.poses
+    expected = OPTIONS.part_pose @ TRAJ.poses[motion.source]  # read back as the sensor's poses
     assert np.abs(contents.poses[:, :3, 3] - expected[:, :3, 3]).max() <= 1e-6
     np.testing.assert_array_equal(contents.speed_mm_s, plan_motion(TRAJ, OPTIONS).speed_mm_s)
 

@@ -90,30 +90,32 @@ def wave_plan():
     return part, spec, traj, evaluate(part, spec, traj, points_per_profile=256)
 
 
-def fly(poses: np.ndarray, scanning: np.ndarray, spacing_mm: float, wd_mm: float) -> Trajectory:
-    """The scanning runs of a program's targets flown by linear moves (position lerp,
-    orientation slerp, one parameter), a profile every `spacing_mm` of the path of the line
-    (the beam's point at the working distance `wd_mm`), as the plan spaces its profiles."""
+def fly(poses: np.ndarray, scanning: np.ndarray, spacing_mm: float, spec: ScanSpec) -> Trajectory:
+    """The scanning runs of a program's read-back targets (`T_part_sensor`) flown as the
+    controller flies them: linear moves of the program's TCP (the laser line at W_d,
+    `spec.T_sensor_line`; position lerp, orientation slerp, one parameter) at a constant TCP
+    speed, so a profile every `spacing_mm` (speed / profile rate) of the TCP's path."""
+    T_line = spec.T_sensor_line
+    tcp = poses @ T_line
     out, swath = [], []
     runs = np.split(np.arange(len(poses)), np.flatnonzero(np.diff(scanning.astype(int))) + 1)
     for k, run in enumerate(r for r in runs if scanning[r[0]]):
         dense = []
         for a, b in zip(run[:-1], run[1:], strict=True):  # every move at 0.02 mm steps or finer
-            line_a, line_b = (poses[i, :3, 3] + wd_mm * poses[i, :3, 2] for i in (a, b))
-            u = np.linspace(0.0, 1.0, int(np.linalg.norm(line_b - line_a) / 0.02) + 50)
-            r0 = Rotation.from_matrix(poses[a, :3, :3])
-            turn = (r0.inv() * Rotation.from_matrix(poses[b, :3, :3])).as_rotvec()
+            p_a, p_b = tcp[a, :3, 3], tcp[b, :3, 3]
+            u = np.linspace(0.0, 1.0, int(np.linalg.norm(p_b - p_a) / 0.02) + 50)
+            r0 = Rotation.from_matrix(tcp[a, :3, :3])
+            turn = (r0.inv() * Rotation.from_matrix(tcp[b, :3, :3])).as_rotvec()
             T = np.tile(np.eye(4), (len(u), 1, 1))
             T[:, :3, :3] = (r0 * Rotation.from_rotvec(u[:, None] * turn)).as_matrix()
-            T[:, :3, 3] = poses[a, :3, 3] + u[:, None] * (poses[b, :3, 3] - poses[a, :3, 3])
+            T[:, :3, 3] = p_a + u[:, None] * (p_b - p_a)
             dense.append(T)
         path = np.concatenate(dense)
-        line = path[:, :3, 3] + wd_mm * path[:, :3, 2]
-        arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))]
+        arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path[:, :3, 3], axis=0), axis=1))]
         at = np.searchsorted(arc, np.arange(0.0, arc[-1] + 1e-9, spacing_mm))
         out.append(path[np.clip(at, 0, len(path) - 1)])
         swath += [k] * len(at)
-    flown = np.concatenate(out)
+    flown = np.concatenate(out) @ np.linalg.inv(T_line)
     return Trajectory(flown, swath, np.ones(len(flown), bool))
 
 
@@ -124,10 +126,37 @@ def test_flying_the_program_scans_as_planned(wave_plan, fmt: str) -> None:
     motion = plan_motion(traj, options)
     assert len(motion.poses) <= len(traj) / 10
     poses, scanning = parse_program(export_program(traj, fmt, options), fmt)
-    # Back in the part's frame, a profile every scan speed / profile rate along the line.
+    # Back in the part's frame, flown at the program's constant TCP speed: a profile every
+    # scan speed / profile rate along the TCP's path, which the program puts on the line.
     spacing = options.scan_speed / spec.profile_rate_hz
     poses_part = np.linalg.inv(options.part_pose) @ poses
-    flown = fly(poses_part, scanning, spacing, spec.working_distance_mm)
+    flown = fly(poses_part, scanning, spacing, spec)
     assert abs(len(flown) - int(traj.scanning.sum())) <= 0.01 * len(flown)
     metrics = evaluate(part, spec, flown, points_per_profile=256)
     assert abs(metrics.in_spec_coverage - planned.in_spec_coverage) <= 0.01
+
+
+@pytest.mark.parametrize("fmt", ["urscript", "csv"])
+def test_constant_tcp_speed_spaces_profiles_on_the_surface(wave_plan, fmt: str) -> None:
+    """The sensor pitches along the waving sheet, so its origin, W_d behind the line, travels
+    much farther or shorter than the line does; flown at the program's constant speed the
+    beam still meets the part about Δs apart, as planned."""
+    part, spec, traj, _ = wave_plan
+    options = ExportOptions(part_pose=OPTIONS.part_pose, tcp=OPTIONS.tcp, scan=spec)
+    poses, scanning = parse_program(export_program(traj, fmt, options), fmt)
+    spacing = options.scan_speed / spec.profile_rate_hz
+    assert spacing == pytest.approx(spec.delta_s_opt_mm)
+    flown = fly(np.linalg.inv(options.part_pose) @ poses, scanning, spacing, spec)
+    origin, beam = flown.poses[:, :3, 3], flown.poses[:, :3, 2]
+    t, face = part.ray_engine.first_hit(origin, beam)
+    hit = origin + np.where(face[:, None] >= 0, t[:, None], np.nan) * beam
+    same = flown.swath[1:] == flown.swath[:-1]
+    step = np.linalg.norm(np.diff(hit, axis=0), axis=1)[same]
+    step = step[np.isfinite(step)]
+    assert len(step) > 0.9 * same.sum()
+    # The line meets the sheet at about W_d (±Z_r/2), so the spacing stays near Δs ...
+    assert np.median(step) == pytest.approx(spec.delta_s_opt_mm, rel=0.05)
+    assert np.quantile(step, 0.95) <= 1.3 * spec.delta_s_opt_mm
+    # ... while the sensor's origin travels several times farther or shorter per profile.
+    origin_step = np.linalg.norm(np.diff(origin, axis=0), axis=1)[same]
+    assert np.abs(origin_step / spec.delta_s_opt_mm - 1).max() > 0.5

@@ -34,14 +34,18 @@ def test_krl_structure() -> None:
     base = next(ln for ln in lines if ln.startswith("$BASE = "))
     assert base.startswith("$BASE = {X 500.000000,Y -200.000000,Z 100.000000,A 30.0")
     first = [float(v.split()[1]) for v in lins[0][5:-1].split(",")[:3]]
-    np.testing.assert_allclose(first, TRAJ.poses[0, :3, 3], atol=1e-5)
+    # ... and are the TCP: the laser line, W_d along the sensor's beam.
+    line = TRAJ.poses[0] @ OPTIONS.scan.T_sensor_line
+    np.testing.assert_allclose(first, line[:3, 3], atol=1e-5)
     blended = np.array([ln.endswith("C_DIS") for ln in lins])
     np.testing.assert_array_equal(blended, m.blend_mm > 0)
     assert not blended[m.pass_start | m.pass_end].any()
-    assert (
-        "$TOOL = {X 12.000000,Y -3.000000,Z 180.000000,A 0.000000,B -15.000000,C 90.000000}"
-        in lines
-    )
+    # $TOOL is that point on the sensor: T_flange_sensor moved W_d along the beam.
+    tool = next(ln for ln in lines if ln.startswith("$TOOL = {"))
+    items = dict(item.split() for item in tool[len("$TOOL = {") : -1].split(","))
+    T_tool = pose_from_xyzabc(float(items[k]) for k in "XYZABC")
+    np.testing.assert_allclose(T_tool, OPTIONS.tcp @ OPTIONS.scan.T_sensor_line, atol=1e-5)
+    assert "; TCP standoff 400 mm along the sensor's beam" in text
     assert {ln for ln in lines if ln.startswith("$VEL.CP")} == {"$VEL.CP = 0.1", "$VEL.CP = 0.3"}
     # Acquisition on right after each pass's first target, off right after its last.
     on = [i for i, ln in enumerate(lines) if ln.startswith("$OUT[1] = TRUE")]
@@ -60,7 +64,7 @@ def test_krl_angles_are_intrinsic_zyx() -> None:
         * Rotation.from_euler("x", 10, degrees=True)
     ).as_matrix()
     text = export_program(Trajectory(T[None], [0], [True]), "krl", ExportOptions())
-    assert "LIN {X 0.000000,Y 0.000000,Z 0.000000,A 30.000000,B 20.000000,C 10.000000}" in text
+    assert "A 30.000000,B 20.000000,C 10.000000}\n" in text
 
 
 def test_krl_enters_passes_by_ptp_with_status_and_turn() -> None:
@@ -76,7 +80,7 @@ def test_krl_enters_passes_by_ptp_with_status_and_turn() -> None:
     items = dict(item.split() for item in moves[0][5:-1].split(","))
     # Forward kinematics of the joints reproduces the Cartesian target ($BASE, $TOOL).
     target = pose_from_xyzabc(float(items[k]) for k in "XYZABC")
-    np.testing.assert_allclose(OPTIONS.part_pose @ target @ np.linalg.inv(OPTIONS.tcp),
+    np.testing.assert_allclose(OPTIONS.part_pose @ target @ np.linalg.inv(OPTIONS.tool),
                                arm.forward(q), atol=1e-5)  # fmt: skip
     # Basic area, A3 >= phi, A5 > 0; A2 and A6 negative.
     assert (items["S"], items["T"]) == ("'B010'", "'B100010'")

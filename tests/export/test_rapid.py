@@ -43,7 +43,10 @@ def test_rapid_structure() -> None:
     assert text.count("SetDO doScan, 1;") == text.count("SetDO doScan, 0;") == 3
     tool = re.search(r"tooldata tSensor := \[TRUE,\[\[([^\]]*)\],\[([^\]]*)\]\]", text)
     assert tool is not None
-    np.testing.assert_allclose([float(v) for v in tool.group(1).split(",")], [12, -3, 180])
+    # The tool is where the laser line meets the part: T_flange_sensor moved W_d along z.
+    xyz = [float(v) for v in tool.group(1).split(",")]
+    np.testing.assert_allclose(xyz, OPTIONS.tool[:3, 3], atol=1e-6)
+    np.testing.assert_allclose(OPTIONS.tool[:3, 3], [12, -3, 180] + 400 * OPTIONS.tcp[:3, 2])
     q = np.array([float(v) for v in tool.group(2).split(",")])
     R = Rotation.from_quat([*q[1:], q[0]]).as_matrix()
     np.testing.assert_allclose(R, OPTIONS.tcp[:3, :3], atol=1e-8)

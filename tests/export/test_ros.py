@@ -23,9 +23,10 @@ def test_ros_structure() -> None:
     first = doc["pose_array"]["poses"][0]
     np.testing.assert_allclose(
         [first["position"][k] for k in "xyz"],
-        (OPTIONS.part_pose @ TRAJ.poses[0])[:3, 3] / 1000,
+        (OPTIONS.part_pose @ TRAJ.poses[0] @ OPTIONS.scan.T_sensor_line)[:3, 3] / 1000,
         atol=1e-9,
     )
+    assert doc["scanplan"]["standoff_mm"] == 400.0
     stamps = [p["header"]["stamp"] for p in doc["path"]["poses"]]
     t = np.array([s["sec"] + s["nanosec"] * 1e-9 for s in stamps])
     assert t[0] == 0 and np.all(np.diff(t) >= 0)

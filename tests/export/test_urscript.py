@@ -46,7 +46,9 @@ def test_urscript_structure() -> None:
     tcp = re.search(r"set_tcp\(p\[([^\]]*)\]\)", text)
     assert tcp is not None
     vals = np.array([float(x) for x in tcp.group(1).split(",")])
-    np.testing.assert_allclose(vals[:3], OPTIONS.tcp[:3, 3] / 1000, atol=1e-9)
+    # The TCP is the laser line at W_d: the sensor moved 400 mm along its beam (z).
+    np.testing.assert_allclose(vals[:3], OPTIONS.tool[:3, 3] / 1000, atol=1e-9)
+    np.testing.assert_allclose(OPTIONS.tool[:3, 3], OPTIONS.tcp[:3, 3] + 400 * OPTIONS.tcp[:3, 2])
     R = Rotation.from_rotvec(vals[3:]).as_matrix()
     np.testing.assert_allclose(R, OPTIONS.tcp[:3, :3], atol=1e-8)
 

@@ -1,8 +1,10 @@
 """Robot programs from a trajectory: URScript, ABB RAPID, KUKA KRL, ROS 2 YAML, base-frame CSV,
 and a ROS 2 bag (`rosbag2`, a directory rather than a text file: `export_rosbag`).
 
-Every dialect writes the sensor poses in the robot base frame, `T_base_sensor = part_pose @
-T_part_sensor`, with the program's tool set to the sensor (`tcp` = `T_flange_sensor`).
+Every dialect writes the poses of the program's TCP, the laser line at the working distance
+(`T_part_sensor @ ScanSpec.T_sensor_line`), under the part's pose, with the program's tool set
+to that point (`ExportOptions.tool` = `T_flange_sensor @ T_sensor_line`); reading a program
+back undoes the standoff its header records, so parsers return `T_base_sensor`.
 """
 
 from __future__ import annotations

@@ -1,8 +1,13 @@
 """Frame maths, options and the motion plan shared by every robot-program dialect.
 
-Every dialect writes the same `Motion`: the sensor poses in the robot base frame
-(`T_base_sensor = part_pose @ T_part_sensor`, mm), a commanded speed per move and where the
-path may be blended. Keeping that decision here means the five files can never disagree.
+Every dialect writes the same `Motion`: the poses of the program's TCP in the robot base
+frame, a commanded speed per move and where the path may be blended. The TCP is where the
+laser line meets the part at the working distance (`ScanSpec.T_sensor_line`, W_d along the
+beam), not the sensor's origin W_d behind it: the controller's constant TCP speed is then
+the line's speed over the surface (profiles Δs apart where the part is at W_d), and linear
+moves, thinning and blends act on the surface path. Keeping that decision here means the
+five files can never disagree; their parsers undo the standoff they record
+(`TCP_STANDOFF`), so a program reads back as `T_base_sensor`.
 """
 
 from __future__ import annotations
@@ -57,7 +62,8 @@ class ExportOptions:
     """How a trajectory becomes a robot program.
 
     part_pose: (4, 4) `T_base_part`, mm — where the part sits in the robot base frame.
-    tcp:       (4, 4) `T_flange_sensor`, mm — the sensor mounted on the tool flange.
+    tcp:       (4, 4) `T_flange_sensor`, mm — the sensor mounted on the tool flange; the
+               program's tool is `tool` = `T_flange_sensor @ scan.T_sensor_line`.
     scan:      the ScanSpec: scan speed = its profile rate × Δs_opt (the speed at which
                profiles land Δs_opt apart) unless `scan_speed_mm_s` is given; its travel speed
                between passes.
@@ -127,6 +133,16 @@ class ExportOptions:
         return self.scan.travel_speed_mm_s
 
     @property
+    def standoff_mm(self) -> float:
+        """mm from the sensor's origin along its beam to the program's TCP (W_d)."""
+        return self.scan.working_distance_mm
+
+    @property
+    def tool(self) -> np.ndarray:
+        """(4, 4) `T_flange_tcp`, mm: the tool frame the program sets."""
+        return self.tcp @ self.scan.T_sensor_line
+
+    @property
     def chord_tol(self) -> float:
         """mm the thinned path may stray from a planned pose's position."""
         if self.chord_tol_mm is not None:
@@ -147,8 +163,8 @@ class Motion:
     run by run (`scanplan.export.thinning`) to the fewest within the options' chord and angle
     tolerances.
 
-    poses:      (n, 4, 4) `T_base_sensor`, mm.
-    poses_part: (n, 4, 4) `T_part_sensor`, mm: the targets a program writes under a work
+    poses:      (n, 4, 4) `T_base_tcp`, mm: the TCP (the laser line at W_d) in the base frame.
+    poses_part: (n, 4, 4) `T_part_tcp`, mm: the targets a program writes under a work
                 object / base frame `part_pose` (`T_base_part`) calibrated on the cell, so
                 moving the part means changing one frame, not every target.
     scanning:   (n,) bool; swath: (n,) int.
@@ -157,6 +173,7 @@ class Motion:
     blend_mm:   (n,) blend radius at pose i; 0 = exact stop (pass ends and transitions).
     source:     (n,) int, the index of each target among the planned poses.
     n_planned:  how many planned poses the targets were thinned from.
+    standoff_mm: the TCP's offset from the sensor's origin along its beam (`TCP_STANDOFF`).
     """
 
     poses: np.ndarray
@@ -170,6 +187,7 @@ class Motion:
     part_pose: np.ndarray
     source: np.ndarray
     n_planned: int
+    standoff_mm: float
 
 
 def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
@@ -178,8 +196,10 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     start, end = pass_bounds(traj.scanning, traj.swath)
     # Pass starts and ends stay targets (the acquisition switches there); every run between
     # them, scanning or not, keeps the fewest poses within the tolerances.
-    keep = thin(traj.poses, start | end, options.chord_tol, options.angle_tol_rad)
-    poses_part = traj.poses[keep]
+    # Thinned on the TCP's path: the one the controller interpolates linearly.
+    tcp_part = traj.poses @ options.scan.T_sensor_line
+    keep = thin(tcp_part, start | end, options.chord_tol, options.angle_tol_rad)
+    poses_part = tcp_part[keep]
     poses = options.part_pose @ poses_part
     scanning, start, end = traj.scanning[keep], start[keep], end[keep]
     # Entering a pass is still a travel move; only moves between two recorded poses scan.
@@ -196,6 +216,7 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
         options.part_pose,
         keep,
         len(traj),
+        options.standoff_mm,
     )
 
 
@@ -219,7 +240,8 @@ def blend_radii(poses: np.ndarray, inner: np.ndarray, options: ExportOptions) ->
 
 
 def flange_poses(traj: Trajectory, options: ExportOptions) -> np.ndarray:
-    """(n, 4, 4) `T_base_flange` in mm, the input of `scanplan.robot.check_reach`."""
+    """(n, 4, 4) `T_base_flange` in mm, the input of `scanplan.robot.check_reach`: the same
+    whichever TCP the program flies (`T_base_tcp @ inv(tool)` is this)."""
     return options.part_pose @ traj.poses @ np.linalg.inv(options.tcp)
 
 
@@ -273,6 +295,33 @@ def parse_pose_arg(s: str) -> np.ndarray:
 
 
 # --- reading programs back -----------------------------------------------------------------
+
+# What every program's header records of its TCP, in the dialect's comment syntax; a program
+# without it (written before the TCP moved to the line) flies the sensor's origin.
+TCP_STANDOFF = re.compile(r"TCP standoff ([-+0-9.eE]+) mm along the sensor's beam")
+
+
+def standoff_note(motion: Motion) -> str:
+    """The header text `TCP_STANDOFF` reads back, and why."""
+    return (
+        f"TCP standoff {motion.standoff_mm:.6g} mm along the sensor's beam (z): the tool is "
+        "where the laser line meets the part at the working distance, so the commanded "
+        "speed is the line's speed over the surface"
+    )
+
+
+def read_standoff(text: str) -> float:
+    """mm, the standoff a program's header records (`standoff_note`); 0 when none."""
+    m = TCP_STANDOFF.search(text)
+    return float(m.group(1)) if m else 0.0
+
+
+def sensor_poses(poses_tcp: np.ndarray, standoff_mm: float | np.ndarray) -> np.ndarray:
+    """(n, 4, 4) `T_x_sensor` of the TCP poses `T_x_tcp` (mm) of a program with that standoff
+    (mm, one or (n,)): each moved back along its own z."""
+    poses = np.array(poses_tcp, dtype=np.float64)
+    poses[..., :3, 3] -= np.asarray(standoff_mm, dtype=np.float64)[..., None] * poses[..., :3, 2]
+    return poses
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,10 @@ from scanplan.export.common import (
     euler_zyx_deg,
     joint_move_targets,
     pose_from_xyzabc,
+    read_standoff,
     scan_output,
+    sensor_poses,
+    standoff_note,
 )
 
 SUFFIX = ".src"
@@ -65,9 +68,10 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"DEF {name}( )",
         "; Laser-profilometer scan path written by scanplan. Save as "
         f"{name}.src (KRL wants the file named after the DEF).",
-        "; Targets are T_part_sensor, the sensor pose in the part's frame: $BASE is the part",
+        "; Targets are T_part_tcp, the TCP's pose in the part's frame: $BASE is the part",
         "; (T_base_part; assumes $WORLD = $ROBROOT; calibrate it as a BASE_DATA and nothing",
-        "; else changes) and $TOOL is the sensor (T_flange_sensor).",
+        "; else changes) and $TOOL the TCP (T_flange_sensor moved along the beam).",
+        f"; {standoff_note(motion)}.",
         "; X,Y,Z in mm; A,B,C in degrees, A about Z, B about Y', "
         "C about X''. $VEL.CP in m/s, $APO.CDIS in mm.",
         f"; {len(motion.poses)} targets from {motion.n_planned} planned poses, "
@@ -88,7 +92,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "; switches with the robot standing on that target.",
         "  BAS(#INITMOV, 0)",
         f"  $BASE = {_frames(motion.part_pose[None])[0]}",
-        f"  $TOOL = {_frames(options.tcp[None])[0]}",
+        f"  $TOOL = {_frames(options.tool[None])[0]}",
         "  $ADVANCE = 3",
         f"  $ACC.CP = {options.accel_mm_s2 / 1000.0:.6g}",
     ]
@@ -152,4 +156,5 @@ def parse(text: str) -> Parsed:
     poses = np.tile(np.eye(4), (len(arr), 1, 1))
     poses[:, :3, :3] = Rotation.from_euler("ZYX", arr[:, 3:], degrees=True).as_matrix()
     poses[:, :3, 3] = arr[:, :3]
-    return Parsed(base @ poses, np.array(tracker.flags), np.array(speeds), np.array(blended))
+    poses = sensor_poses(base @ poses, read_standoff(text))
+    return Parsed(poses, np.array(tracker.flags), np.array(speeds), np.array(blended))

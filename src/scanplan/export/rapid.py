@@ -18,7 +18,10 @@ from scanplan.export.common import (
     joint_move_targets,
     poses_from_parts,
     quat_wxyz,
+    read_standoff,
     scan_output,
+    sensor_poses,
+    standoff_note,
     target_joints,
 )
 
@@ -81,9 +84,11 @@ def write(motion: Motion, options: ExportOptions) -> str:
     out = [
         f"MODULE {options.program_name}",
         "  ! Laser-profilometer scan path written by scanplan.",
-        "  ! Targets are T_part_sensor, the sensor pose in the part's frame, in the work object",
+        "  ! Targets are T_part_tcp, the TCP's pose in the part's frame, in the work object",
         "  ! wobjPart (its user frame is T_base_part: calibrate it and nothing else changes),",
-        "  ! for tool tSensor (T_flange_sensor). mm, quaternions",
+        "  ! for tool tSensor (T_flange_sensor moved along the beam to the TCP).",
+        f"  ! {standoff_note(motion)}.",
+        "  ! mm, quaternions",
         "  ! [q1..q4] scalar first. Each target's confdata [cf1,cf4,cf6,cfx] is the",
         "  ! configuration the reach check chose ([0,0,0,0] when no arm was checked); every",
         "  ! run is entered by MoveAbsJ into that configuration and ConfL\\Off lets the linear",
@@ -97,7 +102,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"  ! Acquisition: SetDO {signal}, 1 at each run's first target, 0 at its last (after a",
         "  ! fine point, so it switches with the robot standing there): define the signal in",
         "  ! the I/O configuration and wire it to the sensor's acquisition enable.",
-        f"  PERS tooldata tSensor := [TRUE,[{_frames(options.tcp[None])[0]}],"
+        f"  PERS tooldata tSensor := [TRUE,[{_frames(options.tool[None])[0]}],"
         "[1,[0,0,50],[1,0,0,0],0,0,0]];",
         f'  PERS wobjdata wobjPart := [FALSE,TRUE,"",[{_frames(motion.part_pose[None])[0]}],'
         "[[0,0,0],[1,0,0,0]]];",
@@ -166,7 +171,7 @@ def parse(text: str) -> Parsed:
     rot = Rotation.from_quat(np.concatenate([wxyz[:, 1:], wxyz[:, :1]], axis=1))
     speed = np.array([speeds[v] for v, _ in moves])
     return Parsed(
-        uframe @ poses_from_parts(xyz, rot),
+        sensor_poses(uframe @ poses_from_parts(xyz, rot), read_standoff(text)),
         np.array(tracker.flags),
         speed,
         np.array([b for _, b in moves]),

@@ -2,8 +2,10 @@
 
 One YAML mapping with three keys: `pose_array` and `path` are the messages exactly as
 `ros2 topic pub` / rosidl YAML expects them, `scanplan` carries what no message holds (the
-scanning flags, swath indices and speeds). Path stamps are the planned arrival times from the
-start (distance / commanded speed, accelerations ignored). The same two messages as a rosbag2
+scanning flags, swath indices, speeds and the TCP's standoff from the sensor, `standoff_mm`).
+Poses are the TCP's, where the laser line meets the part at the working distance. Path
+stamps are the planned arrival times from the start (distance / commanded speed,
+accelerations ignored). The same two messages as a rosbag2
 directory: `scanplan.export.rosbag`, built on `ros_poses` and `arrival_times` here.
 """
 
@@ -13,7 +15,15 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from scanplan.export.common import ExportOptions, Motion, Parsed, poses_from_parts, quat_wxyz
+from scanplan.export.common import (
+    ExportOptions,
+    Motion,
+    Parsed,
+    poses_from_parts,
+    quat_wxyz,
+    sensor_poses,
+    standoff_note,
+)
 
 SUFFIX = ".yaml"
 
@@ -30,7 +40,7 @@ def _stamp(t: float) -> str:
 
 
 def ros_poses(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (n, 3) in metres, quaternions (n, 4) scalar *first*) of `T_base_sensor`;
+    """(positions (n, 3) in metres, quaternions (n, 4) scalar *first*) of `T_base_tcp`;
     ROS messages order the quaternion x, y, z, w."""
     return motion.poses[:, :3, 3] / 1000.0, quat_wxyz(motion.poses[:, :3, :3])
 
@@ -53,14 +63,17 @@ def write(motion: Motion, options: ExportOptions) -> str:
     ]
     out = [
         f"# {options.program_name}: laser-profilometer scan path written by scanplan",
-        f"# Poses are T_{frame}_sensor (sensor pose in the robot base frame, part_pose @",
-        "# T_part_sensor), metres and unit quaternions. On a UR arm, note that the ROS frame",
+        f"# Poses are T_{frame}_tcp (the TCP in the robot base frame, part_pose @",
+        "# T_part_tcp), metres and unit quaternions. On a UR arm, note that the ROS frame",
         "# base_link is the controller's base frame turned 180 deg about Z.",
+        f"# {standoff_note(motion)};",
+        "# the sensor's pose is the TCP's moved back by standoff_mm along its z.",
         "scanplan:",
         f"  frame_id: {frame}",
         f"  scanning: [{', '.join('true' if s else 'false' for s in motion.scanning)}]",
         f"  swath: [{', '.join(str(int(k)) for k in motion.swath)}]",
         f"  speed_mm_s: [{', '.join(f'{v:g}' for v in motion.speed_mm_s)}]",
+        f"  standoff_mm: {motion.standoff_mm:.9g}",
         "pose_array:",
         "  header:",
         "    stamp: {sec: 0, nanosec: 0}",
@@ -94,6 +107,7 @@ def parse(text: str) -> Parsed:
     path_xyz = np.array([[p["position"][k] for k in "xyz"] for p in poses_in]) * 1000.0
     if not np.allclose(path_xyz, xyz, atol=1e-6):
         raise ValueError("ROS YAML: path and pose_array hold different poses")
+    poses = sensor_poses(poses, float(extra.get("standoff_mm", 0.0)))
     return Parsed(
         poses, np.array(extra["scanning"], dtype=bool), np.array(extra["speed_mm_s"]), None
     )

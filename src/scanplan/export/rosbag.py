@@ -9,9 +9,11 @@ plugin of stock Humble; Jazzy ships it beside mcap.
 
 Two topics, one message each, both stamped 0 (the bag starts at the epoch, like the YAML's
 headers): `/scanplan/path` (`nav_msgs/msg/Path`, pose stamps = planned arrival times from the
-start) and `/scanplan/poses` (`geometry_msgs/msg/PoseArray`). Poses are `T_<frame>_sensor` in
-metres, quaternion x, y, z, w, computed by `scanplan.export.ros`. What no message holds — the
-scanning flags, swath indices and speeds — goes into the metadata's `custom_data`.
+start) and `/scanplan/poses` (`geometry_msgs/msg/PoseArray`). Poses are `T_<frame>_tcp` (the
+TCP where the laser line meets the part at the working distance) in metres, quaternion x, y,
+z, w, computed by `scanplan.export.ros`. What no message holds — the scanning flags, swath
+indices, speeds and the TCP's standoff from the sensor — goes into the metadata's
+`custom_data`.
 
 The bag is written into a hidden staging directory beside the target and renamed into place,
 so a failure never leaves a half-written bag. An existing rosbag2 directory (one holding a
@@ -32,7 +34,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from scanplan.export.common import ExportOptions, Motion, poses_from_parts
+from scanplan.export.common import ExportOptions, Motion, poses_from_parts, sensor_poses
 from scanplan.export.ros import arrival_times, ros_poses, split_stamp
 from scanplan.files import replace_directory
 
@@ -108,6 +110,7 @@ def write_rosbag(motion: Motion, options: ExportOptions, path: str | os.PathLike
                     "scanning": ",".join("1" if s else "0" for s in motion.scanning),
                     "swath": ",".join(str(int(k)) for k in motion.swath),
                     "speed_mm_s": ",".join(repr(float(v)) for v in motion.speed_mm_s),
+                    "standoff_mm": repr(float(motion.standoff_mm)),
                 }
                 for key, value in extra.items():
                     writer.set_custom_data(f"scanplan.{key}", value)
@@ -128,7 +131,8 @@ def write_rosbag(motion: Motion, options: ExportOptions, path: str | os.PathLike
 class RosbagContents:
     """What `read_rosbag` recovers.
 
-    poses: (n, 4, 4) `T_base_sensor`, mm (from the PoseArray; the Path must agree);
+    poses: (n, 4, 4) `T_base_sensor`, mm (from the PoseArray, the TCP's standoff undone;
+    the Path must agree);
     stamps_s: (n,) the Path's pose stamps; scanning (n,) bool, swath (n,) int,
     speed_mm_s (n,) from the metadata's custom_data; frame_id; topics: {topic: msgtype};
     message_counts: {topic: messages}.
@@ -168,8 +172,9 @@ def read_rosbag(path: str | os.PathLike) -> RosbagContents:
         meta = yaml.safe_load((path / "metadata.yaml").read_text())
         custom = meta["rosbag2_bagfile_information"]["custom_data"]
         extra = {k: custom[f"scanplan.{k}"].split(",") for k in _KEYS}
+        standoff_mm = float(custom.get("scanplan.standoff_mm", 0.0))
         path_msg, poses_msg = msgs[PATH_TOPIC], msgs[POSES_TOPIC]
-    except (ReaderError, KeyError, TypeError, yaml.YAMLError) as exc:
+    except (ReaderError, KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
         raise ValueError(f"not a scanplan rosbag2 directory {path}: {exc}") from None
     poses = _pose_matrices(poses_msg.poses)
     path_poses = _pose_matrices([p.pose for p in path_msg.poses])
@@ -181,7 +186,7 @@ def read_rosbag(path: str | os.PathLike) -> RosbagContents:
         raise ValueError(f"rosbag2 {path}: messages in different frames {sorted(frames)}")
     stamps = np.array([p.header.stamp.sec + p.header.stamp.nanosec * 1e-9 for p in path_msg.poses])
     return RosbagContents(
-        poses=poses,
+        poses=sensor_poses(poses, standoff_mm),
         stamps_s=stamps,
         scanning=np.array([v == "1" for v in extra["scanning"]], dtype=bool),
         swath=np.array([int(v) for v in extra["swath"]], dtype=int),

@@ -18,7 +18,10 @@ from scanplan.export.common import (
     floats,
     joint_move_targets,
     poses_from_parts,
+    read_standoff,
     scan_output,
+    sensor_poses,
+    standoff_note,
 )
 
 SUFFIX = ".script"
@@ -45,10 +48,11 @@ def write(motion: Motion, options: ExportOptions) -> str:
     out_n = scan_output(options, DEFAULT_SCAN_OUTPUT, "number 0-7")
     out = [
         f"# {name}: laser-profilometer scan path written by scanplan",
-        "# Targets are T_part_sensor, the sensor pose in the part's frame, flown as",
+        "# Targets are T_part_tcp, the TCP's pose in the part's frame, flown as",
         "# pose_trans(feature, target): `feature` is the part's pose in the base frame",
         "# (T_base_part); calibrate it (a feature plane on the pendant) and nothing else changes.",
-        "# set_tcp below makes the sensor the TCP. Units: metres,"
+        f"# {standoff_note(motion)}.",
+        "# set_tcp below is that point: T_flange_sensor moved along the beam. Units: metres,",
         "# rotation vectors in radians, speeds m/s, accelerations m/s^2, blend radii metres.",
         f"# {len(motion.poses)} targets from {motion.n_planned} planned poses, "
         f"{int(motion.pass_start.sum())} scanning runs; scan speed {options.scan_speed:g} mm/s, "
@@ -64,7 +68,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "and False at its last;",
         "# wire it to the sensor's acquisition enable.",
         f"def {name}():",
-        f"  set_tcp({_poses_m(options.tcp[None])[0]})",
+        f"  set_tcp({_poses_m(options.tool[None])[0]})",
         f"  feature = {_poses_m(motion.part_pose[None])[0]}",
     ]
     joint_moves = joint_move_targets(motion, options)
@@ -111,4 +115,5 @@ def parse(text: str) -> Parsed:
         raise ValueError("URScript program holds no movel")
     arr = np.asarray(values)
     poses = feature @ poses_from_parts(arr[:, :3] * 1000.0, Rotation.from_rotvec(arr[:, 3:6]))
+    poses = sensor_poses(poses, read_standoff(text))
     return Parsed(poses, np.array(tracker.flags), arr[:, 7] * 1000.0, arr[:, 8] > 0)
