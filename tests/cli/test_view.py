@@ -142,3 +142,14 @@ def test_the_report_of_a_plan_made_for_an_arm_draws_it(tmp_path):
     assert result.exit_code == 0, result.output
     html = (tmp_path / "r" / "report.html").read_text()
     assert "the cell and the arm are not drawn" in html and "ur5e base" not in html
+
+
+def test_links_in_the_table_are_drawn_red(tmp_path, no_simulation):
+    # The base 200 mm under the plate, inside the table's footprint: the column stands in it.
+    plan = robot_plan(tmp_path, part_pose="300,0,200,0,0,0")
+    page = tmp_path / "page.html"
+    result = run_cli("view", str(plan), "-o", str(page))
+    assert result.exit_code == 0, result.output
+    assert "(0 unreachable, 41 link collisions)" in result.output
+    html = page.read_text()
+    assert "41 poses: a link collides" in html and "(view 0, pass 0, first): links collide" in html
