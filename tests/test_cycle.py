@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers import run_cli
+from helpers import plate_file, run_cli
 from scanplan.cycle import NOMINAL, MotionLimits, cycle_time, trapezoid_time_s
 from scanplan.quantities import ScanSpec
 from scanplan.robot import motion_limits
@@ -208,7 +208,7 @@ def test_export_prints_the_cycle_time_on_the_chosen_arm(tmp_path) -> None:
     write_csv(traj, plan)
     args = ["export", str(plan), "--format", "krl", "--tcp", "0,0,90,0,0,0"]
     args += ["--part-pose", "355.966,0,-200,0,0,0", "-o", str(tmp_path / "p.src")]
-    result = run_cli(*args, "--robot", "kr6-r900")
+    result = run_cli(*args, "--robot", "kr6-r900", "--part", plate_file(tmp_path))
     assert result.exit_code == 0, result.output
     (line,) = [ln for ln in result.stdout.splitlines() if ln.startswith("cycle time ")]
     assert line.endswith("in 2 passes, moving 0.9 s, 1 joint moves; trapezoidal, kr6-r900 limits)")

@@ -14,7 +14,7 @@ import numpy as np
 from scanplan.collision import CellObstacles
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links
-from scanplan.robot.place import Placement, place
+from scanplan.robot.place import HALF_TURN, Placement, flyable_poses, place, turned_passes
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.trajectory import Trajectory
@@ -153,11 +153,6 @@ def fit_to_robot(
     )
 
 
-# Half a turn about the sensor's beam (z_s): the laser line lands where it did, the camera
-# looks from the other side, and the wrist gets another way to reach the pose.
-_HALF_TURN = np.diag([-1.0, -1.0, 1.0, 1.0])
-
-
 def _turned(
     traj: Trajectory,
     arm: Robot,
@@ -168,21 +163,13 @@ def _turned(
     """`traj` with each pass (and the move into it, which carries its swath index) turned
     half a turn about the beam where more of its poses are reachable and clear that way,
     and how many were."""
-    kept = []
-    for poses in (traj.poses, traj.poses @ _HALF_TURN):
-        report = check_reach(
-            T_base_part @ poses @ inv_tcp, arm, swath=traj.swath, scanning=traj.scanning
-        )
-        good = ~np.isnan(report.joints).any(axis=1)
-        if obstacles is not None:
-            good &= ~check_links(arm, report.joints, obstacles, T_base_part).colliding
-        kept.append(good)
-    passes = np.unique(traj.swath[traj.scanning])
-    better = [s for s in passes if kept[1][traj.swath == s].sum() > kept[0][traj.swath == s].sum()]
-    turn = np.isin(traj.swath, better)
+    planned, turned = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles)
+    scanning = traj.scanning
+    better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
     if not len(better):
         return traj, 0
-    poses = np.where(turn[:, None, None], traj.poses @ _HALF_TURN, traj.poses)
+    turn = np.isin(traj.swath, better)
+    poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
     return replace(traj, poses=poses), len(better)
 
 

@@ -96,6 +96,49 @@ def _as_printed(T_base_part: np.ndarray) -> np.ndarray:
     return T
 
 
+# Half a turn about the sensor's beam (z_s): the laser line lands where it did, the camera
+# looks from the other side, and the wrist gets another way to reach the pose.
+HALF_TURN = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def flyable_poses(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    index: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
+    default) of `traj` the arm reaches within its limits with its links clear."""
+    index = np.arange(len(traj)) if index is None else index
+    out = []
+    for poses in (traj.poses[index], traj.poses[index] @ HALF_TURN):
+        report = check_reach(
+            T_base_part @ poses @ inv_tcp,
+            arm,
+            swath=traj.swath[index],
+            scanning=traj.scanning[index],
+        )
+        good = ~np.isnan(report.joints).any(axis=1)
+        if obstacles is not None:
+            good &= ~check_links(arm, report.joints, obstacles, T_base_part).colliding
+        out.append(good)
+    return out[0], out[1]
+
+
+def turned_passes(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> np.ndarray:
+    """The swath indices whose poses are kept more often turned than as planned."""
+    passes = np.unique(swath)
+    gain = np.bincount(np.searchsorted(passes, swath), turned.astype(int) - planned, len(passes))
+    return passes[gain > 0]
+
+
+def kept_by_pass(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> np.ndarray:
+    """(m,) bool: the poses kept, each pass flown the better way."""
+    return np.where(np.isin(swath, turned_passes(swath, planned, turned)), turned, planned)
+
+
 def _reach_mm(robot: Robot) -> tuple[float, float]:
     """(horizontal reach of the flange, height of the workspace centre) from FK samples."""
     lim = np.clip(robot.joint_limits, -np.pi, np.pi)
@@ -253,16 +296,18 @@ def place(
     # the most poses flyable wins, a fully flyable one first.
     ranked: list[tuple[bool, float, int, Placement]] = []
     sample = _subsample(traj, _LINK_RANK_POSES)
+    inv_tcp = np.linalg.inv(tcp)
     for rank, i in enumerate(np.argsort(-best_scores)):
         T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
         report = check_reach(
             T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
         )
-        good = ~np.isnan(report.joints).any(axis=1)
-        if obstacles is not None:
-            hits = check_links(arm, report.joints[sample], obstacles, T_base_part).colliding
-            good = good[sample] & ~hits
         found = Placement(T_base_part, report, float(best_scores[i]), evaluated, 0.0)
+        if obstacles is None:
+            good = ~np.isnan(report.joints).any(axis=1)
+        else:  # what `fit.fit_to_robot` keeps: each pass as planned or turned about the beam
+            kept = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, sample)
+            good = kept_by_pass(traj.swath[sample], *kept)
         flyable = report.reachable and bool(good.all())
         ranked.append((flyable, float(good.mean()), -rank, found))
         if flyable and obstacles is None:
