@@ -340,6 +340,7 @@ NEEDS = {
     "train": ["-o", "{out}/policy"],
     "demo": ["-o", "{out}/demo"],
     "sweep": ["-o", "{out}/sweep"],
+    "view": ["{good}", "-o", "{out}/v.html"],
 }
 
 
