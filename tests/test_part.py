@@ -209,3 +209,25 @@ def test_a_step_part_can_be_planned():
     assert np.isfinite(traj.poses).all()
     # the fixed planner flies at W_d above the plate's top face (z = 10 mm)
     assert np.median(traj.positions_mm[traj.scanning, 2]) == pytest.approx(410.0, abs=1.0)
+
+
+def test_a_step_file_read_only_in_part_is_refused(tmp_path, capfd):
+    # Bytes garbled inside one entity: OpenCASCADE skips it and returns a box missing a face.
+    data = (DATA / "box.step").read_bytes()
+    at = data.index(b"#26 = ") + 10
+    bad = tmp_path / "garbled.step"
+    bad.write_bytes(data[:at] + b"}}{{ 7 ?? !! ((" + data[at:])
+    with pytest.raises(ValueError, match="read only in part") as err:
+        load_part(bad)
+    assert "\n" not in str(err.value) and str(bad) in str(err.value)
+    out, stderr = capfd.readouterr()
+    assert out == "" and stderr == ""  # OpenCASCADE's own report captured
+
+
+@pytest.mark.parametrize("factor", [b"-25.4", b"0.", b"abc"])
+def test_a_step_length_unit_that_is_not_a_positive_length_is_refused(tmp_path, factor):
+    data = (DATA / "small_box_in.step").read_bytes()
+    bad = tmp_path / "mirrored.step"
+    bad.write_bytes(data.replace(b"LENGTH_MEASURE(25.4)", b"LENGTH_MEASURE(" + factor + b")"))
+    with pytest.raises(ValueError, match="not a positive length"):
+        load_part(bad)

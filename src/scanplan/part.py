@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
+import math
 import os
 import re
 import sys
@@ -281,10 +282,14 @@ def _step_to_glb(data: bytes, path: Path, deflection_mm: float) -> trimesh.Trime
             merge_primitives=True,
         )
         log = printed()
+    errors = [ln for ln in re.sub(r"\x1b\[[0-9;]*m", "", log).splitlines() if "ERR" in ln]
+    reason = errors[0].strip(" *").split(":", 2)[-1].strip() if errors else "no shape in it"
     if not glb:
-        errors = [ln for ln in re.sub(r"\x1b\[[0-9;]*m", "", log).splitlines() if "ERR" in ln]
-        reason = errors[0].strip(" *").split(":", 2)[-1].strip() if errors else "no shape in it"
         raise ValueError(f"part file {path} cannot be read as STEP: {reason}")
+    if errors:  # OpenCASCADE skips what it cannot parse and returns the rest: a wrong part
+        raise ValueError(
+            f"part file {path}: STEP read only in part ({reason}); repair or export it again"
+        )
     try:
         with np.errstate(all="ignore"):
             mesh = trimesh.load(io.BytesIO(glb), file_type="glb", force="mesh", process=False)
@@ -296,9 +301,29 @@ def _step_to_glb(data: bytes, path: Path, deflection_mm: float) -> trimesh.Trime
     return mesh
 
 
+# A unit defined by conversion (inch = 25.4 mm): its factor must be a positive length.
+_LENGTH_CONVERSION = re.compile(rb"LENGTH_MEASURE_WITH_UNIT\s*\(\s*LENGTH_MEASURE\s*\(([^)]*)\)")
+
+
+def _check_step_units(data: bytes, path: Path) -> None:
+    """A length unit converted by a factor <= 0 (or not a number) would mirror or collapse
+    the part; OpenCASCADE applies it without a word."""
+    for match in _LENGTH_CONVERSION.finditer(data):
+        text = match.group(1).decode("ascii", "replace").strip()
+        try:
+            factor = float(text)
+        except ValueError:
+            factor = float("nan")
+        if not (math.isfinite(factor) and factor > 0):
+            raise ValueError(
+                f"part file {path}: STEP length unit converted by {text!r}, not a positive length"
+            )
+
+
 def _load_step(data: bytes, path: Path) -> trimesh.Trimesh:
     """STEP through OpenCASCADE (cascadio): a coarse pass measures the part, the real one
     tessellates with a chord error of max(0.01 mm, 1e-3 x bounding diagonal)."""
+    _check_step_units(data, path)
     coarse = _step_to_glb(data, path, deflection_mm=1e9)
     diagonal = float(np.linalg.norm(coarse.extents))
     deflection = max(STEP_MIN_DEFLECTION_MM, STEP_RELATIVE_DEFLECTION * diagonal)
