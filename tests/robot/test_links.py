@@ -114,3 +114,14 @@ def _z_to(d: np.ndarray) -> np.ndarray:
     d = d / np.linalg.norm(d)
     rot, _ = Rotation.align_vectors([d], [[0.0, 0.0, 1.0]])
     return rot.as_matrix()
+
+
+def test_an_arm_over_the_table_stands_on_it_not_in_the_air() -> None:
+    arm = get_robot("kr6-r900")
+    part = _box_part((200, 200, 50), (0, 0, 25))
+    block = Cell.around(part).table_block(part)
+    T = np.eye(4)
+    T[:3, 3] = (-200.0, 0.0, -30.0)  # over the table, on a 30 mm plate: fine
+    assert column_clear(arm, T[None], block)[0]
+    T[:3, 3] = (-200.0, 0.0, -250.0)  # over the table on a 250 mm riser nothing models
+    assert not column_clear(arm, T[None], block)[0]

@@ -17,6 +17,8 @@ from scanplan.robot.base import Robot, inv_rigid
 # Every link keeps this far from the part, a fixture and the table: the capsules already
 # enclose the links, so this is the margin for the cell's calibration, not for the shapes.
 LINK_CLEARANCE_MM = 10.0
+# An arm over the table stands on it: its mounting face at most this above the top (a plate).
+ON_TABLE_MM = 50.0
 # Poses whose capsules lie within this of a checked pose's share its verdict (its capsules
 # grown by how far theirs moved).
 LINK_STRIDE_MM = 10.0
@@ -164,11 +166,12 @@ def check_links(
 def column_clear(
     robot: Robot, T_base_part: np.ndarray, block: tuple[np.ndarray, np.ndarray] | None
 ) -> np.ndarray:
-    """(P,) whether the links that turn with joint 1 only (the first two capsules: column
-    and shoulder), swept about the vertical, keep `LINK_CLEARANCE_MM` from the table block
-    (lo, hi in part coordinates), for placements T_base_part (P, 4, 4) that turn the part
-    about the vertical only. A cheap test the placement search runs on every candidate: the
-    arm stands beside the table, or on it."""
+    """(P,) whether the arm can stand where placements T_base_part (P, 4, 4; turning the
+    part about the vertical only) put it, beside the table block (lo, hi in part
+    coordinates) or on the table: the links that turn with joint 1 only (the first two
+    capsules, column and shoulder), swept about the vertical, keep `LINK_CLEARANCE_MM` from
+    the block, and an arm over the block stands on its top (within `ON_TABLE_MM`), not on a
+    riser nothing models. A cheap test the placement search runs on every candidate."""
     T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
     if block is None:
         return np.ones(len(T), bool)
@@ -181,9 +184,9 @@ def column_clear(
     gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
     base_z = axis_in_part[:, 2]
     gap_z = np.maximum(lo[2] - (base_z + z_hi), (base_z + z_lo) - hi[2])
-    return (np.linalg.norm(gap_xy, axis=1) > sweep + LINK_CLEARANCE_MM) | (
-        gap_z > LINK_CLEARANCE_MM
-    )
+    beside = np.linalg.norm(gap_xy, axis=1) > sweep + LINK_CLEARANCE_MM
+    on_top = (gap_z > LINK_CLEARANCE_MM) & (base_z - hi[2] <= ON_TABLE_MM)
+    return beside | on_top
 
 
 __all__ = ["LINK_CLEARANCE_MM", "LinkReport", "check_links", "column_clear", "obstacles_for"]
