@@ -176,6 +176,23 @@ def test_a_program_stops_only_at_its_targets() -> None:
     np.testing.assert_allclose(ct.move_s, [2.0 * math.sqrt(20.0 / a)])
 
 
+def test_a_blended_move_is_one_trapezoid() -> None:
+    """Blended through its via points, the move up, over and down is one profile over its
+    500 mm; stopping at the first via point splits it in two."""
+    traj = two_passes_and_a_move()
+    spec = spec_at(100.0, travel_mm_s=250.0)
+    a = FAST.accel_mm_s2
+    blended = np.array([False, False, False, True, True, False, False, False])
+    ct = cycle_time(traj, spec, FAST, blended=blended)
+    np.testing.assert_allclose(ct.move_s, [500.0 / 250.0 + 250.0 / a])
+    np.testing.assert_allclose(ct.pass_s, [2.0 + 100.0 / a] * 2)  # passes as before
+    blended[3] = False
+    ct = cycle_time(traj, spec, FAST, blended=blended)
+    np.testing.assert_allclose(ct.move_s, [100.0 / 250 + 250 / a + 400.0 / 250 + 250 / a])
+    with pytest.raises(ValueError, match="blended must be"):
+        cycle_time(traj, spec, FAST, blended=blended[:3])
+
+
 def test_json_and_limits_validation() -> None:
     data = cycle_time(two_passes_and_a_move(), ScanSpec(), NOMINAL).to_json_dict()
     assert data["passes"] == 2 and data["moves"] == 1 and data["limits"]["name"] == "nominal"

@@ -24,8 +24,9 @@ CYCLE_TIME_MODEL = (
     "the TCP the program flies (the laser line at the working distance): each pass one "
     "profile at the scan speed, blended through its targets, slowed where its rotation (at "
     "the angular speed limit) or, with the arm's joints known, a joint (at its speed limit) "
-    "needs longer than the scan speed allows; each segment of a move between passes or "
-    "views an exact stop at the travel speed, timed by its rotation instead where that "
+    "needs longer than the scan speed allows; each move between passes or views one "
+    "profile at the travel speed over every run of targets it blends through (slowed as a "
+    "pass is), a segment between two exact stops timed by its rotation instead where that "
     "takes longer, and by its slowest joint's own trapezoid where the arm's joints are known "
     "(the joint move into each pass); speeds capped by the arm's Cartesian speed limit; no "
     "settling, I/O or controller look-ahead time"
@@ -183,6 +184,7 @@ def cycle_time(
     limits: MotionLimits = NOMINAL,
     joints_rad: np.ndarray | None = None,
     targets: np.ndarray | None = None,
+    blended: np.ndarray | None = None,
 ) -> CycleTime:
     """The time `traj` takes on an arm with `limits` (`CYCLE_TIME_MODEL`): passes at the
     spec's scan speed, moves at its travel speed, both capped by the arm's Cartesian speed.
@@ -192,6 +194,8 @@ def cycle_time(
     the joints bound every other segment too.
     targets: increasing indices of the poses a program flies between (a robot program's
     thinned targets, every pass's first and last pose among them); None: every pose.
+    blended: (len(targets),) bool, the targets a move blends through without stopping (a
+    program's blend radius > 0); None: a move stops at every target.
     """
     start, _ = pass_bounds(traj.scanning, traj.swath)  # the passes as planned
     swaths = len(np.unique(traj.swath[traj.scanning]))
@@ -230,8 +234,14 @@ def cycle_time(
         joint_trap = np.where(known, trap, np.nan)
     has_joints = np.isfinite(joint_trap)
 
-    # Moves: exact stops at every target, each segment the slower of its translation and
-    # rotation; a segment into a pass is the program's joint move when the joints are known.
+    # Moves: between exact stops, a lone segment is the slower of its translation and
+    # rotation, or the program's joint move into a pass when the joints are known; a run
+    # blended through its targets is one trapezoid, as a pass is (below).
+    through = np.zeros(n, dtype=bool)
+    if blended is not None:
+        through = np.asarray(blended, dtype=bool)
+        if through.shape != (n,):
+            raise ValueError(f"blended must be ({n},), got {through.shape}")
     cartesian = np.maximum(
         trapezoid_time_s(length, travel_v, accel),
         trapezoid_time_s(turn, limits.angular_speed_deg_s, limits.angular_accel_deg_s2),
@@ -242,7 +252,21 @@ def cycle_time(
     )
     moving = ~in_pass
     move_id = np.cumsum(moving & ~np.r_[False, moving[:-1]]) - 1
-    move_s = np.bincount(move_id[moving], weights=segment_s[moving])
+    # Stretches of a move: a new one starts at each segment whose first target is a stop.
+    stretch_id = np.cumsum(moving & ~(through[:-1] & np.r_[False, moving[:-1]])) - 1
+    ids = stretch_id[moving]
+    n_stretch = int(ids.max()) + 1 if ids.size else 0
+    stretch_n = np.bincount(ids, minlength=n_stretch)
+    stretch_len = np.bincount(ids, weights=length[moving], minlength=n_stretch)
+    behind = np.maximum(turn / limits.angular_speed_deg_s, joint_cruise) - length / travel_v
+    stretch_extra = np.bincount(ids, weights=np.maximum(behind, 0.0)[moving], minlength=n_stretch)
+    lone = np.bincount(ids, weights=segment_s[moving], minlength=n_stretch)
+    stretch_s = np.where(
+        stretch_n > 1, trapezoid_time_s(stretch_len, travel_v, accel) + stretch_extra, lone
+    )
+    stretch_move = np.zeros(n_stretch, dtype=np.intp)
+    stretch_move[ids] = move_id[moving]
+    move_s = np.bincount(stretch_move, weights=stretch_s, minlength=len(np.unique(move_id[moving])))
 
     # Passes: one trapezoid over the pass's length, plus whatever a segment's rotation or
     # joints need beyond its share at the scan speed.

@@ -78,9 +78,16 @@ def run_demo(
     for (name, traj), context in zip(trajectories.items(), contexts, strict=True):
         step(f"evaluating {name} ({int(traj.scanning.sum())} profiles, {context.surface} surface)")
         # The cycle timed as the exported program flies it: between its thinned targets.
-        targets = plan_motion(traj, ExportOptions(scan=spec)).source
+        motion = plan_motion(traj, ExportOptions(scan=spec))
         metrics[name] = evaluate(
-            part, spec, traj, seed, points_per_profile, context=context, targets=targets
+            part,
+            spec,
+            traj,
+            seed,
+            points_per_profile,
+            context=context,
+            targets=motion.source,
+            blended=motion.blend_mm > 0,
         )
 
     step("writing the URScript program")

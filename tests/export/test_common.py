@@ -21,11 +21,15 @@ def test_motion_rules() -> None:
     m = plan_motion(TRAJ, OPTIONS)
     runs = int(m.pass_start.sum())
     assert runs == 3 == int(m.pass_end.sum())
-    ends = m.pass_start | m.pass_end | ~m.scanning
+    ends = m.pass_start | m.pass_end
+    ends[[0, -1]] = True
     assert np.all(m.blend_mm[ends] == 0)
     # 0.5 mm between stations: blends capped at half a segment so neighbours never overlap.
-    inner = m.blend_mm[~ends]
+    inner = m.blend_mm[~ends & m.scanning]
     assert inner.max() <= 0.2 + 1e-12 and inner.min() > 0
+    # The lifted transitions between passes are blended too, beyond the scanning cap.
+    moves = m.blend_mm[~ends & ~m.scanning]
+    assert len(moves) == 4 and moves.min() > 0.2
     assert np.all(m.speed_mm_s[m.scanning & ~m.pass_start] == 100.0)  # 200 Hz · 0.5 mm
     assert np.all(m.speed_mm_s[~m.scanning | m.pass_start] == 300.0)
 

@@ -34,7 +34,9 @@ def test_rapid_structure() -> None:
     m = plan_motion(TRAJ, OPTIONS)
     assert len(moves) == len(m.poses) < len(TRAJ)
     zones = np.array([z for _, _, z in moves])
-    assert np.all(zones[m.pass_start | m.pass_end | ~m.scanning] == "fine")
+    stops = m.pass_start | m.pass_end
+    stops[[0, -1]] = True
+    assert np.all(zones[stops] == "fine") and np.all(zones[~stops] != "fine")
     # Each blend a zone of its own radius, rounded down (in 0.01 mm) so the cap still holds.
     radii = dict(re.findall(r"CONST zonedata (\w+) := \[FALSE,([^,]+),", text))
     for z, b in zip(zones, m.blend_mm, strict=True):

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import FAST, snake_trajectory
 from scanplan.export import ExportOptions
-from scanplan.export.common import plan_motion
+from scanplan.export.common import MOVE_BLEND_MM, MOVE_CUT_SHARE, plan_motion
 from scanplan.export.thinning import interp_params, thin_run
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory
@@ -98,22 +98,27 @@ def test_any_wavy_run_thinned_within_tolerances(seed: int, chord: float, angle_d
 
 
 def test_blends_cut_the_path_by_at_most_the_chord_tolerance() -> None:
+    """In a pass by the chord tolerance; in a move between passes by a share of the
+    clearance the move was planned with."""
     wide = ExportOptions(blend_mm=50.0, chord_tol_mm=0.3, angle_tol_deg=1.0)
     m = plan_motion(TRAJ, wide)
     p = m.poses[:, :3, 3]
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
     inner = np.flatnonzero(m.blend_mm > 0)
     assert len(inner) > 0
-    ends = m.pass_start | m.pass_end | ~m.scanning
+    ends = m.pass_start | m.pass_end
+    ends[[0, -1]] = True
     assert np.all(m.blend_mm[ends] == 0)
+    assert wide.move_cut_mm == pytest.approx(20.0 * MOVE_CUT_SHARE)
     for i in inner:
+        cut = 0.3 if m.scanning[i] else wide.move_cut_mm
         r = m.blend_mm[i]
         # No overlap with the neighbours' blends.
         assert r <= 0.5 * min(seg[i - 1], seg[i]) + 1e-9
         # A blend from r before the corner to r after it cuts the corner by r·sin(θ/2).
         a, b = p[i] - p[i - 1], p[i + 1] - p[i]
         cos_turn = a @ b / np.linalg.norm(a) / np.linalg.norm(b)
-        assert r * np.sqrt((1 - min(cos_turn, 1.0)) / 2) <= 0.3 + 1e-9
+        assert r * np.sqrt((1 - min(cos_turn, 1.0)) / 2) <= cut + 1e-9
     # A straight scanning run is blended up to blend_mm, the neighbours permitting.
     line = np.tile(np.eye(4), (5, 1, 1))
     line[:, 0, 3] = [0, 100, 200, 300, 400]
@@ -122,3 +127,42 @@ def test_blends_cut_the_path_by_at_most_the_chord_tolerance() -> None:
     np.testing.assert_array_equal(corner.source, [0, 2, 4])
     # 0.5 mm (the chord tolerance) over sin(θ/2), below half the 200 mm moves.
     np.testing.assert_allclose(corner.blend_mm, [0, 0.5 / np.sin(np.arctan(4 / 200)), 0])
+
+
+def _lifted_move() -> Trajectory:
+    """Pass 0 along +x, a move up 100, over 300 (with a 90° corner each end) and down 100,
+    pass 1 back: the move's via points are corners no thinning drops."""
+    xyz = [[0, 0, 0], [100, 0, 0], [200, 0, 0]]
+    xyz += [[200, 0, 100], [200, 150, 100], [200, 300, 100]]
+    xyz += [[200, 300, 0], [100, 300, 0], [0, 300, 0]]
+    poses = np.tile(np.eye(4), (len(xyz), 1, 1))
+    poses[:, :3, 3] = xyz
+    scanning = [True] * 3 + [False] * 3 + [True] * 3
+    return Trajectory(poses, [0, 0, 0, 1, 1, 1, 1, 1, 1], scanning)
+
+
+def test_a_move_between_passes_is_blended_but_not_into_a_joint_move() -> None:
+    traj = _lifted_move()
+    options = ExportOptions(scan=ScanSpec(clearance_mm=20.0))
+    m = plan_motion(traj, options)
+    np.testing.assert_array_equal(m.source, [0, 2, 3, 5, 6, 8])
+    # The two 90° corners of the move: cut by the clearance's share, r·sin 45° = 5 mm.
+    r = 5.0 / np.sin(np.pi / 4)
+    np.testing.assert_allclose(m.blend_mm, [0, 0, r, r, 0, 0])
+    # Capped by the largest move blend asked for, and by default at MOVE_BLEND_MM.
+    small = plan_motion(traj, ExportOptions(scan=options.scan, move_blend_mm=3.0))
+    np.testing.assert_allclose(small.blend_mm, [0, 0, 3, 3, 0, 0])
+    assert options.move_blend_mm == MOVE_BLEND_MM > r
+    # With the arm's joints the program enters pass 1 by a joint move: it starts standing.
+    joints = np.zeros((len(traj), 6))
+    jm = plan_motion(traj, ExportOptions(scan=options.scan, joints_rad=joints))
+    np.testing.assert_allclose(jm.blend_mm, [0, 0, r, 0, 0, 0])
+    # Where the joints are unknown there is no joint move, and the blend stays.
+    joints[6] = np.nan
+    np.testing.assert_allclose(
+        plan_motion(traj, ExportOptions(scan=options.scan, joints_rad=joints)).blend_mm,
+        [0, 0, r, r, 0, 0],
+    )
+    # No clearance, no room to cut a corner: exact stops.
+    tight = plan_motion(traj, ExportOptions(scan=ScanSpec(clearance_mm=0.0)))
+    np.testing.assert_array_equal(tight.blend_mm, 0.0)

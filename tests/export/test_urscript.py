@@ -34,7 +34,9 @@ def test_urscript_structure() -> None:
     part = np.array([float(x) for x in feature.group(1).split(",")])
     np.testing.assert_allclose(part[:3], OPTIONS.part_pose[:3, 3] / 1000, atol=1e-9)
     r = np.array([float(x[2]) for x in movel])
-    assert np.all(r[m.pass_start | m.pass_end | ~m.scanning] == 0)
+    stops = m.pass_start | m.pass_end
+    stops[[0, -1]] = True
+    assert np.all(r[stops] == 0) and np.all(r[~stops] > 0)
     np.testing.assert_allclose(r, m.blend_mm / 1000, atol=1e-9)
     v = {float(x[1]) for x in movel}
     assert v == {0.1, 0.3}

@@ -209,18 +209,21 @@ def plan_cmd(
         f"{int(traj.scanning.sum())} profiles, {traj.path_length_mm():.0f} mm, "
         f"planned in {traj.plan_time_s:.2f} s -> {output}"
     )
-    cycle = cycle_time(traj, spec, arm_limits(robot, traj), targets=program_targets(traj, spec))
+    targets, blended = program_targets(traj, spec)
+    cycle = cycle_time(traj, spec, arm_limits(robot, traj), targets=targets, blended=blended)
     typer.echo(cycle.line())
     print_plan_notes(traj, spec)
 
 
-def program_targets(traj: Trajectory, spec: ScanSpec) -> np.ndarray:
+def program_targets(traj: Trajectory, spec: ScanSpec) -> tuple[np.ndarray, np.ndarray]:
     """The poses a robot program of `traj` flies between (export's thinned targets at its
-    default tolerances): where the cycle time is timed, so plan, evaluate and export agree."""
+    default tolerances) and which of them it blends through: where the cycle time is timed,
+    so plan, evaluate and export agree."""
     # Deferred: export loads the writers of every dialect.
     from scanplan.export import ExportOptions, plan_motion
 
-    return plan_motion(traj, ExportOptions(scan=spec)).source
+    motion = plan_motion(traj, ExportOptions(scan=spec))
+    return motion.source, motion.blend_mm > 0
 
 
 def arm_limits(robot: str | None, traj: Trajectory) -> MotionLimits:
@@ -350,6 +353,7 @@ def evaluate_cmd(
     context.cell(the_part.with_roi(context.roi))  # a bad ROI, table or fixture: fail first
     if note:
         typer.echo(note, err=True)
+    targets, blended = program_targets(traj, context.spec)
     with progress_bar("evaluating", quiet) as progress:
         metrics = evaluate(
             the_part,
@@ -360,7 +364,8 @@ def evaluate_cmd(
             progress=progress,
             context=context,
             limits=arm_limits(None, traj),
-            targets=program_targets(traj, context.spec),
+            targets=targets,
+            blended=blended,
         )
     if output is not None:
         from scanplan.report import Evaluated, write_report

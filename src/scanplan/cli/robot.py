@@ -183,7 +183,11 @@ def export_cmd(
 
     none = robot.lower() == "none"
     limits = NOMINAL if none else motion_limits(robot)
-    cycle = cycle_time(traj, options.scan, limits, options.joints_rad, motion.source)
+    # Planned again with the joints: a joint move into a pass starts from an exact stop.
+    motion = plan_motion(traj, options)
+    cycle = cycle_time(
+        traj, options.scan, limits, options.joints_rad, motion.source, motion.blend_mm > 0
+    )
     typer.echo(cycle.line() + (", --robot none: timed on a nominal arm" if none else ""))
 
 

@@ -34,6 +34,15 @@ _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, 
 DEFAULT_CHORD_SHARE = 1.0 / 25.0
 DEFAULT_ANGLE_SHARE = 1.0 / 30.0
 
+# A move between passes may cut its corners by this share of the clearance its poses were
+# planned with (ScanSpec.clearance_mm: 5 mm of the default 20 mm), on top of the chord
+# tolerance of its thinning: the rest covers the sensor body swinging with the blended
+# orientation, so a blended move stays as clear of the cell as its planned poses, near enough.
+MOVE_CUT_SHARE = 1.0 / 4.0
+# The largest blend radius of a move: at 1 m/s² a 50 mm blend is taken at √(a·r) ≈ 220 mm/s,
+# about the travel speed, so the move flies its blended run as one speed profile.
+MOVE_BLEND_MM = 50.0
+
 
 class Kinematics(Protocol):
     """What a dialect needs of the arm (`scanplan.robot.Robot` has it): (…, 3) signed terms
@@ -78,7 +87,9 @@ class ExportOptions:
                once each run is thinned to few targets (`scanplan.export.thinning`); None:
                the defaults, `DEFAULT_CHORD_SHARE` of the in-spec depth tolerance and
                `DEFAULT_ANGLE_SHARE` of the in-spec angle tolerance.
-    blend_mm:  the largest blend radius (further capped per target, see `plan_motion`).
+    blend_mm:  the largest blend radius in a pass (further capped per target, see
+               `blend_radii`).
+    move_blend_mm: the largest blend radius of a move between passes (`MOVE_BLEND_MM`).
     scan_output: the output that switches the sensor's acquisition on over each pass: a
                digital output number (URScript standard output 0-7, KRL $OUT 1-4096) or a
                RAPID signal name; None: each dialect's default (`DEFAULT_SCAN_OUTPUT`).
@@ -90,6 +101,7 @@ class ExportOptions:
     scan_speed_mm_s: float | None = None
     accel_mm_s2: float = 1000.0
     blend_mm: float = 5.0
+    move_blend_mm: float = MOVE_BLEND_MM
     program_name: str = "scanplan_path"
     ros_frame_id: str = "base_link"
     joints_rad: np.ndarray | None = None
@@ -113,8 +125,9 @@ class ExportOptions:
         for what, tol in tolerances:
             if tol is not None and not (np.isfinite(tol) and tol > 0):
                 raise ValueError(f"export option {what} must be a finite number > 0, got {tol}")
-        if not np.isfinite(self.blend_mm) or self.blend_mm < 0:
-            raise ValueError(f"export option blend_mm must be >= 0, got {self.blend_mm}")
+        for what, radius in (("blend_mm", self.blend_mm), ("move_blend_mm", self.move_blend_mm)):
+            if not np.isfinite(radius) or radius < 0:
+                raise ValueError(f"export option {what} must be >= 0, got {radius}")
         if not _IDENT.fullmatch(self.program_name):
             raise ValueError(
                 f"program name {self.program_name!r} must be a letter followed by at most 23 "
@@ -150,6 +163,11 @@ class ExportOptions:
         return DEFAULT_CHORD_SHARE * self.scan.tolerance_mm
 
     @property
+    def move_cut_mm(self) -> float:
+        """mm a move's blend may cut a corner of its path (`MOVE_CUT_SHARE` of the clearance)."""
+        return MOVE_CUT_SHARE * self.scan.clearance_mm
+
+    @property
     def angle_tol_rad(self) -> float:
         """rad the thinned path may turn away from a planned pose's orientation."""
         if self.angle_tol_deg is not None:
@@ -170,7 +188,8 @@ class Motion:
     scanning:   (n,) bool; swath: (n,) int.
     pass_start, pass_end: (n,) bool — first / last pose of each scanning run.
     speed_mm_s: (n,) speed of the move that ends at pose i.
-    blend_mm:   (n,) blend radius at pose i; 0 = exact stop (pass ends and transitions).
+    blend_mm:   (n,) blend radius at pose i; 0 = exact stop (the program's first and last
+                target, each pass's start and end, the start of a joint move into a pass).
     source:     (n,) int, the index of each target among the planned poses.
     n_planned:  how many planned poses the targets were thinned from.
     standoff_mm: the TCP's offset from the sensor's origin along its beam (`TCP_STANDOFF`).
@@ -204,6 +223,14 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     scanning, start, end = traj.scanning[keep], start[keep], end[keep]
     # Entering a pass is still a travel move; only moves between two recorded poses scan.
     speed = np.where(scanning & ~start, options.scan_speed, options.travel_speed_mm_s)
+    # Exact stops where the acquisition switches, at the ends of the program, and where a
+    # joint move into a pass starts (its swept path is checked from a standing arm).
+    n = len(keep)
+    stop = start | end | (np.arange(n) == 0) | (np.arange(n) == n - 1)
+    if options.joints_rad is not None:
+        joints = np.asarray(options.joints_rad, dtype=np.float64)[keep]
+        into = start[1:] & np.isfinite(joints[1:]).all(axis=1)
+        stop[:-1] |= into
     return Motion(
         poses,
         scanning,
@@ -211,7 +238,7 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
         start,
         end,
         speed,
-        blend_radii(poses, scanning & ~start & ~end, options),
+        blend_radii(poses, scanning & ~stop, ~scanning & ~stop, options),
         poses_part,
         options.part_pose,
         keep,
@@ -220,23 +247,30 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     )
 
 
-def blend_radii(poses: np.ndarray, inner: np.ndarray, options: ExportOptions) -> np.ndarray:
-    """(n,) blend radius at each target, mm; 0 (exact stop) where `inner` is not set.
+def blend_radii(
+    poses: np.ndarray, in_pass: np.ndarray, in_move: np.ndarray, options: ExportOptions
+) -> np.ndarray:
+    """(n,) blend radius at each target, mm; 0 (exact stop) where neither `in_pass` nor
+    `in_move` (n,) bool is set.
 
     A blend of radius r around a corner that turns the path by θ cuts it by at most
-    r·sin(θ/2): capped so that stays within the chord tolerance. Blends of neighbouring
-    targets must not overlap either (UR stops with an error if they do, RAPID/KRL shrink them
-    silently): capped at half the shorter adjacent move.
+    r·sin(θ/2): capped so that stays within the chord tolerance in a pass, and within
+    `ExportOptions.move_cut_mm` (a share of the clearance) in a move between passes. Blends
+    of neighbouring targets must not overlap either (UR stops with an error if they do,
+    RAPID/KRL shrink them silently): capped at half the shorter adjacent move.
     """
     step = np.diff(poses[:, :3, 3], axis=0)
     seg = np.linalg.norm(step, axis=1)
     room = 0.5 * np.minimum(np.r_[np.inf, seg], np.r_[seg, np.inf])
     unit = step / np.maximum(seg, 1e-12)[:, None]
     cos_turn = np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0)
-    half_sin = np.r_[0.0, np.sqrt((1.0 - cos_turn) / 2.0), 0.0]  # sin(θ/2) at each target
-    cut = np.where(half_sin > 1e-12, options.chord_tol / np.maximum(half_sin, 1e-12), np.inf)
-    blend = np.minimum(np.minimum(options.blend_mm, room), cut)
-    return np.where(inner, blend, 0.0)
+    half_sin = np.maximum(np.r_[0.0, np.sqrt((1.0 - cos_turn) / 2.0), 0.0], 1e-12)  # sin(θ/2)
+    straight = half_sin <= 1e-12
+    scan_r = np.where(straight, options.blend_mm, options.chord_tol / half_sin)
+    move_r = np.where(straight, options.move_blend_mm, options.move_cut_mm / half_sin)
+    scan_r = np.minimum(np.minimum(scan_r, options.blend_mm), room)
+    move_r = np.minimum(np.minimum(move_r, options.move_blend_mm), room)
+    return np.where(in_pass, scan_r, np.where(in_move, move_r, 0.0))
 
 
 def flange_poses(traj: Trajectory, options: ExportOptions) -> np.ndarray:

@@ -78,7 +78,11 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"{int(motion.pass_start.sum())} scanning runs; each run thinned to the fewest "
         f"targets within {options.chord_tol:g} mm and {np.degrees(options.angle_tol_rad):g} deg",
         "; of the plan. C_DIS blends where $APO.CDIS > 0, capped so a blend cuts the path by",
-        "; at most that chord tolerance; none (exact stop) at run starts/ends and transitions.",
+        "; at most that chord tolerance in a run and by at most "
+        f"{options.move_cut_mm:g} mm between runs (a share of",
+        f"; the {options.scan.clearance_mm:g} mm clearance the moves were planned with); none "
+        "(exact stop) at each run's start and end,",
+        "; at the program's ends and before each PTP.",
         (
             "; The program's first target and each run's first target: PTP to the E6POS with"
             " the Status and Turn of the configuration the reach check chose."

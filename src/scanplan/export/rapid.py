@@ -98,7 +98,11 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"{int(motion.pass_start.sum())} scanning runs; each run thinned to the fewest",
         f"  ! targets within {options.chord_tol:g} mm and {np.degrees(options.angle_tol_rad):g} "
         "deg of the plan; zones zScan<r in 0.01 mm> cut",
-        "  ! the path by at most that chord tolerance; fine at every run start/end and transition.",
+        "  ! the path by at most that chord tolerance in a run and by at most "
+        f"{options.move_cut_mm:g} mm between runs",
+        f"  ! (a share of the {options.scan.clearance_mm:g} mm clearance the moves were planned "
+        "with); fine at each run's start and end,",
+        "  ! at the program's ends and before each MoveAbsJ.",
         f"  ! Acquisition: SetDO {signal}, 1 at each run's first target, 0 at its last (after a",
         "  ! fine point, so it switches with the robot standing there): define the signal in",
         "  ! the I/O configuration and wire it to the sensor's acquisition enable.",

@@ -59,11 +59,14 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"travel {options.travel_speed_mm_s:g} mm/s.",
         f"# Each run is thinned to the fewest targets within {options.chord_tol:g} mm and "
         f"{np.degrees(options.angle_tol_rad):g} deg of the plan.",
-        "# Blend r = 0 at every run start/end and transition, so the sensor triggers on a "
-        "stopped robot;",
-        f"# elsewhere r <= {options.blend_mm:g} mm, capped so a blend cuts the path by at most "
-        "the chord tolerance",
-        "# and at half the distance to the neighbouring targets so blends never overlap.",
+        "# Blend r = 0 at each run's start and end, so the sensor triggers on a stopped robot,",
+        "# at the program's ends and before each joint move; in a run r <= "
+        f"{options.blend_mm:g} mm, capped so a blend",
+        "# cuts the path by at most the chord tolerance; between runs r <= "
+        f"{options.move_blend_mm:g} mm, cutting a corner by at",
+        f"# most {options.move_cut_mm:g} mm (a share of the {options.scan.clearance_mm:g} mm "
+        "clearance the moves were planned with);",
+        "# every r at most half the distance to the neighbouring targets so blends never overlap.",
         f"# Acquisition: standard digital output {out_n} is set True at each run's first target "
         "and False at its last;",
         "# wire it to the sensor's acquisition enable.",
@@ -82,7 +85,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
             out.append(f"  movej([{q}], a={qa:.6g}, v={qv:.6g})")
         v = motion.speed_mm_s[i] / 1000.0
         r = motion.blend_mm[i] / 1000.0
-        out.append(f"  movel(pose_trans(feature, {target}), a={a:.6g}, v={v:.6g}, r={r:.6g})")
+        out.append(f"  movel(pose_trans(feature, {target}), a={a:.6g}, v={v:.6g}, r={r:.9g})")
         if motion.pass_start[i]:
             out.append(f'  textmsg("scanplan: pass {k} start")')
             out.append(f"  set_standard_digital_out({out_n}, True)  # acquisition on")

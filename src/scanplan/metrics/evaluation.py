@@ -32,7 +32,11 @@ def coverage_spacing_mm(sensor: SensorSpec) -> float:
 
 
 def _path_summary(
-    traj: Trajectory, scan_spec: ScanSpec, limits: MotionLimits, targets: np.ndarray | None
+    traj: Trajectory,
+    scan_spec: ScanSpec,
+    limits: MotionLimits,
+    targets: np.ndarray | None,
+    blended: np.ndarray | None,
 ) -> dict[str, Any]:
     scan_len = float(
         np.linalg.norm(np.diff(traj.positions_mm, axis=0), axis=1)[
@@ -40,7 +44,7 @@ def _path_summary(
         ].sum()
     )
     path_len = traj.path_length_mm()
-    cycle = cycle_time(traj, scan_spec, limits, targets=targets)
+    cycle = cycle_time(traj, scan_spec, limits, targets=targets, blended=blended)
     return {
         "path_length_mm": path_len,
         "scan_length_mm": scan_len,
@@ -76,6 +80,7 @@ def evaluate(
     context: PlanContext | None = None,
     limits: MotionLimits = NOMINAL,
     targets: np.ndarray | None = None,
+    blended: np.ndarray | None = None,
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
@@ -85,8 +90,9 @@ def evaluate(
     context: what the plan is judged as (its surface to inspect, region of interest and
     reward); None: as recorded in the trajectory (`context.recorded`). Every statistic is
     over the part's surface to inspect: points on other faces count as no hit.
-    limits, targets: the arm's motion limits the cycle time is timed with, and the poses a
-    program flies between (`cycle.cycle_time`; None: every planned pose).
+    limits, targets, blended: the arm's motion limits the cycle time is timed with, the poses
+    a program flies between and those it blends through (`cycle.cycle_time`; None: every
+    planned pose, each an exact stop).
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -164,5 +170,5 @@ def evaluate(
         clearance_mm=collisions.clearance_mm,
         **errors.summary(),
         **spacing.summary(wd, scan_spec),
-        **_path_summary(traj, scan_spec, limits, targets),
+        **_path_summary(traj, scan_spec, limits, targets, blended),
     )
