@@ -61,7 +61,8 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     poses = ["--part-pose", "500,-200,100,30,5,-10", "--tcp", "12,-3,180,0,-15,90"]
     runner = CliRunner()
     robot = ["--robot", "ur5e", "--allow-unreachable", "--part", plate_file(tmp_path)]
-    result = runner.invoke(app, [*args, *poses, *robot, "--travel-speed", "300"])
+    frame = ["--ros-frame", "door"]
+    result = runner.invoke(app, [*args, *poses, *robot, *frame, "--travel-speed", "300"])
     assert result.exit_code == 0, result.output
     assert "ur5e: " in result.output  # the UR5e reach check ran (ok or a warning)
     motion = plan_motion(TRAJ, OPTIONS)
@@ -70,6 +71,9 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     expected = OPTIONS.part_pose @ TRAJ.poses[motion.source]  # read back as the sensor's poses
     assert np.abs(contents.poses[:, :3, 3] - expected[:, :3, 3]).max() <= 1e-6
     np.testing.assert_array_equal(contents.speed_mm_s, plan_motion(TRAJ, OPTIONS).speed_mm_s)
+    # The targets in the part's frame, which the part pose places as one static transform.
+    assert contents.frame_id == "door" and contents.transforms[0][:2] == ("base_link", "door")
+    np.testing.assert_allclose(contents.transforms[0][2], OPTIONS.part_pose, atol=1e-6)
 
     # User errors: one line, exit 2, no traceback, no directory (nor staging) left behind.
     bad = tmp_path / "bad_bag"

@@ -28,7 +28,7 @@ def _bag_messages(path) -> dict[str, tuple[str, int, object]]:
     store = get_typestore(Stores.ROS2_HUMBLE)
     out = {}
     with Reader(path) as reader:
-        assert reader.message_count == 2
+        assert reader.message_count == 3
         for conn, timestamp, raw in reader.messages():
             assert timestamp == 0 and conn.topic not in out
             out[conn.topic] = (
@@ -51,16 +51,16 @@ def test_rosbag_round_trip(tmp_path) -> None:
     assert meta["version"] == 8 and meta["storage_identifier"] == "sqlite3"
 
     msgs = _bag_messages(bag)
-    assert set(msgs) == {"/scanplan/path", "/scanplan/poses"}
+    assert set(msgs) == {"/scanplan/path", "/scanplan/poses", "/tf_static"}
     path_type, path_count, path = msgs["/scanplan/path"]
     poses_type, poses_count, pose_array = msgs["/scanplan/poses"]
     assert (path_type, poses_type) == ("nav_msgs/msg/Path", "geometry_msgs/msg/PoseArray")
     assert path_count == poses_count == 1
-    assert pose_array.header.frame_id == path.header.frame_id == "base_link"
+    assert pose_array.header.frame_id == path.header.frame_id == "scan_part"
     motion = plan_motion(TRAJ, OPTIONS)  # the thinned targets, as every dialect writes
     assert len(pose_array.poses) == len(path.poses) == len(motion.poses)
 
-    expected = motion.poses
+    expected = motion.poses_part  # in the part's frame
     for poses in (pose_array.poses, [p.pose for p in path.poses]):
         xyz = np.array([[p.position.x, p.position.y, p.position.z] for p in poses])
         xyzw = np.array([[p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]
@@ -78,7 +78,12 @@ def test_rosbag_round_trip(tmp_path) -> None:
     bag_stamps = [(p.header.stamp.sec, p.header.stamp.nanosec) for p in path.poses]
     assert bag_stamps == yaml_stamps
     assert bag_stamps[-1][0] > 0  # the path takes seconds: the stamps are not all zero
-    assert {p.header.frame_id for p in path.poses} == {"base_link"}
+    assert {p.header.frame_id for p in path.poses} == {"scan_part"}
+    # The static transforms: the part in the base frame, the TCP on the flange.
+    tf_type, _, tf = msgs["/tf_static"]
+    assert tf_type == "tf2_msgs/msg/TFMessage"
+    frames = [(t.header.frame_id, t.child_frame_id) for t in tf.transforms]
+    assert frames == [("base_link", "scan_part"), ("tool0", "scan_tcp")]
 
     # Read back as the sensor's poses: the TCP's standoff undone.
     contents = read_rosbag(bag)
@@ -88,9 +93,21 @@ def test_rosbag_round_trip(tmp_path) -> None:
     np.testing.assert_array_equal(contents.scanning, motion.scanning)
     np.testing.assert_array_equal(contents.swath, motion.swath)
     np.testing.assert_array_equal(contents.speed_mm_s, motion.speed_mm_s)
-    assert contents.frame_id == "base_link"
-    assert contents.topics == {"/scanplan/path": path_type, "/scanplan/poses": poses_type}
-    assert contents.message_counts == {"/scanplan/path": 1, "/scanplan/poses": 1}
+    assert contents.frame_id == "scan_part"
+    (_, _, part), (_, _, tool) = contents.transforms
+    np.testing.assert_allclose(part, OPTIONS.part_pose, atol=1e-6)
+    np.testing.assert_allclose(tool, OPTIONS.tool, atol=1e-6)
+    assert contents.topics == {
+        "/scanplan/path": path_type,
+        "/scanplan/poses": poses_type,
+        "/tf_static": tf_type,
+    }
+    assert contents.message_counts == {"/scanplan/path": 1, "/scanplan/poses": 1, "/tf_static": 1}
+    # /tf_static offered as a static broadcaster does: late listeners still get it.
+    meta_topics = {
+        t["topic_metadata"]["name"]: t["topic_metadata"] for t in meta["topics_with_message_count"]
+    }
+    assert "durability: 1" in meta_topics["/tf_static"]["offered_qos_profiles"]
 
 
 def test_rosbag_frame_id_and_replacing(tmp_path) -> None:

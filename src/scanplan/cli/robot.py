@@ -88,6 +88,15 @@ ScanOutputOpt = Annotated[
         "name (default doScan)",
     ),
 ]
+RosFrameOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--ros-frame",
+        help="ROS 2 YAML and rosbag2: the part's frame the targets are given in (default "
+        "scan_part); a static transform from base_link (the part pose) places it, another "
+        "from tool0 the TCP",
+    ),
+]
 AllowUnreachableOpt = Annotated[
     bool,
     typer.Option(
@@ -113,6 +122,7 @@ def export_cmd(
     chord_tol: ChordTolOpt = None,
     angle_tol: AngleTolOpt = None,
     scan_output: ScanOutputOpt = None,
+    ros_frame: RosFrameOpt = None,
     allow_unreachable: AllowUnreachableOpt = False,
     part: PlannedPartOpt = None,
     units: PlannedUnitsOpt = None,
@@ -157,6 +167,8 @@ def export_cmd(
         angle_tol_deg=angle_tol,
         scan_output=scan_output,
     )
+    if ros_frame is not None:
+        options = replace(options, ros_frame_id=ros_frame)
     motion = plan_motion(traj, options)  # refuse an unexportable plan before the reach check
     if robot.lower() == "none":
         typer.echo("--robot none: no reach check; the program is not known to be flyable")

@@ -26,6 +26,7 @@ from scanplan.quantities import ScanSpec
 from scanplan.trajectory import Trajectory, pass_bounds
 
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, RAPID 32
+_FRAME = re.compile(r"[A-Za-z_][A-Za-z0-9_/]*")  # a tf2 frame id
 
 # Thinning defaults, as shares of the in-spec tolerances (ScanSpec): the flown path may stray
 # 1/25 of the depth tolerance (0.5 mm of Z_r/20 = 12.5 mm for the default sensor) and 1/30 of
@@ -90,6 +91,11 @@ class ExportOptions:
     blend_mm:  the largest blend radius in a pass (further capped per target, see
                `blend_radii`).
     move_blend_mm: the largest blend radius of a move between passes (`MOVE_BLEND_MM`).
+    ros_frame_id: the part's frame in the ROS 2 exports: their targets are `T_part_tcp` in it,
+               and a static transform from `ros_base_frame_id` (the part pose) places it.
+    ros_base_frame_id, ros_flange_frame_id, ros_tcp_frame_id: the arm's base and flange
+               frames (ROS-Industrial's `base_link`, `tool0`) and the TCP frame the static
+               transform of the tool (`tool`) names.
     scan_output: the output that switches the sensor's acquisition on over each pass: a
                digital output number (URScript standard output 0-7, KRL $OUT 1-4096) or a
                RAPID signal name; None: each dialect's default (`DEFAULT_SCAN_OUTPUT`).
@@ -103,7 +109,10 @@ class ExportOptions:
     blend_mm: float = 5.0
     move_blend_mm: float = MOVE_BLEND_MM
     program_name: str = "scanplan_path"
-    ros_frame_id: str = "base_link"
+    ros_frame_id: str = "scan_part"
+    ros_base_frame_id: str = "base_link"
+    ros_flange_frame_id: str = "tool0"
+    ros_tcp_frame_id: str = "scan_tcp"
     joints_rad: np.ndarray | None = None
     arm: Kinematics | None = None
     chord_tol_mm: float | None = None
@@ -128,6 +137,20 @@ class ExportOptions:
         for what, radius in (("blend_mm", self.blend_mm), ("move_blend_mm", self.move_blend_mm)):
             if not np.isfinite(radius) or radius < 0:
                 raise ValueError(f"export option {what} must be >= 0, got {radius}")
+        frames = (
+            self.ros_frame_id,
+            self.ros_base_frame_id,
+            self.ros_flange_frame_id,
+            self.ros_tcp_frame_id,
+        )
+        for frame in frames:
+            if not _FRAME.fullmatch(frame):
+                raise ValueError(
+                    f"ROS frame {frame!r} must be a letter or underscore followed by letters, "
+                    "digits, underscores or slashes"
+                )
+        if len(set(frames)) != len(frames):
+            raise ValueError(f"ROS frames must differ: part, base, flange, TCP = {frames}")
         if not _IDENT.fullmatch(self.program_name):
             raise ValueError(
                 f"program name {self.program_name!r} must be a letter followed by at most 23 "

@@ -7,11 +7,13 @@ writes and keeps the topic QoS as the string Humble/Iron parse; Jazzy reads it t
 version 9 bag, Jazzy's own, is not readable by Humble). sqlite3 is the default storage
 plugin of stock Humble; Jazzy ships it beside mcap.
 
-Two topics, one message each, both stamped 0 (the bag starts at the epoch, like the YAML's
+Three topics, one message each, all stamped 0 (the bag starts at the epoch, like the YAML's
 headers): `/scanplan/path` (`nav_msgs/msg/Path`, pose stamps = planned arrival times from the
-start) and `/scanplan/poses` (`geometry_msgs/msg/PoseArray`). Poses are `T_<frame>_tcp` (the
-TCP where the laser line meets the part at the working distance) in metres, quaternion x, y,
-z, w, computed by `scanplan.export.ros`. What no message holds — the scanning flags, swath
+start), `/scanplan/poses` (`geometry_msgs/msg/PoseArray`) and `/tf_static`
+(`tf2_msgs/msg/TFMessage`, transient local as a static broadcaster offers it: base -> part,
+flange -> TCP). Poses are `T_<part frame>_tcp` (the TCP where the laser line meets the part at
+the working distance) in metres, quaternion x, y, z, w, computed by `scanplan.export.ros`, so
+moving the part changes one transform. What no message holds — the scanning flags, swath
 indices, speeds and the TCP's standoff from the sensor — goes into the metadata's
 `custom_data`.
 
@@ -35,13 +37,22 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from scanplan.export.common import ExportOptions, Motion, poses_from_parts, sensor_poses
-from scanplan.export.ros import arrival_times, ros_poses, split_stamp
+from scanplan.export.ros import (
+    arrival_times,
+    base_poses,
+    matrix_of,
+    ros_poses,
+    split_stamp,
+    static_transforms,
+)
 from scanplan.files import replace_directory
 
 PATH_TOPIC = "/scanplan/path"
 POSES_TOPIC = "/scanplan/poses"
 PATH_TYPE = "nav_msgs/msg/Path"
 POSES_TYPE = "geometry_msgs/msg/PoseArray"
+TF_STATIC_TOPIC = "/tf_static"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
 BAG_VERSION: Literal[8] = 8
 _KEYS = ("scanning", "swath", "speed_mm_s")
 
@@ -52,10 +63,60 @@ def _typestore() -> Any:
     return get_typestore(Stores.ROS2_HUMBLE)
 
 
-def _messages(motion: Motion, frame: str, store: Any) -> tuple[Any, Any]:
-    """(Path, PoseArray) message objects of the typestore."""
+def _tf_qos() -> Any:
+    """What tf2's StaticTransformBroadcaster offers: reliable, transient local, keep last 1
+    (a late listener still gets the transforms)."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    never = QosTime(0, 0)
+    return Qos(
+        QosHistory.KEEP_LAST,
+        1,
+        QosReliability.RELIABLE,
+        QosDurability.TRANSIENT_LOCAL,
+        never,
+        never,
+        QosLiveliness.AUTOMATIC,
+        never,
+        False,
+    )
+
+
+def _tf_message(motion: Motion, options: ExportOptions, store: Any) -> Any:
     T = store.types
-    xyz, q = ros_poses(motion)
+    transforms = []
+    for parent, child, pose in static_transforms(motion, options):
+        (p,), (q,) = ros_poses(pose[None])
+        transforms.append(
+            T["geometry_msgs/msg/TransformStamped"](
+                header=T["std_msgs/msg/Header"](
+                    stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=parent
+                ),
+                child_frame_id=child,
+                transform=T["geometry_msgs/msg/Transform"](
+                    translation=T["geometry_msgs/msg/Vector3"](
+                        x=float(p[0]), y=float(p[1]), z=float(p[2])
+                    ),
+                    rotation=T["geometry_msgs/msg/Quaternion"](
+                        x=float(q[1]), y=float(q[2]), z=float(q[3]), w=float(q[0])
+                    ),
+                ),
+            )
+        )
+    return T[TF_TYPE](transforms=transforms)
+
+
+def _messages(motion: Motion, frame: str, store: Any) -> tuple[Any, Any]:
+    """(Path, PoseArray) message objects of the typestore, in the part's frame `frame`."""
+    T = store.types
+    xyz, q = ros_poses(motion.poses_part)
     poses = [
         T["geometry_msgs/msg/Pose"](
             position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=float(p[2])),
@@ -117,8 +178,12 @@ def write_rosbag(motion: Motion, options: ExportOptions, path: str | os.PathLike
                 for topic, msgtype, msg in (
                     (PATH_TOPIC, PATH_TYPE, path_msg),
                     (POSES_TOPIC, POSES_TYPE, poses_msg),
+                    (TF_STATIC_TOPIC, TF_TYPE, _tf_message(motion, options, store)),
                 ):
-                    conn = writer.add_connection(topic, msgtype, typestore=store)
+                    qos = [_tf_qos()] if topic == TF_STATIC_TOPIC else []
+                    conn = writer.add_connection(
+                        topic, msgtype, typestore=store, offered_qos_profiles=qos
+                    )
                     writer.write(conn, 0, store.serialize_cdr(msg, msgtype))
         except WriterError as exc:
             raise ValueError(f"cannot write rosbag2 {target}: {exc}") from None
@@ -131,11 +196,12 @@ def write_rosbag(motion: Motion, options: ExportOptions, path: str | os.PathLike
 class RosbagContents:
     """What `read_rosbag` recovers.
 
-    poses: (n, 4, 4) `T_base_sensor`, mm (from the PoseArray, the TCP's standoff undone;
-    the Path must agree);
+    poses: (n, 4, 4) `T_base_sensor`, mm (from the PoseArray in the part's frame, placed by
+    the static transform base -> part, the TCP's standoff undone; the Path must agree);
     stamps_s: (n,) the Path's pose stamps; scanning (n,) bool, swath (n,) int,
-    speed_mm_s (n,) from the metadata's custom_data; frame_id; topics: {topic: msgtype};
-    message_counts: {topic: messages}.
+    speed_mm_s (n,) from the metadata's custom_data; frame_id: the messages' (the part's)
+    frame; transforms: [(parent, child, (4, 4) mm)] from /tf_static (none in a bag written
+    before the part frame); topics: {topic: msgtype}; message_counts: {topic: messages}.
     """
 
     poses: np.ndarray
@@ -144,6 +210,7 @@ class RosbagContents:
     swath: np.ndarray
     speed_mm_s: np.ndarray
     frame_id: str
+    transforms: list[tuple[str, str, np.ndarray]]
     topics: dict[str, str]
     message_counts: dict[str, int]
 
@@ -184,14 +251,27 @@ def read_rosbag(path: str | os.PathLike) -> RosbagContents:
     frames |= {p.header.frame_id for p in path_msg.poses}
     if len(frames) != 1:
         raise ValueError(f"rosbag2 {path}: messages in different frames {sorted(frames)}")
+    frame = frames.pop()
+    transforms = [
+        (
+            t.header.frame_id,
+            t.child_frame_id,
+            matrix_of(
+                {k: getattr(t.transform.translation, k) for k in "xyz"},
+                {k: getattr(t.transform.rotation, k) for k in "xyzw"},
+            ),
+        )
+        for t in getattr(msgs.get(TF_STATIC_TOPIC), "transforms", [])
+    ]
     stamps = np.array([p.header.stamp.sec + p.header.stamp.nanosec * 1e-9 for p in path_msg.poses])
     return RosbagContents(
-        poses=sensor_poses(poses, standoff_mm),
+        poses=sensor_poses(base_poses(poses, frame, transforms), standoff_mm),
         stamps_s=stamps,
         scanning=np.array([v == "1" for v in extra["scanning"]], dtype=bool),
         swath=np.array([int(v) for v in extra["swath"]], dtype=int),
         speed_mm_s=np.array([float(v) for v in extra["speed_mm_s"]]),
-        frame_id=frames.pop(),
+        frame_id=frame,
+        transforms=transforms,
         topics=topics,
         message_counts=counts,
     )
