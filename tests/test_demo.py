@@ -13,7 +13,7 @@ from scanplan.cli import app
 from scanplan.export import ExportOptions, parse_program
 from scanplan.export.common import plan_motion
 from scanplan.quantities import ScanSpec
-from scanplan.trajectory import read_csv
+from scanplan.trajectory import read_csv, read_json
 
 pytestmark = pytest.mark.slow
 
@@ -32,7 +32,8 @@ def test_demo_writes_every_output(demo):
     out, _ = demo
     for name in (
         "report.html",
-        "scan_rl.script",
+        "scan_rl.mod",
+        "trajectory_rl_irb2400.json",
         "metrics.json",
         "distance_error_maps.png",
         "orientation_error_maps.png",
@@ -62,15 +63,31 @@ def test_printed_table_matches_the_report(demo):
         assert re.findall(r"<td>(.*?)</td>", html_row.group(1)) == values
 
 
-def test_urscript_parses_back_to_the_planned_poses(demo):
-    out, _ = demo
+def test_the_program_is_the_rl_plan_fitted_to_the_arm(demo):
+    out, printed = demo
     planned = read_csv(out / "trajectory_rl.csv")
-    poses, scanning = parse_program((out / "scan_rl.script").read_text(), "urscript")
-    # The program's targets are the plan's poses thinned (export.thinning), each its own.
-    kept = plan_motion(planned, ExportOptions(scan=ScanSpec())).source
-    assert len(poses) == len(kept) < len(planned)
-    assert np.abs(poses[:, :3, 3] - planned.poses[kept, :3, 3]).max() / 1000 < 1e-6
-    assert np.array_equal(scanning, planned.scanning[kept])
+    fitted = read_json(out / "trajectory_rl_irb2400.json")
+    arm = fitted.meta["robot"]
+    assert arm["robot"] == "irb2400" and arm["flyable"] and arm["tcp"] == "0,0,90,0,0,0"
+    # What the arm gave up is at most what was planned, and said in one line.
+    given_up = sum(arm["scanning_poses_given_up"].values())
+    assert int(fitted.scanning.sum()) <= int(planned.scanning.sum())
+    line = " ".join(printed.split())  # rich wraps long lines
+    assert f"irb2400 at --part-pose {arm['part_pose']}" in line
+    assert "0 unreachable, links clear -> scan_rl.mod" in line
+    assert f"gave up {given_up} scanning poses" in line
+    assert f"{arm['in_spec']:.3f} with it" in line
+    # A RAPID module whose targets, read back, are the fitted plan's poses thinned, each its
+    # own, where the part stands in the arm's base frame.
+    text = (out / "scan_rl.mod").read_text()
+    assert text.startswith("MODULE ") and "MoveAbsJ" in text
+    poses, scanning = parse_program(text, "rapid")
+    T_base_part = np.asarray(arm["T_base_part"])
+    kept = plan_motion(fitted, ExportOptions(scan=ScanSpec())).source
+    assert len(poses) == len(kept) < len(fitted)
+    expected = T_base_part @ fitted.poses[kept]
+    assert np.abs(poses[:, :3, 3] - expected[:, :3, 3]).max() / 1000 < 1e-6
+    assert np.array_equal(scanning, fitted.scanning[kept])
 
 
 def test_every_planner_is_judged_on_one_surface(demo):

@@ -51,7 +51,8 @@ def demo_cmd(
     roi: RoiOpt = None,
 ):
     """The main job: three planners on a part (the door by default), the table, maps, an
-    HTML report and a URScript program."""
+    HTML report and the rl plan as a RAPID program for an IRB 2400 that flies it (the part
+    placed, what the arm cannot fly given up, checked as export checks)."""
     # Deferred: the demo loads the whole library (torch, matplotlib, plotly).
     from rich.console import Console
 
@@ -94,8 +95,9 @@ def print_summary(console: Console, part: str, result: DemoResult) -> None:
         table.add_row(label, *values)
     console.print(table)
     console.print(f"report:   {result.report}")
+    console.print(result.robot_line)
     console.print(
-        f"URScript: {result.program} (parses back to the planned poses within "
+        f"program:  {result.program} (parses back to the fitted plan's poses within "
         f"{result.program_error_m:.1e} m)"
     )
     console.print(f"done in {result.seconds:.0f} s -> {result.out_dir}")

@@ -243,10 +243,6 @@ def arm_of(
     return robot, poses[0], poses[1]
 
 
-# The sensor check asks FCL only about bodies within this of the cell (exact below it).
-_TOUCH_MM = 1e-3
-
-
 def planned_cell(
     traj: Trajectory,
     part: str | None,
@@ -285,55 +281,29 @@ def check_flyable(
     and pose (nothing is written), or with `allow` a warning. Returns the joint angles the
     check followed (n, 6), NaN where it found none."""
     # Deferred: as in export_cmd.
-    from scanplan.collision import checker_for
     from scanplan.context import recorded
-    from scanplan.export import flange_poses
-    from scanplan.robot import check_reach, get_robot
-    from scanplan.robot.links import check_links, obstacles_for
-    from scanplan.robot.reach import pass_starts
+    from scanplan.robot import get_robot
+    from scanplan.robot.flyable import check_flyable as check
 
     part, the_cell = cell
-    arm = get_robot(robot)
-    with progress_bar("reach check", quiet):
-        report = check_reach(
-            flange_poses(traj, options), arm, swath=traj.swath, scanning=traj.scanning
+    sensor = recorded(traj, ScanSpec()).spec.sensor
+    with progress_bar("reach and collision check", quiet):
+        result = check(
+            traj, get_robot(robot), options.part_pose, options.tcp, part, the_cell, sensor
         )
-    with progress_bar("collision check", quiet):
-        links = check_links(
-            arm,
-            report.joints,
-            obstacles_for(part, the_cell),
-            options.part_pose,
-            pass_starts(traj.swath, traj.scanning),
-        )
-        sensor = checker_for(part, recorded(traj, ScanSpec()).spec.sensor, the_cell)
-        touching = sensor.check(traj.poses, _TOUCH_MM).touching
-    problems = [(*report.first_problem(), report.summary())] if not report.reachable else []
-    if not links.clear:
-        problems.append((links.first(), links.describe(links.first()), links.summary()))
-    if touching.any():
-        first = int(np.argmax(touching))
-        problems.append(
-            (
-                first,
-                "puts the sensor body into the part, table or a fixture",
-                f"sensor: {int(touching.sum())} poses touching the cell",
-            )
-        )
-    if not problems:
+    report = result.reach
+    if result.flyable:
         warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
         typer.echo(("warning: " if warn else "") + report.summary(), err=warn)
-        typer.echo(links.summary())
+        typer.echo(result.links.summary())
         return report.joints
-    first_pose, what, _ = min(problems)
-    where = f"pose {first_pose} (pass {int(traj.swath[first_pose])}) {what}"
-    summary = "; ".join(p[2] for p in problems)
+    where = result.first_problem(traj.swath)
     if not allow:
         raise ValueError(
-            f"{report.model} cannot fly this plan: {where}; {summary} — place the part "
+            f"{report.model} cannot fly this plan: {where} — place the part "
             "(scanplan place) or give --allow-unreachable"
         )
-    typer.echo(f"warning: {where}; {summary}", err=True)
+    typer.echo(f"warning: {where}", err=True)
     return report.joints
 
 

@@ -1,0 +1,89 @@
+"""Whether an arm flies a plan as its program would: the one check `export` and the demo run
+before writing a program (reach, joint limits, configuration flips, the arm's links and the
+sensor body against the part, the table block and the fixtures).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanplan.cell import Cell
+from scanplan.collision import checker_for
+from scanplan.part import Part
+from scanplan.robot.base import Robot
+from scanplan.robot.links import LinkReport, check_links, obstacles_for
+from scanplan.robot.reach import ReachReport, check_reach, pass_starts
+from scanplan.sensor import SensorSpec
+from scanplan.trajectory import Trajectory
+
+# The sensor check asks FCL only about bodies within this of the cell (exact below it).
+_TOUCH_MM = 1e-3
+
+
+@dataclass(frozen=True, eq=False)  # array fields: == would be ambiguous
+class Flyability:
+    """What `check_flyable` found.
+
+    reach: the reach check (its `joints` (n, 6) rad, NaN where none was found);
+    links: the arm's link capsules against the cell; touching: (n,) bool, the sensor body
+    in the part, table or a fixture; problems: (first pose, what, summary) of each kind of
+    failure, none when the arm flies the plan.
+    """
+
+    reach: ReachReport
+    links: LinkReport
+    touching: np.ndarray
+    problems: list[tuple[int, str, str]]
+
+    @property
+    def flyable(self) -> bool:
+        return not self.problems
+
+    @property
+    def joints(self) -> np.ndarray:
+        return self.reach.joints
+
+    def first_problem(self, swath: np.ndarray) -> str:
+        """'pose 12 (pass 3) is out of reach; <summaries>': the first offending pose."""
+        first, what, _ = min(self.problems)
+        summary = "; ".join(p[2] for p in self.problems)
+        return f"pose {first} (pass {int(swath[first])}) {what}; {summary}"
+
+
+def check_flyable(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    T_flange_sensor: np.ndarray,
+    part: Part,
+    cell: Cell,
+    sensor: SensorSpec,
+) -> Flyability:
+    """The arm's reach along the flange poses of `traj` (part frame, sensor poses) with the
+    part at `T_base_part` and the sensor at `T_flange_sensor` (mm), its links along that
+    path and every joint move into a pass, and the sensor body, against `part` in `cell`."""
+    flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
+    links = check_links(
+        arm,
+        reach.joints,
+        obstacles_for(part, cell),
+        T_base_part,
+        pass_starts(traj.swath, traj.scanning),
+    )
+    touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
+    problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []
+    if not links.clear:
+        problems.append((links.first(), links.describe(links.first()), links.summary()))
+    if touching.any():
+        first = int(np.argmax(touching))
+        problems.append(
+            (
+                first,
+                "puts the sensor body into the part, table or a fixture",
+                f"sensor: {int(touching.sum())} poses touching the cell",
+            )
+        )
+    return Flyability(reach, links, touching, problems)
