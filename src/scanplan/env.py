@@ -258,14 +258,33 @@ class SwathScanEnv(gym.Env):
     ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """`step` with the profile at `proposed.state` measured by the caller: the batched
         vector env measures many envs' proposed poses (`dynamics.propose`) in one call."""
+        self.dynamics.accept(proposed, profile)
+        return self.step_accepted(proposed, self.reward_terms())
+
+    def reward_terms(self, dyns: Sequence[PassDynamics] | None = None) -> dict[str, Any]:
+        """`reward.reward_terms` of the sensor where it stands, or as arrays of several
+        (`dyns`: a batch of this env's kind); v1 charges the full angle between beam and mean
+        normal (what pitch and roll fix)."""
+        if dyns is None:
+            dyn = self.dynamics
+            orientation = dyn.tilt_rad if self.roll else dyn.alpha_rad
+            return reward_terms(dyn.d_mm, orientation, dyn.delta_s_mm, self.scan_spec)
+        return reward_terms(
+            [d.d_mm for d in dyns],
+            [d.tilt_rad if self.roll else d.alpha_rad for d in dyns],
+            [d.delta_s_mm for d in dyns],
+            self.scan_spec,
+        )
+
+    def step_accepted(
+        self, proposed: PassStep, terms: dict[str, Any]
+    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """The rest of `step` once `self.dynamics` has accepted `proposed`: `terms` are its
+        `reward_terms` (scalars, or this env's entries of a batch's arrays)."""
         dyn = self.dynamics
-        dyn.accept(proposed, profile)
-        # v1 charges the full angle between beam and mean normal (what pitch and roll fix).
-        orientation = dyn.tilt_rad if self.roll else dyn.alpha_rad
-        terms = reward_terms(dyn.d_mm, orientation, dyn.delta_s_mm, self.scan_spec)
         reward = float(terms["reward"])
         self.steps += 1
-        self.invalid_run = 0 if profile.valid.any() else self.invalid_run + 1
+        self.invalid_run = 0 if dyn.profile.valid.any() else self.invalid_run + 1
         terminated = bool(dyn.progress_mm >= self.s_end_mm)
         truncated = self.steps >= self.step_limit
         lost_penalty = 0.0

@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import cached_property
 
 import numpy as np
 
@@ -102,8 +103,9 @@ class Profile:
     face: np.ndarray
     status: np.ndarray
 
-    @property
+    @cached_property
     def valid(self) -> np.ndarray:
+        """(N,) bool; computed once (a training step reads it several times)."""
         return self.status == PointStatus.VALID
 
 

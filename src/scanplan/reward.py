@@ -2,7 +2,9 @@
 
 Shared by the environment, the geometric planner's cost and the metrics; the scale, α_max,
 Δs_opt and the weights come from the one `ScanSpec`. Each term lies in
-[-1, 0]; a missing measurement (NaN) is charged the full -1.
+[-1, 0]; a missing measurement (NaN) is charged the full -1. Squares are written e * e: numpy
+squares an array so but a scalar with pow, and the two differ in the last bit now and then,
+so a batch of envs would not reward exactly as each env alone.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ def reward_distance(d_mm: ArrayLike, cfg: ScanSpec) -> np.ndarray:
     d = np.asarray(d_mm, dtype=np.float64)
     half = cfg.z_range_mm / 2
     with np.errstate(invalid="ignore"):
-        r = -((cfg.working_distance_mm - d) ** 2) / half**2
+        e = cfg.working_distance_mm - d
+        r = -(e * e) / half**2
         return np.where(np.isfinite(d) & (r >= -1.0), r, -1.0)
 
 
@@ -26,7 +29,7 @@ def reward_alpha(alpha_rad: ArrayLike, cfg: ScanSpec) -> np.ndarray:
     """R_alpha = max(-1, -alpha^2 / alpha_max^2)."""
     a = np.asarray(alpha_rad, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        return np.where(np.isfinite(a), np.maximum(-1.0, -(a**2) / cfg.alpha_max_rad**2), -1.0)
+        return np.where(np.isfinite(a), np.maximum(-1.0, -(a * a) / cfg.alpha_max_rad**2), -1.0)
 
 
 def reward_advance(delta_s_mm: ArrayLike, cfg: ScanSpec) -> np.ndarray:
@@ -34,7 +37,8 @@ def reward_advance(delta_s_mm: ArrayLike, cfg: ScanSpec) -> np.ndarray:
     s = np.asarray(delta_s_mm, dtype=np.float64)
     opt = cfg.delta_s_opt_mm
     with np.errstate(invalid="ignore"):
-        return np.where(np.isfinite(s), np.maximum(-1.0, -((s - opt) ** 2) / opt**2), -1.0)
+        e = s - opt
+        return np.where(np.isfinite(s), np.maximum(-1.0, -(e * e) / opt**2), -1.0)
 
 
 def reward_terms(

@@ -105,6 +105,9 @@ def build_ppo(config: TrainConfig, vec: Any) -> Any:
         policy_kwargs={
             "net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)},
             "activation_fn": activation,
+            # SB3's Adam (eps 1e-5) stepping all tensors at once: the same arithmetic (the same
+            # weights bit for bit), a tenth less time per update than one tensor at a time.
+            "optimizer_kwargs": {"eps": 1e-5, "foreach": True},
         },
         stats_window_size=_STATS_WINDOW,
         seed=config.seed,
@@ -190,6 +193,10 @@ def train(config: TrainConfig) -> TrainResult:
         log_csv.unlink(missing_ok=True)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # several times faster here than torch's default for a 64x64 MLP
+    # The policy's Normal checks its arguments at every minibatch: the checks change no
+    # number, and cost several percent of an update.
+    validate = torch.distributions.Distribution._validate_args
+    torch.distributions.Distribution.set_default_validate_args(False)
     start = time.perf_counter()
     bc_mse = math.nan
     vec = make_vec_env(config)
@@ -222,6 +229,7 @@ def train(config: TrainConfig) -> TrainResult:
     finally:
         vec.close()
         torch.set_num_threads(threads)
+        torch.distributions.Distribution.set_default_validate_args(validate)
     (out / f"{PROGRESS_CSV}.before-resume").unlink(missing_ok=True)
     wall = time.perf_counter() - start + wall_before
     final = (

@@ -19,6 +19,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+from scanplan.dynamics import PassDynamics
 from scanplan.env import SwathScanEnv, random_part
 from scanplan.learn.config import TrainConfig
 from scanplan.part import Part, load_part
@@ -93,19 +94,26 @@ class BatchedVecEnv(VecEnv):
         for i, (env, a) in enumerate(zip(self.envs, self._actions, strict=True)):
             proposed.append(env.dynamics.propose(a))
             groups.setdefault(id(env.dynamics.part), []).append(i)  # one simulator per part
-        profiles: list[Any] = [None] * self.num_envs
+        terms: dict[str, np.ndarray] = {}
         for idx in groups.values():
+            # The envs on one part as arrays: their poses, one measure_many, D, α, Δs and the
+            # reward terms in one call each (per-env numpy calls cost more than the rays).
             first = self.envs[idx[0]]
-            poses = np.stack([self.envs[i].dynamics.pose(proposed[i].state) for i in idx])
-            scan = first.dynamics.sim.measure_many(poses, first.np_random)
-            for k, i in enumerate(idx):
-                profiles[i] = scan.profile(k)
+            dyns = [self.envs[i].dynamics for i in idx]
+            steps = [proposed[i] for i in idx]
+            scan = first.dynamics.sim.measure_many(
+                PassDynamics.poses_of(dyns, [p.state for p in steps]), first.np_random
+            )
+            PassDynamics.accept_many(dyns, steps, scan)
+            for key, values in first.reward_terms(dyns).items():
+                terms.setdefault(key, np.zeros(self.num_envs))[idx] = values
         obs = np.zeros((self.num_envs, *self.obs_shape), np.float32)
         rewards = np.zeros(self.num_envs, np.float32)
         dones = np.zeros(self.num_envs, bool)
         infos = []
         for i, env in enumerate(self.envs):
-            o, r, term, trunc, info = env.step_measured(proposed[i], profiles[i])
+            mine = {key: values[i] for key, values in terms.items()}
+            o, r, term, trunc, info = env.step_accepted(proposed[i], mine)
             if term or trunc:
                 info["terminal_observation"] = o
                 info["TimeLimit.truncated"] = trunc and not term
