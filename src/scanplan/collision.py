@@ -342,28 +342,55 @@ def _z_to(direction: np.ndarray) -> np.ndarray:
     return R
 
 
-class _VoxelProxy:
-    """A mesh's surface as voxel centres (trimesh's voxelization, a k-d tree over them): a
-    quick test that clears capsules far from the mesh before FCL measures the rest. Every
-    surface point lies within `bound_mm` of a centre, so a capsule whose axis keeps further
-    than its radius plus that from every centre cannot touch the mesh."""
+def _surface_points(mesh, spacing_mm: float) -> np.ndarray:
+    """(k, 3) points on the mesh, every surface point within 2·`spacing_mm` of one: its
+    vertices, and on each larger triangle a grid along its two edges from an end of its
+    shortest edge, at most `spacing_mm` apart along each (a sliver gets a row of points, not
+    a square grid of its longest edge)."""
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
+    edge = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from vertex k
+    start = edge.argmin(axis=1)  # the shortest edge's first vertex
+    order = (start[:, None] + np.arange(3)) % 3
+    tri = np.take_along_axis(tri, order[:, :, None], axis=1)
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    k1 = np.ceil(np.linalg.norm(e1, axis=1) / spacing_mm).astype(np.int64)
+    k2 = np.ceil(np.linalg.norm(e2, axis=1) / spacing_mm).astype(np.int64)
+    points = [np.asarray(mesh.vertices, dtype=np.float64)]
+    big = (k1 > 1) | (k2 > 1)
+    for a, b in set(zip(k1[big].tolist(), k2[big].tolist(), strict=True)):
+        pick = big & (k1 == a) & (k2 == b)
+        i, j = np.meshgrid(np.arange(a + 1) / a, np.arange(b + 1) / b, indexing="ij")
+        inside = i + j <= 1 + 1e-9
+        u, v = i[inside], j[inside]
+        grid = (
+            tri[pick, None, 0]
+            + u[None, :, None] * e1[pick, None]
+            + v[None, :, None] * e2[pick, None]
+        )
+        points.append(grid.reshape(-1, 3))
+    return np.vstack(points)
+
+
+class _SurfaceProxy:
+    """A mesh's surface as points (`_surface_points`, a k-d tree over them): a quick test
+    that clears capsules far from the mesh before FCL measures the rest. Every surface point
+    lies within `bound_mm` of one, so a capsule whose axis keeps further than its radius plus
+    that from every point cannot touch the mesh; one whose axis comes within its radius of a
+    point surely does."""
 
     def __init__(self, part: Part) -> None:
         from scipy.spatial import cKDTree
 
         extent = float(np.ptp(part.bounds, axis=0).max())
-        # Fine enough to clear capsules a few mm away, coarse enough to voxelize in < 1 s.
+        # The axes are sampled at `pitch`, the surface at half of it: fine enough to clear
+        # capsules a few mm away, coarse enough to build in well under a second.
         self.pitch = max(extent / 128.0, 2.0)
-        centres = np.asarray(part.mesh.voxelized(self.pitch).points, dtype=np.float64)
-        self._tree = cKDTree(centres)
-        # trimesh subdivides the mesh to edges <= pitch / 2 and marks the voxels holding its
-        # vertices: a surface point is within pitch / 2 of a vertex, a vertex within
-        # pitch·√3/2 of its voxel's centre.
-        self.bound_mm = self.pitch * (0.5 + np.sqrt(3.0) / 2)
+        self.bound_mm = self.pitch / 2
+        self._tree = cKDTree(_surface_points(part.mesh, self.bound_mm / 2))
 
     def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
-        mesh, and those that surely do (a voxel holding surface lies inside the capsule).
+        mesh, and those that surely do (a point of the surface lies inside the capsule).
         Points every `pitch` along each axis stand for it (the axis is within pitch / 2 of
         one of them)."""
         a, b = segments[:, 0], segments[:, 1]
@@ -376,24 +403,39 @@ class _VoxelProxy:
         )
         points = a[owner] + t[:, None] * (b - a)[owner]
         reach = radii + self.bound_mm + 0.5 * self.pitch
-        d, _ = self._tree.query(points, distance_upper_bound=float(reach.max()))
+        # An approximate nearest point (at most 1 + eps times as far as the nearest) is
+        # much quicker to find in a dense cloud and keeps both verdicts sound.
+        eps = 1.0
+        d, _ = self._tree.query(
+            points, eps=eps, distance_upper_bound=float((1 + eps) * reach.max())
+        )
         maybe, surely = np.zeros(len(segments), bool), np.zeros(len(segments), bool)
-        np.logical_or.at(maybe, owner, d <= reach[owner])
-        # A voxel's surface lies within pitch·√3/2 of its centre.
-        np.logical_or.at(surely, owner, d <= radii[owner] - self.pitch * np.sqrt(3.0) / 2)
+        np.logical_or.at(maybe, owner, d <= (1 + eps) * reach[owner])
+        # The axis points lie on the axis, the tree's on the surface.
+        np.logical_or.at(surely, owner, d <= radii[owner])
         return maybe, surely
 
 
 class CellObstacles:
     """The part, its fixtures and the table block (`Cell.table_block`) in part coordinates,
     for capsules that enclose a robot's links: `capsules_hit` says which obstacle, if any,
-    comes within a clearance of each capsule."""
+    comes within a clearance of each capsule; and, given the sensor, whether its body keeps
+    its clearance at poses other than those planned (`sensor_clear`)."""
 
     NAMES = ("part", "fixture", "table")
 
-    def __init__(self, part: Part, cell: Cell) -> None:
-        self._objects: list[tuple[int, fcl.CollisionObject, np.ndarray, _VoxelProxy | None]] = [
-            (0, _mesh_object(part), np.asarray(part.bounds, np.float64), _VoxelProxy(part))
+    def __init__(
+        self,
+        part: Part,
+        cell: Cell,
+        sensor: SensorSpec | None = None,
+        sensor_clearance_mm: float = 0.0,
+    ) -> None:
+        # The sensor body, for poses the arm would fly otherwise than planned (turned).
+        self._sensor = None if sensor is None else checker_for(part, sensor, cell)
+        self.sensor_clearance_mm = float(sensor_clearance_mm)
+        self._objects: list[tuple[int, fcl.CollisionObject, np.ndarray, _SurfaceProxy | None]] = [
+            (0, _mesh_object(part), np.asarray(part.bounds, np.float64), _SurfaceProxy(part))
         ]
         for fixture in cell.fixtures:
             self._objects.append(
@@ -401,7 +443,7 @@ class CellObstacles:
                     1,
                     _mesh_object(fixture),
                     np.asarray(fixture.bounds, np.float64),
-                    _VoxelProxy(fixture),
+                    _SurfaceProxy(fixture),
                 )
             )
         block = cell.table_block(part)
@@ -410,6 +452,13 @@ class CellObstacles:
             box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(0.5 * (lo + hi)))
             self._objects.append((2, box, np.array([lo, hi]), None))
         self.table_block = block
+
+    def sensor_clear(self, poses: np.ndarray) -> np.ndarray:
+        """(n,) bool: the sensor body at poses (n, 4, 4) keeps its clearance from the part,
+        the fixtures and the table (all True when no sensor was given)."""
+        if self._sensor is None:
+            return np.ones(len(poses), bool)
+        return ~self._sensor.check(poses, self.sensor_clearance_mm).colliding
 
     def capsules_hit(self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float) -> np.ndarray:
         """(n, k) int: for capsules (n, k, 2, 3) (segment ends in part coordinates, mm) of

@@ -26,6 +26,7 @@ from scanplan.quantities import ScanSpec
 from scanplan.report import Evaluated, write_report
 from scanplan.robot import get_robot
 from scanplan.robot.flyable import check_flyable
+from scanplan.robot.links import obstacles_for
 from scanplan.trajectory import Trajectory, dumps_json, to_csv_text, to_json_dict
 
 PLANNER_ORDER = ("fixed", "geometric", "rl")
@@ -59,9 +60,11 @@ def run_demo(
     seed: int = 0,
     step: Callable[[str], None] = lambda message: None,
     roi: str | None = None,
+    full_3d: bool = False,
 ) -> DemoResult:
     """Plan, evaluate, draw, report and export. `step` is told what is starting (progress);
-    `roi`: a region of interest (`part.parse_roi`) that planning and coverage keep to.
+    `roi`: a region of interest (`part.parse_roi`) that planning and coverage keep to;
+    `full_3d`: the report's 3-D views at full resolution (`write_report`).
 
     Everything is computed first and written at the end by `report.write_report`, as one
     directory that replaces `out_dir` atomically: an interrupted demo leaves no half of one."""
@@ -131,6 +134,7 @@ def run_demo(
         training_log=training_log,
         files=files,
         title=f"{part.name}: scan quality by planner",
+        full_3d=full_3d,
     )
     return DemoResult(
         out_dir,
@@ -151,11 +155,15 @@ def _robot_program(
     up), checked as `scanplan export` checks it and written in the arm's language: (the line
     saying so, the program, its largest read-back position error in m), after the fitted plan."""
     tcp = parse_pose_arg(DEMO_TCP)
-    fitted = fit_arm(part, traj, Arm(DEMO_ROBOT, tcp), context)
+    # Built once for the fit and the check: it voxelizes the part (~20 s for the door).
+    obstacles = obstacles_for(part, context.cell(part), spec.sensor, spec.clearance_mm)
+    fitted = fit_arm(part, traj, Arm(DEMO_ROBOT, tcp), context, obstacles)
     record = fitted.meta["robot"]
     T_base_part = np.asarray(record["T_base_part"], dtype=np.float64)
     arm = get_robot(DEMO_ROBOT)
-    checked = check_flyable(fitted, arm, T_base_part, tcp, part, context.cell(part), spec.sensor)
+    checked = check_flyable(
+        fitted, arm, T_base_part, tcp, part, context.cell(part), spec.sensor, obstacles
+    )
     if not checked.flyable:  # fit_arm gives up what the arm cannot fly: a bug if not
         raise ValueError(
             f"{DEMO_ROBOT} cannot fly the fitted plan: {checked.first_problem(fitted.swath)}"

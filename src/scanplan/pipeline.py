@@ -17,7 +17,7 @@ import numpy as np
 
 from scanplan.bands import plan_adaptive_swaths
 from scanplan.cell import LOWEST, Cell
-from scanplan.collision import checker_for
+from scanplan.collision import CellObstacles, checker_for
 from scanplan.context import PlanContext
 from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
 from scanplan.motion import plan_transition, view_transition
@@ -213,7 +213,9 @@ def choose_views(
     hemisphere = PlanContext(spec, views="auto")
 
     def in_spec_set(vp: ViewPlan) -> np.ndarray:
-        m = evaluate(part, spec, vp.traj, seed, points_per_profile, context=hemisphere)
+        m = evaluate(
+            part, spec, vp.traj, seed, points_per_profile, context=hemisphere, ceiling=False
+        )
         assert m.coverage_map is not None
         return m.coverage_map.state == SurfaceState.IN_SPEC
 
@@ -403,14 +405,25 @@ class Arm:
     T_base_part: np.ndarray | None = None
 
 
-def fit_arm(part: Part, traj: Trajectory, arm: Arm, context: PlanContext) -> Trajectory:
+def fit_arm(
+    part: Part,
+    traj: Trajectory,
+    arm: Arm,
+    context: PlanContext,
+    obstacles: CellObstacles | None = None,
+) -> Trajectory:
     """`traj` made flyable by the arm (`robot.fit.fit_to_robot`), with `meta["robot"]`: what
     it gave up, per view, and the in-spec coverage of the surface to inspect before and after
-    (evaluated with the view choice's fan)."""
-    obstacles = obstacles_for(part, context.cell(part))
+    (evaluated with the view choice's fan). obstacles: the part's cell as the links see it
+    (`obstacles_for`; None: built here), for a caller that checks the fitted plan again."""
+    if obstacles is None:
+        spec = context.spec
+        obstacles = obstacles_for(part, context.cell(part), spec.sensor, spec.clearance_mm)
     fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
     record = fit.record(arm.tcp)
     for key, plan in (("in_spec_without_robot", traj), ("in_spec", fit.traj)):
-        m = evaluate(part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context=context)
+        m = evaluate(
+            part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context=context, ceiling=False
+        )
         record[key] = m.in_spec_coverage
     return replace(fit.traj, meta=fit.traj.meta | {"robot": record})

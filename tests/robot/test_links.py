@@ -125,3 +125,25 @@ def test_an_arm_over_the_table_stands_on_it_not_in_the_air() -> None:
     assert column_clear(arm, T[None], block)[0]
     T[:3, 3] = (-200.0, 0.0, -250.0)  # over the table on a 250 mm riser nothing models
     assert not column_clear(arm, T[None], block)[0]
+
+
+def test_a_turn_about_the_beam_is_checked_for_the_sensor_body() -> None:
+    # The body is not symmetric about the beam: a tilted pose clear of the table may put the
+    # body into it once turned half a turn, and the cell check says so.
+    from scipy.spatial.transform import Rotation
+
+    from scanplan.robot.place import HALF_TURN
+    from scanplan.sensor import DEFAULT_SENSOR, PRESETS
+
+    part = _box_part((300, 300, 20), (0, 0, 10))
+    obstacles = obstacles_for(part, Cell.around(part), PRESETS[DEFAULT_SENSOR], 20.0)
+    rng = np.random.default_rng(3)
+    poses = np.tile(np.eye(4), (2000, 1, 1))
+    tilt = rng.uniform(-1.4, 1.4, (2000, 2))
+    down = Rotation.from_euler("x", np.pi)  # the beam (z_s) pointing down
+    poses[:, :3, :3] = (Rotation.from_euler("xy", tilt) * down).as_matrix()
+    poses[:, :3, 3] = rng.uniform((-150, -150, 20), (150, 150, 400), (2000, 3))
+    planned, turned = obstacles.sensor_clear(poses), obstacles.sensor_clear(poses @ HALF_TURN)
+    assert (planned & ~turned).any() and (turned & ~planned).any()
+    # Without the sensor, only the links are checked: every pose passes this test.
+    assert obstacles_for(part, Cell.around(part)).sensor_clear(poses @ HALF_TURN).all()

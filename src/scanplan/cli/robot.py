@@ -352,6 +352,7 @@ def place_cmd(
     the fixtures (the arm stands beside the table); print it as --part-pose. Exit 2 if none
     does."""
     # Deferred: the placement search loads the kinematics (numpy, scipy).
+    from scanplan.context import recorded
     from scanplan.export import parse_pose_arg
     from scanplan.robot import get_robot
     from scanplan.robot.links import obstacles_for
@@ -361,7 +362,8 @@ def place_cmd(
     heights = parse_height_range(height_range)
     traj = read_trajectory(trajectory)
     arm = get_robot(robot)  # a bad arm is named before a missing part
-    obstacles = obstacles_for(*planned_cell(traj, part, units))
+    spec = recorded(traj, ScanSpec()).spec
+    obstacles = obstacles_for(*planned_cell(traj, part, units), spec.sensor, spec.clearance_mm)
     with progress_bar("searching a placement", quiet):
         result = place(
             traj,

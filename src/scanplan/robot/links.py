@@ -13,6 +13,7 @@ from scanplan.cell import Cell
 from scanplan.collision import CellObstacles
 from scanplan.part import Part
 from scanplan.robot.base import Robot, inv_rigid
+from scanplan.sensor import SensorSpec
 
 # Every link keeps this far from the part, a fixture and the table: the capsules already
 # enclose the links, so this is the margin for the cell's calibration, not for the shapes.
@@ -80,9 +81,12 @@ class LinkReport:
         )
 
 
-def obstacles_for(part: Part, cell: Cell) -> CellObstacles:
-    """What the links must keep clear of: the part, the cell's fixtures and table block."""
-    return CellObstacles(part, cell)
+def obstacles_for(
+    part: Part, cell: Cell, sensor: SensorSpec | None = None, clearance_mm: float = 0.0
+) -> CellObstacles:
+    """What the links must keep clear of: the part, the cell's fixtures and table block;
+    with the sensor, what its body keeps `clearance_mm` from when a pose is changed."""
+    return CellObstacles(part, cell, sensor, clearance_mm)
 
 
 def _capsules_hit(

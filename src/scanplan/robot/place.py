@@ -110,7 +110,8 @@ def flyable_poses(
     index: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
-    default) of `traj` the arm reaches within its limits with its links clear."""
+    default) of `traj` the arm reaches within its limits with its links clear, and (the
+    body is not symmetric about the beam) the sensor keeping its clearance."""
     index = np.arange(len(traj)) if index is None else index
     out = []
     for poses in (traj.poses[index], traj.poses[index] @ HALF_TURN):
@@ -123,6 +124,7 @@ def flyable_poses(
         good = ~np.isnan(report.joints).any(axis=1)
         if obstacles is not None:
             good &= ~check_links(arm, report.joints, obstacles, T_base_part).colliding
+            good &= obstacles.sensor_clear(poses)
         out.append(good)
     return out[0], out[1]
 
