@@ -1,7 +1,8 @@
 """The most of a part's upper-hemisphere surface any scan could hold in spec: the share of
-its samples (`metrics.hemisphere_visible_samples`) that some beam within the angle
-tolerance of the normal, and no more than `views.VIEW_AXIS_MAX_TILT_DEG` (or 90°) from +Z,
-reaches without hitting the part. A bound, not a plan: it ignores the depth window, the
+its samples (`surface.hemisphere_visible_samples`) that some beam within the angle
+tolerance of the normal, and no more than `surface.VIEW_AXIS_MAX_TILT_DEG` (or 90°) from +Z,
+reaches without hitting the part (`surface.reachable_samples`, which `evaluate` reports as
+`visibility_ceiling`). A bound, not a plan: it ignores the depth window, the
 sensor body and tracking, so real plans stay below it. The last column also asks for the
 camera's line of sight, as the simulator does: a triangulation sensor sees a point only if
 its camera, at the triangulation angle from the beam (on any side: the sensor may turn
@@ -21,15 +22,13 @@ from compare_views import PARTS  # the shared parts and their units (benchmarks/
 
 from scanplan.part import load_part
 from scanplan.quantities import ScanSpec
-from scanplan.surface import hemisphere_visible_samples, oriented_normals
-from scanplan.views import VIEW_AXIS_MAX_TILT_DEG
-
-
-def _unit_perpendicular(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """(k, 3) random unit vectors perpendicular to the rows of v."""
-    side = rng.normal(size=v.shape)
-    side -= np.sum(side * v, axis=1, keepdims=True) * v
-    return side / np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
+from scanplan.surface import (
+    VIEW_AXIS_MAX_TILT_DEG,
+    hemisphere_visible_samples,
+    oriented_normals,
+    reachable_samples,
+    unit_perpendicular,
+)
 
 
 def ceiling(
@@ -43,22 +42,23 @@ def ceiling(
 ) -> float:
     """The share of the samples some beam reaches (see the module); with `camera_rad`, the
     camera at that angle from the beam must see the point too (`camera_sides` azimuths)."""
-    rng = np.random.default_rng(seed)
     surface = hemisphere_visible_samples(part, 3.0, seed)
+    if camera_rad is None:
+        return float(reachable_samples(part, surface, tol_rad, max_tilt_deg, beams, seed).mean())
+    rng = np.random.default_rng(seed)
     n = oriented_normals(part)[surface.faces]
     seen = np.zeros(len(n), bool)
     lowest = math.cos(math.radians(max_tilt_deg)) - 1e-9
     for k in range(beams):
         # A beam direction (towards the sensor) uniform in the tolerance cone; first the normal.
-        side = _unit_perpendicular(n, rng)
+        side = unit_perpendicular(n, rng)
         angle = 0.0 if k == 0 else tol_rad * np.sqrt(rng.random(len(n)))[:, None]
         beam = np.cos(angle) * n + np.sin(angle) * side
         todo = np.flatnonzero(~seen & (beam[:, 2] >= lowest))
         if len(todo):
             start = surface.points[todo] + 0.05 * n[todo]
             escapes = ~part.ray_engine.occluded(start, beam[todo], np.full(len(todo), 1e6))
-            if camera_rad is not None:
-                escapes &= _camera_sees(part, start, n[todo], beam[todo], camera_rad, camera_sides)
+            escapes &= _camera_sees(part, start, n[todo], beam[todo], camera_rad, camera_sides)
             seen[todo] = escapes
     return float(seen.mean()) if len(seen) else 0.0
 
@@ -66,7 +66,7 @@ def ceiling(
 def _camera_sees(part, start, n, beam, camera_rad: float, sides: int) -> np.ndarray:
     """(k,) bool: a camera `camera_rad` from the beam, on one of `sides` azimuths about it,
     is in front of the face and sees the point unobstructed."""
-    first = _unit_perpendicular(beam, np.random.default_rng(1))
+    first = unit_perpendicular(beam, np.random.default_rng(1))
     second = np.cross(beam, first)
     sees = np.zeros(len(beam), bool)
     for k in range(sides):

@@ -155,7 +155,7 @@ def _robot_program(
     up), checked as `scanplan export` checks it and written in the arm's language: (the line
     saying so, the program, its largest read-back position error in m), after the fitted plan."""
     tcp = parse_pose_arg(DEMO_TCP)
-    # Built once for the fit and the check: it voxelizes the part (~20 s for the door).
+    # Built once for the fit and the check: it samples the part's surface for the links.
     obstacles = obstacles_for(part, context.cell(part), spec.sensor, spec.clearance_mm)
     fitted = fit_arm(part, traj, Arm(DEMO_ROBOT, tcp), context, obstacles)
     record = fitted.meta["robot"]

@@ -1,6 +1,7 @@
 """The part's surface as the planners and the metrics see it, in one place: vertical probes of
-the CAD, the normals that face out of the part, the directions of the upper hemisphere, and
-area samples of the surface a top or a hemisphere of views can see.
+the CAD, the normals that face out of the part, the directions of the upper hemisphere, area
+samples of the surface a top or a hemisphere of views can see, and which of them any beam
+within tolerance can reach (the visibility ceiling).
 """
 
 from __future__ import annotations
@@ -19,6 +20,12 @@ COVERAGE_MAX_SLOPE_DEG = 80.0
 # The directions that define what the upper hemisphere sees (the surface `--views auto`
 # inspects): +Z and rings up to this tilt.
 HEMISPHERE_MAX_TILT_DEG = 75.0
+# A view's axis at most this far from +Z: a vertical wall is then seen 10° off its normal,
+# inside the 15° tolerance with room for tracking, and the sensor stays above it.
+VIEW_AXIS_MAX_TILT_DEG = 80.0
+# Beam directions tried per sample for the visibility ceiling: the normal, the cone's beam
+# nearest +Z, then random ones in the tolerance cone.
+CEILING_BEAMS = 24
 
 
 def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) -> np.ndarray:
@@ -171,3 +178,63 @@ def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> Visi
     blocked = part.ray_engine.occluded(start, up, np.full(count, 1e6))
     visible = ~blocked
     return VisibleSurface(points[visible], cand_area * float(visible.mean()), faces[visible])
+
+
+def unit_perpendicular(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(k, 3) random unit vectors perpendicular to the rows of v."""
+    side = rng.normal(size=v.shape)
+    side -= np.sum(side * v, axis=1, keepdims=True) * v
+    return side / np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
+
+
+def _towards_up(n: np.ndarray, angle_rad: float) -> np.ndarray:
+    """(k, 3): the unit vectors `n` turned towards +Z by up to `angle_rad` (+Z itself where it
+    is nearer than that)."""
+    cos_up = np.clip(n[:, 2], -1.0, 1.0)
+    side = UP - cos_up[:, None] * n
+    norm = np.linalg.norm(side, axis=1, keepdims=True)
+    side = np.where(norm > 1e-9, side / np.maximum(norm, 1e-12), 0.0)
+    turn = np.minimum(np.arccos(cos_up), angle_rad)[:, None]
+    return np.cos(turn) * n + np.sin(turn) * side
+
+
+def reachable_samples(
+    part: Part,
+    surface: VisibleSurface,
+    tol_rad: float,
+    max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG,
+    beams: int = CEILING_BEAMS,
+    seed: int = 0,
+) -> np.ndarray:
+    """(k,) bool: the samples of `surface` some beam reaches unobstructed from within `tol_rad`
+    of the face's outward normal and at most `max_tilt_deg` from +Z (`beams` directions per
+    sample: the normal, the cone's beam nearest +Z, then uniform in the cone, seeded). Their
+    share is the visibility ceiling: no plan holds more of the surface in spec, since a point
+    in spec was measured by such a beam. It ignores the depth window, the sensor body and the
+    camera's line of sight."""
+    seen = np.zeros(len(surface.points), bool)
+    if len(seen) == 0:
+        return seen
+    rng = np.random.default_rng(seed)
+    n = oriented_normals(part)[surface.faces]
+    lowest = math.cos(math.radians(max_tilt_deg)) - 1e-9
+    for b in range(beams):
+        todo = np.flatnonzero(~seen)
+        if len(todo) == 0:
+            break
+        if b == 0:
+            beam = n[todo]
+        elif b == 1:
+            # A wall is reached only by the cone's top edge, which random beams often miss.
+            beam = _towards_up(n[todo], tol_rad)
+        else:
+            # Uniform by solid angle in the cone (near enough for a 15° cone), seeded.
+            angle = tol_rad * np.sqrt(rng.random(len(todo)))[:, None]
+            beam = np.cos(angle) * n[todo] + np.sin(angle) * unit_perpendicular(n[todo], rng)
+        steep = beam[:, 2] < lowest
+        todo, beam = todo[~steep], beam[~steep]
+        if len(todo):
+            start = surface.points[todo] + 0.05 * n[todo]  # off the face, as the samplers do
+            far = np.full(len(todo), 1e6)
+            seen[todo] = ~part.ray_engine.occluded(start, beam, far)
+    return seen

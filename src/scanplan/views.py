@@ -20,12 +20,9 @@ from scipy.spatial.transform import Rotation
 
 from scanplan.part import Part
 from scanplan.quantities import UP, ScanSpec
-from scanplan.surface import hemisphere_directions, oriented_normals
+from scanplan.surface import VIEW_AXIS_MAX_TILT_DEG, hemisphere_directions, oriented_normals
 from scanplan.trajectory import Trajectory
 
-# A view's axis at most this far from +Z: a vertical wall is then seen 10° off its normal,
-# inside the 15° tolerance with room for tracking, and the sensor stays above it.
-VIEW_AXIS_MAX_TILT_DEG = 80.0
 # A region (and a view's slab) smaller than this share of the surface gets no view of its
 # own: it still counts in coverage, but a view for it would add nothing measurable.
 MIN_REGION_AREA_FRACTION = 0.005

@@ -72,6 +72,9 @@ def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)  # exactly one JSON object
     assert data["profiles"] > 700 and data["coverage_fraction"] > 0.99
+    # The plate is all within reach: in-spec coverage is its own share of the ceiling.
+    assert data["visibility_ceiling"] == pytest.approx(1.0, abs=1e-3)
+    assert data["in_spec_of_ceiling"] == pytest.approx(data["in_spec_coverage"], abs=1e-3)
     # plan and evaluate time the same plan with the same model and limits.
     cycle = data["cycle_time"]
     assert cycle["limits"]["name"] == "nominal" and cycle["total_s"] == data["cycle_time_s"]
@@ -83,6 +86,8 @@ def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert cycle_line(result.stdout) == planned
+    share = f"{data['in_spec_of_ceiling']:.1%} of its visibility ceiling 100.0% | "
+    assert share in result.stdout
     names = {p.name for p in report.iterdir()}
     assert {"distance_error.png", "orientation_error.png", "metrics.md", "metrics.json"} <= names
     assert "report.html" in names

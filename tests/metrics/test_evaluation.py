@@ -158,3 +158,28 @@ def test_door_in_spec_coverage_by_planner(door_plans):
     # An earlier independent measurement: 19 % (fixed) vs 92 % (surface following).
     assert 0.1 < got["fixed"] < 0.3, got
     assert 0.8 < got["geometric"] < 0.97 and 0.8 < got["rl"] < 0.97, got
+
+
+def test_in_spec_coverage_is_reported_against_the_visibility_ceiling(plate):
+    from helpers import HEMISPHERE
+
+    m = evaluate(plate, SPEC, straight(np.arange(20.25, 620.0, 0.5)), points_per_profile=128)
+    assert m.visibility_ceiling == pytest.approx(1.0, abs=1e-3)  # a plate is all in reach
+    # A shelf 60 mm over a plate hides the plate under it from every beam within 15°.
+    plate_mesh = trimesh.creation.box((600.0, 300.0, 10.0))
+    plate_mesh.apply_translation((0, 0, -5.0))
+    shelf = trimesh.creation.box((200.0, 200.0, 10.0))
+    shelf.apply_translation((0, 0, 65.0))
+    part = part_from_mesh(trimesh.util.concatenate([plate_mesh, shelf]), "shelf")
+    traj = straight(np.arange(20.25, 620.0, 0.5))
+    m = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE)
+    assert m.visibility_ceiling is not None and 0.5 < m.visibility_ceiling < 0.97
+    assert m.in_spec_coverage <= m.visibility_ceiling
+    assert m.in_spec_of_ceiling == pytest.approx(m.in_spec_coverage / m.visibility_ceiling)
+    assert m.in_spec_of_ceiling >= m.in_spec_coverage
+    data = m.to_json_dict()
+    assert data["visibility_ceiling"] == m.visibility_ceiling
+    assert data["in_spec_of_ceiling"] == m.in_spec_of_ceiling
+    # Not measured on request (choosing views): None, and no share of it.
+    off = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE, ceiling=False)
+    assert off.visibility_ceiling is None and off.to_json_dict()["in_spec_of_ceiling"] is None

@@ -50,7 +50,8 @@ def test_report_is_self_contained_and_shows_every_planner(tmp_path, results):
     page = out.read_text()
     assert page.startswith("<!DOCTYPE html>")
     assert "<script src=" not in page  # plotly.js is inlined, nothing is fetched
-    assert page.count("Plotly.newPlot") == 3  # two planners + the training curves
+    assert page.count("data-figure=") == 3  # two planners + the training curves
+    assert "scanplan-plotly-gz" in page  # plotly.js packed, unpacked by the page
     for name in ("high", "right", "ep_rew_mean", "test definition"):
         assert name in page
     # The table shows each planner's number, rounded as the CLI JSON would be read.

@@ -13,6 +13,7 @@ import typer
 from scanplan.cli.common import user_errors
 from scanplan.cli.options import (
     POINTS_CHECK,
+    Full3dOpt,
     RoiOpt,
     SeedOpt,
     SensorOpt,
@@ -49,6 +50,7 @@ def demo_cmd(
     seed: SeedOpt = 0,
     tolerance: ToleranceOpt = None,
     roi: RoiOpt = None,
+    full_3d: Full3dOpt = False,
 ):
     """The main job: three planners on a part (the door by default), the table, maps, an
     HTML report and the rl plan as a RAPID program for an IRB 2400 that flies it (the part
@@ -76,6 +78,7 @@ def demo_cmd(
             seed=seed,
             step=step,
             roi=roi,
+            full_3d=full_3d,
         )
     print_summary(console, part, result)
 

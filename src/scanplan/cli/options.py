@@ -145,6 +145,14 @@ QuietOpt = Annotated[
     bool, typer.Option("--quiet", "-q", help="no progress bar (none either off a terminal)")
 ]
 TrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV or JSON")]
+Full3dOpt = Annotated[
+    bool,
+    typer.Option(
+        "--full-3d",
+        help="report.html's 3-D views with every face of the part and every sampled point, "
+        "pictures at full size (tens of MB for a large part; by default a few MB)",
+    ),
+]
 
 # ---- poses (export, place) ----------------------------------------------------------------
 POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"

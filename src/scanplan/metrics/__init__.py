@@ -6,6 +6,7 @@ from scanplan.metrics.evaluation import coverage_spacing_mm, evaluate, in_spec_r
 from scanplan.metrics.summary import (
     COVERAGE_DEFINITION,
     IN_SPEC_COVERAGE_DEFINITION,
+    VISIBILITY_CEILING_DEFINITION,
     CoverageMap,
     Metrics,
     SurfaceState,
@@ -14,6 +15,7 @@ from scanplan.metrics.summary import (
 __all__ = [
     "COVERAGE_DEFINITION",
     "IN_SPEC_COVERAGE_DEFINITION",
+    "VISIBILITY_CEILING_DEFINITION",
     "CoverageMap",
     "Metrics",
     "SurfaceState",

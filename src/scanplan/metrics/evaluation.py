@@ -21,7 +21,11 @@ from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import ScanSpec, point_orientation_error
 from scanplan.sensor import SensorSpec
-from scanplan.surface import hemisphere_visible_samples, upward_visible_samples
+from scanplan.surface import (
+    hemisphere_visible_samples,
+    reachable_samples,
+    upward_visible_samples,
+)
 from scanplan.trajectory import Trajectory
 
 
@@ -81,6 +85,7 @@ def evaluate(
     limits: MotionLimits = NOMINAL,
     targets: np.ndarray | None = None,
     blended: np.ndarray | None = None,
+    ceiling: bool = True,
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
@@ -93,6 +98,8 @@ def evaluate(
     limits, targets, blended: the arm's motion limits the cycle time is timed with, the poses
     a program flies between and those it blends through (`cycle.cycle_time`; None: every
     planned pose, each an exact stop).
+    ceiling: also measure the visibility ceiling of the surface to inspect (about a second
+    on the door); off where only the in-spec set is wanted (choosing views, fitting an arm).
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -142,6 +149,11 @@ def evaluate(
             f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
         )
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
+    ceiling_share = None
+    if ceiling and len(surface.points):
+        # On the very samples in-spec coverage counts, so the two shares compare.
+        reachable = reachable_samples(part, surface, scan_spec.tol_angle_rad, seed=seed)
+        ceiling_share = float(reachable.mean())
     checker = checker_for(part, sensor, context.cell(part))
     collisions = checker.check(traj.poses, scan_spec.clearance_mm)
     return Metrics(
@@ -155,6 +167,7 @@ def evaluate(
         surface=context.surface,
         visible_area_mm2=surface.area_mm2,
         in_spec_coverage=in_spec_fraction,
+        visibility_ceiling=ceiling_share,
         in_spec_radius_mm=in_spec_radius,
         in_spec_cell_mm=2.0 * scan_spec.delta_s_opt_mm,
         tolerance_mm=scan_spec.tolerance_mm,

@@ -13,7 +13,7 @@ import numpy as np
 from scanplan.cloud import PointCloud
 from scanplan.cycle import CycleTime
 from scanplan.files import json_safe
-from scanplan.surface import COVERAGE_MAX_SLOPE_DEG
+from scanplan.surface import CEILING_BEAMS, COVERAGE_MAX_SLOPE_DEG, VIEW_AXIS_MAX_TILT_DEG
 
 COVERAGE_DEFINITION = (
     "fraction of the surface to inspect (`surface`) sampled by valid points: that surface is "
@@ -36,6 +36,15 @@ IN_SPEC_COVERAGE_DEFINITION = (
     "2 delta_s_opt long and one evaluated column pitch wide (at the far tolerance depth and "
     "tilt), so a sub-sampled fan still reaches every sample between its columns, while "
     "profiles sparser than 2 delta_s_opt fail however wide the radius"
+)
+
+VISIBILITY_CEILING_DEFINITION = (
+    "fraction of the same samples of the surface to inspect that some beam reaches "
+    "unobstructed from within tol_alpha of the face's normal and at most "
+    f"{VIEW_AXIS_MAX_TILT_DEG:.0f} deg from vertical (the normal and {CEILING_BEAMS - 1} seeded "
+    "directions in that cone tried per sample): no plan holds more of the surface in spec. "
+    "It ignores the depth window, the sensor body and the camera's line of sight, so plans "
+    "stay below it; `in_spec_of_ceiling` is in-spec coverage divided by it"
 )
 
 
@@ -71,7 +80,9 @@ class Metrics:
     Rewards: per step (a profile and its predecessor in the pass), `reward.reward_terms`.
     Coverage: see `COVERAGE_DEFINITION`; in-spec coverage (the headline figure): see
     `IN_SPEC_COVERAGE_DEFINITION`, at the tolerances `tolerance_mm`, `tolerance_deg` and at
-    least one point per `in_spec_cell_mm`² (2·Δs_opt).
+    least one point per `in_spec_cell_mm`² (2·Δs_opt). `visibility_ceiling`: the most of the
+    same samples any plan could hold in spec (`VISIBILITY_CEILING_DEFINITION`; None if not
+    measured), and `in_spec_of_ceiling` the in-spec coverage as a share of it.
     Cycle time: `cycle` (`scanplan.cycle.CycleTime`, its model and the arm's limits);
     `cycle_time_s`, `scan_time_s`, `move_time_s` its total, passes and moves.
     Collisions (every pose, scanning or not; `collision.CellChecker`): poses whose sensor
@@ -128,9 +139,18 @@ class Metrics:
     collisions_fixtures: int
     worst_penetration_mm: float
     clearance_mm: float
+    visibility_ceiling: float | None = None
     cloud: PointCloud | None = field(default=None, repr=False, compare=False)
     coverage_map: CoverageMap | None = field(default=None, repr=False, compare=False)
     cycle: CycleTime | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def in_spec_of_ceiling(self) -> float | None:
+        """In-spec coverage as a share of the visibility ceiling (None if that is unmeasured
+        or 0)."""
+        if not self.visibility_ceiling:
+            return None
+        return self.in_spec_coverage / self.visibility_ceiling
 
     def to_json_dict(self) -> dict[str, Any]:
         """The SPEC §8 keys (and more): plain floats and ints, None where a number is not
@@ -143,6 +163,9 @@ class Metrics:
                 "profiles": self.profiles,
                 "points_per_profile": self.points_per_profile,
                 "in_spec_coverage": self.in_spec_coverage,
+                "visibility_ceiling": self.visibility_ceiling,
+                "in_spec_of_ceiling": self.in_spec_of_ceiling,
+                "visibility_ceiling_definition": VISIBILITY_CEILING_DEFINITION,
                 "tolerance": {"mm": self.tolerance_mm, "deg": self.tolerance_deg},
                 "in_spec_definition": IN_SPEC_COVERAGE_DEFINITION,
                 "in_spec_radius_mm": self.in_spec_radius_mm,

@@ -282,7 +282,8 @@ def plot_coverage_map(
         cmap,
         lo,
         hi,
-        f"In-spec coverage {source.in_spec_coverage:.1%} — {planner} on {part}\n"
+        f"In-spec coverage {source.in_spec_coverage:.1%}{_of_ceiling(source)} — {planner} on "
+        f"{part}\n"
         f"({_tolerance_text(source)}, ≥ 1 point per "
         f"{source.in_spec_cell_mm:g} mm square)",
     )
@@ -291,6 +292,12 @@ def plot_coverage_map(
     _save(fig, path)
     plt.close(fig)
     return path
+
+
+def _of_ceiling(metrics: Metrics) -> str:
+    """' (84% of the ceiling)', or nothing where the ceiling was not measured."""
+    share = metrics.in_spec_of_ceiling
+    return "" if share is None else f" ({share:.0%} of the ceiling)"
 
 
 def plot_coverage_comparison(
@@ -316,7 +323,13 @@ def plot_coverage_comparison(
         layout="constrained",
     )
     for ax, (name, metrics), cmap in zip(axes[0], sources, maps, strict=True):
-        _draw_coverage(ax, cmap, lo, hi, f"{name}: {metrics.in_spec_coverage:.1%} in spec")
+        _draw_coverage(
+            ax,
+            cmap,
+            lo,
+            hi,
+            f"{name}: {metrics.in_spec_coverage:.1%} in spec{_of_ceiling(metrics)}",
+        )
     first = sources[0][1]
     fig.suptitle(
         f"In-spec coverage — {part or first.part} ({_tolerance_text(first)}, ≥ 1 point per "

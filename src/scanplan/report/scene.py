@@ -173,14 +173,20 @@ def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]
 # ---- traces -------------------------------------------------------------------------------
 
 
-def part_trace(part: Part, name: str = "part", colour: str = "lightgray", opacity: float = 0.45):
-    """The part's mesh, decimated to MAX_PART_FACES if larger."""
+def part_trace(
+    part: Part,
+    name: str = "part",
+    colour: str = "lightgray",
+    opacity: float = 0.45,
+    max_faces: int | None = MAX_PART_FACES,
+):
+    """The part's mesh, decimated to `max_faces` if larger (None: every face)."""
     import plotly.graph_objects as go
 
     mesh = part.mesh
-    if len(mesh.faces) > MAX_PART_FACES:
+    if max_faces is not None and len(mesh.faces) > max_faces:
         try:
-            mesh = mesh.simplify_quadric_decimation(face_count=MAX_PART_FACES)
+            mesh = mesh.simplify_quadric_decimation(face_count=max_faces)
         except (ImportError, ValueError):  # decimation is cosmetic: fall back to the full mesh
             mesh = part.mesh
     v, f = mesh.vertices, mesh.faces

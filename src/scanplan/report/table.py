@@ -9,6 +9,9 @@ from typing import Any
 # (label, key path in Metrics.to_json_dict(), format). In-spec coverage is the headline.
 TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
     ("in-spec coverage", ("in_spec_coverage",), "{:.1%}"),
+    # No plan exceeds the ceiling: the gap to it, not to 100 %, is what planning can win.
+    ("in-spec share of the visibility ceiling", ("in_spec_of_ceiling",), "{:.1%}"),
+    ("visibility ceiling (some beam within tolerance)", ("visibility_ceiling",), "{:.1%}"),
     ("coverage (any valid point)", ("coverage_fraction",), "{:.1%}"),
     ("profiles", ("profiles",), "{:.0f}"),
     ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),

@@ -49,6 +49,7 @@ def write_report(
     training_log: Path | None = None,
     files: Mapping[str, str | bytes | Path] | None = None,
     title: str | None = None,
+    full_3d: bool = False,
 ) -> Path:
     """Write the report directory of one or more evaluated trajectories; return report.html.
 
@@ -56,7 +57,9 @@ def write_report(
     its metrics. Several: each one's maps in a sub-directory named after it, side-by-side
     comparison maps at the top level and metrics.json a mapping name -> metrics.
     pictures: more PNGs for the HTML report (e.g. training curves); files: more outputs by
-    relative name — text, bytes, or a Path to copy."""
+    relative name — text, bytes, or a Path to copy. full_3d: report.html's 3-D views at full
+    resolution (every face, every sampled point) and its pictures at full size; by default
+    they are decimated so the page stays a few MB."""
     # Deferred: matplotlib and plotly load only when a report is written.
     from scanplan.report.html import PlannerResult, write_html_report
     from scanplan.report.maps import (
@@ -141,6 +144,7 @@ def write_report(
                 training_log=training_log,
                 pictures=[*maps, *pictures],
                 notes=notes,
+                full_3d=full_3d,
             )
     return out_dir / "report.html"
 

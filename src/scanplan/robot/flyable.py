@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.cell import Cell
-from scanplan.collision import checker_for
+from scanplan.collision import CellObstacles, checker_for
 from scanplan.part import Part
 from scanplan.robot.base import Robot
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
@@ -60,16 +60,19 @@ def check_flyable(
     part: Part,
     cell: Cell,
     sensor: SensorSpec,
+    obstacles: CellObstacles | None = None,
 ) -> Flyability:
     """The arm's reach along the flange poses of `traj` (part frame, sensor poses) with the
     part at `T_base_part` and the sensor at `T_flange_sensor` (mm), its links along that
-    path and every joint move into a pass, and the sensor body, against `part` in `cell`."""
+    path and every joint move into a pass, and the sensor body, against `part` in `cell`.
+    obstacles: `obstacles_for(part, cell)` if the caller has it (a fit just built it);
+    None: built here."""
     flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
     reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(
         arm,
         reach.joints,
-        obstacles_for(part, cell),
+        obstacles_for(part, cell) if obstacles is None else obstacles,
         T_base_part,
         pass_starts(traj.swath, traj.scanning),
     )
