@@ -1,6 +1,7 @@
 """`--views top` vs `--views auto` on the real parts (../shared/parts): in-spec coverage
-(of the upward-visible surface and of the surface visible from the upper hemisphere),
-views, passes and planning time, geometric planner with its default raster.
+(of the upward-visible surface and of the surface visible from the upper hemisphere, and
+the latter's visibility ceiling and share of it), views, passes and planning time,
+geometric planner with its default raster.
 
     PYTHONPATH=src python benchmarks/compare_views.py [PARTS_DIR] [--points 256]
 """
@@ -36,7 +37,10 @@ def main() -> None:
     args = ap.parse_args()
     spec = ScanSpec()
     planner = make_planner("geometric")
-    print("part | views | passes | in-spec top-surface | in-spec hemisphere | plan s")
+    print(
+        "part | views | passes | in-spec top-surface | in-spec hemisphere | ceiling | "
+        "in-spec of ceiling | plan s"
+    )
     for name, units in PARTS.items():
         if args.only and args.only not in name:
             continue
@@ -50,7 +54,12 @@ def main() -> None:
             ("auto", auto, len(plans), sum(p.passes for p in plans), auto.plan_time_s),
         ):
             up = evaluate(
-                part, spec, traj, points_per_profile=args.points, context=PlanContext(spec)
+                part,
+                spec,
+                traj,
+                points_per_profile=args.points,
+                context=PlanContext(spec),
+                ceiling=False,
             )
             hemi = evaluate(
                 part,
@@ -61,7 +70,8 @@ def main() -> None:
             )
             print(
                 f"{name} {label} | {n_view} | {n_pass} | {up.in_spec_coverage:.3f} | "
-                f"{hemi.in_spec_coverage:.3f} | {t:.1f}",
+                f"{hemi.in_spec_coverage:.3f} | {hemi.visibility_ceiling:.3f} | "
+                f"{hemi.in_spec_of_ceiling:.3f} | {t:.1f}",
                 flush=True,
             )
 

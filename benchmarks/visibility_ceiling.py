@@ -43,23 +43,14 @@ def ceiling(
     """The share of the samples some beam reaches (see the module); with `camera_rad`, the
     camera at that angle from the beam must see the point too (`camera_sides` azimuths)."""
     surface = hemisphere_visible_samples(part, 3.0, seed)
-    if camera_rad is None:
-        return float(reachable_samples(part, surface, tol_rad, max_tilt_deg, beams, seed).mean())
-    rng = np.random.default_rng(seed)
-    n = oriented_normals(part)[surface.faces]
-    seen = np.zeros(len(n), bool)
-    lowest = math.cos(math.radians(max_tilt_deg)) - 1e-9
-    for k in range(beams):
-        # A beam direction (towards the sensor) uniform in the tolerance cone; first the normal.
-        side = unit_perpendicular(n, rng)
-        angle = 0.0 if k == 0 else tol_rad * np.sqrt(rng.random(len(n)))[:, None]
-        beam = np.cos(angle) * n + np.sin(angle) * side
-        todo = np.flatnonzero(~seen & (beam[:, 2] >= lowest))
-        if len(todo):
-            start = surface.points[todo] + 0.05 * n[todo]
-            escapes = ~part.ray_engine.occluded(start, beam[todo], np.full(len(todo), 1e6))
-            escapes &= _camera_sees(part, start, n[todo], beam[todo], camera_rad, camera_sides)
-            seen[todo] = escapes
+    also = None
+    if camera_rad is not None:
+        n = oriented_normals(part)[surface.faces]
+
+        def also(todo, start, beam):
+            return _camera_sees(part, start, n[todo], beam, camera_rad, camera_sides)
+
+    seen = reachable_samples(part, surface, tol_rad, max_tilt_deg, beams, seed, also)
     return float(seen.mean()) if len(seen) else 0.0
 
 

@@ -33,6 +33,17 @@ class PointCloud:
     swath: np.ndarray
 
 
+# A point of `write_ply`'s binary PLY: x, y, z float32, RGBA, two float32 and two int32
+# fields (tests check it against a written file).
+PLY_BYTES_PER_POINT = 32
+PLY_HEADER_BYTES = 410
+
+
+def ply_size_bytes(points: int) -> int:
+    """About the size of the PLY `write_ply` writes for this many points."""
+    return PLY_HEADER_BYTES + PLY_BYTES_PER_POINT * points
+
+
 def simulate_cloud(
     part: Part,
     sensor: SensorSpec,
@@ -40,14 +51,19 @@ def simulate_cloud(
     seed: int = 0,
     chunk_poses: int = 256,
     progress: Callable[[int, int], None] | None = None,
+    max_points: int | None = None,
 ) -> PointCloud:
     """Measure every scanning pose and keep the valid points (chunked to bound memory); of a
     part with a region of interest, only the points on its faces. progress(done, total) is
-    called after each chunk."""
+    called after each chunk. max_points: keep a uniform random sample of at most this many
+    valid points (seeded), in scan order; memory stays within about twice that."""
     profilometer = LineProfilometer(part, sensor, seed=seed)
     poses = traj.scan_poses
     swath_of_pose = traj.swath[traj.scanning]
-    out: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
+    rng = np.random.default_rng(seed)
+    fields = [*PointCloud.__dataclass_fields__, "key"]
+    out: dict[str, list[np.ndarray]] = {k: [] for k in fields}
+    held = 0
     for start, scan in profilometer.measure_in_chunks(poses, chunk_poses, progress):
         valid = scan.valid
         rows = np.nonzero(valid)[0]
@@ -57,12 +73,27 @@ def simulate_cloud(
         out["orientation_error_rad"].append(alpha[valid])
         out["profile"].append(rows + start)
         out["swath"].append(swath_of_pose[rows + start])
+        # A random key per point: the sample is the points with the smallest keys.
+        out["key"].append(rng.random(len(rows)))
+        held += len(rows)
+        if max_points is not None and held > 2 * max_points:
+            out, held = _smallest_keys(out, max_points), max_points
+    if max_points is not None and held > max_points:
+        out = _smallest_keys(out, max_points)
     return PointCloud(
         **{
             k: np.concatenate(v) if v else np.zeros((0, 3) if k == "points_part" else 0)
             for k, v in out.items()
+            if k != "key"
         }
     )
+
+
+def _smallest_keys(parts: dict[str, list[np.ndarray]], count: int) -> dict[str, list[np.ndarray]]:
+    """The `count` points with the smallest keys, kept in scan order, as one chunk."""
+    joined = {k: np.concatenate(v) for k, v in parts.items()}
+    keep = np.sort(np.argpartition(joined["key"], count - 1)[:count]) if count else np.zeros(0, int)
+    return {k: [v[keep]] for k, v in joined.items()}
 
 
 def _colormap(values: np.ndarray, limit: float) -> np.ndarray:

@@ -7,6 +7,7 @@ within tolerance can reach (the visibility ceiling).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -205,13 +206,15 @@ def reachable_samples(
     max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG,
     beams: int = CEILING_BEAMS,
     seed: int = 0,
+    also: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """(k,) bool: the samples of `surface` some beam reaches unobstructed from within `tol_rad`
     of the face's outward normal and at most `max_tilt_deg` from +Z (`beams` directions per
     sample: the normal, the cone's beam nearest +Z, then uniform in the cone, seeded). Their
     share is the visibility ceiling: no plan holds more of the surface in spec, since a point
     in spec was measured by such a beam. It ignores the depth window, the sensor body and the
-    camera's line of sight."""
+    camera's line of sight; `also(samples, ray starts, beams) -> (k,) bool` adds a test a
+    beam must pass too (a benchmark's camera)."""
     seen = np.zeros(len(surface.points), bool)
     if len(seen) == 0:
         return seen
@@ -236,5 +239,8 @@ def reachable_samples(
         if len(todo):
             start = surface.points[todo] + 0.05 * n[todo]  # off the face, as the samplers do
             far = np.full(len(todo), 1e6)
-            seen[todo] = ~part.ray_engine.occluded(start, beam, far)
+            escapes = ~part.ray_engine.occluded(start, beam, far)
+            if also is not None:
+                escapes &= also(todo, start, beam)
+            seen[todo] = escapes
     return seen

@@ -38,6 +38,29 @@ def test_scan_writes_a_point_cloud_with_error_fields(plate_and_trajectory, tmp_p
     assert {"red", "green", "blue", "profile", "swath"} <= set(raw.dtype.names)
 
 
+def test_scan_writes_fewer_points_on_request_and_says_how_many_first(
+    plate_and_trajectory, tmp_path
+):
+    from scanplan.cloud import ply_size_bytes
+
+    plate, traj = plate_and_trajectory
+    out = tmp_path / "cloud.ply"
+    result = run_cli("scan", str(plate), str(traj), "-o", str(out), "--max-points", "5000")
+    assert result.exit_code == 0, result.output
+    full = 21 * 4096
+    assert f"21 profiles x 4096 columns: up to {full:,} points" in result.output
+    cloud = trimesh.load(out)
+    assert len(cloud.vertices) == 5000  # every point valid: exactly the cap
+    assert out.stat().st_size == pytest.approx(ply_size_bytes(5000), abs=64)
+    profile = cloud.metadata["_ply_raw"]["vertex"]["data"]["profile"]
+    assert (np.diff(profile) >= 0).all() and len(np.unique(profile)) == 21  # spread, in order
+    assert f"5000 points from 21 profiles -> {out} (0.2 MB)" in result.output
+    # Fewer columns: a thinner fan over the same line.
+    result = run_cli("scan", str(plate), str(traj), "-o", str(out), "--points", "64")
+    assert result.exit_code == 0, result.output
+    assert len(trimesh.load(out).vertices) == 21 * 64
+
+
 def test_scan_out_of_reach_and_bad_trajectory(plate_and_trajectory, tmp_path):
     plate, traj = plate_and_trajectory
     far = tmp_path / "far.csv"

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import base64
 import csv
+import json
 import re
 
 import numpy as np
@@ -51,7 +53,7 @@ def test_report_is_self_contained_and_shows_every_planner(tmp_path, results):
     assert page.startswith("<!DOCTYPE html>")
     assert "<script src=" not in page  # plotly.js is inlined, nothing is fetched
     assert page.count("data-figure=") == 3  # two planners + the training curves
-    assert "scanplan-plotly-gz" in page  # plotly.js packed, unpacked by the page
+    assert "id='scanplan-plotly-gz'" in page  # plotly.js packed, unpacked by the page
     for name in ("high", "right", "ep_rew_mean", "test definition"):
         assert name in page
     # The table shows each planner's number, rounded as the CLI JSON would be read.
@@ -119,3 +121,31 @@ def test_a_plan_made_for_an_arm_shows_the_arm_and_the_table(tmp_path, results):
     assert '"name":"table"' in page and "ur5e base" in page
     assert "ur5e at pose 0 (view 0, pass 0, first)" in page
     assert '"sliders"' in page  # one arm pose at a time, or all of them
+
+
+def _figure_traces(page: str, div_id: str) -> dict[str, dict]:
+    """The traces of one figure on the page, by name."""
+    start = page.index(f"data-figure='{div_id}'>") + len(f"data-figure='{div_id}'>")
+    figure = json.loads(page[start : page.index("</script>", start)])
+    return {t.get("name", "shared"): t for t in figure["data"]}
+
+
+def test_the_page_is_compact_unless_asked_for_every_point(tmp_path, results, monkeypatch):
+    import scanplan.report.html as report_html
+
+    part, res = results
+    monkeypatch.setattr(report_html, "MAX_POINTS_PER_PLANNER", 500)
+    total = len(res[0].cloud.points_part)
+    assert total > 500
+    for full, expected in ((False, 500), (True, total)):
+        out = tmp_path / f"report_{full}.html"
+        write_html_report(out, part, res[:1], "s", full_3d=full)
+        page = out.read_text()
+        x = _figure_traces(page, "planner-0")["scan points"]["x"]
+        # Coordinates as float32 typed arrays, not decimal lists.
+        assert x["dtype"] == "f4" and len(base64.b64decode(x["bdata"])) == 4 * expected
+        # plotly.js gzipped (the page unpacks it) unless the page is asked to be full.
+        assert ("id='scanplan-plotly-gz'" in page) is not full
+        # The part's mesh is sent once and put back into each figure by the page.
+        assert _figure_traces(page, "planner-0")["shared"] == {"shared": 0}
+        assert '"name":"part"' in page

@@ -48,6 +48,25 @@ if TYPE_CHECKING:
 # ---- scan ---------------------------------------------------------------------------------
 ScanTrajectoryArg = Annotated[Path, typer.Argument(help="trajectory file (CSV or JSON)")]
 NoNoiseOpt = Annotated[bool, typer.Option("--no-noise", help="switch noise off")]
+ScanPointsOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--points",
+        help=f"pixel columns per profile, 2 to {SensorSpec.MAX_POINTS} (same line width); "
+        "default: the sensor's",
+        callback=POINTS_CHECK,
+        show_default=False,
+    ),
+]
+MaxPointsOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--max-points",
+        help="write a uniform random sample (seeded) of at most N valid points",
+        callback=bounded(1, None),
+        show_default=False,
+    ),
+]
 
 
 @user_errors
@@ -61,10 +80,14 @@ def scan_cmd(
     no_noise: NoNoiseOpt = False,
     quiet: QuietOpt = False,
     roi: RoiOpt = None,
+    points: ScanPointsOpt = None,
+    max_points: MaxPointsOpt = None,
 ):
-    """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields."""
+    """Simulate the scan of a trajectory; write the point cloud (PLY) with error fields. The
+    full cloud of a large part runs to GB: its size is printed first, and --points or
+    --max-points write fewer."""
     # Deferred: the simulator loads trimesh, Embree and scipy.
-    from scanplan.cloud import simulate_cloud, write_ply
+    from scanplan.cloud import ply_size_bytes, simulate_cloud, write_ply
     from scanplan.config import load_sensor
     from scanplan.part import load_part
     from scanplan.trajectory import read_trajectory
@@ -74,19 +97,35 @@ def scan_cmd(
     spec = load_sensor(sensor)
     if no_noise:
         spec = spec.without_noise()
+    if points is not None:
+        spec = spec.with_points(points)
     the_part = load_part(part, units).with_roi(roi)
     traj = read_trajectory(trajectory)
     if not traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
+    profiles = int(traj.scanning.sum())
+    most = profiles * spec.points_per_profile
+    kept = most if max_points is None else min(most, max_points)
+    # Before scanning: a cloud of GB is better cut now than found on the disk.
+    typer.echo(
+        f"scan: {profiles} profiles x {spec.points_per_profile} columns: up to {most:,} points"
+        f" (~{_megabytes(ply_size_bytes(most))} as PLY)"
+        + (f", at most {kept:,} kept (~{_megabytes(ply_size_bytes(kept))})" if kept < most else "")
+        + ("" if kept < most or most <= 1_000_000 else "; --max-points N writes fewer"),
+        err=True,
+    )
     with progress_bar("scanning", quiet) as progress:
-        cloud = simulate_cloud(the_part, spec, traj, seed=seed, progress=progress)
+        cloud = simulate_cloud(
+            the_part, spec, traj, seed=seed, progress=progress, max_points=max_points
+        )
     if len(cloud.points_part) == 0:
         raise ValueError(
             f"no valid point: part {part} is outside the sensor's reach along {trajectory}"
         )
     write_ply(cloud, output)
     typer.echo(
-        f"{len(cloud.points_part)} points from {int(traj.scanning.sum())} profiles -> {output}"
+        f"{len(cloud.points_part)} points from {profiles} profiles -> {output} "
+        f"({_megabytes(output.stat().st_size)})"
     )
 
 
@@ -449,6 +488,10 @@ def _of_ceiling(metrics: Metrics) -> str:
     if share is None or metrics.visibility_ceiling is None:
         return ""
     return f", {share:.1%} of its visibility ceiling {metrics.visibility_ceiling:.1%}"
+
+
+def _megabytes(size_bytes: int) -> str:
+    return f"{size_bytes / 1e6:.1f} MB"
 
 
 def _grouped(value: float) -> str:
