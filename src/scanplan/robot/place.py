@@ -108,13 +108,17 @@ def flyable_poses(
     inv_tcp: np.ndarray,
     obstacles: CellObstacles | None,
     index: np.ndarray | None = None,
+    sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
     default) of `traj` the arm reaches within its limits with its links clear, and (the
-    body is not symmetric about the beam) the sensor keeping its clearance."""
+    body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
+    last verdict for both, if known (it does not depend on the placement)."""
     index = np.arange(len(traj)) if index is None else index
+    if sensor_ok is None and obstacles is not None:
+        sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
     out = []
-    for poses in (traj.poses[index], traj.poses[index] @ HALF_TURN):
+    for k, poses in enumerate((traj.poses[index], traj.poses[index] @ HALF_TURN)):
         report = check_reach(
             T_base_part @ poses @ inv_tcp,
             arm,
@@ -124,9 +128,15 @@ def flyable_poses(
         good = ~np.isnan(report.joints).any(axis=1)
         if obstacles is not None:
             good &= ~check_links(arm, report.joints, obstacles, T_base_part).colliding
-            good &= obstacles.sensor_clear(poses)
+        if sensor_ok is not None:
+            good &= sensor_ok[k]
         out.append(good)
     return out[0], out[1]
+
+
+def sensor_clear_both(poses: np.ndarray, obstacles: CellObstacles) -> tuple[np.ndarray, np.ndarray]:
+    """Whether the sensor body keeps its clearance at `poses` as planned and turned."""
+    return obstacles.sensor_clear(poses), obstacles.sensor_clear(poses @ HALF_TURN)
 
 
 def turned_passes(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> np.ndarray:
@@ -249,6 +259,11 @@ def place(
     disc = np.hypot(gx, gy) <= reach
     yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
     heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
+    if obstacles is not None and obstacles.table_block is not None:
+        # The arm on the table top beside the part: a cell the even grid may step over.
+        on_table = -float(obstacles.table_block[1][2])
+        if lo <= on_table <= hi:
+            heights = np.union1d(heights, [on_table])
     grid = np.array(
         [
             (x, y, z, a)
@@ -296,25 +311,29 @@ def place(
     # The answer is judged on every pose, following the branch as a controller would; in a
     # cell the arm's links too (on a subsample while ranking): the candidate that keeps
     # the most poses flyable wins, a fully flyable one first.
-    ranked: list[tuple[bool, float, int, Placement]] = []
+    ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
     sample = _subsample(traj, _LINK_RANK_POSES)
     inv_tcp = np.linalg.inv(tcp)
+    sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses[sample], obstacles)
     for rank, i in enumerate(np.argsort(-best_scores)):
         T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
-        report = check_reach(
-            T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
-        )
-        found = Placement(T_base_part, report, float(best_scores[i]), evaluated, 0.0)
         if obstacles is None:
+            report = check_reach(
+                T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
+            )
             good = ~np.isnan(report.joints).any(axis=1)
-        else:  # what `fit.fit_to_robot` keeps: each pass as planned or turned about the beam
-            kept = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, sample)
+            flyable = report.reachable
+        else:  # ranked on the sample by what `fit.fit_to_robot` would keep: each pass as
+            # planned or turned about the beam; the full check for the chosen one only
+            kept = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok)
             good = kept_by_pass(traj.swath[sample], *kept)
-        flyable = report.reachable and bool(good.all())
-        ranked.append((flyable, float(good.mean()), -rank, found))
+            flyable = bool(good.all())
+        ranked.append((flyable, float(good.mean()), -rank, T_base_part, float(best_scores[i])))
         if flyable and obstacles is None:
             break
-    chosen = max(ranked, key=lambda r: r[:3])[3]
+    *_, T_best, score = max(ranked, key=lambda r: r[:3])
+    report = check_reach(T_best @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning)
+    chosen = Placement(T_best, report, score, evaluated, 0.0)
     if obstacles is not None and chosen.reachable:
         links = check_links(
             arm,
