@@ -106,13 +106,13 @@ def scan_cmd(
     profiles = int(traj.scanning.sum())
     most = profiles * spec.points_per_profile
     kept = most if max_points is None else min(most, max_points)
-    # Before scanning: a cloud of GB is better cut now than found on the disk.
+    # Before scanning (stdout: stderr carries only an error's one line): a cloud of GB is
+    # better cut now than found on the disk.
     typer.echo(
         f"scan: {profiles} profiles x {spec.points_per_profile} columns: up to {most:,} points"
         f" (~{_megabytes(ply_size_bytes(most))} as PLY)"
         + (f", at most {kept:,} kept (~{_megabytes(ply_size_bytes(kept))})" if kept < most else "")
-        + ("" if kept < most or most <= 1_000_000 else "; --max-points N writes fewer"),
-        err=True,
+        + ("" if kept < most or most <= 1_000_000 else "; --max-points N writes fewer")
     )
     with progress_bar("scanning", quiet) as progress:
         cloud = simulate_cloud(
