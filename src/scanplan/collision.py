@@ -460,11 +460,14 @@ class CellObstacles:
             return np.ones(len(poses), bool)
         return ~self._sensor.check(poses, self.sensor_clearance_mm).colliding
 
-    def capsules_hit(self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float) -> np.ndarray:
+    def capsules_hit(
+        self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float, exact: bool = True
+    ) -> np.ndarray:
         """(n, k) int: for capsules (n, k, 2, 3) (segment ends in part coordinates, mm) of
         radii (k,) or (n, k), the index into NAMES of an obstacle within `clearance_mm` of
         the capsule, -1 where none is. An AABB test leaves FCL only the capsules near an
-        obstacle."""
+        obstacle. exact=False: a capsule the pre-test cannot clear counts as hitting the
+        mesh (a verdict up to a few mm too cautious, without FCL: for ranking placements)."""
         ends = np.asarray(ends, dtype=np.float64)
         n, k = ends.shape[:2]
         grown = np.broadcast_to(np.asarray(radii, dtype=np.float64), (n, k)) + clearance_mm
@@ -477,6 +480,8 @@ class CellObstacles:
             rows, links = np.nonzero(near)
             if proxy is not None and len(rows):
                 maybe, surely = proxy.within(ends[rows, links], grown[rows, links])
+                if not exact:
+                    surely = maybe
                 hit[rows[surely], links[surely]] = kind
                 rows, links = rows[maybe & ~surely], links[maybe & ~surely]
             if not len(rows):

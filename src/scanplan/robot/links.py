@@ -95,6 +95,7 @@ def _capsules_hit(
     obstacles: CellObstacles,
     T_base_part: np.ndarray,
     clearance_mm: float,
+    exact: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(link, obstacle) per row of joints (m, 6): the first colliding link, -1 if none.
 
@@ -120,7 +121,7 @@ def _capsules_hit(
         checked.append(i)
         grown.append(radii + moved[:span].max(axis=0))
         i += span
-    hit = obstacles.capsules_hit(ends[checked], np.array(grown), clearance_mm)[covers]
+    hit = obstacles.capsules_hit(ends[checked], np.array(grown), clearance_mm, exact)[covers]
     colliding = hit >= 0
     link = np.where(colliding.any(axis=1), colliding.argmax(axis=1), -1)
     obstacle = np.where(link >= 0, hit[np.arange(len(hit)), np.maximum(link, 0)], -1)
@@ -134,18 +135,20 @@ def check_links(
     T_base_part: np.ndarray,
     pass_start: np.ndarray | None = None,
     clearance_mm: float = LINK_CLEARANCE_MM,
+    exact: bool = True,
 ) -> LinkReport:
     """The arm's links along `joints` (n, 6) rad (NaN rows: no joints, not checked) with the
     part at `T_base_part`: at every pose, and, where `pass_start` (n,) is True, along the
     joint move from the previous pose's joints into that pose's (the move a program makes
-    into each pass), at steps of `JOINT_MOVE_STEP_RAD`."""
+    into each pass), at steps of `JOINT_MOVE_STEP_RAD`. exact=False: without FCL, a few mm
+    too cautious (`CellObstacles.capsules_hit`)."""
     joints = np.asarray(joints, dtype=np.float64)
     n = len(joints)
     link, obstacle = np.full(n, -1), np.full(n, -1)
     known = np.flatnonzero(~np.isnan(joints).any(axis=1))
     if len(known):
         link[known], obstacle[known] = _capsules_hit(
-            robot, joints[known], obstacles, T_base_part, clearance_mm
+            robot, joints[known], obstacles, T_base_part, clearance_mm, exact
         )
     moves: dict[int, tuple[int, int]] = {}
     starts = np.flatnonzero(np.zeros(n, bool) if pass_start is None else pass_start)

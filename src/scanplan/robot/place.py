@@ -109,11 +109,13 @@ def flyable_poses(
     obstacles: CellObstacles | None,
     index: np.ndarray | None = None,
     sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
+    exact: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
     default) of `traj` the arm reaches within its limits with its links clear, and (the
     body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
-    last verdict for both, if known (it does not depend on the placement)."""
+    last verdict for both, if known (it does not depend on the placement). exact=False: the
+    links' quick, slightly cautious verdict (`links.check_links`)."""
     index = np.arange(len(traj)) if index is None else index
     if sensor_ok is None and obstacles is not None:
         sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
@@ -127,7 +129,8 @@ def flyable_poses(
         )
         good = ~np.isnan(report.joints).any(axis=1)
         if obstacles is not None:
-            good &= ~check_links(arm, report.joints, obstacles, T_base_part).colliding
+            links = check_links(arm, report.joints, obstacles, T_base_part, exact=exact)
+            good &= ~links.colliding
         if sensor_ok is not None:
             good &= sensor_ok[k]
         out.append(good)
@@ -325,7 +328,9 @@ def place(
             flyable = report.reachable
         else:  # ranked on the sample by what `fit.fit_to_robot` would keep: each pass as
             # planned or turned about the beam; the full check for the chosen one only
-            kept = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok)
+            kept = flyable_poses(
+                traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False
+            )
             good = kept_by_pass(traj.swath[sample], *kept)
             flyable = bool(good.all())
         ranked.append((flyable, float(good.mean()), -rank, T_base_part, float(best_scores[i])))
