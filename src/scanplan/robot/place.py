@@ -262,11 +262,6 @@ def place(
     disc = np.hypot(gx, gy) <= reach
     yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
     heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
-    if obstacles is not None and obstacles.table_block is not None:
-        # The arm on the table top beside the part: a cell the even grid may step over.
-        on_table = -float(obstacles.table_block[1][2])
-        if lo <= on_table <= hi:
-            heights = np.union1d(heights, [on_table])
     grid = np.array(
         [
             (x, y, z, a)
