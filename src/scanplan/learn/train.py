@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -16,7 +17,9 @@ from typing import Any
 import numpy as np
 
 from scanplan.context import scan_spec_record
+from scanplan.files import atomic_directory
 from scanplan.learn.checkpoint import (
+    CHECKPOINT_DIR,
     latest_checkpoint,
     load_checkpoint,
     restore,
@@ -26,6 +29,7 @@ from scanplan.learn.checkpoint import (
 from scanplan.learn.config import TrainConfig, env_options
 from scanplan.policy import FORMAT as POLICY_FORMAT
 from scanplan.policy import (
+    POLICY_JSON,
     WEIGHTS,
     Architecture,
     PolicyMeta,
@@ -162,7 +166,51 @@ def train(config: TrainConfig) -> TrainResult:
     progress.csv (SB3's logger; the paper's quantities under `report.training.LOG_KEYS`),
     the curve PNGs, and checkpoints/ (safetensors + JSON, for resuming only). Resuming takes
     the model's and envs' config from the checkpoint (`resumed_config`) and continues the
-    count, the log and the checkpoints. Torch runs on one thread while training."""
+    count, the log and the checkpoints. Torch runs on one thread while training. The folder
+    is replaced whole at the end; a failed run leaves the one there untouched (a new folder
+    keeps its checkpoints, to resume from)."""
+    ckpt = None
+    if config.resume:
+        ckpt = load_checkpoint(latest_checkpoint(config.resume))
+        config = resumed_config(ckpt, config)
+    env_options(config.env)  # fail before training, not when saving
+    out = Path(config.output_dir)
+    # Everything is written in a temporary sibling swapped in at the end: an interrupted run,
+    # or a second run into the same folder, never leaves a policy beside another's log.
+    with atomic_directory(out, replaceable=is_run_directory) as work:
+        try:
+            result = _train_into(config, ckpt, work, out)
+        except BaseException:
+            _keep_checkpoints(work, out)
+            raise
+    return result
+
+
+def is_run_directory(path: Path) -> bool:
+    """Whether `path` holds a training run's output (a policy, a log or checkpoints), so that
+    a new run may replace it."""
+    return any((path / name).exists() for name in (POLICY_JSON, PROGRESS_CSV, CHECKPOINT_DIR))
+
+
+def _keep_checkpoints(work: Path, out: Path) -> None:
+    """After a failed or interrupted run into a new folder, the folder with its checkpoints
+    (to --resume from); a previous run's folder is left as it was."""
+    if not out.exists() and any((work / CHECKPOINT_DIR).glob("*.json")):
+        os.chmod(work, 0o777 & ~_umask())  # mkdtemp makes it private
+        try:
+            os.rename(work, out)
+        except OSError:  # another run got there first: its folder stays as it is
+            pass
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+def _train_into(config: TrainConfig, ckpt: Any, work: Path, out: Path) -> TrainResult:
+    """Train in `work`; the result names the files as they will be in `out`."""
     # Deferred: torch's threads are set, and stable-baselines3 loads, only when a run trains.
     import torch
 
@@ -170,27 +218,19 @@ def train(config: TrainConfig) -> TrainResult:
     from scanplan.learn.teacher import behaviour_clone
     from scanplan.learn.vec_env import make_vec_env
 
-    ckpt = None
-    if config.resume:
-        ckpt = load_checkpoint(latest_checkpoint(config.resume))
-        config = resumed_config(ckpt, config)
-    env_options(config.env)  # fail before training, not when saving
-    out = Path(config.output_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    log_csv = out / PROGRESS_CSV
+    log_csv = work / PROGRESS_CSV
     before: tuple[list[str], list[dict[str, str]]] = ([], [])
     wall_before, episodes_before = 0.0, 0
     if config.resume:
-        previous = Path(config.resume) / PROGRESS_CSV
-        if previous.resolve() == log_csv.resolve() and previous.is_file():
-            # Kept on disk until merged: SB3's logger truncates progress.csv.
-            previous = previous.replace(out / f"{PROGRESS_CSV}.before-resume")
+        resumed = Path(config.resume)
+        previous = resumed / PROGRESS_CSV
         before = _read_rows(previous)
         if before[1]:
             log = read_log(previous)
             wall_before, episodes_before = _last(log, "wall_time_s"), int(_last(log, "episodes"))
-    else:
-        log_csv.unlink(missing_ok=True)
+        if resumed.resolve() == out.resolve() and (resumed / CHECKPOINT_DIR).is_dir():
+            # The swap replaces the folder: its checkpoints carry over.
+            shutil.copytree(resumed / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # several times faster here than torch's default for a 64x64 MLP
     # The policy's Normal checks its arguments at every minibatch: the checks change no
@@ -211,8 +251,8 @@ def train(config: TrainConfig) -> TrainResult:
                 bc_mse = behaviour_clone(model, vec, config.bc_samples, config.seed)
         remaining = config.total_timesteps - model.num_timesteps
         if remaining > 0:
-            model.set_logger(make_logger(out))
-            callback = PaperQuantities(config, out, start, wall_before, episodes_before)
+            model.set_logger(make_logger(work))
+            callback = PaperQuantities(config, work, start, wall_before, episodes_before)
             try:
                 model.learn(
                     remaining,
@@ -223,14 +263,13 @@ def train(config: TrainConfig) -> TrainResult:
             finally:
                 model.logger.close()
                 _prepend_rows(log_csv, before)
-            save_checkpoint(model, config, out)
+            save_checkpoint(model, config, work)
         elif before[1]:
             _prepend_rows(log_csv, before)  # nothing new: the log is the resumed one
     finally:
         vec.close()
         torch.set_num_threads(threads)
         torch.distributions.Distribution.set_default_validate_args(validate)
-    (out / f"{PROGRESS_CSV}.before-resume").unlink(missing_ok=True)
     wall = time.perf_counter() - start + wall_before
     final = (
         final_metrics(read_log(log_csv)) if log_csv.is_file() else dict.fromkeys(CURVES, math.nan)
@@ -247,14 +286,14 @@ def train(config: TrainConfig) -> TrainResult:
         "machine_cores": os.cpu_count(),
     }
     meta = policy_meta(model, config, training)
-    policy_json = save_policy(actor_state_dict(model), meta, out)
-    plots = plot_training_curves(log_csv, out) if log_csv.is_file() else ()
+    policy_json = save_policy(actor_state_dict(model), meta, work)
+    plots = plot_training_curves(log_csv, work) if log_csv.is_file() else ()
     return TrainResult(
         output_dir=out,
-        policy_json=policy_json,
+        policy_json=out / policy_json.name,
         weights=out / meta.weights,
-        log_csv=log_csv,
-        plots=plots,
+        log_csv=out / PROGRESS_CSV,
+        plots=tuple(out / p.name for p in plots),
         timesteps=int(model.num_timesteps),
         wall_time_s=wall,
         final=final,
