@@ -77,7 +77,7 @@ def main() -> None:
             links = check_links(
                 get_robot(robot),
                 report.joints,
-                obstacles_for(part, context.cell(part)),
+                obstacles_for(part, context.cell(part), clearance_mm=spec.clearance_mm),
                 T_base_part,
                 pass_starts(traj.swath, traj.scanning),
             )

@@ -428,12 +428,13 @@ class CellObstacles:
         self,
         part: Part,
         cell: Cell,
+        clearance_mm: float,
         sensor: SensorSpec | None = None,
-        sensor_clearance_mm: float = 0.0,
     ) -> None:
+        # What every link and the sensor body keep from the part, a fixture and the table.
+        self.clearance_mm = float(clearance_mm)
         # The sensor body, for poses the arm would fly otherwise than planned (turned).
         self._sensor = None if sensor is None else checker_for(part, sensor, cell)
-        self.sensor_clearance_mm = float(sensor_clearance_mm)
         self._objects: list[tuple[int, fcl.CollisionObject, np.ndarray, _SurfaceProxy | None]] = [
             (0, _mesh_object(part), np.asarray(part.bounds, np.float64), _SurfaceProxy(part))
         ]
@@ -458,7 +459,7 @@ class CellObstacles:
         the fixtures and the table (all True when no sensor was given)."""
         if self._sensor is None:
             return np.ones(len(poses), bool)
-        return ~self._sensor.check(poses, self.sensor_clearance_mm).colliding
+        return ~self._sensor.check(poses, self.clearance_mm).colliding
 
     def capsules_hit(
         self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float, exact: bool = True

@@ -12,7 +12,9 @@ from scanplan.cell import TABLE_MARGIN_MM, Cell
 from scanplan.collision import CellObstacles
 from scanplan.part import part_from_mesh
 from scanplan.robot import ROBOT_NAMES, get_robot
-from scanplan.robot.links import LINK_CLEARANCE_MM, check_links, column_clear, obstacles_for
+from scanplan.robot.links import check_links, column_clear, obstacles_for
+
+CLEARANCE = 20.0  # the plan clearance the links keep, as the sensor body does
 
 RNG = np.random.default_rng(7)
 
@@ -61,12 +63,12 @@ def test_the_table_block_and_the_arm_beside_it() -> None:
     T = np.eye(4)
     # The base 300 mm from the part's centre, below the table top: the column is in the block.
     T[:3, 3] = (-300.0, 0.0, 200.0)
-    assert not column_clear(arm, T[None], (lo, hi))[0]
+    assert not column_clear(arm, T[None], (lo, hi), CLEARANCE)[0]
     # On the table top (the table below the column): clear; far beside it: clear.
     T[:3, 3] = (-300.0, 0.0, -1.0)
-    assert column_clear(arm, T[None], (lo, hi))[0]
+    assert column_clear(arm, T[None], (lo, hi), CLEARANCE)[0]
     T[:3, 3] = (-700.0, 0.0, 200.0)
-    assert column_clear(arm, T[None], (lo, hi))[0]
+    assert column_clear(arm, T[None], (lo, hi), CLEARANCE)[0]
 
 
 def test_a_joint_move_through_the_part_is_caught() -> None:
@@ -86,13 +88,13 @@ def test_the_voxel_test_never_clears_what_fcl_finds() -> None:
     # A curved part: every capsule the quick test clears keeps its clearance from the mesh.
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=120.0)
     part = part_from_mesh(mesh, "sphere")
-    obstacles = CellObstacles(part, Cell())
+    obstacles = CellObstacles(part, Cell(), CLEARANCE)
     centre = RNG.uniform(-250, 250, (400, 3))
     axis = RNG.normal(size=(400, 3))
     axis = 60.0 * axis / np.linalg.norm(axis, axis=1, keepdims=True)
     ends = np.stack([centre - axis, centre + axis], axis=1)[:, None]
     radii = np.full(1, 30.0)
-    hit = obstacles.capsules_hit(ends, radii, LINK_CLEARANCE_MM)[:, 0]
+    hit = obstacles.capsules_hit(ends, radii, CLEARANCE)[:, 0]
     bvh = fcl.BVHModel()
     bvh.beginModel(len(mesh.vertices), len(mesh.faces))
     bvh.addSubModel(np.asarray(mesh.vertices), np.asarray(mesh.faces, np.int32))
@@ -104,10 +106,10 @@ def test_the_voxel_test_never_clears_what_fcl_finds() -> None:
             fcl.Transform(_z_to(b - a), 0.5 * (a + b)),
         )
         d = fcl.distance(segment, sphere, fcl.DistanceRequest(), fcl.DistanceResult())
-        assert (h == 0) == (d < LINK_CLEARANCE_MM), (d, h)
+        assert (h == 0) == (d < CLEARANCE), (d, h)
     assert 50 < (hit == 0).sum() < 350  # both verdicts are exercised
     # Without FCL the verdict is cautious: every capsule FCL finds hitting still hits.
-    quick = obstacles.capsules_hit(ends, radii, LINK_CLEARANCE_MM, exact=False)[:, 0]
+    quick = obstacles.capsules_hit(ends, radii, CLEARANCE, exact=False)[:, 0]
     assert (quick[hit == 0] == 0).all() and (quick == 0).sum() <= (hit == 0).sum() + 60
 
 
@@ -125,9 +127,9 @@ def test_an_arm_over_the_table_stands_on_it_not_in_the_air() -> None:
     block = Cell.around(part).table_block(part)
     T = np.eye(4)
     T[:3, 3] = (-200.0, 0.0, -30.0)  # over the table, on a 30 mm plate: fine
-    assert column_clear(arm, T[None], block)[0]
+    assert column_clear(arm, T[None], block, CLEARANCE)[0]
     T[:3, 3] = (-200.0, 0.0, -250.0)  # over the table on a 250 mm riser nothing models
-    assert not column_clear(arm, T[None], block)[0]
+    assert not column_clear(arm, T[None], block, CLEARANCE)[0]
 
 
 def test_a_turn_about_the_beam_is_checked_for_the_sensor_body() -> None:

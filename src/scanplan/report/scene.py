@@ -101,6 +101,8 @@ def check_arm(
     """The arm `robot` along `traj` (the part at `T_base_part`, the sensor at
     `T_flange_sensor` on the flange): its reach and link checks and the poses to draw."""
     # Deferred: the robot package loads the kinematics and FCL.
+    from scanplan.context import recorded
+    from scanplan.quantities import ScanSpec
     from scanplan.robot import check_reach, get_robot
     from scanplan.robot.links import check_links, obstacles_for
     from scanplan.robot.reach import pass_starts
@@ -112,7 +114,8 @@ def check_arm(
     links = check_links(
         arm,
         reach.joints,
-        obstacles_for(part, cell),
+        # The links keep the clearance the plan was made with, as the sensor does.
+        obstacles_for(part, cell, clearance_mm=recorded(traj, ScanSpec()).spec.clearance_mm),
         T_base_part,
         pass_starts(traj.swath, traj.scanning),
     )

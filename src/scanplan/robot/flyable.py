@@ -11,7 +11,9 @@ import numpy as np
 
 from scanplan.cell import Cell
 from scanplan.collision import CellObstacles, checker_for
+from scanplan.context import recorded
 from scanplan.part import Part
+from scanplan.quantities import ScanSpec
 from scanplan.robot.base import Robot
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
@@ -67,12 +69,13 @@ def check_flyable(
     path and every joint move into a pass, and the sensor body, against `part` in `cell`.
     obstacles: `obstacles_for(part, cell)` if the caller has it (a fit just built it);
     None: built here."""
+    clearance = recorded(traj, ScanSpec()).spec.clearance_mm  # the links keep the plan's
     flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
     reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(
         arm,
         reach.joints,
-        obstacles_for(part, cell) if obstacles is None else obstacles,
+        obstacles_for(part, cell, sensor, clearance) if obstacles is None else obstacles,
         T_base_part,
         pass_starts(traj.swath, traj.scanning),
     )

@@ -12,12 +12,10 @@ import numpy as np
 from scanplan.cell import Cell
 from scanplan.collision import CellObstacles
 from scanplan.part import Part
+from scanplan.quantities import ScanSpec
 from scanplan.robot.base import Robot, inv_rigid
 from scanplan.sensor import SensorSpec
 
-# Every link keeps this far from the part, a fixture and the table: the capsules already
-# enclose the links, so this is the margin for the cell's calibration, not for the shapes.
-LINK_CLEARANCE_MM = 10.0
 # An arm over the table stands on it: its mounting face at most this above the top (a plate).
 ON_TABLE_MM = 50.0
 # Poses whose capsules lie within this of a checked pose's share its verdict (its capsules
@@ -82,11 +80,15 @@ class LinkReport:
 
 
 def obstacles_for(
-    part: Part, cell: Cell, sensor: SensorSpec | None = None, clearance_mm: float = 0.0
+    part: Part,
+    cell: Cell,
+    sensor: SensorSpec | None = None,
+    clearance_mm: float = ScanSpec.clearance_mm,
 ) -> CellObstacles:
-    """What the links must keep clear of: the part, the cell's fixtures and table block;
-    with the sensor, what its body keeps `clearance_mm` from when a pose is changed."""
-    return CellObstacles(part, cell, sensor, clearance_mm)
+    """What the links keep `clearance_mm` from (the plan's clearance, as the sensor body
+    does): the part, the cell's fixtures and table block; with the sensor, what its body
+    keeps that clearance from when a pose is changed (turned about the beam)."""
+    return CellObstacles(part, cell, clearance_mm, sensor)
 
 
 def _capsules_hit(
@@ -134,7 +136,7 @@ def check_links(
     obstacles: CellObstacles,
     T_base_part: np.ndarray,
     pass_start: np.ndarray | None = None,
-    clearance_mm: float = LINK_CLEARANCE_MM,
+    clearance_mm: float | None = None,
     exact: bool = True,
 ) -> LinkReport:
     """The arm's links along `joints` (n, 6) rad (NaN rows: no joints, not checked) with the
@@ -142,6 +144,7 @@ def check_links(
     joint move from the previous pose's joints into that pose's (the move a program makes
     into each pass), at steps of `JOINT_MOVE_STEP_RAD`. exact=False: without FCL, a few mm
     too cautious (`CellObstacles.capsules_hit`)."""
+    clearance_mm = obstacles.clearance_mm if clearance_mm is None else clearance_mm
     joints = np.asarray(joints, dtype=np.float64)
     n = len(joints)
     link, obstacle = np.full(n, -1), np.full(n, -1)
@@ -171,12 +174,15 @@ def check_links(
 
 
 def column_clear(
-    robot: Robot, T_base_part: np.ndarray, block: tuple[np.ndarray, np.ndarray] | None
+    robot: Robot,
+    T_base_part: np.ndarray,
+    block: tuple[np.ndarray, np.ndarray] | None,
+    clearance_mm: float,
 ) -> np.ndarray:
     """(P,) whether the arm can stand where placements T_base_part (P, 4, 4; turning the
     part about the vertical only) put it, beside the table block (lo, hi in part
     coordinates) or on the table: the links that turn with joint 1 only (the first two
-    capsules, column and shoulder), swept about the vertical, keep `LINK_CLEARANCE_MM` from
+    capsules, column and shoulder), swept about the vertical, keep `clearance_mm` from
     the block, and an arm over the block stands on its top (within `ON_TABLE_MM`), not on a
     riser nothing models. A cheap test the placement search runs on every candidate."""
     T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
@@ -191,9 +197,9 @@ def column_clear(
     gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
     base_z = axis_in_part[:, 2]
     gap_z = np.maximum(lo[2] - (base_z + z_hi), (base_z + z_lo) - hi[2])
-    beside = np.linalg.norm(gap_xy, axis=1) > sweep + LINK_CLEARANCE_MM
-    on_top = (gap_z > LINK_CLEARANCE_MM) & (base_z - hi[2] <= ON_TABLE_MM)
+    beside = np.linalg.norm(gap_xy, axis=1) > sweep + clearance_mm
+    on_top = (gap_z > clearance_mm) & (base_z - hi[2] <= ON_TABLE_MM)
     return beside | on_top
 
 
-__all__ = ["LINK_CLEARANCE_MM", "LinkReport", "check_links", "column_clear", "obstacles_for"]
+__all__ = ["LinkReport", "check_links", "column_clear", "obstacles_for"]

@@ -199,11 +199,11 @@ def _scores(
     T_part_flange: np.ndarray,
     starts: np.ndarray,
     T_base_part: np.ndarray,
-    block: tuple[np.ndarray, np.ndarray] | None = None,
+    obstacles: CellObstacles | None = None,
 ) -> np.ndarray:
     """(P,) rank of each placement: the worst normalized margin (>= 0) if every pose is
     reachable with one configuration per run, else reachable fraction - 2 (in [-2, -1]);
-    4 less where the arm's column stands in the table `block` (lo, hi in part coordinates)."""
+    4 less where the arm's column stands in the table block of `obstacles`."""
     m = len(T_part_flange)
     limits = robot.joint_limits
     out = np.empty(len(T_base_part))
@@ -221,7 +221,10 @@ def _scores(
         worst = per_run.min(axis=1)
         fraction = inside.reshape(p, m, 8).any(axis=2).mean(axis=1)
         out[k : k + p] = np.where(np.isfinite(worst), worst, fraction - 2.0)
-    return np.where(column_clear(robot, T_base_part, block), out, out - 4.0)
+    if obstacles is None:
+        return out
+    clear = column_clear(robot, T_base_part, obstacles.table_block, obstacles.clearance_mm)
+    return np.where(clear, out, out - 4.0)
 
 
 def place(
@@ -270,9 +273,8 @@ def place(
             for a in yaws
         ]
     )
-    block = None if obstacles is None else obstacles.table_block
     scores = _scores(
-        arm, T_part_flange[coarse], _groups(traj, coarse), _placements(grid, centre), block
+        arm, T_part_flange[coarse], _groups(traj, coarse), _placements(grid, centre), obstacles
     )
     evaluated = len(grid)
 
@@ -287,14 +289,14 @@ def place(
             at = np.flatnonzero(grid[:, 2] == z)
             seeds.append(int(at[np.argmax(scores[at])]))
     best = grid[np.unique(seeds)]
-    best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre), block)
+    best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre), obstacles)
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
     moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
     for _ in range(24):
         trial = best[:, None] + moves[None] * delta
         trial[..., 2] = np.clip(trial[..., 2], lo, hi)
         flat = trial.reshape(-1, 4)
-        s = _scores(arm, T_part_flange[fine], starts, _placements(flat, centre), block)
+        s = _scores(arm, T_part_flange[fine], starts, _placements(flat, centre), obstacles)
         evaluated += len(flat)
         s = s.reshape(len(best), len(moves))
         pick = s.argmax(axis=1)
