@@ -258,3 +258,25 @@ def test_cli_plan_evaluate_scan_keep_to_the_roi(tmp_path):
     assert run(app, ["scan", str(stl), str(csv), "-o", str(ply), *roi]).exit_code == 0
     points = trimesh.load(ply).vertices
     assert len(points) and np.allclose(points[:, 2], 60.0, atol=0.5)
+
+
+def test_evaluate_perturbed_zero_is_nominal_and_bad_specs_are_one_line(plate_file, tmp_path):
+    traj = tmp_path / "t.csv"
+    write_csv(straight(np.arange(150.0, 350.0, 0.5)), traj)
+    base = ["evaluate", str(plate_file), str(traj), "--points", "64"]
+    zero = "place:0mm,0deg;warp:0mm@200mm;path:0mm"
+    result = runner.invoke(app, [*base, "--json", "--perturb", zero, "--trials", "1"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    robust = data["robustness"]
+    assert robust["nominal"] == data["in_spec_coverage"] == robust["worst"] == robust["mean"]
+    assert robust["trials"] == 1 and robust["per_trial"] == [robust["mean"]]
+    for bad, message in [
+        (["--perturb", "warp:1mm"], "error: --perturb term 'warp:1mm': expected an RMS"),
+        (["--perturb", "path:1mm", "--trials", "0"], "--trials"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler runs --perturb's trials"),
+        (["--perturb", "path:1mm", "--scheduler", "nowhere"], "expected tcp://HOST:PORT"),
+    ]:
+        result = runner.invoke(app, [*base, *bad])
+        assert result.exit_code == 2 and message in result.output, result.output
+        assert result.output.strip().count("\n") == 0

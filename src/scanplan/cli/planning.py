@@ -5,6 +5,11 @@ measures, and the quality of that scan.
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -361,6 +366,29 @@ EvaluateSensorOpt = Annotated[
     ),
 ]
 
+PerturbOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="also replay the plan on perturbed parts, e.g. "
+        "'place:2mm,1deg;warp:1mm@200mm;scale:0.1%;path:0.1mm,0.05deg' (each a σ; ±2mm: "
+        "uniform bounds): placement error, as-built deviation (RMS along the normal @ "
+        "wavelength), scale, robot path error",
+        show_default=False,
+    ),
+]
+TrialsOpt = Annotated[
+    int, typer.Option(help="perturbed trials with --perturb", callback=bounded(1, 10_000))
+]
+EvaluateSchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="run the trials on the Dask scheduler tcp://HOST:8786 (default: every core here)",
+        show_default=False,
+    ),
+]
+CLUSTER_HINT = "evaluate --scheduler needs the cluster extra: pip install 'scanplan[cluster]'"
+
 
 @user_errors
 def evaluate_cmd(
@@ -379,15 +407,25 @@ def evaluate_cmd(
     table: TableOpt = None,
     fixture: FixtureOpt = None,
     full_3d: Full3dOpt = False,
+    perturb: PerturbOpt = None,
+    trials: TrialsOpt = 16,
+    scheduler: EvaluateSchedulerOpt = None,
 ):
     """Simulate the scan of a trajectory and report its quality, judged as the plan file
     records it (sensor, tolerance, region of interest, surface) unless an option says
-    otherwise."""
+    otherwise. With --perturb, also how that in-spec coverage holds on seeded perturbed
+    parts (mean, p5, worst over the trials) and which surface is fragile."""
     # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
+    from scanplan.cli.training import check_cluster
     from scanplan.metrics import evaluate
     from scanplan.part import load_part
+    from scanplan.perturb import Perturbation
     from scanplan.trajectory import read_trajectory
 
+    model = Perturbation.parse(perturb) if perturb is not None else None
+    if model is None and scheduler is not None:
+        raise ValueError("--scheduler runs --perturb's trials: give --perturb too")
+    check_cluster(scheduler, None)
     traj = read_trajectory(trajectory)
     context, note = judged_context(traj, sensor, tolerance, roi, views, table, fixture)
     the_part = load_part(part, units)
@@ -408,6 +446,15 @@ def evaluate_cmd(
             targets=targets,
             blended=blended,
         )
+    robust = None
+    if model is not None:
+        from scanplan.metrics import robustness, trial_tasks
+
+        tasks = trial_tasks(
+            the_part, context.spec, traj, model, trials, seed, points, context=context
+        )
+        with progress_bar("trials", quiet) as progress, trial_runner(scheduler, trials) as run:
+            robust = robustness(tasks, counted(run, progress))
     if output is not None:
         from scanplan.report import Evaluated, write_report
 
@@ -421,12 +468,56 @@ def evaluate_cmd(
             full_3d=full_3d,
         )
     data = metrics.to_json_dict()
+    if robust is not None:
+        data["robustness"] = {"nominal": metrics.in_spec_coverage, **robust.to_json_dict()}
+        if output is not None:
+            robust.write_csv(output / "fragility.csv")
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
         return
     typer.echo(metrics_line(metrics, data) + (f" -> {output}" if output is not None else ""))
     if metrics.cycle is not None:
         typer.echo(metrics.cycle.line())
+    if robust is not None:
+        typer.echo(robust.line(metrics.in_spec_coverage))
+
+
+@contextmanager
+def trial_runner(scheduler: str | None, trials: int) -> Iterator[Any]:
+    """A map(function, tasks) for the trials: on the Dask scheduler at `scheduler`, else
+    over worker processes, one per core (one after another if one suffices)."""
+    if scheduler is not None:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise ValueError(CLUSTER_HINT) from None
+        try:
+            with Client(scheduler) as client:
+                yield lambda f, tasks: client.gather(client.map(f, tasks, pure=False))
+        except (OSError, TimeoutError) as exc:  # no scheduler there, or it went away
+            raise ValueError(f"--scheduler {scheduler}: {exc}".splitlines()[0]) from None
+        return
+    workers = min(os.cpu_count() or 1, trials)
+    if workers == 1:
+        yield map
+        return
+    # Spawned, not forked: the parent already runs Embree's threads.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        yield pool.map
+
+
+def counted(run: Any, progress: Callable[[int, int], None] | None) -> Any:
+    """`run` that reports each finished trial to `progress` (results stay in task order)."""
+    if progress is None:
+        return run
+
+    def counting(f: Any, tasks: Any) -> Iterator[Any]:
+        for i, result in enumerate(run(f, tasks)):
+            progress(i + 1, len(tasks))
+            yield result
+
+    return counting
 
 
 def judged_context(

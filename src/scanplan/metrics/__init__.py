@@ -1,8 +1,10 @@
 """Scan-quality metrics of a trajectory: simulate its scan (`evaluate`), summarize the errors,
-spacing, coverage and in-spec coverage of the surface to inspect (`Metrics`).
+spacing, coverage and in-spec coverage of the surface to inspect (`Metrics`), and how that
+coverage holds on seeded perturbed parts (`robustness`).
 """
 
 from scanplan.metrics.evaluation import coverage_spacing_mm, evaluate, in_spec_radius_mm
+from scanplan.metrics.robustness import Robustness, TrialTask, robustness, run_trial, trial_tasks
 from scanplan.metrics.summary import (
     COVERAGE_DEFINITION,
     IN_SPEC_COVERAGE_DEFINITION,
@@ -18,8 +20,13 @@ __all__ = [
     "VISIBILITY_CEILING_DEFINITION",
     "CoverageMap",
     "Metrics",
+    "Robustness",
     "SurfaceState",
+    "TrialTask",
     "coverage_spacing_mm",
     "evaluate",
     "in_spec_radius_mm",
+    "robustness",
+    "run_trial",
+    "trial_tasks",
 ]

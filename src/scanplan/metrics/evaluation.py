@@ -22,6 +22,7 @@ from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import ScanSpec, point_orientation_error
 from scanplan.sensor import SensorSpec
 from scanplan.surface import (
+    VisibleSurface,
     hemisphere_visible_samples,
     reachable_samples,
     upward_visible_samples,
@@ -72,6 +73,36 @@ def in_spec_radius_mm(scan_spec: ScanSpec, evaluated_pitch_mm: float) -> float:
     return 0.5 * math.hypot(2.0 * scan_spec.delta_s_opt_mm, across)
 
 
+def scanning_steps(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) the indices of the scanning poses and (m,) bool whether each is a step: it and
+    the previous pose of the trajectory scan in the same pass."""
+    scan_idx = np.flatnonzero(traj.scanning)
+    swath = traj.swath[scan_idx]
+    has_prev = np.zeros(len(scan_idx), bool)
+    has_prev[1:] = (swath[1:] == swath[:-1]) & (np.diff(scan_idx) == 1)
+    return scan_idx, has_prev
+
+
+def surface_samples(
+    part: Part, spec: SensorSpec, context: PlanContext, seed: int
+) -> VisibleSurface:
+    """The samples of the surface to inspect that (in-spec) coverage is counted on; `part`
+    already restricted to the context's region of interest, `spec` the evaluated fan."""
+    sampler = upward_visible_samples if context.visible == "top" else hemisphere_visible_samples
+    return sampler(part, coverage_spacing_mm(spec), seed)
+
+
+def coverage_of(surface: VisibleSurface, scan_spec: ScanSpec, spec: SensorSpec) -> Coverage:
+    """The coverage accumulator for a scan by the evaluated fan `spec` (perhaps sub-sampled)."""
+    lateral_spacing = spec.line_width_mm / max(spec.points_per_profile - 1, 1)
+    # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
+    col_stride = max(1, int(coverage_spacing_mm(spec) / 3 / lateral_spacing))
+    # Wide enough that every sample between two measured lines has a point within reach.
+    cover_radius = max(1.0, lateral_spacing * col_stride)
+    in_spec_radius = in_spec_radius_mm(scan_spec, lateral_spacing * col_stride)
+    return Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius)
+
+
 def evaluate(
     part: Part,
     scan_spec: ScanSpec,
@@ -109,32 +140,22 @@ def evaluate(
     wd = spec.working_distance_mm
     if not traj.scanning.any():
         raise ValueError("trajectory has no scanning pose")
-    scan_idx = np.flatnonzero(traj.scanning)
+    scan_idx, has_prev = scanning_steps(traj)
     poses = traj.poses[scan_idx]
     m = len(poses)
     swath = traj.swath[scan_idx]
-    # A step: this profile and the previous pose of the trajectory, scanning in the same pass.
-    has_prev = np.zeros(m, bool)
-    has_prev[1:] = (swath[1:] == swath[:-1]) & (np.diff(scan_idx) == 1)
     # The scan direction y_s says which way is forward (only the sign of Δs uses it): on a
     # side view's pass up a wall the horizontal has no forward.
     u_dir = poses[:, :3, 1].copy()
 
-    lateral_spacing = spec.line_width_mm / max(n_cols - 1, 1)
-    cover_spacing = coverage_spacing_mm(spec)
     context = recorded(traj, scan_spec) if context is None else context
     part = part.with_roi(context.roi)
-    sampler = upward_visible_samples if context.visible == "top" else hemisphere_visible_samples
-    surface = sampler(part, cover_spacing, seed)
-    # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
-    col_stride = max(1, int(cover_spacing / 3 / lateral_spacing))
-    # Wide enough that every sample between two measured lines has a point within reach.
-    cover_radius = max(1.0, lateral_spacing * col_stride)
-    in_spec_radius = in_spec_radius_mm(scan_spec, lateral_spacing * col_stride)
+    surface = surface_samples(part, spec, context, seed)
 
     errors = PointErrors(wd, spec.z_range_mm)
     spacing = Spacing(u_dir, has_prev, context.full_beam_angle)
-    coverage = Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius)
+    coverage = coverage_of(surface, scan_spec, spec)
+    cover_radius, in_spec_radius = coverage.cover_radius, coverage.in_spec_radius
     sample = CloudSample(m * n_cols, max_map_points, seed)
     profiler = LineProfilometer(part, spec, seed=seed)
     for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
