@@ -29,3 +29,19 @@ def test_maps_and_table(plate, tmp_path):
     table = metrics_table_markdown([a, b], ["high", "exact"])
     assert "| mean |distance error| (mm) | 5.00" in table.replace("5.000", "5.00")
     assert len(table.splitlines()) > 10
+
+
+def test_fragility_map_is_written(tmp_path):
+    from scanplan.metrics import Robustness
+    from scanplan.report.maps import plot_fragility_map
+
+    rng = np.random.default_rng(0)
+    robust = Robustness(
+        spec="place:1mm,0deg",
+        seed=0,
+        per_trial=np.array([0.9, 0.8]),
+        points_part=rng.uniform(0, 100, (500, 3)),
+        in_spec_share=rng.choice([0.0, 0.5, 1.0], 500),
+    )
+    path = plot_fragility_map(robust, tmp_path / "f.png", "plate")
+    assert path.stat().st_size > 10_000

@@ -471,7 +471,12 @@ def evaluate_cmd(
     if robust is not None:
         data["robustness"] = {"nominal": metrics.in_spec_coverage, **robust.to_json_dict()}
         if output is not None:
+            from scanplan.report.maps import plot_fragility_map
+
             robust.write_csv(output / "fragility.csv")
+            plot_fragility_map(
+                robust, output / "fragility.png", f"{the_part.name}: {trajectory.name}"
+            )
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
         return

@@ -1,7 +1,7 @@
 """The paper's error maps as PNG (matplotlib): scanned points seen from above, coloured by
 distance error (diverging, mm) or orientation error (sequential, degrees); the in-spec map
-(the surface to inspect seen from above: in spec, out of spec, not seen); and the metrics
-table as Markdown.
+(the surface to inspect seen from above: in spec, out of spec, not seen); the fragility map
+(the share of perturbed trials each sample was in spec in); and the metrics table as Markdown.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.cloud import PointCloud
-from scanplan.metrics import CoverageMap, Metrics, SurfaceState
+from scanplan.metrics import CoverageMap, Metrics, Robustness, SurfaceState
 from scanplan.report.table import table_rows
 
 MAX_PLOT_POINTS = 120_000
@@ -288,6 +288,45 @@ def plot_coverage_map(
         f"{source.in_spec_cell_mm:g} mm square)",
     )
     _coverage_legend(fig, [cmap])
+    path = Path(out_path)
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def plot_fragility_map(robust: Robustness, out_path: str | os.PathLike, title: str) -> Path:
+    """The fragility map, seen from above: each nominal sample of the surface to inspect
+    coloured by the share of perturbed trials that held it in spec (yellow: always)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    xy = robust.points_part[:, :2]
+    keep = _subsample(len(xy), MAX_PLOT_POINTS)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    aspect = float(np.clip((hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9), 0.3, 3.0))
+    fig, ax = plt.subplots(figsize=(8, 8 * aspect + 1.0), layout="constrained")
+    # The least steady drawn last: a fragile sample stays visible among sound ones.
+    order = keep[np.argsort(-robust.in_spec_share[keep], kind="stable")]
+    dots = ax.scatter(
+        xy[order, 0],
+        xy[order, 1],
+        c=robust.in_spec_share[order],
+        s=2,
+        cmap=ORIENTATION_CMAP,
+        vmin=0.0,
+        vmax=1.0,
+        linewidths=0,
+    )
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(
+        f"{title}\nin-spec coverage over {len(robust.per_trial)} trials: mean "
+        f"{robust.mean:.1%}, p5 {robust.p5:.1%}, worst {robust.worst:.1%}"
+    )
+    fig.colorbar(dots, ax=ax, label="share of trials in spec")
     path = Path(out_path)
     _save(fig, path)
     plt.close(fig)
