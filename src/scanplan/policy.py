@@ -18,8 +18,10 @@ from pydantic import model_validator as _model_validator
 from torch import nn
 
 from scanplan.context import scan_spec_from_record
+from scanplan.limits import ANGLE_RAD, LENGTH_MM, STEP_MM
 from scanplan.observation import observation_size
 from scanplan.quantities import ScanSpec
+from scanplan.sensor import SensorSpec
 
 FORMAT: Literal["scanplan-policy/2"] = "scanplan-policy/2"
 POLICY_JSON = "policy.json"
@@ -35,6 +37,11 @@ StrictBool = Annotated[bool, Field(strict=True)]
 PositiveInt = Annotated[int, Field(strict=True, gt=0)]
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
+Length = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=LENGTH_MM.lo, le=LENGTH_MM.hi)]
+StepMm = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=STEP_MM.lo, le=STEP_MM.hi)]
+StepRad = Annotated[
+    float, Field(strict=True, allow_inf_nan=False, gt=ANGLE_RAD.lo, le=ANGLE_RAD.hi)
+]
 
 
 class _Model(BaseModel):
@@ -74,14 +81,14 @@ class EnvOptions(_Model):
 
     use_position: StrictBool
     lookahead: StrictBool
-    fan_points: Annotated[int, Field(strict=True, ge=2)]
+    fan_points: Annotated[int, Field(strict=True, ge=2, le=SensorSpec.MAX_POINTS)]
     noise: StrictBool
-    segment_mm: tuple[Positive, Positive] | None
-    procedural_parts: Annotated[int, Field(strict=True, ge=0)]
-    dy_max_mm: Positive | None = None
-    dz_max_mm: Positive | None = None
-    dtheta_max_rad: Positive | None = None
-    dphi_max_rad: Positive | None = None
+    segment_mm: tuple[Length, Length] | None
+    procedural_parts: Annotated[int, Field(strict=True, ge=0, le=1000)]
+    dy_max_mm: StepMm | None = None
+    dz_max_mm: StepMm | None = None
+    dtheta_max_rad: StepRad | None = None
+    dphi_max_rad: StepRad | None = None
     roll: StrictBool = False
 
     @field_validator("segment_mm")

@@ -103,3 +103,34 @@ def test_train_refuses_to_replace_a_folder_of_something_else(tmp_path, monkeypat
     result = runner.invoke(app, ["train", "-o", str(mine), "--timesteps", "64"])
     assert_quiet_failure(result, "not empty", code=2)
     assert tree(mine) == {"notes.txt": b"keep"}
+
+
+# ---- sweep: everything checked before a worker starts ---------------------------------------
+SWEEP_CASES = [
+    (["--grid", "total_timesteps=abc"], "total_timesteps 'abc'"),
+    (["--grid", "learning_rate=[1,2]"], "learning_rate"),
+    (["--grid", "gamma=0.5,2"], "gamma 2"),
+    (["--grid", "env.fan_points=1"], "fan_points"),
+    (["--grid", "output_dir=x"], "output_dir"),
+    (["--seeds", "inf"], "--seeds 'inf'"),
+    (["--seeds", "1,1"], "given twice"),
+    (["--seeds", "99999999999"], "99999999999 is not in"),
+    (["--part", "nosuch.stl"], "nosuch.stl"),
+    (["--scheduler", "localhost"], "--scheduler"),
+    (["--timesteps", "-1"], "--timesteps"),
+]
+
+
+@pytest.mark.parametrize("args, fragment", SWEEP_CASES, ids=[" ".join(a) for a, _ in SWEEP_CASES])
+def test_sweep_fails_early_and_quietly(tmp_path, monkeypatch, args, fragment):
+    pytest.importorskip("dask.distributed")
+    import scanplan.learn.sweep as sweep
+
+    def no_cluster(*a, **kw):
+        raise AssertionError("a worker started")
+
+    monkeypatch.setattr(sweep, "connect", no_cluster)
+    out = tmp_path / "a" / "sweep"
+    result = runner.invoke(app, ["sweep", "-o", str(out), *args])
+    assert_quiet_failure(result, fragment, code=2)
+    assert list(tmp_path.iterdir()) == []

@@ -204,6 +204,11 @@ def test_user_toml_equals_the_preset(tmp_path) -> None:
         (lambda s: s.replace("c3 = 420\n", ""), "c3"),
         (lambda s: s.replace("a1 = 25", "a1 = = 25"), "cannot be parsed"),
         (lambda s: s.replace("c4 = 80", "c4 = nan"), "c4"),
+        # Issue 26: lengths an arm could have, not infinities, 1e308 or denormals.
+        (lambda s: s.replace("c2 = 455", "c2 = inf"), "c2"),
+        (lambda s: s.replace("c2 = 455", "c2 = 1e-300"), "c2"),
+        (lambda s: s.replace("a1 = 25", "a1 = 1e308"), "a1"),
+        (lambda s: s.replace("c3 = 420", "c3 = -1e308"), "c3"),
     ],
 )
 def test_bad_user_toml_is_one_line_naming_the_field(tmp_path, edit, field) -> None:

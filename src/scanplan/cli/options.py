@@ -12,6 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
+from scanplan.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, TOLERANCE_MM, Limit
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 
@@ -26,11 +27,11 @@ def bounded(
     """A Typer callback refusing a number outside [lo, hi] (open ends on request), NaN and
     infinities; Click names the option in the error."""
     interval = (
-        f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        f"{'(' if lo_open else '['}{_num(lo)}, {_num(hi)}{')' if hi_open else ']'}"
         if lo is not None and hi is not None
-        else f"{'>' if lo_open else '>='} {lo:g}"
+        else f"{'>' if lo_open else '>='} {_num(lo)}"
         if lo is not None
-        else f"{'<' if hi_open else '<='} {hi:g}"
+        else f"{'<' if hi_open else '<='} {_num(hi)}"
         if hi is not None
         else "finite"
     )
@@ -48,6 +49,16 @@ def bounded(
         return value
 
     return check
+
+
+def _num(x: float) -> str:
+    """A bound as a user types it: whole numbers in full (4294967295, not 4.29497e+09)."""
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e16 else f"{x:g}"
+
+
+def within(limit: Limit) -> Callable[[Any], Any]:
+    """The `bounded` callback of one of `scanplan.limits`' ranges."""
+    return bounded(limit.lo, limit.hi, lo_open=limit.lo_open)
 
 
 def pose_option(value: str | None) -> str | None:
@@ -81,9 +92,10 @@ def parse_tolerance(text: str | None) -> dict[str, float]:
         mm, deg = (float(p) for p in parts) if len(parts) == 2 else (math.nan, math.nan)
     except ValueError:
         mm = deg = math.nan
-    if not (math.isfinite(mm) and math.isfinite(deg) and mm > 0 and 0 < deg <= 90):
+    if not (TOLERANCE_MM.contains(mm) and math.isfinite(deg) and 0 < deg <= 90):
         raise ValueError(
-            f"--tolerance {text!r}: expected MM,DEG with MM > 0 and 0 < DEG <= 90, e.g. 12.5,15"
+            f"--tolerance {text!r}: expected MM,DEG with MM in {TOLERANCE_MM} and "
+            "0 < DEG <= 90, e.g. 12.5,15"
         )
     return {"tol_distance_mm": mm, "tol_angle_rad": math.radians(deg)}
 
@@ -97,7 +109,7 @@ def scan_spec(sensor: str, tolerance: str | None = None) -> ScanSpec:
     return ScanSpec(load_sensor(sensor), **tol)
 
 
-SEED_CHECK = bounded(0)
+SEED_CHECK = bounded(0, MAX_SEED)
 POSITIVE = bounded(0, lo_open=True)
 POINTS_CHECK = bounded(2, SensorSpec.MAX_POINTS)
 
@@ -180,7 +192,9 @@ EnvVersionOpt = Annotated[
 ]
 ProceduralOpt = Annotated[
     int,
-    typer.Option(help="also train on N randomized procedural parts, >= 0", callback=SEED_CHECK),
+    typer.Option(
+        help="also train on N randomized procedural parts, 0 to 1000", callback=bounded(0, 1000)
+    ),
 ]
 FanPointsOpt = Annotated[
     int | None,
@@ -195,12 +209,16 @@ LogStdInitOpt = Annotated[
 ]
 InitAdvanceOpt = Annotated[
     float | None,
-    typer.Option(help="initial mean Δy action (0.5 = Δs_opt); default none", callback=bounded()),
+    typer.Option(
+        help="initial mean Δy action, -1 to 1 (0.5 = Δs_opt); default none",
+        callback=within(ACTION),
+    ),
 ]
 BcSamplesOpt = Annotated[
     int,
     typer.Option(
-        help="warm start: behaviour-clone a P-controller on N states first", callback=SEED_CHECK
+        help="warm start: behaviour-clone a P-controller on N states first",
+        callback=bounded(0, MAX_BC_SAMPLES),
     ),
 ]
 TableOpt = Annotated[

@@ -27,6 +27,7 @@ from scanplan.cli.options import (
     bounded,
     parse_floats,
 )
+from scanplan.limits import MAX_SEED, MAX_TIMESTEPS
 
 if TYPE_CHECKING:
     from scanplan.learn.config import TrainConfig
@@ -64,7 +65,8 @@ TrainPartsOpt = Annotated[
 ]
 # Not shared with sweep: a total here, per run there, where 0 means behaviour cloning only.
 TrainTimestepsOpt = Annotated[
-    int, typer.Option(help="total PPO timesteps, >= 1", callback=bounded(1))
+    int,
+    typer.Option(help="total PPO timesteps, >= 1", callback=bounded(1, MAX_TIMESTEPS)),
 ]
 TrainSeedOpt = Annotated[
     int, typer.Option(help="seed of PPO and the environments, >= 0", callback=SEED_CHECK)
@@ -144,6 +146,22 @@ def parse_grid(items: list[str]) -> dict[str, list[Any]]:
     return grid
 
 
+def parse_seeds(text: str) -> list[int]:
+    """--seeds 0,1,2: whole numbers in [0, MAX_SEED], each once."""
+    seeds = []
+    for item in text.split(","):
+        try:
+            seed = int(item.strip())
+        except ValueError:
+            raise ValueError(f"--seeds {text!r}: expected whole numbers, e.g. 0,1,2") from None
+        if not 0 <= seed <= MAX_SEED:
+            raise ValueError(f"--seeds {text!r}: {seed} is not in [0, {MAX_SEED}]")
+        if seed in seeds:
+            raise ValueError(f"--seeds {text!r}: {seed} given twice")
+        seeds.append(seed)
+    return seeds
+
+
 def check_cluster(scheduler: str | None, workers: int | None) -> None:
     """--scheduler and --workers, refused before any work."""
     if scheduler is not None and not re.fullmatch(r"(tcp|tls|inproc)://[^\s/]+", scheduler):
@@ -204,7 +222,10 @@ SchedulerOpt = Annotated[
 WorkersOpt = Annotated[
     int | None, typer.Option(help="LocalCluster workers (default: one per core)")
 ]
-SweepTimestepsOpt = Annotated[int, typer.Option(help="PPO timesteps per run (0: BC only)")]
+SweepTimestepsOpt = Annotated[
+    int,
+    typer.Option(help="PPO timesteps per run (0: BC only)", callback=bounded(0, MAX_TIMESTEPS)),
+]
 
 
 @user_errors
@@ -239,7 +260,9 @@ def sweep_cmd(
         raise ValueError(CLUSTER_HINT) from None
     from scanplan.learn.sweep import EvalPart, SweepTask, grid_tasks
 
-    seed_list = [int(v) for v in parse_floats(seeds, "--seeds")]
+    # Everything is checked before a worker starts: a mistake never costs a training run.
+    check_cluster(scheduler, workers)
+    seed_list = parse_seeds(seeds)
     base = training_config(ctx, progress_bar=False)  # the training group, via ctx.params
     tasks = grid_tasks(label, base, output / "runs", seed_list, parse_grid(grid or []))
     roll = env_version == "v1"
@@ -247,8 +270,7 @@ def sweep_cmd(
         if name not in ("fixed", "feedback", "geometric"):
             raise ValueError(f"--baseline {name!r}: use fixed, feedback or geometric")
     tasks += [SweepTask(name, planner=name, roll=roll) for name in baseline or []]
-    parts = [EvalPart.parse(p) for p in part or ["door", "drone"]]
-    check_cluster(scheduler, workers)
+    parts = [EvalPart.parse(p).check() for p in part or ["door", "drone"]]
     csv_path, md_path = run_on_cluster(tasks, parts, output, scheduler, workers)
     typer.echo(md_path.read_text(), nl=False)
     typer.echo(f"-> {csv_path}, {md_path}")

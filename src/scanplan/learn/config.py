@@ -6,18 +6,22 @@ from __future__ import annotations
 
 import inspect
 import math
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from pydantic import ValidationError
+from pydantic import TypeAdapter, ValidationError
 
 from scanplan.env import TRAINING_SEGMENT_MM, SwathScanEnv
+from scanplan.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, MAX_TIMESTEPS
 from scanplan.policy import EnvOptions, first_error
 from scanplan.quantities import TRAINING_FAN_POINTS
 
 VEC_ENVS = ("batched", "subproc")
 ACTIVATIONS = ("relu", "tanh")
+MAX_ENVS = 1024
+MAX_WIDTH = 4096  # units of a hidden layer
 
 
 @dataclass
@@ -71,10 +75,28 @@ class TrainConfig:
         for name, value in positive.items():
             if value < 1:
                 raise ValueError(f"training config: {name} must be >= 1, got {value}")
-        if self.total_timesteps < 0:
+        if not 0 <= self.total_timesteps <= MAX_TIMESTEPS:
             raise ValueError(
-                f"training config: total_timesteps must be >= 0, got {self.total_timesteps}"
+                f"training config: total_timesteps {self.total_timesteps} is not in "
+                f"[0, {MAX_TIMESTEPS}]"
             )
+        if not 0 <= self.seed <= MAX_SEED:
+            raise ValueError(f"training config: seed {self.seed} is not in [0, {MAX_SEED}]")
+        if self.n_envs > MAX_ENVS:
+            raise ValueError(f"training config: n_envs {self.n_envs} is more than {MAX_ENVS}")
+        if not (math.isfinite(self.gamma) and 0 < self.gamma <= 1):
+            raise ValueError(f"training config: gamma {self.gamma} is not in (0, 1]")
+        if not (math.isfinite(self.clip_range) and 0 < self.clip_range <= 1):
+            raise ValueError(f"training config: clip_range {self.clip_range} is not in (0, 1]")
+        if not (self.net_arch and all(0 < n <= MAX_WIDTH for n in self.net_arch)):
+            raise ValueError(
+                f"training config: net_arch {list(self.net_arch)}: layers of 1 to {MAX_WIDTH}"
+            )
+        stds = self.log_std_init if isinstance(self.log_std_init, tuple) else (self.log_std_init,)
+        if not all(math.isfinite(v) and abs(v) <= 20 for v in stds):
+            raise ValueError(f"training config: log_std_init {self.log_std_init} not in [-20, 20]")
+        if self.init_advance is not None:
+            ACTION.check(self.init_advance, "training config: init_advance")
         if self.total_timesteps == 0 and self.bc_samples == 0:
             raise ValueError(
                 "training config: 0 timesteps and no behaviour cloning: nothing to train"
@@ -85,14 +107,28 @@ class TrainConfig:
             raise ValueError(
                 f"training config: activation {self.activation!r}, use one of {ACTIVATIONS}"
             )
-        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
+        if not (math.isfinite(self.learning_rate) and 0 < self.learning_rate <= 1):
             raise ValueError(
-                f"training config: learning_rate must be > 0, got {self.learning_rate}"
+                f"training config: learning_rate {self.learning_rate} is not in (0, 1]"
             )
-        if self.bc_samples < 0:
-            raise ValueError(f"training config: bc_samples must be >= 0, got {self.bc_samples}")
+        if not 0 <= self.bc_samples <= MAX_BC_SAMPLES:
+            raise ValueError(
+                f"training config: bc_samples {self.bc_samples} is not in [0, {MAX_BC_SAMPLES}]"
+            )
         if self.bc_samples > 0 and self.vec_env != "batched":
             raise ValueError("training config: behaviour cloning needs vec_env 'batched'")
+
+
+def typed_field(name: str, value: Any) -> Any:
+    """`value` as TrainConfig's field `name` is typed (e.g. a sweep grid's JSON value), or a
+    ValueError naming the field; ranges are checked when the config is made."""
+    hints = typing.get_type_hints(TrainConfig)
+    if name not in hints:
+        raise ValueError(f"{name!r} is no training config field")
+    try:
+        return TypeAdapter(hints[name]).validate_python(value)
+    except ValidationError as exc:
+        raise ValueError(f"{name} {value!r}: {exc.errors()[0]['msg']}") from None
 
 
 # `scanplan train --state`: (use_position, lookahead)

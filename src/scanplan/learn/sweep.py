@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import logging
 import math
 import os
 import re
@@ -18,10 +19,12 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from scanplan.learn.config import TrainConfig
+from scanplan.learn.config import TrainConfig, env_options, typed_field
 from scanplan.learn.train import train
+from scanplan.limits import MAX_RUNS, check_count
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
+from scanplan.parts import PART_NAMES
 from scanplan.pipeline import plan_scan
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
@@ -64,6 +67,16 @@ class EvalPart:
             source, units = text, "mm"
         return cls(Path(source).stem, source, units)
 
+    def check(self) -> EvalPart:
+        """Self, or a ValueError if it is neither a built-in part nor a file (checked before
+        any training, which would otherwise end on it)."""
+        if self.source not in PART_NAMES and not Path(self.source).is_file():
+            raise ValueError(
+                f"--part {self.source!r} is neither a file nor a built-in part "
+                f"({', '.join(PART_NAMES)})"
+            )
+        return self
+
 
 @dataclass(frozen=True)
 class SweepTask:
@@ -95,10 +108,16 @@ def slug(text: str) -> str:
 def _with_param(config: TrainConfig, key: str, value: Any) -> TrainConfig:
     """`key` a TrainConfig field, or `env.NAME` for an environment option."""
     if key.startswith("env."):
-        return replace(config, env={**config.env, key[4:]: value})
-    if key not in TrainConfig.__dataclass_fields__:
+        env = {**config.env, key[4:]: value}
+        env_options(env)  # the policy file's schema: types and ranges, before any worker
+        return replace(config, env=env)
+    if key not in TrainConfig.__dataclass_fields__ or key in _NOT_SWEPT:
         raise ValueError(f"sweep grid: {key!r} is no TrainConfig field (nor env.NAME)")
-    return replace(config, **{key: value})
+    try:
+        # The field's type, then its range (TrainConfig checks it when made).
+        return replace(config, **{key: typed_field(key, value)})
+    except ValueError as exc:
+        raise ValueError(f"sweep grid: {str(exc).removeprefix('training config: ')}") from None
 
 
 def grid_tasks(
@@ -111,6 +130,9 @@ def grid_tasks(
     """seeds x the cartesian product of `grid` (TrainConfig field -> values), each task
     training into `out_dir/<label>[-key=value...]-s<seed>`."""
     grid = dict(grid or {})
+    seeds = list(seeds)
+    runs = len(seeds) * math.prod(len(v) for v in grid.values())
+    check_count(runs, MAX_RUNS, "sweep: runs (seeds x grid)")
     tasks = []
     for values in itertools.product(*grid.values()):
         params = dict(zip(grid, values, strict=True))
@@ -130,6 +152,8 @@ def grid_tasks(
     return tasks
 
 
+# Set per run by the sweep itself.
+_NOT_SWEPT = ("output_dir", "seed", "resume", "progress_bar", "command")
 _DONE = "sweep_train.json"
 _EVALUATED = "sweep_eval.json"
 
@@ -234,6 +258,9 @@ def connect(scheduler: str | None = None, n_workers: int | None = None) -> Itera
             n_workers=n_workers or os.cpu_count() or 1,
             threads_per_worker=1,
             processes=True,
+            # The workers' log (start, stop, a lost worker) stays out of the user's terminal:
+            # the sweep reports what matters itself.
+            silence_logs=logging.CRITICAL,
             host="127.0.0.1",
             dashboard_address=":0",
         ) as cluster,

@@ -22,6 +22,7 @@ from scanplan.cycle import (
     MotionLimits,
     joint_accels,
 )
+from scanplan.limits import LENGTH_MM, LINK_MM, SIGNED_LENGTH_MM, SPEED_MM_S
 from scanplan.robot.base import Robot
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.ur import UR_MODELS
@@ -166,13 +167,13 @@ class RobotFile(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     name: str = "custom"
-    a1: float
-    a2: float
-    b: float = 0.0
-    c1: float
-    c2: float = Field(gt=0)
-    c3: float
-    c4: float = Field(ge=0)
+    a1: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
+    a2: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
+    b: float = Field(0.0, allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
+    c1: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
+    c2: float = Field(allow_inf_nan=False, ge=LINK_MM.lo, le=LINK_MM.hi)
+    c3: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
+    c4: float = Field(ge=0, le=LENGTH_MM.hi, allow_inf_nan=False)
     offsets_deg: Six = Field(default_factory=lambda: [0.0] * 6)
     sign: Annotated[list[Literal[-1, 1]], Field(min_length=6, max_length=6)] = [1, 1, 1, 1, 1, 1]
     limits_deg: Annotated[
@@ -183,7 +184,9 @@ class RobotFile(BaseModel):
     flange: Six = Field(default_factory=lambda: [0.0] * 6)
     j3_from_horizontal: bool = False
     # Motion limits for the cycle time; the nominal arm's where the file gives none.
-    speed_mm_s: float = Field(NOMINAL.speed_mm_s, gt=0, allow_inf_nan=False)
+    speed_mm_s: float = Field(
+        NOMINAL.speed_mm_s, allow_inf_nan=False, ge=SPEED_MM_S.lo, le=SPEED_MM_S.hi
+    )
     accel_mm_s2: float = Field(NOMINAL.accel_mm_s2, gt=0, allow_inf_nan=False)
     angular_speed_deg_s: float = Field(NOMINAL.angular_speed_deg_s, gt=0, allow_inf_nan=False)
     angular_accel_deg_s2: float = Field(NOMINAL.angular_accel_deg_s2, gt=0, allow_inf_nan=False)
@@ -192,9 +195,6 @@ class RobotFile(BaseModel):
 
     @model_validator(mode="after")
     def _finite_and_ordered(self) -> RobotFile:
-        for name in ("a1", "a2", "b", "c1", "c3", "c4"):
-            if not np.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite")
         for i, (lo, hi) in enumerate(self.limits_deg):
             if not lo < hi:
                 raise ValueError(f"limits_deg joint {i + 1}: lower {lo} must be < upper {hi}")
