@@ -9,7 +9,7 @@ The open-loop plan is replayed: nobody re-plans against the perturbed part.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,7 @@ from scanplan.metrics.evaluation import coverage_of, scanning_steps, surface_sam
 from scanplan.metrics.summary import SurfaceState
 from scanplan.part import Part
 from scanplan.perturb import Perturbation
-from scanplan.profilometer import LineProfilometer
+from scanplan.profilometer import LineProfilometer, Scan
 from scanplan.quantities import ScanSpec, point_orientation_error
 from scanplan.sensor import SensorSpec
 from scanplan.surface import VisibleSurface
@@ -64,8 +64,10 @@ def run_trial(task: TrialTask) -> np.ndarray:
     # The part sits at T_placed in the nominal frame and the robot flies the noisy path there.
     # Measuring the part in its own frame with the poses moved by the inverse placement is the
     # same scan, and its points come out in the nominal frame: the placement error undone
-    # exactly, so a point is associated with the nominal sample nearest it (within the
-    # coverage radii) as in `evaluate`, and only the warp and the path move it.
+    # exactly. The warp and scale are undone per hit face (`_on_nominal`), so a point is
+    # associated with the nominal sample nearest it (within the coverage radii) as in
+    # `evaluate`, and it is the path, the placement and the part's shape that decide which
+    # points there are and whether they are in spec.
     T_part_placed = trial.T_part_placed(centre)
     poses = trial.path_poses(task.poses)
     if not np.array_equal(T_part_placed, np.eye(4)):
@@ -74,10 +76,29 @@ def run_trial(task: TrialTask) -> np.ndarray:
     # The sensor noise is the nominal evaluation's (same seed): trials differ by the
     # perturbation only.
     profiler = LineProfilometer(part, task.sensor, seed=task.seed)
+    warped = not np.array_equal(built, task.vertices)
     for lo, scan in profiler.measure_in_chunks(poses, task.chunk_poses):
         ori = point_orientation_error(scan.normals_part, scan.poses)
+        if warped:
+            scan = replace(scan, points_part=_on_nominal(scan, task.vertices, built, task.faces))
         coverage.add(scan, ori, task.has_prev[lo : lo + len(scan)])
     return coverage.finish()[2].state == SurfaceState.IN_SPEC
+
+
+def _on_nominal(
+    scan: Scan, vertices: np.ndarray, built: np.ndarray, faces: np.ndarray
+) -> np.ndarray:
+    """(m, N, 3) the scan's points carried back from the as-built to the nominal surface: the
+    same barycentric place on the same face, the depth noise kept. The in-spec radius is
+    about a millimetre, the warp's size: left on the as-built surface, a point would miss
+    the nominal sample it lies over."""
+    points = scan.points_part.copy()
+    valid = scan.valid
+    tri = faces[scan.face[valid]]
+    bary = trimesh.triangles.points_to_barycentric(built[tri], points[valid])
+    bary = np.nan_to_num(bary)  # a degenerate face: its point stays where it is
+    points[valid] += np.einsum("ki,kij->kj", bary, vertices[tri] - built[tri])
+    return points
 
 
 @dataclass(frozen=True)
