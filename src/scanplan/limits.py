@@ -47,6 +47,8 @@ STEP_MM = Limit(1e-3, 1e3, "mm")
 # Angles: a step or a tolerance, at most a half turn.
 ANGLE_DEG = Limit(0.0, 180.0, "deg", lo_open=True)
 ANGLE_RAD = Limit(0.0, math.pi, "rad", lo_open=True)
+# A joint's position or limit: a few turns either way at most.
+JOINT_DEG = Limit(-1080.0, 1080.0, "deg")
 # In-spec distance tolerance |z_s - W_d|.
 TOLERANCE_MM = Limit(1e-3, 1e3, "mm")
 # Line profilometers run from a few Hz to some tens of kHz.
@@ -67,9 +69,14 @@ MAX_SEED = 2**32 - 1  # numpy's and torch's seeds
 MAX_RUNS = 10_000  # runs of one sweep (seeds x grid)
 
 
+class TooLarge(ValueError):
+    """A size over its MAX_: a mistake of the user's that no fallback (another view, another
+    candidate) may swallow."""
+
+
 def check_count(count: int, limit: int, what: str, hint: str = "") -> int:
     """`count`, or a ValueError saying what would be too many (before it is allocated)."""
     if count > limit:
         more = f"; {hint}" if hint else ""
-        raise ValueError(f"{what}: {count:,} is more than the {limit:,} allowed{more}")
+        raise TooLarge(f"{what}: {count:,} is more than the {limit:,} allowed{more}")
     return count

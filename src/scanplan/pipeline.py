@@ -19,6 +19,7 @@ from scanplan.bands import plan_adaptive_swaths
 from scanplan.cell import LOWEST, Cell
 from scanplan.collision import CellObstacles, checker_for
 from scanplan.context import PlanContext
+from scanplan.limits import TooLarge
 from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
 from scanplan.motion import plan_transition, view_transition
 from scanplan.part import Part
@@ -225,6 +226,8 @@ def choose_views(
         top = plan_view(part, View.looking_along(UP, 0), plan)
         covered = in_spec_set(top)
         plans, coverage = [top], [float(covered.mean())]
+    except TooLarge:  # the user's numbers, not the view's fault
+        raise
     except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
         covered = np.zeros(len(samples.points), bool)
         plans, coverage = [], [0.0]
@@ -244,6 +247,8 @@ def choose_views(
                 try:
                     vp = plan_view(part, replace(candidates[i], index=len(plans)), plan)
                     evaluated[i] = (vp, in_spec_set(vp))
+                except TooLarge:  # the user's numbers, not the view's fault
+                    raise
                 except ValueError:  # a view whose passes see nothing of the part
                     on_faces[i] = np.zeros_like(on_faces[i])
                     continue

@@ -15,6 +15,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
+from scanplan.limits import MAX_PASSES, check_count
 from scanplan.part import Part
 from scanplan.quantities import OVERLAP, UP
 from scanplan.sensor import SensorSpec
@@ -287,6 +288,9 @@ def plan_swaths(
     step = width * (1.0 - overlap)
     span = float(across.max() - across.min())
     n_pass = 1 if span <= width else 1 + math.ceil((span - width) / step - 1e-9)
+    check_count(
+        n_pass, MAX_PASSES, f"passes of one view (overlap {overlap!r})", "a smaller overlap"
+    )
     centre = 0.5 * (across.max() + across.min())
     offsets = centre + (np.arange(n_pass) - (n_pass - 1) / 2) * step
     return swaths_at(

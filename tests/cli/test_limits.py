@@ -134,3 +134,174 @@ def test_sweep_fails_early_and_quietly(tmp_path, monkeypatch, args, fragment):
     result = runner.invoke(app, ["sweep", "-o", str(out), *args])
     assert_quiet_failure(result, fragment, code=2)
     assert list(tmp_path.iterdir()) == []
+
+
+# ---- huge or ill-typed numbers: refused at the edge, naming the option and the range -------
+@pytest.fixture(scope="module")
+def cell_files(tmp_path_factory) -> Path:
+    """A 600 mm plate, a 21-pose plan over it, a robot TOML and the default policy's copy."""
+    import shutil
+
+    import numpy as np
+    import trimesh
+
+    from scanplan.swaths import Swath
+    from scanplan.trajectory import Trajectory, write_csv
+
+    d = tmp_path_factory.mktemp("limits")
+    plate = trimesh.creation.box((600, 600, 10))
+    plate.apply_translation((0, 0, -5))
+    plate.export(d / "plate.stl")
+    sw = Swath(0, np.array([-50.0, 0, 400]), np.array([50.0, 0, 400]), np.eye(3)[0], np.eye(3)[1])
+    poses = sw.poses(np.linspace(0, 100, 21), np.zeros(21), np.zeros(21))
+    write_csv(Trajectory(poses, np.zeros(21, int), np.ones(21, bool)), d / "t.csv")
+    shutil.copytree(Path(__file__).parents[2] / "src/scanplan/policies/default", d / "pol")
+    return d
+
+
+def robot_toml(directory: Path, **edits: str) -> Path:
+    text = {
+        "a1": "25", "a2": "-35", "c1": "400", "c2": "455", "c3": "420", "c4": "80",
+        "offsets_deg": "[0, -90, 0, 0, 0, 0]", "sign": "[-1, 1, 1, -1, 1, -1]",
+        "limits_deg": "[[-170, 170], [-190, 45], [-120, 156], [-185, 185], [-120, 120], "
+        "[-350, 350]]",
+    } | edits  # fmt: skip
+    path = directory / f"arm-{abs(hash(tuple(edits.items())))}.toml"
+    path.write_text("".join(f"{k} = {v}\n" for k, v in text.items()))
+    return path
+
+
+HUGE_CASES = [
+    (["evaluate", "{d}/plate.stl", "{d}/t.csv", "--tolerance", "1e308,90"], "--tolerance"),
+    (["plan", "{d}/plate.stl", "-o", "{o}/x.csv", "--tolerance", "1e-300,15"], "--tolerance"),
+    (["train", "-o", "{o}/pol", "--init-advance", "1e308"], "--init-advance"),
+    (["train", "-o", "{o}/pol", "--init-advance", "-7"], "--init-advance"),
+    (["train", "-o", "{o}/pol", "--timesteps", "100000000000000"], "--timesteps"),
+    (
+        [
+            "export",
+            "{d}/t.csv",
+            "-o",
+            "{o}/p.script",
+            "--robot",
+            "none",
+            "--profile-rate",
+            "1e308",
+            "--spacing",
+            "1e308",
+        ],
+        "--profile-rate",
+    ),  # fmt: skip
+    (
+        [
+            "export",
+            "{d}/t.csv",
+            "-o",
+            "{o}/p.script",
+            "--robot",
+            "none",
+            "--profile-rate",
+            "20000",
+            "--spacing",
+            "1",
+        ],
+        "scan speed of 20000 mm/s",
+    ),  # fmt: skip
+    (
+        ["export", "{d}/t.csv", "-o", "{o}/p.script", "--robot", "none", "--travel-speed", "1e300"],
+        "--travel-speed",
+    ),  # fmt: skip
+    (
+        ["export", "{d}/t.csv", "-o", "{o}/p.script", "--robot", "none", "--chord-tol", "1e-300"],
+        "--chord-tol",
+    ),  # fmt: skip
+    (
+        ["place", "{d}/t.csv", "--part", "{d}/plate.stl", "--robot", "ur5e", "--yaw-step", "1e-9"],
+        "candidate placements",
+    ),  # fmt: skip
+    (
+        ["place", "{d}/t.csv", "--part", "{d}/plate.stl", "--robot", "ur5e", "--yaw-step", "0.001"],
+        "candidate placements",
+    ),  # fmt: skip
+    (
+        [
+            "place",
+            "{d}/t.csv",
+            "--part",
+            "{d}/plate.stl",
+            "--robot",
+            "ur5e",
+            "--height-range",
+            "-1e308,1e308",
+        ],
+        "--height-range",
+    ),  # fmt: skip
+    (
+        [
+            "plan",
+            "{d}/plate.stl",
+            "-o",
+            "{o}/x.csv",
+            "--raster",
+            "nominal",
+            "--overlap",
+            "0.999999999999",
+        ],
+        "passes of one view",
+    ),  # fmt: skip
+    (
+        ["plan", "{d}/plate.stl", "-o", "{o}/x.csv", "--raster", "nominal", "--overlap", "0.99999"],
+        "passes of one view",
+    ),  # fmt: skip
+]
+
+
+@pytest.mark.parametrize(
+    "args, fragment", HUGE_CASES, ids=[" ".join(a[:1] + a[-2:]) for a, _ in HUGE_CASES]
+)
+def test_huge_numbers_are_refused_naming_the_option(cell_files, tmp_path, args, fragment):
+    out = tmp_path / "out"
+    out.mkdir()
+    args = [a.format(d=cell_files, o=out) for a in args]
+    assert_quiet_failure(runner.invoke(app, args), fragment, code=2)
+    assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "edits, field",
+    [
+        ({"c2": "inf"}, "c2"),
+        ({"c2": "1e-300"}, "c2"),
+        ({"a2": "1e308"}, "a2"),
+        ({"c4": "1e300"}, "c4"),
+        ({"b": "-inf"}, "b"),
+        ({"base": "[1e308, 0, 0, 0, 0, 0]"}, "base"),
+        ({"offsets_deg": "[0, 1e300, 0, 0, 0, 0]"}, "offsets_deg"),
+        ({"speed_mm_s": "1e308"}, "speed_mm_s"),
+    ],
+)
+def test_a_robot_file_with_impossible_lengths_is_refused(cell_files, tmp_path, edits, field):
+    arm = robot_toml(tmp_path, **edits)
+    out = tmp_path / "p.script"
+    result = runner.invoke(app, ["export", str(cell_files / "t.csv"), "-o", str(out), "--robot",
+                                 str(arm)])  # fmt: skip
+    assert_quiet_failure(result, field, code=2)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "key, value", [("dy_max_mm", 1e-300), ("dz_max_mm", 1e300), ("segment_mm", [1e-300, 1e300])]
+)
+def test_a_policy_with_impossible_steps_is_refused(cell_files, tmp_path, key, value):
+    import json
+    import shutil
+
+    pol = tmp_path / "pol"
+    shutil.copytree(cell_files / "pol", pol)
+    meta = json.loads((pol / "policy.json").read_text())
+    meta["env"][key] = value
+    (pol / "policy.json").write_text(json.dumps(meta))
+    out = tmp_path / "x.csv"
+    args = ["plan", str(cell_files / "plate.stl"), "-o", str(out), "--planner", "rl"]
+    assert_quiet_failure(runner.invoke(app, [*args, "--policy", str(pol)]), key, code=2)
+    assert not out.exists()

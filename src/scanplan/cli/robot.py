@@ -15,7 +15,6 @@ import typer
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.options import (
     IDENTITY_POSE,
-    POSITIVE,
     PartPoseOpt,
     PlannedPartOpt,
     PlannedUnitsOpt,
@@ -23,6 +22,16 @@ from scanplan.cli.options import (
     TcpOpt,
     TrajectoryArg,
     bounded,
+    within,
+)
+from scanplan.limits import (
+    ANGLE_DEG,
+    MAX_SCAN_SPEED_MM_S,
+    PROFILE_RATE_HZ,
+    SIGNED_LENGTH_MM,
+    SPEED_MM_S,
+    STEP_MM,
+    TOLERANCE_MM,
 )
 from scanplan.quantities import ScanSpec
 
@@ -46,14 +55,24 @@ FormatOpt = Annotated[
 ProfileRateOpt = Annotated[
     float,
     typer.Option(
-        help="sensor profile rate, Hz (> 0); scan speed = rate x spacing", callback=POSITIVE
+        help=f"sensor profile rate, Hz, {PROFILE_RATE_HZ.lo:g} to {PROFILE_RATE_HZ.hi:g}; scan "
+        f"speed = rate x spacing, at most {MAX_SCAN_SPEED_MM_S:g} mm/s",
+        callback=within(PROFILE_RATE_HZ),
     ),
 ]
 SpacingOpt = Annotated[
-    float, typer.Option(help="profile spacing on the part, mm (> 0)", callback=POSITIVE)
+    float,
+    typer.Option(
+        help=f"profile spacing on the part, mm, {STEP_MM.lo:g} to {STEP_MM.hi:g}",
+        callback=within(STEP_MM),
+    ),
 ]
 TravelSpeedOpt = Annotated[
-    float, typer.Option(help="speed between passes, mm/s (> 0)", callback=POSITIVE)
+    float,
+    typer.Option(
+        help=f"speed between passes, mm/s, {SPEED_MM_S.lo:g} to {SPEED_MM_S.hi:g}",
+        callback=within(SPEED_MM_S),
+    ),
 ]
 ReachRobotOpt = Annotated[
     str | None,
@@ -64,9 +83,10 @@ ChordTolOpt = Annotated[
     typer.Option(
         "--chord-tol",
         metavar="MM",
-        help="how far the thinned, blended path may stray from a planned pose, mm (> 0); "
-        "default 1/25 of the in-spec depth tolerance (0.5 mm)",
-        callback=POSITIVE,
+        help="how far the thinned, blended path may stray from a planned pose, mm "
+        f"({TOLERANCE_MM.lo:g} to {TOLERANCE_MM.hi:g}); default 1/25 of the in-spec depth "
+        "tolerance (0.5 mm)",
+        callback=within(TOLERANCE_MM),
     ),
 ]
 AngleTolOpt = Annotated[
@@ -74,9 +94,9 @@ AngleTolOpt = Annotated[
     typer.Option(
         "--angle-tol",
         metavar="DEG",
-        help="how far its orientation may turn from a planned pose's, degrees (> 0); "
-        "default 1/30 of the in-spec angle tolerance (0.5 deg)",
-        callback=POSITIVE,
+        help="how far its orientation may turn from a planned pose's, degrees (> 0, at most "
+        "180); default 1/30 of the in-spec angle tolerance (0.5 deg)",
+        callback=within(ANGLE_DEG),
     ),
 ]
 ScanOutputOpt = Annotated[
@@ -154,6 +174,11 @@ def export_cmd(
     name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
     if output.exists() and output.resolve() == trajectory.resolve():
         raise ValueError(f"-o {output} is the plan being exported: give the program another name")
+    if profile_rate * spacing > MAX_SCAN_SPEED_MM_S:  # each in range, their product not
+        raise ValueError(
+            f"--profile-rate {profile_rate:g} x --spacing {spacing:g}: a scan speed of "
+            f"{profile_rate * spacing:g} mm/s, more than the {MAX_SCAN_SPEED_MM_S:g} allowed"
+        )
     traj = read_trajectory(trajectory)
     robot, T_base_part, T_flange_sensor = arm_of(traj, robot, part_pose, tcp)
     options = ExportOptions(
@@ -333,6 +358,8 @@ def parse_height_range(text: str | None) -> tuple[float, float] | None:
         raise ValueError(f"--height-range {text!r}: expected LO,HI in mm") from None
     if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
         raise ValueError(f"--height-range {text!r}: expected finite LO <= HI in mm")
+    for v in (lo, hi):
+        SIGNED_LENGTH_MM.check(v, "--height-range")
     return (lo, hi)
 
 

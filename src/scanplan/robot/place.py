@@ -13,6 +13,7 @@ answer is the best candidate whose links also keep clear of the part, fixtures a
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.collision import CellObstacles
+from scanplan.limits import MAX_PLACEMENTS, check_count
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links, column_clear
 from scanplan.robot.presets import get_robot
@@ -263,8 +265,15 @@ def place(
     g = np.arange(-reach, reach + 1e-9, step)
     gx, gy = np.meshgrid(g, g, indexing="ij")
     disc = np.hypot(gx, gy) <= reach
-    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
     heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
+    n_yaws = math.ceil(360.0 / yaw_step_deg - 1e-9)
+    check_count(  # before the grid is allocated
+        int(disc.sum()) * len(heights) * n_yaws,
+        MAX_PLACEMENTS,
+        f"candidate placements (yaw step {yaw_step_deg:g} deg)",
+        "give a larger yaw step",
+    )
+    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
     grid = np.array(
         [
             (x, y, z, a)

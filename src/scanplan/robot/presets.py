@@ -22,7 +22,7 @@ from scanplan.cycle import (
     MotionLimits,
     joint_accels,
 )
-from scanplan.limits import LENGTH_MM, LINK_MM, SIGNED_LENGTH_MM, SPEED_MM_S
+from scanplan.limits import JOINT_DEG, LENGTH_MM, LINK_MM, SIGNED_LENGTH_MM, SPEED_MM_S
 from scanplan.robot.base import Robot
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.ur import UR_MODELS
@@ -201,6 +201,13 @@ class RobotFile(BaseModel):
         for name in ("offsets_deg", "base", "flange"):
             if not np.isfinite(getattr(self, name)).all():
                 raise ValueError(f"{name} must be finite")
+        # Where a cell's numbers can be: 1e308 is finite, but no arm's.
+        for name in ("base", "flange"):
+            for v in getattr(self, name)[:3]:
+                SIGNED_LENGTH_MM.check(v, f"{name} x,y,z")
+        for name in ("offsets_deg", "limits_deg"):
+            for v in np.ravel(getattr(self, name)):
+                JOINT_DEG.check(float(v), name)
         for name in ("joint_speed_deg_s", "joint_accel_deg_s2"):
             values = np.asarray(getattr(self, name))
             if not (np.isfinite(values).all() and (values > 0).all()):
