@@ -61,7 +61,9 @@ def test_trials_in_worker_processes_give_the_serial_numbers(plate):
     importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
 )
 def test_a_loopback_dask_cluster_gives_the_local_numbers(plate):
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import LocalCluster
+
+    from scanplan.cli.planning import trial_runner  # what evaluate --scheduler runs
 
     text = "place:10mm,1deg;path:0.2mm"
     with (
@@ -72,9 +74,9 @@ def test_a_loopback_dask_cluster_gives_the_local_numbers(plate):
             host="127.0.0.1",
             dashboard_address=":0",
         ) as cluster,
-        Client(cluster) as client,
+        trial_runner(cluster.scheduler_address, 2) as run,
     ):
-        on_dask = _run(plate, text, run=lambda f, tasks: client.gather(client.map(f, tasks)))
+        on_dask = _run(plate, text, run=run)
     assert np.array_equal(on_dask.per_trial, _run(plate, text).per_trial)
 
 
