@@ -6,9 +6,10 @@ pose has an in-limit IK solution and each scanning pass keeps one arm configurat
 feasible ones the worst normalized margin (joint limits, wrist, elbow, shoulder) is
 maximized. A coarse grid on a subsample of poses, then a pattern search on more of them,
 then the full `check_reach` on every pose of the best. In a cell (`obstacles`), a placement
-that puts the arm's column into the table block is ranked below every other, and the
-answer is the best candidate whose links also keep clear of the part, fixtures and table
-(`links.check_links`).
+that puts the arm's column into the table block is ranked below every other, the best
+candidate at each height of the grid is among the final ones, and those are ranked on a
+sample by the poses `fit.fit_to_robot` would keep (each pass as planned or turned about
+the beam; the links by `links.check_links`, the sensor body by its clearance).
 """
 
 from __future__ import annotations
