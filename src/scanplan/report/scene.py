@@ -12,7 +12,12 @@ from typing import Any
 import numpy as np
 
 from scanplan.cell import Cell
+from scanplan.context import recorded
 from scanplan.part import Part
+from scanplan.quantities import ScanSpec
+from scanplan.robot import check_reach, get_robot
+from scanplan.robot.links import check_links, obstacles_for
+from scanplan.robot.reach import pass_starts
 from scanplan.trajectory import Trajectory
 
 # Enough for a smooth picture, small enough that the page stays a few MB.
@@ -64,9 +69,6 @@ class ArmPoses:
 
 def pass_runs(traj: Trajectory) -> list[np.ndarray]:
     """The pose indices of each pass: runs of scanning poses of one swath."""
-    # Deferred: the robot package loads the kinematics.
-    from scanplan.robot.reach import pass_starts
-
     starts = np.flatnonzero(pass_starts(traj.swath, traj.scanning))
     runs = []
     for s in starts:
@@ -100,13 +102,6 @@ def check_arm(
 ) -> ArmPoses:
     """The arm `robot` along `traj` (the part at `T_base_part`, the sensor at
     `T_flange_sensor` on the flange): its reach and link checks and the poses to draw."""
-    # Deferred: the robot package loads the kinematics and FCL.
-    from scanplan.context import recorded
-    from scanplan.quantities import ScanSpec
-    from scanplan.robot import check_reach, get_robot
-    from scanplan.robot.links import check_links, obstacles_for
-    from scanplan.robot.reach import pass_starts
-
     arm = get_robot(robot)
     T_base_part = np.asarray(T_base_part, dtype=np.float64)
     T_base_flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
@@ -162,10 +157,6 @@ def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]
     """The cell `traj` was planned in around `part` and, for a plan made for an arm
     (`meta["robot"]`), that arm along it. ValueError or OSError if a fixture file or the
     arm's file is gone or the record is malformed."""
-    # Deferred: the context reads the sensor datasheet.
-    from scanplan.context import recorded
-    from scanplan.quantities import ScanSpec
-
     cell = recorded(traj, ScanSpec()).cell(part)
     record = traj.meta.get("robot")
     if not record:
