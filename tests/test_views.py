@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from helpers import HEMISPHERE
 from scanplan.collision import checker_for
@@ -21,6 +22,8 @@ from scanplan.views import (
     View,
     candidate_views,
     depth_slabs,
+    limit_beam_tilt,
+    missed_views,
     segment_regions,
     view_axis,
 )
@@ -99,7 +102,8 @@ def test_vertical_walls_get_views_that_see_them_nearly_head_on():
 def test_on_a_table_side_views_fly_up_their_walls_and_keep_clear_of_it():
     # The same box on a table at its lowest point: every side view keeps its passes
     # (flown upward, the camera side leading away from the table), and no pose comes
-    # within the clearance of the table; only the walls' lowest band is lost.
+    # within the clearance of the table; the beam held at the view's tilt, not level with
+    # the wall, keeps the sensor above the table at the walls' foot too.
     part = part_from_mesh(trimesh.creation.box((400.0, 300.0, 150.0)), "block")
     plans, auto = plan_views(part, SPEC, make_planner("geometric"), "auto")
     assert len(plans) == 5
@@ -110,4 +114,69 @@ def test_on_a_table_side_views_fly_up_their_walls_and_keep_clear_of_it():
     assert corners[..., 2].min() >= part.bounds[0, 2] + SPEC.clearance_mm - 1e-6
     m = evaluate(part, SPEC, auto, points_per_profile=256, context=HEMISPHERE)
     assert m.collisions_table == 0 and m.collisions_count == 0
-    assert 0.6 < m.in_spec_coverage < 0.85
+    assert m.in_spec_coverage > 0.95
+
+
+def _box(centre, extents) -> trimesh.Trimesh:
+    box = trimesh.creation.box(extents=extents)
+    box.apply_translation(centre)
+    return box
+
+
+def test_missed_views_aim_at_what_is_missed_one_per_depth():
+    # Two blocks 300 mm apart along x: their +x walls face one way at two depths.
+    part = part_from_mesh(
+        trimesh.util.concatenate(
+            [_box((0, 0, 50), (100, 200, 100)), _box((-300, 0, 50), (100, 200, 100))]
+        ),
+        "blocks",
+    )
+    samples = hemisphere_visible_samples(part, 3.0)
+    normals = part.mesh.face_normals[samples.faces]
+    missed = normals[:, 0] > 0.99
+    views = missed_views(part, SPEC, samples, missed, min_samples=50)
+    assert len(views) == 2
+    for view in views:
+        assert math.degrees(math.acos(view.axis[2])) == pytest.approx(VIEW_AXIS_MAX_TILT_DEG)
+        assert view.axis[0] > 0.95
+        assert view.faces is not None
+        assert (part.mesh.face_normals[view.faces, 0] > 0.99).all()
+    depths = sorted(float(part.mesh.triangles_center[v.faces, 0].mean()) for v in views)
+    assert depths == pytest.approx([-250.0, 50.0])
+    # Nothing missed, or too little: no view.
+    assert missed_views(part, SPEC, samples, np.zeros_like(missed), 50) == []
+    assert missed_views(part, SPEC, samples, missed, int(missed.sum()) + 1) == []
+
+
+def test_a_missed_slope_in_a_trench_gets_an_axis_steep_enough_to_clear_its_rim():
+    # A 70° slope facing a 150 mm wall across a trench: along its normal the wall blocks
+    # most beams; tilted back towards +Z they clear it.
+    slope = trimesh.creation.box(extents=(200, 200, 10))
+    slope.apply_transform(trimesh.transformations.rotation_matrix(math.radians(-70), [0, 1, 0]))
+    slope.apply_translation((0, 0, 95))
+    wall = _box((-110, 0, 75), (20, 200, 150))
+    part = part_from_mesh(trimesh.util.concatenate([slope, wall]), "trench")
+    samples = hemisphere_visible_samples(part, 3.0)
+    normal = np.array([-math.sin(math.radians(70)), 0, math.cos(math.radians(70))])
+    missed = part.mesh.face_normals[samples.faces] @ normal > 0.99
+    assert missed.sum() > 100
+    views = missed_views(part, SPEC, samples, missed, min_samples=20)
+    assert len(views) == 1
+    tilt = math.degrees(math.acos(views[0].axis[2]))
+    assert 55.0 <= tilt <= 70.0 - 2.0  # turned up from the normal to see past the wall
+
+
+def test_a_beam_leaning_past_the_view_tilt_is_turned_back_about_its_footprint():
+    wd = SPEC.working_distance_mm
+    level = np.eye(4)
+    level[:3, :3] = Rotation.from_euler("y", 90, degrees=True).as_matrix()  # beam along +x
+    level[:3, 3] = (-wd, 0.0, 30.0)
+    down = np.eye(4)
+    down[:3, :3] = Rotation.from_euler("x", 180, degrees=True).as_matrix()  # beam along -z
+    out = limit_beam_tilt(np.stack([level, down]), UP, wd)
+    tilt = math.degrees(math.acos(-out[0, 2, 2]))
+    assert tilt == pytest.approx(VIEW_AXIS_MAX_TILT_DEG)
+    assert np.allclose(out[0, :3, 3] + wd * out[0, :3, 2], (0.0, 0.0, 30.0))  # same footprint
+    assert out[0, 2, 3] > 30.0 + 60.0  # the sensor lifted above the footprint
+    assert np.allclose(out[0, :3, 0] @ out[0, :3, 1], 0.0)
+    assert np.array_equal(out[1], down)  # a beam within the tilt is left as it was

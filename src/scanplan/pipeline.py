@@ -27,12 +27,22 @@ from scanplan.planners import Planner, pass_workers
 from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
-from scanplan.surface import hemisphere_visible_samples
+from scanplan.surface import hemisphere_visible_samples, reachable_samples
 from scanplan.swaths import Swath, plan_swaths
 from scanplan.trajectory import Trajectory
-from scanplan.views import PlanView, View, ViewPlan, candidate_views, plan_view
+from scanplan.views import (
+    PlanView,
+    View,
+    ViewPlan,
+    candidate_views,
+    limit_beam_tilt,
+    missed_views,
+    plan_view,
+)
 
 RASTERS = ("auto", "adaptive", "nominal")
+# Rounds of views aimed at what the chosen views still miss (`views.missed_views`).
+MISSED_ROUNDS = 2
 
 
 def plan_path(
@@ -70,6 +80,13 @@ def plan_path(
             jobs = [pool.submit(planner.plan, part, swath, spec) for swath in swaths]
         for i, (swath, job) in enumerate(zip(swaths, jobs, strict=True)):
             planned = job.result()
+            if cell is not None and cell.table is not None:
+                planned = replace(
+                    planned,
+                    poses=limit_beam_tilt(
+                        planned.poses, cell.table.normal, spec.working_distance_mm
+                    ),
+                )
             colliding = checker.check(planned.poses, spec.clearance_mm).colliding
             dropped += int(colliding.sum())
             for k, run in enumerate(_runs(~colliding)):
@@ -237,6 +254,8 @@ def choose_views(
     # The samples on each candidate's faces: the bound on its gain.
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
     evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
+    reachable: np.ndarray | None = None
+    rounds = 0
     while len(plans) < max_views and coverage[-1] < coverage_target:
         bounds = [float((m & ~covered).mean()) for m in on_faces]
         best: tuple[float, int] | None = None
@@ -256,7 +275,20 @@ def choose_views(
             if best is None or gain > best[0]:
                 best = (gain, int(i))
         if best is None or best[0] < min_gain:
-            break
+            # Nothing left among the candidates: aim new ones at what is still missed.
+            if rounds == MISSED_ROUNDS:
+                break
+            rounds += 1
+            if reachable is None:
+                reachable = reachable_samples(part, samples, spec.tol_angle_rad)
+            more = missed_views(
+                part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
+            )
+            if not more:
+                break
+            candidates += more
+            on_faces += [np.isin(samples.faces, v.faces) for v in more]
+            continue
         vp, cov = evaluated.pop(best[1])
         on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
         plans.append(replace(vp, view=replace(vp.view, index=len(plans))))

@@ -188,7 +188,7 @@ def unit_perpendicular(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return side / np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
 
 
-def _towards_up(n: np.ndarray, angle_rad: float) -> np.ndarray:
+def towards_up(n: np.ndarray, angle_rad: float) -> np.ndarray:
     """(k, 3): the unit vectors `n` turned towards +Z by up to `angle_rad` (+Z itself where it
     is nearer than that)."""
     cos_up = np.clip(n[:, 2], -1.0, 1.0)
@@ -229,7 +229,7 @@ def reachable_samples(
             beam = n[todo]
         elif b == 1:
             # A wall is reached only by the cone's top edge, which random beams often miss.
-            beam = _towards_up(n[todo], tol_rad)
+            beam = towards_up(n[todo], tol_rad)
         else:
             # Uniform by solid angle in the cone (near enough for a 15° cone), seeded.
             angle = tol_rad * np.sqrt(rng.random(len(todo)))[:, None]

@@ -20,7 +20,13 @@ from scipy.spatial.transform import Rotation
 
 from scanplan.part import Part
 from scanplan.quantities import UP, ScanSpec
-from scanplan.surface import VIEW_AXIS_MAX_TILT_DEG, hemisphere_directions, oriented_normals
+from scanplan.surface import (
+    VIEW_AXIS_MAX_TILT_DEG,
+    VisibleSurface,
+    hemisphere_directions,
+    oriented_normals,
+    towards_up,
+)
 from scanplan.trajectory import Trajectory
 
 # A region (and a view's slab) smaller than this share of the surface gets no view of its
@@ -221,3 +227,98 @@ def candidate_views(
         View.looking_along(axis, k + 1, faces)
         for k, (_, axis, faces) in enumerate(slabs[:max_candidates])
     ]
+
+
+# Tilts back from a missed cluster's mean normal towards +Z tried for its view's axis: a
+# wall at the bottom of a pocket is seen only by a beam that leaves it steeply enough to
+# clear the pocket's rim, at the cost of part of the angle tolerance.
+MISSED_AXIS_TILTS_DEG = (0.0, 5.0, 10.0)
+
+
+def missed_views(
+    part: Part,
+    spec: ScanSpec,
+    surface: VisibleSurface,
+    missed: np.ndarray,
+    min_samples: int,
+    index: int = 1,
+) -> list[View]:
+    """Views aimed at what the views chosen so far miss: the `missed` samples of `surface`
+    grouped by normal direction (`hemisphere_directions` bins), each group's axis the one
+    among its mean normal (at most `VIEW_AXIS_MAX_TILT_DEG` from +Z, `view_axis`) tilted
+    back towards +Z by `MISSED_AXIS_TILTS_DEG` from which most of its samples are within three
+    quarters of the angle tolerance and unobstructed, and those samples cut into depth
+    slabs along it (a gap of the distance tolerance: one raster holds one depth). One
+    view per slab of at least `min_samples` samples, its region the faces they lie on."""
+    idx = np.flatnonzero(missed)
+    if len(idx) < min_samples:
+        return []
+    normals = oriented_normals(part)[surface.faces[idx]]
+    points = surface.points[idx]
+    dirs = hemisphere_directions()
+    label = np.argmax(normals @ dirs.T, axis=1)
+    cos_tol = math.cos(0.75 * spec.tol_angle_rad)
+    views: list[View] = []
+    for b in np.unique(label):
+        members = np.flatnonzero(label == b)
+        if len(members) < min_samples:
+            continue
+        mean = normals[members].sum(axis=0)
+        mean /= max(float(np.linalg.norm(mean)), 1e-12)
+        best: tuple[int, np.ndarray, np.ndarray] | None = None
+        for tilt in MISSED_AXIS_TILTS_DEG:
+            axis = towards_up(view_axis(mean)[None], math.radians(tilt))[0]
+            sees = _sees(part, points[members], normals[members], axis, cos_tol)
+            if best is None or int(sees.sum()) > best[0]:
+                best = (int(sees.sum()), axis, members[sees])
+        assert best is not None
+        count, axis, seen = best
+        if count < min_samples:
+            continue
+        depth = points[seen] @ axis
+        order = np.argsort(depth)
+        breaks = np.flatnonzero(np.diff(depth[order]) > spec.tolerance_mm) + 1
+        for group in np.split(order, breaks):
+            if len(group) >= min_samples:
+                faces = np.unique(surface.faces[idx[seen[group]]])
+                views.append(View.looking_along(axis, index + len(views), faces))
+    return views
+
+
+def _sees(
+    part: Part, points: np.ndarray, normals: np.ndarray, axis: np.ndarray, cos_tol: float
+) -> np.ndarray:
+    """(k,) bool: the samples within acos(cos_tol) of facing `axis` whose ray along it
+    escapes the part."""
+    ok = normals @ axis >= cos_tol
+    todo = np.flatnonzero(ok)
+    if len(todo):
+        start = points[todo] + 0.05 * normals[todo]
+        ray = np.broadcast_to(axis, start.shape)
+        ok[todo] = ~part.ray_engine.occluded(start, ray, np.full(len(todo), 1e6))
+    return ok
+
+
+def limit_beam_tilt(
+    poses: np.ndarray, up: np.ndarray, pivot_mm: float, max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG
+) -> np.ndarray:
+    """(n, 4, 4) `poses` whose beam (z_s) leans more than `max_tilt_deg` from straight down
+    (−`up`, the table's normal) turned back to that tilt about the point `pivot_mm` along the
+    beam (the footprint at W_d). A planner aligning the beam with a vertical wall would lay
+    the sensor level with the wall's foot, the table there; at the view's tilt the wall is
+    still within 10° of the beam, inside the angle tolerance."""
+    down = -np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    beam = poses[:, :3, 2]
+    excess = np.arccos(np.clip(beam @ down, -1.0, 1.0)) - math.radians(max_tilt_deg)
+    turn = np.flatnonzero(excess > 1e-9)
+    if len(turn) == 0:
+        return poses
+    out = poses.copy()
+    axis = np.cross(beam[turn], down)
+    norm = np.linalg.norm(axis, axis=1, keepdims=True)
+    axis = np.where(norm > 1e-9, axis / np.maximum(norm, 1e-12), [1.0, 0.0, 0.0])
+    rot = Rotation.from_rotvec(axis * excess[turn, None]).as_matrix()
+    footprint = poses[turn, :3, 3] + pivot_mm * beam[turn]
+    out[turn, :3, :3] = rot @ poses[turn, :3, :3]
+    out[turn, :3, 3] = footprint - pivot_mm * out[turn, :3, 2]
+    return out

@@ -286,17 +286,18 @@ class GeometricPlanner:
     def _band_columns(scan, swath: Swath, part: Part | None = None) -> np.ndarray:
         """The valid columns the pass is judged by: on an adaptive pass, those in its band
         (x_s within `band_mm`), and of a part with a region of interest, those on it; a
-        station with none left keeps all its valid columns."""
-        keep = scan.valid
+        station with none in its band keeps its valid columns on the region of interest,
+        and one with none on the region of interest none (its D is unknown, and the rest
+        of the part, a flange above a pocket's floor, would pull the targets off it)."""
+        on_roi = scan.valid
         if part is not None and part.inspect_faces is not None:
-            keep = keep & part.inspect_faces[np.maximum(scan.face, 0)]
-        if swath.band_mm is not None:
-            lo, hi = swath.band_mm
-            with np.errstate(invalid="ignore"):
-                keep = keep & (scan.x_sensor >= lo) & (scan.x_sensor <= hi)
-        if keep is scan.valid:
-            return scan.valid
-        return np.where(keep.any(axis=1, keepdims=True), keep, scan.valid)
+            on_roi = on_roi & part.inspect_faces[np.maximum(scan.face, 0)]
+        if swath.band_mm is None:
+            return on_roi
+        lo, hi = swath.band_mm
+        with np.errstate(invalid="ignore"):
+            keep = on_roi & (scan.x_sensor >= lo) & (scan.x_sensor <= hi)
+        return np.where(keep.any(axis=1, keepdims=True), keep, on_roi)
 
     def _rolled_stations(
         self, grid, pitch_t, height_t, arc, roll_t, lookahead: Lookahead, spec: ScanSpec
