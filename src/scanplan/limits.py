@@ -57,6 +57,9 @@ PROFILE_RATE_HZ = Limit(1e-1, 1e5, "Hz")
 # than a few m/s.
 SPEED_MM_S = Limit(1e-3, 1e4, "mm/s")
 MAX_SCAN_SPEED_MM_S = 5_000.0
+# A defect's size (its depth) and the call threshold in σ of the sensor noise.
+DEFECT_SIZE_MM = Limit(1e-4, 100.0, "mm")
+K_SIGMA = Limit(0.0, 1000.0, "σ", lo_open=True)
 # The initial mean Δy action of a policy (actions are in [-1, 1]).
 ACTION = Limit(-1.0, 1.0)
 
@@ -67,6 +70,7 @@ MAX_TIMESTEPS = 10**10  # PPO steps of one run
 MAX_BC_SAMPLES = 10**7  # states behaviour cloning stores (a few hundred MB)
 MAX_SEED = 2**32 - 1  # numpy's and torch's seeds
 MAX_RUNS = 10_000  # runs of one sweep (seeds x grid)
+MAX_DEFECTS = 100_000  # defects of one POD run (trials x per trial)
 
 
 class TooLarge(ValueError):

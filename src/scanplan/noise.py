@@ -18,6 +18,9 @@ import numpy as np
 
 # Cap 1/cos(alpha) so near-grazing points (which the incidence cutoff removes anyway) stay finite.
 _MAX_INCIDENCE_GAIN = 10.0
+# The speckle's standard deviation over a surface as a share of its amplitude (`perlin3` at
+# 400 000 random points: 0.278).
+SPECKLE_STD_RATIO = 0.28
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,14 @@ class NoiseModel:
     ) -> np.ndarray:
         gain = np.minimum(1.0 / np.maximum(cos_incidence, 1e-6), _MAX_INCIDENCE_GAIN)
         return self.sigma0_mm * (z_mm / working_distance_mm) ** 2 * gain
+
+    def std_mm(
+        self, z_mm: np.ndarray, cos_incidence: np.ndarray, working_distance_mm: float
+    ) -> np.ndarray:
+        """The standard deviation of `depth_noise_mm` at a point: the Gaussian part and the
+        speckle's, independent."""
+        sigma = self.sigma_mm(z_mm, cos_incidence, working_distance_mm)
+        return np.hypot(sigma, SPECKLE_STD_RATIO * self.speckle_amplitude_mm)
 
     def depth_noise_mm(
         self,

@@ -10,6 +10,7 @@ import sys
 import typer
 
 from scanplan.cli.common import OneLineErrors
+from scanplan.cli.defects import defects_cmd
 from scanplan.cli.demo import demo_cmd
 from scanplan.cli.parts import part_cmd
 from scanplan.cli.planning import evaluate_cmd, plan_cmd, scan_cmd
@@ -33,6 +34,7 @@ app.command("scan")(scan_cmd)
 app.command("plan")(plan_cmd)
 app.command("evaluate")(evaluate_cmd)
 app.command("view")(view_cmd)
+app.command("defects")(defects_cmd)
 app.command("train")(train_cmd)
 app.command("sweep")(sweep_cmd)
 app.command("export")(export_cmd)

@@ -1,0 +1,185 @@
+"""`scanplan defects`: the defects a plan would find. Seeded defects injected into the part,
+the plan's scan of it simulated, hit/miss against size fitted as a POD curve (a50, a90,
+a90/95), with the false calls the same plan makes on the defect-free part.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from scanplan.cli.common import progress_bar, user_errors
+from scanplan.cli.options import (
+    PartArg,
+    QuietOpt,
+    SeedOpt,
+    TrajectoryArg,
+    UnitsOpt,
+    bounded,
+    within,
+)
+from scanplan.cli.planning import (
+    EvaluateSchedulerOpt,
+    counted,
+    judged_context,
+    trial_runner,
+)
+from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, check_count
+
+TypeOpt = Annotated[str, typer.Option("--type", help="dent, bump, pit or scratch")]
+SizesOpt = Annotated[
+    str,
+    typer.Option(
+        help="LO:HI, the defects' depths in mm (a bump's height), spread evenly in log; "
+        "the width follows the depth: dent and bump 10x (diameter), pit 4x, scratch 4x "
+        "wide and 40x long"
+    ),
+]
+DefectTrialsOpt = Annotated[
+    int, typer.Option(help="trials (one defective part each)", callback=bounded(1, 10_000))
+]
+PerTrialOpt = Annotated[
+    int,
+    typer.Option(help="defects per trial, placed far apart", callback=bounded(1, 1000)),
+]
+KSigmaOpt = Annotated[
+    float,
+    typer.Option(
+        "--k-sigma",
+        help="a point is flagged beyond k·σ of the sensor noise there",
+        callback=within(K_SIGMA),
+    ),
+]
+MinPointsOpt = Annotated[
+    int, typer.Option(help="flagged points a call needs", callback=bounded(1, 10_000))
+]
+JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
+DirOpt = Annotated[
+    Path | None,
+    typer.Option("-o", "--output", help="directory for pod.json, pod.png and defects.csv"),
+]
+
+
+def parse_sizes(text: str) -> tuple[float, float]:
+    """'0.1:1.0' -> (0.1, 1.0) mm, each within `DEFECT_SIZE_MM`, LO <= HI."""
+    lo_text, sep, hi_text = text.partition(":")
+    try:
+        lo = float(lo_text)
+        hi = float(hi_text) if sep else lo
+    except ValueError:
+        raise ValueError(f"--sizes {text!r}: expected LO:HI in mm, e.g. 0.05:1.0") from None
+    DEFECT_SIZE_MM.check(lo, "--sizes LO")
+    DEFECT_SIZE_MM.check(hi, "--sizes HI")
+    if lo > hi:
+        raise ValueError(f"--sizes {text!r}: LO must be <= HI")
+    return lo, hi
+
+
+@user_errors
+def defects_cmd(
+    part: PartArg,
+    trajectory: TrajectoryArg,
+    kind: TypeOpt = "dent",
+    sizes: SizesOpt = "0.01:0.5",
+    trials: DefectTrialsOpt = 16,
+    per_trial: PerTrialOpt = 8,
+    seed: SeedOpt = 0,
+    k_sigma: KSigmaOpt = 4.0,
+    min_points: MinPointsOpt = 3,
+    as_json: JsonOpt = False,
+    output: DirOpt = None,
+    units: UnitsOpt = "mm",
+    scheduler: EvaluateSchedulerOpt = None,
+    quiet: QuietOpt = False,
+):
+    """Inject seeded defects of one type at random places on the surface to inspect, simulate
+    the plan's scan of each defective part, and fit the probability of detection against
+    size (hit/miss, logistic on log size by maximum likelihood): a50, a90 and a90/95 (the
+    95 % upper confidence bound on a90, delta method). A point is flagged where it departs
+    from the nominal surface by more than k·σ of the sensor noise at it; flagged points
+    form a call; a defect is found when a call lies on it. The false calls of the same plan
+    on the defect-free part are reported beside."""
+    # Deferred: the simulator loads trimesh, Embree and scipy; the report, matplotlib.
+    from scanplan.cli.training import check_cluster
+    from scanplan.defects import KINDS
+    from scanplan.metrics.detection import (
+        defect_run,
+        defect_tasks,
+        detector_for,
+        false_calls,
+    )
+    from scanplan.metrics.evaluation import surface_samples
+    from scanplan.part import load_part
+    from scanplan.trajectory import read_trajectory
+
+    start = time.perf_counter()
+    if kind not in KINDS:
+        raise ValueError(f"--type {kind!r}: use {', '.join(KINDS)}")
+    lo, hi = parse_sizes(sizes)
+    check_count(trials * per_trial, MAX_DEFECTS, "--trials x --per-trial defects")
+    check_cluster(scheduler, None)
+    traj = read_trajectory(trajectory)
+    if not traj.scanning.any():
+        raise ValueError(f"trajectory {trajectory} has no scanning pose")
+    context, note = judged_context(traj, None, None, None, None)
+    if note:
+        typer.echo(note, err=True)
+    the_part = load_part(part, units)
+    spec = context.spec
+    detector = detector_for(traj, spec.sensor, k_sigma=k_sigma, min_points=min_points)
+    inspected = the_part.with_roi(context.roi)
+    surface = surface_samples(inspected, spec.sensor, context, seed)
+    tasks = defect_tasks(
+        the_part, spec, traj, kind, (lo, hi), trials, per_trial, seed, context, detector, surface
+    )
+    with progress_bar("defect trials", quiet) as progress, trial_runner(scheduler, trials) as run:
+        result = defect_run(tasks, counted(run, progress), seed)
+    area = surface.area_mm2
+    with progress_bar("false calls", quiet) as progress:
+        calls = false_calls(
+            inspected, spec.sensor, traj.poses[traj.scanning], detector, area, seed,
+            progress=progress,
+        )  # fmt: skip
+    elapsed = time.perf_counter() - start
+    data = {
+        "part": the_part.name,
+        "planner": traj.planner,
+        **result.to_json_dict(),
+        "false_calls": calls.to_json_dict(),
+        "time_s": elapsed,
+    }
+    if output is not None:
+        from scanplan.files import atomic_write_text
+        from scanplan.report.pod import plot_pod
+
+        output.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(output / "pod.json", json.dumps(data, allow_nan=False, indent=1))
+        rows = ["kind,x_mm,y_mm,z_mm,depth_mm,width_mm,length_mm,found,flagged_points,landed"]
+        for d, h, f, n in zip(
+            result.defects, result.hits, result.flagged_points, result.landed_points, strict=True
+        ):
+            x, y, z = d.centre_mm
+            rows.append(
+                f"{d.kind},{x:.3f},{y:.3f},{z:.3f},{d.depth_mm:.5g},{d.width_mm:.5g},"
+                f"{d.length_mm:.5g},{int(h)},{int(f)},{int(n)}"
+            )
+        atomic_write_text(output / "defects.csv", "\n".join(rows) + "\n")
+        plot_pod(result, output / "pod.png", f"{the_part.name}: {trajectory.name}")
+    if as_json:
+        typer.echo(json.dumps(data, allow_nan=False))
+        return
+    typer.echo(
+        f"{result.fit.line(kind)} | {len(result.defects)} defects over {trials} trials, depth "
+        f"{lo:g}-{hi:g} mm, {result.seen_share:.1%} under the scan | call: > "
+        f"{k_sigma:g}σ, >= {min_points} points within {detector.link_mm:.2f} mm"
+        + (f" -> {output}" if output is not None else "")
+    )
+    typer.echo(
+        f"false calls on the defect-free part: {calls.count} ({calls.per_m2:.2f} per m² over "
+        f"{area / 1e6:.3f} m², {calls.flagged_points} of {calls.valid_points:,} points flagged)"
+        f" | {elapsed:.1f} s"
+    )

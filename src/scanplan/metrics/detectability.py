@@ -1,0 +1,203 @@
+"""The smallest defect a plan would find where, predicted without injecting any: from the
+scan of the defect-free part, at each sample of the surface to inspect, the points' density
+(profile spacing x column pitch on the surface) and the noise σ along the normal there.
+
+The model is the call rule of `detection` on a radial defect (dent, bump, pit) of depth a
+and its width (`defects.shape`): the points flagged are those where the defect's depth
+exceeds k·σ, inside a disc of radius r_k; the profiles cross it at the spacing, from an
+offset uniform over one spacing, each with a chord of r_k's disc sampled at the column pitch.
+A defect there is found when the flagged points reach the call's minimum: the share of
+offsets for which they do is the probability of detection at that sample; its mean over the
+surface is the predicted POD (defects land uniformly by area, as `defects.place` puts them).
+A scratch is not predicted.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from scanplan.defects import ASPECT
+from scanplan.metrics.detection import (
+    Detector,
+    FalseCalls,
+    calls,
+    cos_incidence,
+    flagged,
+    sigma_mm,
+)
+from scanplan.part import Part
+from scanplan.profilometer import LineProfilometer
+from scanplan.sensor import SensorSpec
+from scanplan.surface import VisibleSurface
+
+PREDICTED = ("dent", "bump", "pit")
+DENSITY_RADIUS_MM = 2.0
+COLUMN_STRIDE = 4  # the density is counted on every 4th column (x 4)
+OFFSETS = 16  # profile offsets averaged over, per sample
+MAX_PREDICTED_SAMPLES = 20_000
+
+
+def flagged_radius(kind: str, q: np.ndarray) -> np.ndarray:
+    """The radius over the defect's half-width (u) at which its depth profile falls to the
+    share q of its depth (0 where q >= 1: nothing flagged)."""
+    q = np.clip(q, 0.0, 1.0)
+    if kind == "pit":
+        return (1.0 - np.sqrt(q)) ** (1.0 / 6.0)  # (1 - u^6)^2 = q
+    return np.sqrt(1.0 - np.cbrt(q))  # (1 - u^2)^3 = q
+
+
+@dataclass(frozen=True)
+class Detectability:
+    """Per sample of the surface to inspect (k,): points_part (k, 3); sigma_mm the noise σ
+    along the normal; column_mm the column pitch and spacing_mm the profile spacing on the
+    surface (from the density; inf where no point came); seen whether any point came."""
+
+    points_part: np.ndarray
+    sigma_mm: np.ndarray
+    column_mm: np.ndarray
+    spacing_mm: np.ndarray
+    seen: np.ndarray
+
+    def pod_at(
+        self, kind: str, size_mm: float, detector: Detector, rows: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(k,) the probability a `kind` defect of depth `size_mm` at each sample is found."""
+        if kind not in PREDICTED:
+            raise ValueError(f"no prediction for a {kind}: only {', '.join(PREDICTED)}")
+        sl = slice(None) if rows is None else rows
+        sigma, col, gap = self.sigma_mm[sl], self.column_mm[sl], self.spacing_mm[sl]
+        seen = self.seen[sl]
+        half = ASPECT[kind] * size_mm / 2
+        rk = half * flagged_radius(kind, detector.k_sigma * sigma / size_mm)
+        rk = np.where(seen, rk, 0.0)
+        gap = np.where(seen, gap, 1.0)
+        col = np.where(seen, col, 1.0)
+        reach = int(np.ceil(np.max(rk / gap, initial=0.0))) + 1
+        j = np.arange(-reach, reach + 1)
+        found = np.zeros(len(rk))
+        for i in range(OFFSETS):
+            u = ((i + 0.5) / OFFSETS + j[None, :]) * gap[:, None]  # (k, j) profiles' offsets
+            chord = 2.0 * np.sqrt(np.maximum(rk[:, None] ** 2 - u**2, 0.0))
+            count = (chord / col[:, None]).sum(axis=1)
+            found += count >= detector.min_points
+        return found / OFFSETS
+
+    def predicted_pod(
+        self, kind: str, sizes_mm: np.ndarray, detector: Detector, seed: int = 0
+    ) -> np.ndarray:
+        """(s,) the predicted POD over the surface at each size (a subsample of samples)."""
+        rows = self._rows(seed)
+        return np.array([self.pod_at(kind, a, detector, rows).mean() for a in sizes_mm])
+
+    def predicted_a(
+        self, kind: str, detector: Detector, share: float = 0.9, seed: int = 0
+    ) -> float | None:
+        """The depth at which the predicted POD reaches `share` (None if it never does
+        below 100 mm: too much of the surface unseen)."""
+        grid = np.geomspace(1e-4, 100.0, 121)
+        pod = self.predicted_pod(kind, grid, detector, seed)
+        above = np.flatnonzero(pod >= share)
+        if len(above) == 0:
+            return None
+        i = above[0]
+        if i == 0:
+            return float(grid[0])
+        # Interpolate in log size between the grid's neighbours.
+        lo, hi = pod[i - 1], pod[i]
+        w = (share - lo) / max(hi - lo, 1e-12)
+        return float(math.exp(math.log(grid[i - 1]) + w * math.log(grid[i] / grid[i - 1])))
+
+    def smallest_mm(self, kind: str, detector: Detector, share: float = 0.9) -> np.ndarray:
+        """(k,) per sample the smallest depth found with probability `share` (inf: none
+        below 100 mm)."""
+        grid = np.geomspace(1e-3, 100.0, 61)
+        out = np.full(len(self.seen), np.inf)
+        for a in grid[::-1]:
+            out = np.where(self.pod_at(kind, a, detector) >= share, a, out)
+        return out
+
+    def _rows(self, seed: int) -> np.ndarray | None:
+        k = len(self.seen)
+        if k <= MAX_PREDICTED_SAMPLES:
+            return None
+        return np.sort(np.random.default_rng(seed).choice(k, MAX_PREDICTED_SAMPLES, False))
+
+    def to_json_dict(self) -> dict[str, Any]:
+        seen = self.seen
+        return {
+            "samples": len(seen),
+            "seen_share": float(seen.mean()) if len(seen) else 0.0,
+            "median_sigma_mm": _median(self.sigma_mm[seen]),
+            "median_column_mm": _median(self.column_mm[seen]),
+            "median_spacing_mm": _median(self.spacing_mm[seen]),
+        }
+
+
+def _median(values: np.ndarray) -> float | None:
+    return float(np.median(values)) if len(values) else None
+
+
+def survey(
+    part: Part,
+    sensor: SensorSpec,
+    poses: np.ndarray,
+    detector: Detector,
+    surface: VisibleSurface,
+    seed: int = 0,
+    chunk_poses: int = 256,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[FalseCalls, Detectability]:
+    """Scan the defect-free `part` (restricted to its surface to inspect) along the plan's
+    scanning `poses`: the calls it makes, every one false, and the detectability at each
+    sample of `surface`."""
+    profiler = LineProfilometer(part, sensor, seed=seed)
+    samples = surface.points
+    tree = cKDTree(samples)
+    k = len(samples)
+    count = np.zeros(k)
+    sig_sum, col_sum, n_sum = np.zeros(k), np.zeros(k), np.zeros(k)
+    kept: list[np.ndarray] = []
+    n_flag = n_valid = 0
+    for _, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
+        hit = flagged(scan, scan.true_z_sensor, sensor, detector.k_sigma)
+        kept.append(scan.points_part[hit])
+        valid = scan.valid
+        n_flag += int(hit.sum())
+        n_valid += int(valid.sum())
+        sig_n = sigma_mm(scan, sensor) * cos_incidence(scan, sensor)
+        col = np.full(valid.shape, np.nan)
+        col[:, :-1] = np.linalg.norm(np.diff(scan.points_part, axis=1), axis=2)
+        col[:, :-1][~(valid[:, 1:] & valid[:, :-1])] = np.nan
+        pick = (slice(None), slice(None, None, COLUMN_STRIDE))
+        v = valid[pick]
+        pts = scan.points_part[pick][v]
+        if len(pts) == 0:
+            continue
+        lo, hi = pts.min(axis=0) - DENSITY_RADIUS_MM, pts.max(axis=0) + DENSITY_RADIUS_MM
+        inside = np.flatnonzero(np.all((samples >= lo) & (samples <= hi), axis=1))
+        count[inside] += COLUMN_STRIDE * np.asarray(
+            cKDTree(pts).query_ball_point(samples[inside], DENSITY_RADIUS_MM, return_length=True)
+        )
+        dist, near = tree.query(pts, distance_upper_bound=DENSITY_RADIUS_MM)
+        ok = np.isfinite(dist)
+        c, s = col[pick][v][ok], sig_n[pick][v][ok]
+        good = np.isfinite(c) & np.isfinite(s)
+        near = near[ok][good]
+        sig_sum += np.bincount(near, s[good], k)
+        col_sum += np.bincount(near, c[good], k)
+        n_sum += np.bincount(near, minlength=k)
+    points = np.concatenate(kept) if kept else np.zeros((0, 3))
+    false = FalseCalls(len(calls(points, detector)), n_flag, n_valid, surface.area_mm2)
+    seen = (n_sum > 0) & (count > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sigma = np.where(seen, sig_sum / n_sum, np.inf)
+        column = np.where(seen, col_sum / n_sum, np.inf)
+        density = count / (math.pi * DENSITY_RADIUS_MM**2)
+        spacing = np.where(seen, 1.0 / (density * column), np.inf)
+    return false, Detectability(samples, sigma, column, spacing, seen)

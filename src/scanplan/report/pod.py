@@ -1,0 +1,54 @@
+"""The probability-of-detection curve as PNG (matplotlib): each injected defect a hit or a
+miss at its size, the fitted POD, its 95 % lower bound and the a50, a90 and a90/95 marks."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from scanplan.metrics.detection import DefectRun
+from scanplan.report.maps import _save
+
+
+def plot_pod(run: DefectRun, out_path: str | os.PathLike, title: str) -> Path:
+    """The POD curve of `run` (log size axis)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes, hits, fit = run.sizes_mm, run.hits, run.fit
+    fig, ax = plt.subplots(figsize=(7, 4.5), layout="constrained")
+    jitter = np.random.default_rng(0).uniform(-0.02, 0.02, len(sizes))
+    ax.scatter(
+        sizes, hits.astype(float) + jitter, s=10, c=np.where(hits, "tab:green", "tab:red"),
+        alpha=0.6, linewidths=0, label="found (1) / missed (0)",
+    )  # fmt: skip
+    grid = np.geomspace(sizes.min(), sizes.max(), 200)
+    pod = fit.pod(grid)
+    if pod is not None:
+        ax.plot(grid, pod, "k-", label="POD (logistic on ln a, ML)")
+        lower = fit.pod_lower95(grid)
+        if lower is not None:
+            ax.plot(grid, lower, "k--", label="95 % lower bound")
+    for value, name, style in (
+        (fit.a50, "a50", ":"),
+        (fit.a90, "a90", "-."),
+        (fit.a90_95, "a90/95", "--"),
+    ):
+        if value is not None and sizes.min() <= value <= sizes.max():
+            ax.axvline(value, color="tab:blue", linestyle=style, lw=1)
+            ax.text(value, 0.5, f" {name} {value:.3g}", color="tab:blue", rotation=90, va="center")
+    ax.axhline(0.9, color="grey", lw=0.5)
+    ax.set_xscale("log")
+    ax.set_ylim(-0.08, 1.08)
+    ax.set_xlabel(f"{run.kind} depth a (mm)")
+    ax.set_ylabel("probability of detection")
+    ax.set_title(f"{title}\n{fit.line(run.kind)}", fontsize=9)
+    ax.legend(loc="center right", fontsize=8)
+    path = Path(out_path)
+    _save(fig, path)
+    plt.close(fig)
+    return path
