@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 from scanplan.cli.common import progress_bar, user_errors
@@ -106,12 +107,8 @@ def defects_cmd(
     # Deferred: the simulator loads trimesh, Embree and scipy; the report, matplotlib.
     from scanplan.cli.training import check_cluster
     from scanplan.defects import KINDS
-    from scanplan.metrics.detection import (
-        defect_run,
-        defect_tasks,
-        detector_for,
-        false_calls,
-    )
+    from scanplan.metrics.detectability import PREDICTED, survey
+    from scanplan.metrics.detection import defect_run, defect_tasks, detector_for
     from scanplan.metrics.evaluation import surface_samples
     from scanplan.part import load_part
     from scanplan.trajectory import read_trajectory
@@ -139,17 +136,24 @@ def defects_cmd(
     with progress_bar("defect trials", quiet) as progress, trial_runner(scheduler, trials) as run:
         result = defect_run(tasks, counted(run, progress), seed)
     area = surface.area_mm2
-    with progress_bar("false calls", quiet) as progress:
-        calls = false_calls(
-            inspected, spec.sensor, traj.poses[traj.scanning], detector, area, seed,
+    with progress_bar("defect-free scan", quiet) as progress:
+        calls, detectability = survey(
+            inspected, spec.sensor, traj.poses[traj.scanning], detector, surface, seed,
             progress=progress,
         )  # fmt: skip
+    predicted: dict[str, float | None] = {}
+    if kind in PREDICTED:
+        predicted = {
+            f"a{round(100 * share)}_mm": detectability.predicted_a(kind, detector, share, seed)
+            for share in (0.5, 0.9)
+        }
     elapsed = time.perf_counter() - start
     data = {
         "part": the_part.name,
         "planner": traj.planner,
         **result.to_json_dict(),
         "false_calls": calls.to_json_dict(),
+        "predicted": {**predicted, **detectability.to_json_dict()} if predicted else None,
         "time_s": elapsed,
     }
     if output is not None:
@@ -169,6 +173,20 @@ def defects_cmd(
             )
         atomic_write_text(output / "defects.csv", "\n".join(rows) + "\n")
         plot_pod(result, output / "pod.png", f"{the_part.name}: {trajectory.name}")
+        if predicted:
+            from scanplan.report.pod import plot_detectability
+
+            smallest = detectability.smallest_mm(kind, detector)
+            table = np.column_stack([detectability.points_part, smallest])
+            text = "x_mm,y_mm,z_mm,smallest_a90_mm\n" + "\n".join(
+                ",".join(f"{v:.4g}" if i == 3 else f"{v:.3f}" for i, v in enumerate(row))
+                for row in table
+            )
+            atomic_write_text(output / "detectability.csv", text + "\n")
+            plot_detectability(
+                detectability.points_part, smallest, kind,
+                output / "detectability.png", f"{the_part.name}: {trajectory.name}",
+            )  # fmt: skip
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
         return
@@ -178,8 +196,17 @@ def defects_cmd(
         f"{k_sigma:g}σ, >= {min_points} points within {detector.link_mm:.2f} mm"
         + (f" -> {output}" if output is not None else "")
     )
+    if predicted:
+        typer.echo(
+            f"predicted from the defect-free scan's density and noise: a50 "
+            f"{_mm(predicted['a50_mm'])}, a90 {_mm(predicted['a90_mm'])}"
+        )
     typer.echo(
         f"false calls on the defect-free part: {calls.count} ({calls.per_m2:.2f} per m² over "
         f"{area / 1e6:.3f} m², {calls.flagged_points} of {calls.valid_points:,} points flagged)"
         f" | {elapsed:.1f} s"
     )
+
+
+def _mm(value: float | None) -> str:
+    return "not reached (too much of the surface unseen)" if value is None else f"{value:.3g} mm"

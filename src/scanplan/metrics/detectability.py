@@ -41,6 +41,7 @@ DENSITY_RADIUS_MM = 2.0
 COLUMN_STRIDE = 4  # the density is counted on every 4th column (x 4)
 OFFSETS = 16  # profile offsets averaged over, per sample
 MAX_PREDICTED_SAMPLES = 20_000
+WIDE_PROFILES = 4.0  # beyond this many profile spacings of radius, count by area
 
 
 def flagged_radius(kind: str, q: np.ndarray) -> np.ndarray:
@@ -78,7 +79,10 @@ class Detectability:
         rk = np.where(seen, rk, 0.0)
         gap = np.where(seen, gap, 1.0)
         col = np.where(seen, col, 1.0)
-        reach = int(np.ceil(np.max(rk / gap, initial=0.0))) + 1
+        ratio = rk / gap
+        # Far more than a few profiles across the disc: the count is its area's.
+        wide = ratio > WIDE_PROFILES
+        reach = int(np.ceil(np.max(np.where(wide, 0.0, ratio), initial=0.0))) + 1
         j = np.arange(-reach, reach + 1)
         found = np.zeros(len(rk))
         for i in range(OFFSETS):
@@ -86,6 +90,8 @@ class Detectability:
             chord = 2.0 * np.sqrt(np.maximum(rk[:, None] ** 2 - u**2, 0.0))
             count = (chord / col[:, None]).sum(axis=1)
             found += count >= detector.min_points
+        area_count = np.pi * rk**2 / (gap * col)
+        found = np.where(wide, OFFSETS * (area_count >= detector.min_points), found)
         return found / OFFSETS
 
     def predicted_pod(
@@ -100,26 +106,32 @@ class Detectability:
     ) -> float | None:
         """The depth at which the predicted POD reaches `share` (None if it never does
         below 100 mm: too much of the surface unseen)."""
-        grid = np.geomspace(1e-4, 100.0, 121)
-        pod = self.predicted_pod(kind, grid, detector, seed)
-        above = np.flatnonzero(pod >= share)
-        if len(above) == 0:
-            return None
-        i = above[0]
-        if i == 0:
-            return float(grid[0])
-        # Interpolate in log size between the grid's neighbours.
-        lo, hi = pod[i - 1], pod[i]
-        w = (share - lo) / max(hi - lo, 1e-12)
-        return float(math.exp(math.log(grid[i - 1]) + w * math.log(grid[i] / grid[i - 1])))
+        rows = self._rows(seed)
+        grid = np.geomspace(1e-4, 100.0, 145)
+        previous = 0.0
+        for i, a in enumerate(grid):
+            pod = float(self.pod_at(kind, a, detector, rows).mean())
+            if pod >= share:
+                if i == 0:
+                    return float(a)
+                # Interpolate in log size between the grid's neighbours.
+                w = (share - previous) / max(pod - previous, 1e-12)
+                return float(math.exp(math.log(grid[i - 1]) + w * math.log(a / grid[i - 1])))
+            previous = pod
+        return None
 
     def smallest_mm(self, kind: str, detector: Detector, share: float = 0.9) -> np.ndarray:
         """(k,) per sample the smallest depth found with probability `share` (inf: none
         below 100 mm)."""
         grid = np.geomspace(1e-3, 100.0, 61)
         out = np.full(len(self.seen), np.inf)
-        for a in grid[::-1]:
-            out = np.where(self.pod_at(kind, a, detector) >= share, a, out)
+        todo = np.flatnonzero(self.seen)
+        for a in grid:
+            if len(todo) == 0:
+                break
+            now = self.pod_at(kind, a, detector, todo) >= share
+            out[todo[now]] = a
+            todo = todo[~now]
         return out
 
     def _rows(self, seed: int) -> np.ndarray | None:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.metrics.detection import DefectRun
-from scanplan.report.maps import _save
+from scanplan.report.maps import MAX_PLOT_POINTS, _save
 
 
 def plot_pod(run: DefectRun, out_path: str | os.PathLike, title: str) -> Path:
@@ -48,6 +48,48 @@ def plot_pod(run: DefectRun, out_path: str | os.PathLike, title: str) -> Path:
     ax.set_ylabel("probability of detection")
     ax.set_title(f"{title}\n{fit.line(run.kind)}", fontsize=9)
     ax.legend(loc="center right", fontsize=8)
+    path = Path(out_path)
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def plot_detectability(
+    points_part: np.ndarray,
+    smallest_mm: np.ndarray,
+    kind: str,
+    out_path: str | os.PathLike,
+    title: str,
+) -> Path:
+    """The detectability map seen from above: each sample of the surface to inspect coloured
+    by the smallest `kind` depth found there with 90 % probability (grey: none)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    xy = points_part[:, :2]
+    keep = np.random.default_rng(0).permutation(len(xy))[:MAX_PLOT_POINTS]
+    finite = np.isfinite(smallest_mm[keep])
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    aspect = float(np.clip((hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9), 0.3, 3.0))
+    fig, ax = plt.subplots(figsize=(8, 8 * aspect + 1.0), layout="constrained")
+    never = keep[~finite]
+    ax.scatter(xy[never, 0], xy[never, 1], s=2, c="0.7", linewidths=0, label="none found")
+    shown = keep[finite]
+    order = shown[np.argsort(smallest_mm[shown])]  # the worst drawn last
+    values = smallest_mm[order]
+    if len(values):
+        dots = ax.scatter(
+            xy[order, 0], xy[order, 1], c=values, s=2, cmap="viridis", linewidths=0,
+            norm=LogNorm(vmin=max(values.min(), 1e-4), vmax=max(values.max(), 2e-4)),
+        )  # fmt: skip
+        fig.colorbar(dots, ax=ax, label=f"smallest {kind} depth found at 90 % (mm)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(f"{title}\npredicted detectability ({kind}, depth)", fontsize=9)
     path = Path(out_path)
     _save(fig, path)
     plt.close(fig)
