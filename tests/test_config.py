@@ -97,8 +97,8 @@ def test_sensor_body_default_from_the_datasheet(tmp_path):
     [
         (("working_distance_mm = 300", "working_distance_mm = 0.3"), "metres"),
         (("working_distance_mm = 300", "working_distance_mm = 6000"), "working_distance_mm"),
-        (("working_distance_mm = 300", "working_distance_mm = inf"), "finite"),
-        (("fov_deg = 45", "fov_deg = nan"), "fov_deg: Input should be a finite"),
+        (("working_distance_mm = 300", "working_distance_mm = inf"), r"inf is not in \[10, 5000\]"),
+        (("fov_deg = 45", "fov_deg = nan"), r"fov_deg: nan is not in \[0.1, 170\) deg"),
         (("fov_deg = 45", "fov_deg = 175"), "fov_deg"),
         (("points_per_profile = 2048", "points_per_profile = 200000"), "points_per_profile"),
         (("points_per_profile = 2048", "points_per_profile = 20.5"), "points_per_profile"),

@@ -10,6 +10,7 @@ import numpy as np
 import trimesh
 
 from scanplan.files import atomic_write_bytes
+from scanplan.limits import MAX_CLOUD_POINTS, check_count
 from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer
 from scanplan.quantities import point_orientation_error
@@ -59,6 +60,14 @@ def simulate_cloud(
     valid points (seeded), in scan order; memory stays within about twice that."""
     profilometer = LineProfilometer(part, sensor, seed=seed)
     poses = traj.scan_poses
+    # Every ray may give a point: the most the cloud may hold, before any is measured.
+    most = len(poses) * sensor.points_per_profile
+    check_count(
+        most if max_points is None else min(most, max_points),
+        MAX_CLOUD_POINTS,
+        "points the cloud would hold in memory",
+        "--max-points N keeps a sample",
+    )
     swath_of_pose = traj.swath[traj.scanning]
     rng = np.random.default_rng(seed)
     fields = [*PointCloud.__dataclass_fields__, "key"]

@@ -40,24 +40,40 @@ from pydantic import (
     model_validator,
 )
 
+from scanplan.limits import (
+    FOV_DEG,
+    INCIDENCE_CUTOFF_DEG,
+    LENGTH_MM,
+    MAX_PROFILE_POINTS,
+    MAX_SEED,
+    NOISE_UM,
+    SENSOR_BODY_MM,
+    SPECKLE_SCALE_MM,
+    TRIANGULATION_DEG,
+    WORKING_DISTANCE_MM,
+    Z_RESOLUTION_UM,
+    Limit,
+    in_range,
+)
 from scanplan.noise import NoiseModel
 from scanplan.sensor import PRESETS, SensorSpec
 
 # Strict: "300" or true where a number belongs is a mistake in the file, not a value to coerce.
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 _STRICT = ConfigDict(extra="forbid", strict=True)
 MAX_SENSOR_FILE_BYTES = 1024**2
 
 
 class NoiseFile(BaseModel):
     model_config = _STRICT
-    sigma0_um: FiniteFloat = Field(4.0, ge=0)
-    speckle_amplitude_um: FiniteFloat = Field(15.0, ge=0)
-    speckle_scale_mm: FiniteFloat = Field(0.5, gt=0)
-    seed: int = Field(0, ge=0)
+    sigma0_um: Annotated[float, in_range(NOISE_UM)] = 4.0
+    speckle_amplitude_um: Annotated[float, in_range(NOISE_UM)] = 15.0
+    speckle_scale_mm: Annotated[float, in_range(SPECKLE_SCALE_MM)] = 0.5
+    seed: Annotated[int, in_range(Limit(0, MAX_SEED))] = 0
 
 
-Interval = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+Interval = Annotated[
+    list[Annotated[float, in_range(SENSOR_BODY_MM)]], Field(min_length=2, max_length=2)
+]
 
 
 class BodyFile(BaseModel):
@@ -74,30 +90,35 @@ class BodyFile(BaseModel):
             interval = getattr(self, axis)
             if interval is not None and not interval[0] < interval[1]:
                 raise ValueError(f"{axis}: min must be < max, got {interval}")
+            # A body thinner than a millimetre is a typing slip, not a sensor.
+            if interval is not None and not interval[1] - interval[0] >= 1.0:
+                raise ValueError(f"{axis}: {interval} is less than 1 mm wide")
         return self
 
 
 class SensorFile(BaseModel):
+    """Every number in the range of `scanplan.limits` a real sensor can have."""
+
     model_config = _STRICT
     name: str = "custom"
-    working_distance_mm: FiniteFloat
-    z_range_mm: FiniteFloat = Field(gt=0)
-    fov_deg: FiniteFloat = Field(gt=0, lt=170)
-    points_per_profile: int = Field(ge=2, le=SensorSpec.MAX_POINTS)
-    z_resolution_um: FiniteFloat = Field(ge=0)
-    triangulation_angle_deg: FiniteFloat = Field(gt=0, lt=90)
+    working_distance_mm: Annotated[float, in_range(WORKING_DISTANCE_MM)]
+    z_range_mm: Annotated[float, in_range(LENGTH_MM)]
+    fov_deg: Annotated[float, in_range(FOV_DEG)]
+    points_per_profile: Annotated[int, in_range(Limit(2, MAX_PROFILE_POINTS))]
+    z_resolution_um: Annotated[float, in_range(Z_RESOLUTION_UM, or_zero=True)]
+    triangulation_angle_deg: Annotated[float, in_range(TRIANGULATION_DEG)]
     camera_side: Literal["+y", "-y"] = "+y"
-    incidence_cutoff_deg: FiniteFloat = Field(80.0, gt=0, le=90)
+    incidence_cutoff_deg: Annotated[float, in_range(INCIDENCE_CUTOFF_DEG)] = 80.0
     noise: NoiseFile | bool = True
     body: BodyFile | None = None
 
-    @field_validator("working_distance_mm")
+    @field_validator("working_distance_mm", mode="before")
     @classmethod
-    def _plausible_distance(cls, value: float) -> float:
-        lo, hi = SensorSpec.MIN_WORKING_DISTANCE_MM, SensorSpec.MAX_WORKING_DISTANCE_MM
-        if not lo <= value <= hi:
-            hint = " (a value in metres? give millimetres)" if value < lo else ""
-            raise ValueError(f"{value:g} mm is outside {lo:g}–{hi:g} mm{hint}")
+    def _metres_hint(cls, value: object) -> object:
+        if isinstance(value, int | float) and 0 < value < WORKING_DISTANCE_MM.lo:
+            raise ValueError(
+                f"{value:g} is not in {WORKING_DISTANCE_MM} (a value in metres? give millimetres)"
+            )
         return value
 
     @model_validator(mode="after")

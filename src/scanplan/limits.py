@@ -7,33 +7,60 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
+
+from pydantic import AfterValidator
 
 
 @dataclass(frozen=True)
 class Limit:
-    """A closed range [lo, hi] (an open lower end on request) with its unit."""
+    """A closed range [lo, hi] (an end open on request) with its unit."""
 
     lo: float
     hi: float
     unit: str = ""
     lo_open: bool = False
+    hi_open: bool = False
 
     def __str__(self) -> str:
         unit = f" {self.unit}" if self.unit else ""
-        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]{unit}"
+        return (
+            f"{'(' if self.lo_open else '['}{_number(self.lo)}, {_number(self.hi)}"
+            f"{')' if self.hi_open else ']'}{unit}"
+        )
 
     def contains(self, value: float) -> bool:
+        try:
+            value = float(value)
+        except (OverflowError, TypeError, ValueError):  # an int of 400 digits, a string
+            return False
         if not math.isfinite(value):
             return False
         above_lo = value > self.lo if self.lo_open else value >= self.lo
-        return above_lo and value <= self.hi
+        below_hi = value < self.hi if self.hi_open else value <= self.hi
+        return above_lo and below_hi
 
     def check(self, value: float, what: str) -> float:
         """`value`, or a ValueError naming `what` (an option or a file's field), the value
         and the range."""
         if not self.contains(value):
-            raise ValueError(f"{what} {value:g} is not in {self}")
+            raise ValueError(f"{what} {_number(value)} is not in {self}")
         return value
+
+
+def _number(value: object) -> str:
+    """A value as the message shows it: whole numbers in full up to 16 digits, else %g (an
+    int too long for a float by its length)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, int):
+        if abs(value) < 10**16:
+            return str(value)
+        try:
+            return f"{float(value):g}"
+        except OverflowError:
+            return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    return str(int(value)) if value.is_integer() and abs(value) < 1e16 else f"{value:g}"
 
 
 # Lengths: a micron to 100 m covers any part, cell or arm; a signed length (an offset of an
@@ -44,9 +71,29 @@ SIGNED_LENGTH_MM = Limit(-1e5, 1e5, "mm")
 LINK_MM = Limit(1.0, 1e5, "mm")
 # One step of the sensor along a pass (profile spacing, the agent's Δy/Δz limits).
 STEP_MM = Limit(1e-3, 1e3, "mm")
-# Angles: a step or a tolerance, at most a half turn.
-ANGLE_DEG = Limit(0.0, 180.0, "deg", lo_open=True)
-ANGLE_RAD = Limit(0.0, math.pi, "rad", lo_open=True)
+# Angles: a step or a tolerance, at most a half turn, at least a thousandth of a degree (no
+# controller resolves finer).
+ANGLE_DEG = Limit(1e-3, 180.0, "deg")
+ANGLE_RAD = Limit(math.radians(1e-3), math.pi, "rad")
+# A sensor's datasheet (SPEC §2): what a real line profilometer can have.
+WORKING_DISTANCE_MM = Limit(10.0, 5000.0, "mm")
+FOV_DEG = Limit(0.1, 170.0, "deg", hi_open=True)
+TRIANGULATION_DEG = Limit(1.0, 89.0, "deg")
+INCIDENCE_CUTOFF_DEG = Limit(1.0, 90.0, "deg")
+MAX_PROFILE_POINTS = 100_000
+# A sensor's Z resolution: 0 (none) or from a nanometre up (a denormal one overflows).
+Z_RESOLUTION_UM = Limit(1e-3, 1000.0, "µm")
+# Sensor noise: a profilometer noisier than a millimetre is none; the speckle's correlation
+# length is a sensor step's size.
+NOISE_UM = Limit(0.0, 1000.0, "µm")
+SPECKLE_SCALE_MM = Limit(1e-3, 1e3, "mm")
+# The sensor body box, in the sensor frame: a few metres either way at the most.
+SENSOR_BODY_MM = Limit(-5000.0, 5000.0, "mm")
+# A trajectory's positions (part frame) and an arm's accelerations.
+POSITION_MM = Limit(-1e5, 1e5, "mm")
+TCP_ACCEL_MM_S2 = Limit(1e-3, 1e6, "mm/s²")
+TURN_SPEED_DEG_S = Limit(1e-3, 1e4, "deg/s")
+TURN_ACCEL_DEG_S2 = Limit(1e-3, 1e6, "deg/s²")
 # A joint's position or limit: a few turns either way at most.
 JOINT_DEG = Limit(-1080.0, 1080.0, "deg")
 # In-spec distance tolerance |z_s - W_d|.
@@ -82,5 +129,30 @@ def check_count(count: int, limit: int, what: str, hint: str = "") -> int:
     """`count`, or a ValueError saying what would be too many (before it is allocated)."""
     if count > limit:
         more = f"; {hint}" if hint else ""
-        raise TooLarge(f"{what}: {count:,} is more than the {limit:,} allowed{more}")
+        shown = f"{count:,}" if count < 10**15 else f"{float(count):.3g}"
+        raise TooLarge(f"{what}: {shown} is more than the {limit:,} allowed{more}")
     return count
+
+
+# Sizes a file may announce before it is read whole.
+MAX_VIEWS = 10_000  # view records of one trajectory (a plan has tens)
+MAX_POSES = 10_000_000  # poses of one trajectory (a 1 GiB CSV holds about this many)
+MAX_TRIANGLES = 20_000_000  # a part's triangles (about 3 GB once loaded)
+# Rays one `scan` or `demo` casts (poses x points per profile): about a day on this machine.
+MAX_RAYS = 10**11
+# Points a point cloud holds in memory before it is written (64 bytes each: ~10 GB).
+MAX_CLOUD_POINTS = 150_000_000
+MAX_POLICY_PARAMS = 100_000_000  # an actor's weights (400 MB of float32; ours has 5 000)
+
+
+def in_range(limit: Limit, or_zero: bool = False) -> Any:
+    """The pydantic check of a number in `limit` (or 0, on request), as
+    `Annotated[float, in_range(LENGTH_MM)]`: its message names the value and the range
+    ("1e+308 is not in [-100000, 100000] mm"); the loader adds the file and the field."""
+
+    def check(value: float) -> float:
+        if not (limit.contains(value) or (or_zero and value == 0)):
+            raise ValueError(f"{_number(value)} is not {'0 or ' if or_zero else ''}in {limit}")
+        return value
+
+    return AfterValidator(check)

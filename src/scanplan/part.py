@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from scanplan.limits import MAX_TRIANGLES, check_count
 from scanplan.parts import PART_NAMES, build_part, surface_to_inspect
 from scanplan.raycast import RayEngine
 from scanplan.roi import RegionOfInterest, parse_roi
@@ -215,6 +216,12 @@ def load_mesh_file(path: str | Path, units: str = "mm") -> trimesh.Trimesh:
             f"{MAX_MESH_FILE_BYTES / 1024**3:.0f} GiB a part may have: decimate it first"
         )
     try:
+        if suffix == ".stl":
+            with path.open("rb") as f:
+                head = f.read(84)
+            count = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
+            if 84 + 50 * count == size:  # a binary STL: its triangles counted before reading
+                check_count(count, MAX_TRIANGLES, f"part file {path}: triangles", "decimate it")
         data = path.read_bytes()
     except OSError as exc:
         raise ValueError(f"part file {path} cannot be read: {exc.strerror or exc}") from None
@@ -339,6 +346,8 @@ def _builtin(name: str) -> Part:
 def load_part(spec: str | Path, units: str = "mm") -> Part:
     """A built-in part name (see `scanplan.parts.PART_NAMES`) or a mesh file path."""
     text = str(spec)
+    if units not in UNITS_TO_MM:  # for a built-in part too: a mistake, whatever the part
+        raise ValueError(f"unknown units {units!r}: use one of {', '.join(UNITS_TO_MM)}")
     if text in PART_NAMES:
         return _builtin(text)
     path = Path(text)

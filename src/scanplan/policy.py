@@ -18,7 +18,14 @@ from pydantic import model_validator as _model_validator
 from torch import nn
 
 from scanplan.context import scan_spec_from_record
-from scanplan.limits import ANGLE_RAD, LENGTH_MM, STEP_MM
+from scanplan.limits import (
+    ANGLE_RAD,
+    LENGTH_MM,
+    MAX_POLICY_PARAMS,
+    STEP_MM,
+    check_count,
+    in_range,
+)
 from scanplan.observation import observation_size
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
@@ -33,15 +40,14 @@ OBSERVATION = (
     "SwathScanEnv observation (see scanplan.env docstring): normalized P (if use_position), "
     "theta, D, alpha, delta-s (+ look-ahead if lookahead)"
 )
+MAX_POLICY_JSON_BYTES = 16 * 1024**2
 StrictBool = Annotated[bool, Field(strict=True)]
 PositiveInt = Annotated[int, Field(strict=True, gt=0)]
 Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 Positive = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
-Length = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=LENGTH_MM.lo, le=LENGTH_MM.hi)]
-StepMm = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=STEP_MM.lo, le=STEP_MM.hi)]
-StepRad = Annotated[
-    float, Field(strict=True, allow_inf_nan=False, gt=ANGLE_RAD.lo, le=ANGLE_RAD.hi)
-]
+Length = Annotated[float, Field(strict=True), in_range(LENGTH_MM)]
+StepMm = Annotated[float, Field(strict=True), in_range(STEP_MM)]
+StepRad = Annotated[float, Field(strict=True), in_range(ANGLE_RAD)]
 
 
 class _Model(BaseModel):
@@ -64,6 +70,13 @@ class Architecture(_Model):
         if v not in (3, 4):
             raise ValueError(f"must be 3 (Δy, Δz, Δθ) or 4 (v1: + Δφ), got {v}")
         return v
+
+    @_model_validator(mode="after")
+    def _bounded(self) -> Architecture:
+        # Before any weight is read or a layer allocated: hidden = [1e9, 1e9] is 4 EB.
+        count = sum(math.prod(shape) for shape in self.tensor_shapes().values())
+        check_count(count, MAX_POLICY_PARAMS, "the architecture's parameters")
+        return self
 
     def tensor_shapes(self) -> dict[str, tuple[int, ...]]:
         """Names and shapes of the `nn.Sequential` state dict that `build_actor` makes."""
@@ -267,6 +280,8 @@ def read_meta(path: str | Path) -> tuple[Path, PolicyMeta]:
     json_path = path / POLICY_JSON if path.is_dir() else path
     if not json_path.is_file():
         raise ValueError(f"policy {path}: no policy.json found")
+    if json_path.stat().st_size > MAX_POLICY_JSON_BYTES:
+        raise ValueError(f"policy {json_path}: larger than 16 MiB, not a policy's description")
     try:
         data = json.loads(json_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
@@ -290,6 +305,14 @@ def load_policy(path: str | Path) -> Policy:
     weights (safetensors only: no pickle is read). Any problem is one-line ValueError."""
     json_path, meta = read_meta(path)
     weights = _weights_path(json_path.parent, meta.weights)
+    # The architecture fixes the weights' size: a larger file is not its weights (and is not
+    # read whole); the safetensors header is small.
+    params = sum(math.prod(shape) for shape in meta.architecture.tensor_shapes().values())
+    if weights.stat().st_size > 4 * params + 1024**2:
+        raise ValueError(
+            f"policy {weights}: {weights.stat().st_size:,} bytes, more than the "
+            f"architecture's {params:,} float32 weights take"
+        )
     state = read_tensors(weights)
     if problem := tensor_problem(state, meta.architecture):
         raise ValueError(f"policy {weights}: {problem}")

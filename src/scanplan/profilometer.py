@@ -15,6 +15,7 @@ from functools import cached_property
 
 import numpy as np
 
+from scanplan.limits import MAX_RAYS, check_count
 from scanplan.part import Part
 from scanplan.sensor import SensorSpec
 
@@ -192,8 +193,15 @@ class LineProfilometer:
     ) -> Iterator[tuple[int, Scan]]:
         """(index of its first pose, Scan) for each chunk of `chunk_poses` poses in order, so
         a long trajectory is measured in bounded memory. Of a part with a region of interest,
-        only the points on its faces (`Scan.on_faces`). progress(done, total) after each."""
+        only the points on its faces (`Scan.on_faces`). progress(done, total) after each.
+        The rays (poses x points per profile) are counted against `MAX_RAYS` first."""
         m = len(poses)
+        check_count(
+            m * self.spec.points_per_profile,
+            MAX_RAYS,
+            f"rays to cast ({m:,} poses x {self.spec.points_per_profile:,} points per profile)",
+            "give fewer poses or --points",
+        )
         for lo in range(0, m, chunk_poses):
             hi = min(m, lo + chunk_poses)
             scan = self.measure_many(poses[lo:hi])

@@ -12,6 +12,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from scanplan.limits import FOV_DEG, MAX_PROFILE_POINTS, WORKING_DISTANCE_MM
 from scanplan.noise import NoiseModel
 
 
@@ -35,10 +36,10 @@ class SensorSpec:
     body_max_mm: tuple[float, float, float] | None = None
 
     # Datasheet values no real line profilometer has (SPEC §2).
-    MIN_WORKING_DISTANCE_MM: ClassVar[float] = 10.0
-    MAX_WORKING_DISTANCE_MM: ClassVar[float] = 5000.0
-    MAX_FOV_RAD: ClassVar[float] = math.radians(170.0)
-    MAX_POINTS: ClassVar[int] = 100_000
+    MIN_WORKING_DISTANCE_MM: ClassVar[float] = WORKING_DISTANCE_MM.lo
+    MAX_WORKING_DISTANCE_MM: ClassVar[float] = WORKING_DISTANCE_MM.hi
+    MAX_FOV_RAD: ClassVar[float] = math.radians(FOV_DEG.hi)
+    MAX_POINTS: ClassVar[int] = MAX_PROFILE_POINTS
 
     def __post_init__(self) -> None:
         fields = {

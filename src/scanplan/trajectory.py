@@ -16,10 +16,11 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from scipy.spatial.transform import Rotation
 
 from scanplan.files import atomic_write_text, dumps_json
+from scanplan.limits import MAX_POSES, MAX_VIEWS, POSITION_MM, check_count, in_range
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
 # The records of `Trajectory.meta` a plan file carries (JSON-able values).
@@ -238,6 +239,7 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
     numbers = numbers[1:]
     if not numbers:
         raise ValueError(f"trajectory file {path} has a header but no poses")
+    check_count(len(numbers), MAX_POSES, f"trajectory file {path}: poses")
     cells = [lines[i - 1].split(",") for i in numbers]
     counts = np.array([len(c) for c in cells])
     wrong = np.flatnonzero(counts != len(CSV_COLUMNS))
@@ -256,6 +258,13 @@ def read_csv(path: str | os.PathLike) -> Trajectory:
         row, col = np.argwhere(bad)[0]
         raise ValueError(
             f"trajectory file {path} line {line[row]}, column {CSV_COLUMNS[col]}: non-finite value"
+        )
+    far = ~((values[:, 2:5] >= POSITION_MM.lo) & (values[:, 2:5] <= POSITION_MM.hi))
+    if far.any():
+        row, col = np.argwhere(far)[0]
+        POSITION_MM.check(
+            values[row, 2 + col],
+            f"trajectory file {path} line {line[row]}, column {CSV_COLUMNS[2 + col]}:",
         )
     swath = values[:, 0]
     bad_swath = (swath != np.round(swath)) | (np.abs(swath) > _INT32.max)
@@ -356,7 +365,7 @@ class _PoseJson(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
     swath: int = Field(ge=int(_INT32.min), le=int(_INT32.max))
     scanning: bool
-    position_mm: list[FiniteFloat] = Field(min_length=3, max_length=3)
+    position_mm: list[Annotated[float, in_range(POSITION_MM)]] = Field(min_length=3, max_length=3)
     quaternion_wxyz: list[FiniteFloat] = Field(min_length=4, max_length=4)
 
 
@@ -368,6 +377,16 @@ class _ViewJson(BaseModel):
     axis: list[FiniteFloat] = Field(min_length=3, max_length=3)
     first_swath: int
     last_swath: int
+
+    @model_validator(mode="after")
+    def _unit_axis_and_a_block(self) -> _ViewJson:
+        if not abs(math.hypot(*self.axis) - 1.0) <= 1e-3:
+            raise ValueError(f"axis {self.axis} is not a unit vector")
+        if not 0 <= self.first_swath <= self.last_swath <= _INT32.max:
+            raise ValueError(
+                f"swaths {self.first_swath}..{self.last_swath} are not a block of pass indices"
+            )
+        return self
 
 
 class _TrajectoryJson(BaseModel):
@@ -386,7 +405,7 @@ def _pydantic_where(exc: ValidationError) -> str:
     where = ""
     for part in err["loc"]:
         where += f"[{part}]" if isinstance(part, int) else f".{part}"
-    return f"{where.lstrip('.') or 'file'}: {err['msg']}"
+    return f"{where.lstrip('.') or 'file'}: {str(err['msg']).removeprefix('Value error, ')}"
 
 
 def read_json(path: str | os.PathLike) -> Trajectory:
@@ -401,6 +420,9 @@ def read_json(path: str | os.PathLike) -> Trajectory:
         raise ValueError(f"trajectory file {path} is not valid JSON: {exc}") from None
     if not isinstance(data, dict):
         raise ValueError(f"trajectory file {path}: expected a JSON object with 'poses'")
+    for key, limit in (("poses", MAX_POSES), ("views", MAX_VIEWS)):
+        if isinstance(data.get(key), list):  # counted before each is validated
+            check_count(len(data[key]), limit, f"trajectory file {path}: {key}")
     try:
         model = _TrajectoryJson.model_validate(data)
     except ValidationError as exc:
@@ -431,6 +453,7 @@ def _validated_views(path: Path, views: object) -> list[dict]:
     """A CSV's views record, checked as the JSON's is."""
     if not isinstance(views, list):
         raise ValueError(f"trajectory file {path}: the views record must be a JSON list")
+    check_count(len(views), MAX_VIEWS, f"trajectory file {path}: views")
     try:
         return [_ViewJson.model_validate(v).model_dump() for v in views]
     except ValidationError as exc:

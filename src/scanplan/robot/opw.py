@@ -102,6 +102,12 @@ class OPWRobot:
 
     def inverse(self, T_base_flange: np.ndarray) -> np.ndarray:
         """(n, 8, 6); index = 4·wrist + 2·shoulder + elbow (the paper's i…viii)."""
+        # A pose whose wrist centre lies on an axis (s = 0, or a forearm along the shoulder)
+        # divides by zero: its angles come out NaN, the pose unreachable, without a warning.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self._inverse(T_base_flange)
+
+    def _inverse(self, T_base_flange: np.ndarray) -> np.ndarray:
         T = inv_rigid(self.base) @ as_poses(T_base_flange) @ inv_rigid(self.flange)
         n = len(T)
         R = T[:, :3, :3]

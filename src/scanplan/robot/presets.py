@@ -6,6 +6,7 @@ its motion limits (`motion_limits`) for the cycle time.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
@@ -22,7 +23,18 @@ from scanplan.cycle import (
     MotionLimits,
     joint_accels,
 )
-from scanplan.limits import JOINT_DEG, LENGTH_MM, LINK_MM, SIGNED_LENGTH_MM, SPEED_MM_S
+from scanplan.limits import (
+    JOINT_DEG,
+    LENGTH_MM,
+    LINK_MM,
+    SIGNED_LENGTH_MM,
+    SPEED_MM_S,
+    TCP_ACCEL_MM_S2,
+    TURN_ACCEL_DEG_S2,
+    TURN_SPEED_DEG_S,
+    Limit,
+    in_range,
+)
 from scanplan.robot.base import Robot
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.ur import UR_MODELS
@@ -160,6 +172,9 @@ MOTION_LIMITS: dict[str, MotionLimits] = {
 }
 
 Six = Annotated[list[float], Field(min_length=6, max_length=6)]
+SixAngles = Annotated[
+    list[Annotated[float, in_range(JOINT_DEG)]], Field(min_length=6, max_length=6)
+]
 
 
 class RobotFile(BaseModel):
@@ -167,51 +182,53 @@ class RobotFile(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     name: str = "custom"
-    a1: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
-    a2: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
-    b: float = Field(0.0, allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
-    c1: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
-    c2: float = Field(allow_inf_nan=False, ge=LINK_MM.lo, le=LINK_MM.hi)
-    c3: float = Field(allow_inf_nan=False, ge=SIGNED_LENGTH_MM.lo, le=SIGNED_LENGTH_MM.hi)
-    c4: float = Field(ge=0, le=LENGTH_MM.hi, allow_inf_nan=False)
-    offsets_deg: Six = Field(default_factory=lambda: [0.0] * 6)
+    a1: Annotated[float, in_range(SIGNED_LENGTH_MM)]
+    a2: Annotated[float, in_range(SIGNED_LENGTH_MM)]
+    b: Annotated[float, in_range(SIGNED_LENGTH_MM)] = 0.0
+    c1: Annotated[float, in_range(SIGNED_LENGTH_MM)]
+    c2: Annotated[float, in_range(LINK_MM)]
+    c3: Annotated[float, in_range(SIGNED_LENGTH_MM)]
+    c4: Annotated[float, in_range(Limit(0.0, LENGTH_MM.hi, "mm"))]
+    offsets_deg: SixAngles = Field(default_factory=lambda: [0.0] * 6)
     sign: Annotated[list[Literal[-1, 1]], Field(min_length=6, max_length=6)] = [1, 1, 1, 1, 1, 1]
     limits_deg: Annotated[
-        list[Annotated[list[float], Field(min_length=2, max_length=2)]],
+        list[
+            Annotated[
+                list[Annotated[float, in_range(JOINT_DEG)]], Field(min_length=2, max_length=2)
+            ]
+        ],
         Field(min_length=6, max_length=6),
     ]
     base: Six = Field(default_factory=lambda: [0.0] * 6)  # x,y,z mm, A,B,C deg
     flange: Six = Field(default_factory=lambda: [0.0] * 6)
     j3_from_horizontal: bool = False
     # Motion limits for the cycle time; the nominal arm's where the file gives none.
-    speed_mm_s: float = Field(
-        NOMINAL.speed_mm_s, allow_inf_nan=False, ge=SPEED_MM_S.lo, le=SPEED_MM_S.hi
+    speed_mm_s: Annotated[float, in_range(SPEED_MM_S)] = NOMINAL.speed_mm_s
+    accel_mm_s2: Annotated[float, in_range(TCP_ACCEL_MM_S2)] = NOMINAL.accel_mm_s2
+    angular_speed_deg_s: Annotated[float, in_range(TURN_SPEED_DEG_S)] = NOMINAL.angular_speed_deg_s
+    angular_accel_deg_s2: Annotated[float, in_range(TURN_ACCEL_DEG_S2)] = (
+        NOMINAL.angular_accel_deg_s2
     )
-    accel_mm_s2: float = Field(NOMINAL.accel_mm_s2, gt=0, allow_inf_nan=False)
-    angular_speed_deg_s: float = Field(NOMINAL.angular_speed_deg_s, gt=0, allow_inf_nan=False)
-    angular_accel_deg_s2: float = Field(NOMINAL.angular_accel_deg_s2, gt=0, allow_inf_nan=False)
-    joint_speed_deg_s: Six = Field(default_factory=lambda: list(NOMINAL.joint_speed_deg_s))
-    joint_accel_deg_s2: Six = Field(default_factory=lambda: list(NOMINAL.joint_accel_deg_s2))
+    joint_speed_deg_s: Annotated[
+        list[Annotated[float, in_range(TURN_SPEED_DEG_S)]], Field(min_length=6, max_length=6)
+    ] = Field(default_factory=lambda: list(NOMINAL.joint_speed_deg_s))
+    joint_accel_deg_s2: Annotated[
+        list[Annotated[float, in_range(TURN_ACCEL_DEG_S2)]], Field(min_length=6, max_length=6)
+    ] = Field(default_factory=lambda: list(NOMINAL.joint_accel_deg_s2))
 
     @model_validator(mode="after")
     def _finite_and_ordered(self) -> RobotFile:
         for i, (lo, hi) in enumerate(self.limits_deg):
             if not lo < hi:
                 raise ValueError(f"limits_deg joint {i + 1}: lower {lo} must be < upper {hi}")
-        for name in ("offsets_deg", "base", "flange"):
-            if not np.isfinite(getattr(self, name)).all():
-                raise ValueError(f"{name} must be finite")
         # Where a cell's numbers can be: 1e308 is finite, but no arm's.
         for name in ("base", "flange"):
             for v in getattr(self, name)[:3]:
                 SIGNED_LENGTH_MM.check(v, f"{name} x,y,z")
-        for name in ("offsets_deg", "limits_deg"):
-            for v in np.ravel(getattr(self, name)):
-                JOINT_DEG.check(float(v), name)
-        for name in ("joint_speed_deg_s", "joint_accel_deg_s2"):
-            values = np.asarray(getattr(self, name))
-            if not (np.isfinite(values).all() and (values > 0).all()):
-                raise ValueError(f"{name} must be finite numbers > 0")
+            for v in getattr(self, name)[3:]:
+                JOINT_DEG.check(v, f"{name} A,B,C")
+        # The forearm (elbow to wrist centre) is a link as c2 is: a zero one has no elbow.
+        LINK_MM.check(math.hypot(self.a2, self.c3), "the forearm's length hypot(a2, c3)")
         return self
 
     def motion_limits(self, source: str) -> MotionLimits:
@@ -245,6 +262,9 @@ class RobotFile(BaseModel):
         )
 
 
+MAX_ROBOT_FILE_BYTES = 1024**2
+
+
 def load_robot_file(path: str | Path) -> OPWRobot:
     """A TOML file of OPW parameters -> OPWRobot; ValueError naming the file and field."""
     return _robot_file(path).to_robot()
@@ -253,6 +273,8 @@ def load_robot_file(path: str | Path) -> OPWRobot:
 def _robot_file(path: str | Path) -> RobotFile:
     path = Path(path)
     try:
+        if path.stat().st_size > MAX_ROBOT_FILE_BYTES:
+            raise ValueError(f"robot file {path} is larger than 1 MiB: not a robot's parameters")
         data = tomllib.loads(path.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -261,9 +283,10 @@ def _robot_file(path: str | Path) -> RobotFile:
         return RobotFile.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        where = ".".join(str(p) for p in err["loc"]) or "file"
+        where = "".join(f"{p}: " if i == 0 else f".{p}" for i, p in enumerate(err["loc"]))
+        where = where.replace(": .", ".").rstrip(" :")
         msg = str(err["msg"]).removeprefix("Value error, ")
-        raise ValueError(f"robot file {path}: {where}: {msg}") from None
+        raise ValueError(f"robot file {path}: {where + ': ' if where else ''}{msg}") from None
 
 
 def get_robot(robot: str | Path | Robot) -> Robot:
