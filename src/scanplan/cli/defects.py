@@ -25,6 +25,7 @@ from scanplan.cli.options import (
 )
 from scanplan.cli.planning import (
     EvaluateSchedulerOpt,
+    EvaluateViewsOpt,
     counted,
     judged_context,
     trial_runner,
@@ -94,6 +95,7 @@ def defects_cmd(
     as_json: JsonOpt = False,
     output: DirOpt = None,
     units: UnitsOpt = "mm",
+    views: EvaluateViewsOpt = None,
     scheduler: EvaluateSchedulerOpt = None,
     quiet: QuietOpt = False,
 ):
@@ -122,7 +124,7 @@ def defects_cmd(
     traj = read_trajectory(trajectory)
     if not traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
-    context, note = judged_context(traj, None, None, None, None)
+    context, note = judged_context(traj, None, None, None, views)
     if note:
         typer.echo(note, err=True)
     the_part = load_part(part, units)

@@ -107,6 +107,9 @@ class Detectability:
         """The depth at which the predicted POD reaches `share` (None if it never does
         below 100 mm: too much of the surface unseen)."""
         rows = self._rows(seed)
+        seen = self.seen if rows is None else self.seen[rows]
+        if not seen.mean() >= share:  # unseen samples never find a defect
+            return None
         grid = np.geomspace(1e-4, 100.0, 145)
         previous = 0.0
         for i, a in enumerate(grid):

@@ -137,10 +137,18 @@ def fit_pod(sizes_mm: np.ndarray, hits: np.ndarray) -> PodFit:
         grad = np.array([-1.0 / b1, -(LOGIT90 - b0) / b1**2])
         se = math.sqrt(max(float(grad @ cov @ grad), 0.0))
         a90_95 = _finite(math.exp(ln_a90 + Z95 * se))
-    note = ""
+    notes = []
     a90 = math.exp(ln_a90)
     if a90 > hi:
-        note = f"a90 extrapolated beyond the largest size tried, {hi:.3g} mm"
+        notes.append(f"a90 extrapolated beyond the largest size tried, {hi:.3g} mm")
     elif a90 < lo:
-        note = f"a90 extrapolated below the smallest size tried, {lo:.3g} mm"
+        notes.append(f"a90 extrapolated below the smallest size tried, {lo:.3g} mm")
+    top = a >= np.quantile(a, 0.75)
+    if y[top].mean() < 0.9:
+        # The logistic climbs to 1; a plan that leaves surface unseen levels off below it.
+        notes.append(
+            f"only {y[top].mean():.0%} of the largest quarter ({a[top].min():.3g} mm and up) "
+            "found: POD levels off below 90 % there, the fitted a90 assumes it does not"
+        )
+    note = "; ".join(notes)
     return PodFit(a, y, "fit", b0, b1, _finite(math.exp(ln_a50)), _finite(a90), a90_95, note, cov)
