@@ -141,7 +141,7 @@ def defects_cmd(
     with progress_bar("defect-free scan", quiet) as progress:
         calls, detectability = survey(
             inspected, spec.sensor, traj.poses[traj.scanning], detector, surface, seed,
-            progress=progress,
+            progress=progress, swath=traj.swath[traj.scanning],
         )  # fmt: skip
     predicted: dict[str, float | None] = {}
     if kind in PREDICTED:

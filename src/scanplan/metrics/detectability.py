@@ -57,42 +57,42 @@ def flagged_radius(kind: str, q: np.ndarray) -> np.ndarray:
 class Detectability:
     """Per sample of the surface to inspect (k,): points_part (k, 3); sigma_mm the noise σ
     along the normal; column_mm the column pitch and spacing_mm the profile spacing on the
-    surface (from the density; inf where no point came); seen whether any point came."""
+    surface (from the density; inf where no point came); seen whether any point came.
+    pass_sample (p,) sorted and pass_share (p,): per pass over a sample, the sample and the
+    share of its points that pass brought (None: one pass everywhere)."""
 
     points_part: np.ndarray
     sigma_mm: np.ndarray
     column_mm: np.ndarray
     spacing_mm: np.ndarray
     seen: np.ndarray
+    pass_sample: np.ndarray | None = None
+    pass_share: np.ndarray | None = None
 
     def pod_at(
         self, kind: str, size_mm: float, detector: Detector, rows: np.ndarray | None = None
     ) -> np.ndarray:
-        """(k,) the probability a `kind` defect of depth `size_mm` at each sample is found."""
+        """(k,) the probability a `kind` defect of depth `size_mm` at each sample (or at the
+        sorted sample indices `rows`) is found: by any of the passes over it, each with its
+        own share of the points and an offset of its own."""
         if kind not in PREDICTED:
             raise ValueError(f"no prediction for a {kind}: only {', '.join(PREDICTED)}")
-        sl = slice(None) if rows is None else rows
-        sigma, col, gap = self.sigma_mm[sl], self.column_mm[sl], self.spacing_mm[sl]
-        seen = self.seen[sl]
+        idx = np.arange(len(self.seen)) if rows is None else rows
+        seen = self.seen[idx]
+        sigma = np.where(seen, self.sigma_mm[idx], 1.0)
+        gap = np.where(seen, self.spacing_mm[idx], 1.0)
+        col = np.where(seen, self.column_mm[idx], 1.0)
         half = ASPECT[kind] * size_mm / 2
-        rk = half * flagged_radius(kind, detector.k_sigma * sigma / size_mm)
-        rk = np.where(seen, rk, 0.0)
-        gap = np.where(seen, gap, 1.0)
-        col = np.where(seen, col, 1.0)
-        ratio = rk / gap
-        # Far more than a few profiles across the disc: the count is its area's.
-        wide = ratio > WIDE_PROFILES
-        reach = int(np.ceil(np.max(np.where(wide, 0.0, ratio), initial=0.0))) + 1
-        j = np.arange(-reach, reach + 1)
-        found = np.zeros(len(rk))
-        for i in range(OFFSETS):
-            u = ((i + 0.5) / OFFSETS + j[None, :]) * gap[:, None]  # (k, j) profiles' offsets
-            chord = 2.0 * np.sqrt(np.maximum(rk[:, None] ** 2 - u**2, 0.0))
-            count = (chord / col[:, None]).sum(axis=1)
-            found += count >= detector.min_points
-        area_count = np.pi * rk**2 / (gap * col)
-        found = np.where(wide, OFFSETS * (area_count >= detector.min_points), found)
-        return found / OFFSETS
+        rk = np.where(seen, half * flagged_radius(kind, detector.k_sigma * sigma / size_mm), 0.0)
+        if self.pass_sample is None or self.pass_share is None:
+            return np.where(seen, _found_share(rk, gap, col, detector.min_points), 0.0)
+        mask = np.isin(self.pass_sample, idx)
+        pos = np.searchsorted(idx, self.pass_sample[mask])
+        # A pass with a share of the points there has its profiles that much farther apart.
+        gap_pass = gap[pos] / self.pass_share[mask]
+        found = _found_share(rk[pos], gap_pass, col[pos], detector.min_points)
+        log_miss = np.bincount(pos, np.log(np.maximum(1.0 - found, 1e-300)), len(idx))
+        return np.where(seen, 1.0 - np.exp(log_miss), 0.0)
 
     def predicted_pod(
         self, kind: str, sizes_mm: np.ndarray, detector: Detector, seed: int = 0
@@ -154,6 +154,23 @@ class Detectability:
         }
 
 
+def _found_share(rk: np.ndarray, gap: np.ndarray, col: np.ndarray, min_points: int) -> np.ndarray:
+    """(k,) the share of profile offsets for which a disc of radius rk, crossed by profiles
+    `gap` apart and sampled `col` apart along them, holds `min_points` points."""
+    ratio = rk / gap
+    # Far more than a few profiles across the disc: the count is its area's.
+    wide = ratio > WIDE_PROFILES
+    reach = int(np.ceil(np.max(np.where(wide, 0.0, ratio), initial=0.0))) + 1
+    j = np.arange(-reach, reach + 1)
+    found = np.zeros(len(rk))
+    for i in range(OFFSETS):
+        u = ((i + 0.5) / OFFSETS + j[None, :]) * gap[:, None]  # (k, j) profiles' offsets
+        chord = 2.0 * np.sqrt(np.maximum(rk[:, None] ** 2 - u**2, 0.0))
+        found += (chord / col[:, None]).sum(axis=1) >= min_points
+    area_count = np.pi * rk**2 / (gap * col)
+    return np.where(wide, (area_count >= min_points).astype(float), found / OFFSETS)
+
+
 def _median(values: np.ndarray) -> float | None:
     return float(np.median(values)) if len(values) else None
 
@@ -167,10 +184,11 @@ def survey(
     seed: int = 0,
     chunk_poses: int = 256,
     progress: Callable[[int, int], None] | None = None,
+    swath: np.ndarray | None = None,
 ) -> tuple[FalseCalls, Detectability]:
     """Scan the defect-free `part` (restricted to its surface to inspect) along the plan's
     scanning `poses`: the calls it makes, every one false, and the detectability at each
-    sample of `surface`."""
+    sample of `surface`; swath (m,): the pass of each pose (None: one pass)."""
     profiler = LineProfilometer(part, sensor, seed=seed)
     samples = surface.points
     tree = cKDTree(samples)
@@ -179,7 +197,12 @@ def survey(
     sig_sum, col_sum, n_sum = np.zeros(k), np.zeros(k), np.zeros(k)
     kept: list[np.ndarray] = []
     n_flag = n_valid = 0
-    for _, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
+    pass_of = np.zeros(len(poses), np.int64) if swath is None else np.asarray(swath, np.int64)
+    pass_of = np.unique(pass_of, return_inverse=True)[1]
+    n_pass = int(pass_of.max(initial=0)) + 1
+    pair_keys: list[np.ndarray] = []
+    pair_counts: list[np.ndarray] = []
+    for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
         hit = flagged(scan, scan.true_z_sensor, sensor, detector.k_sigma)
         kept.append(scan.points_part[hit])
         valid = scan.valid
@@ -192,6 +215,7 @@ def survey(
         pick = (slice(None), slice(None, None, COLUMN_STRIDE))
         v = valid[pick]
         pts = scan.points_part[pick][v]
+        point_pass = pass_of[lo + np.nonzero(v)[0]]
         if len(pts) == 0:
             continue
         lo, hi = pts.min(axis=0) - DENSITY_RADIUS_MM, pts.max(axis=0) + DENSITY_RADIUS_MM
@@ -204,6 +228,9 @@ def survey(
         c, s = col[pick][v][ok], sig_n[pick][v][ok]
         good = np.isfinite(c) & np.isfinite(s)
         near = near[ok][good]
+        keys, counts = np.unique(near * n_pass + point_pass[ok][good], return_counts=True)
+        pair_keys.append(keys)
+        pair_counts.append(counts)
         sig_sum += np.bincount(near, s[good], k)
         col_sum += np.bincount(near, c[good], k)
         n_sum += np.bincount(near, minlength=k)
@@ -215,4 +242,11 @@ def survey(
         column = np.where(seen, col_sum / n_sum, np.inf)
         density = count / (math.pi * DENSITY_RADIUS_MM**2)
         spacing = np.where(seen, 1.0 / (density * column), np.inf)
-    return false, Detectability(samples, sigma, column, spacing, seen)
+    keys = np.concatenate(pair_keys) if pair_keys else np.zeros(0, np.int64)
+    counts = np.concatenate(pair_counts) if pair_counts else np.zeros(0, np.int64)
+    keys, inverse = np.unique(keys, return_inverse=True)
+    counts = np.bincount(inverse, counts, len(keys))
+    pass_sample = keys // n_pass
+    total = np.bincount(pass_sample, counts, k)
+    share = counts / np.maximum(total[pass_sample], 1.0)
+    return false, Detectability(samples, sigma, column, spacing, seen, pass_sample, share)

@@ -81,9 +81,11 @@ def plot_detectability(
     order = shown[np.argsort(smallest_mm[shown])]  # the worst drawn last
     values = smallest_mm[order]
     if len(values):
+        # The colour scale spans the 1st-99th percentiles: a few edge samples stay legible.
+        lo_mm, hi_mm = np.percentile(values, [1, 99])
         dots = ax.scatter(
             xy[order, 0], xy[order, 1], c=values, s=2, cmap="viridis", linewidths=0,
-            norm=LogNorm(vmin=max(values.min(), 1e-4), vmax=max(values.max(), 2e-4)),
+            norm=LogNorm(vmin=max(lo_mm, 1e-4), vmax=max(hi_mm, 1.01 * max(lo_mm, 1e-4))),
         )  # fmt: skip
         fig.colorbar(dots, ax=ax, label=f"smallest {kind} depth found at 90 % (mm)")
     ax.set_aspect("equal")
