@@ -38,21 +38,35 @@ def dumps_json(value: Any, **kwargs: Any) -> str:
     return json.dumps(json_safe(value), allow_nan=False, **kwargs)
 
 
+# The signal (SIGINT, SIGTERM) the command line was stopped by, if any: its handler's
+# exception can be swallowed by a library (an optional import in a bare `except`), so the
+# writers below look here too and write nothing once it is set.
+stopped_by: int | None = None
+
+
+def _stop_if_stopped() -> None:
+    if stopped_by is not None:
+        raise KeyboardInterrupt
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write a file so that a failure never leaves a half-written one behind."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         # mkstemp makes the file private (0600); give it the mode a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
+        _stop_if_stopped()
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         raise
 
 
@@ -64,6 +78,7 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 def replace_directory(new: Path, target: Path) -> None:
     """Move the directory `new` to `target`, replacing what is there: the old one moves aside
     first and comes back if the move fails (POSIX has no atomic swap of directories)."""
+    _stop_if_stopped()
     if not target.exists():
         os.rename(new, target)
         return

@@ -19,6 +19,8 @@ from typing import Any, TypeVar
 import typer
 import typer.core
 
+from scanplan import files
+
 
 class OneLineErrors(typer.core.TyperGroup):
     """The app's Click group: a usage error (unknown option or command, missing argument, a
@@ -36,11 +38,23 @@ class OneLineErrors(typer.core.TyperGroup):
     ) -> Any:
         from typer._click.exceptions import ClickException
 
-        # SIGTERM unwinds like Ctrl-C (signals reach only the main thread's handlers).
+        # SIGTERM unwinds like Ctrl-C (signals reach only the main thread's handlers); both
+        # are recorded too, in case a library swallows the exception (see `files.stopped_by`).
+        global _said_stopped
+        files.stopped_by = None  # a fresh run (tests invoke the app many times in one process)
+        _said_stopped = False
         main_thread = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGTERM, _terminated) if main_thread else None
+        previous = (
+            (signal.signal(signal.SIGTERM, _terminated), signal.signal(signal.SIGINT, _interrupted))
+            if main_thread
+            else None
+        )
         try:
             rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+            # Stopped, and not said yet: the exception was swallowed by a library, or Typer
+            # made it a silent exit 130 (outside a command's own handler).
+            if files.stopped_by is not None and not _said_stopped and rv in (None, 0, 130):
+                raise Terminated if files.stopped_by == signal.SIGTERM else KeyboardInterrupt
         except Terminated:
             typer.echo("terminated", err=True)
             return _exit(143, standalone_mode)
@@ -58,14 +72,20 @@ class OneLineErrors(typer.core.TyperGroup):
                 return code
             sys.exit(code)
         except typer.Abort:
-            typer.echo("interrupted", err=True)
-            return _exit(130, standalone_mode)
+            terminated = files.stopped_by == signal.SIGTERM
+            typer.echo("terminated" if terminated else "interrupted", err=True)
+            return _exit(143 if terminated else 130, standalone_mode)
         finally:
-            if main_thread:
-                signal.signal(signal.SIGTERM, previous)
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous[0])
+                signal.signal(signal.SIGINT, previous[1])
         if not standalone_mode:
             return rv
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+# Whether `user_errors` has printed the stop line already (not twice).
+_said_stopped = False
 
 
 class Terminated(KeyboardInterrupt):
@@ -74,7 +94,28 @@ class Terminated(KeyboardInterrupt):
 
 
 def _terminated(signum: int, frame: Any) -> None:
-    raise Terminated
+    if _stop_here(signum, frame):
+        raise Terminated
+
+
+def _interrupted(signum: int, frame: Any) -> None:
+    if _stop_here(signum, frame):
+        raise KeyboardInterrupt
+
+
+def _stop_here(signum: int, frame: Any) -> bool:
+    """Record the signal and say whether to raise here: not inside a module's import (the
+    signal comes again 50 ms later instead), where an exception crashes a C extension's
+    initialization (cascadio segfaults) or is swallowed around an optional import (trimesh)."""
+    files.stopped_by = signum
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            again = threading.Timer(0.05, os.kill, (os.getpid(), signum))
+            again.daemon = True
+            again.start()
+            return False
+        frame = frame.f_back
+    return True
 
 
 def _exit(code: int, standalone_mode: bool) -> int:
@@ -125,20 +166,21 @@ def user_errors(fn: F) -> F:
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            return fn(*args, **kwargs)
+            result = fn(*args, **kwargs)
+            if files.stopped_by is not None:  # a library swallowed the signal's exception
+                raise Terminated if files.stopped_by == signal.SIGTERM else KeyboardInterrupt
+            return result
         except (ValueError, OSError) as exc:
             message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             typer.echo(f"error: {message}", err=True)
             raise typer.Exit(2) from None
-        except Terminated:
-            typer.echo("terminated", err=True)
-            raise typer.Exit(143) from None
-        except KeyboardInterrupt:
-            typer.echo("interrupted", err=True)
-            raise typer.Exit(130) from None
+        except KeyboardInterrupt as exc:  # Terminated too, and a writer's check of stopped_by
+            raise _stop(isinstance(exc, Terminated) or files.stopped_by == signal.SIGTERM) from None
         except (typer.Exit, typer.Abort):
             raise
         except Exception as exc:
+            if files.stopped_by is not None:  # what a swallowed signal left half-imported
+                raise _stop(files.stopped_by == signal.SIGTERM) from None
             if os.environ.get(DEBUG_ENV):
                 raise
             first = str(exc).splitlines()[0] if str(exc) else ""
@@ -150,6 +192,14 @@ def user_errors(fn: F) -> F:
             raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def _stop(terminated: bool) -> typer.Exit:
+    """The one line of a stopped run, said once, and its exit."""
+    global _said_stopped
+    _said_stopped = True
+    typer.echo("terminated" if terminated else "interrupted", err=True)
+    return typer.Exit(143 if terminated else 130)
 
 
 @contextmanager
