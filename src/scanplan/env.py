@@ -121,6 +121,8 @@ class SwathScanEnv(gym.Env):
     a random sub-segment of the pass of length U(lo, hi) mm starting at a random station: a
     whole pass is ~2000 steps at Δs_opt = 0.5 mm, so training on sub-segments gives PPO many
     more, shorter episodes per update. `segment_mm=None` runs whole passes (planning).
+    The sensor starts aligned at W_d (the paper's start); with `start_offset_mm` /
+    `start_pitch_deg` (training, beyond the paper) off it by a random depth and pitch error.
 
     ## Episode end
 
@@ -157,14 +159,28 @@ class SwathScanEnv(gym.Env):
         lost_patience: int | None = 150,
         max_episode_steps: int | None = None,
         roll: bool = False,
+        start_offset_mm: float = 0.0,
+        start_pitch_deg: float = 0.0,
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal).
         scan_spec: the scan's parameters (sensor, Δs_opt, α_max, weights; `env.spec` is
         Gymnasium's); its sensor is sub-sampled to `fan_points` columns (0 = all) and made
         noiseless unless `noise`. roll: env v1 (4-D action with Δφ, φ and β observed,
-        the orientation reward on the full angle between beam and mean normal)."""
+        the orientation reward on the full angle between beam and mean normal).
+        start_offset_mm, start_pitch_deg: an episode starts off the aligned pose by a depth
+        error U(−a, a) mm along the beam and a pitch error U(−b, b)° about the footprint
+        (beyond the paper, which is silent on the start; 0 = the aligned start, v0 only)."""
         super().__init__()
+        if (start_offset_mm or start_pitch_deg) and roll:
+            raise ValueError("start_offset_mm / start_pitch_deg: env v0 only")
+        if not (0.0 <= start_offset_mm < 1e4 and 0.0 <= start_pitch_deg <= 60.0):
+            raise ValueError(
+                f"start offsets: depth {start_offset_mm} mm not in [0, 1e4) or pitch "
+                f"{start_pitch_deg}° not in [0, 60]"
+            )
+        self.start_offset_mm = float(start_offset_mm)
+        self.start_pitch_deg = float(start_pitch_deg)
         spec = scan_spec or ScanSpec()
         sensor = spec.sensor.with_points(fan_points) if fan_points else spec.sensor
         self.scan_spec = spec.with_sensor(sensor if noise else sensor.without_noise())
@@ -242,11 +258,29 @@ class SwathScanEnv(gym.Env):
         self.s_end_mm = s1
         self.nominal_steps, limit = step_budget(s1 - s0, self.scan_spec)
         self.step_limit = self.max_episode_steps or limit
-        dyn.start(dyn.aligned_start(s0))
+        dyn.start(self._offset_start(dyn, dyn.aligned_start(s0)))
         self.start_state = dyn.state.copy()
         self.steps = 0
         self.invalid_run = 0
         return self._observation(), {"d_mm": dyn.d_mm, "alpha_rad": dyn.alpha_rad}
+
+    def _offset_start(self, dyn: PassDynamics, aligned: np.ndarray) -> np.ndarray:
+        """The aligned start moved by the random start offsets (if any): pitched about the
+        footprint (W_d along the beam), then moved along the new beam; the aligned start
+        itself where the offset pose sees nothing. No draw when both offsets are 0."""
+        if not (self.start_offset_mm or self.start_pitch_deg):
+            return aligned
+        rng = self.np_random
+        dz = float(rng.uniform(-1.0, 1.0)) * self.start_offset_mm
+        dth = math.radians(float(rng.uniform(-1.0, 1.0)) * self.start_pitch_deg)
+        s, h, th = (float(x) for x in aligned)
+        wd = self.scan_spec.working_distance_mm
+        foot_s, foot_h = s - wd * math.sin(th), h - wd * math.cos(th)
+        th2 = th + dth
+        s2 = foot_s + (wd - dz) * math.sin(th2)  # dz > 0: towards the part (D < W_d)
+        h2 = foot_h + (wd - dz) * math.cos(th2)
+        state = np.array([s2, h2, th2])
+        return state if dyn.measure(state).valid.any() else aligned
 
     # ---- steps ----------------------------------------------------------------------------
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

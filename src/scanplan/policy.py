@@ -103,6 +103,9 @@ class EnvOptions(_Model):
     dtheta_max_rad: StepRad | None = None
     dphi_max_rad: StepRad | None = None
     roll: StrictBool = False
+    # Training only (random start offsets, beyond the paper); planning starts aligned.
+    start_offset_mm: Annotated[float, Field(ge=0, lt=1e4, allow_inf_nan=False)] = 0.0
+    start_pitch_deg: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.0
 
     @field_validator("segment_mm")
     @classmethod

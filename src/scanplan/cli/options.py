@@ -214,6 +214,14 @@ InitAdvanceOpt = Annotated[
         callback=within(ACTION),
     ),
 ]
+StartOffsetOpt = Annotated[
+    str,
+    typer.Option(
+        help="random start error of each episode, MM,DEG: depth along the beam U(-MM, MM) and "
+        "pitch U(-DEG, DEG) off the aligned start (beyond the paper, which is silent on the "
+        "start; 0,0 = the aligned start)"
+    ),
+]
 BcSamplesOpt = Annotated[
     int,
     typer.Option(

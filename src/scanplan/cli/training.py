@@ -23,6 +23,7 @@ from scanplan.cli.options import (
     LogStdInitOpt,
     NEnvsOpt,
     ProceduralOpt,
+    StartOffsetOpt,
     StateOpt,
     bounded,
     parse_floats,
@@ -52,6 +53,7 @@ def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
         fan_points=shared["fan_points"],
         log_std_init=parse_floats(shared["log_std_init"], "--log-std-init"),
         init_advance=shared["init_advance"],
+        start_offset=parse_floats(shared["start_offset"], "--start-offset"),
         bc_samples=shared["bc_samples"],
         command=shlex.join(["scanplan", *sys.argv[1:]]),
         **own,
@@ -94,10 +96,15 @@ def train_cmd(
     fan_points: FanPointsOpt = None,
     log_std_init: LogStdInitOpt = "0",
     init_advance: InitAdvanceOpt = None,
+    start_offset: StartOffsetOpt = "0,0",
     bc_samples: BcSamplesOpt = 0,
     no_progress: NoProgressOpt = False,
 ):
-    """Train the pass agent with PPO (the paper's hyperparameters) and write a policy."""
+    """Train the pass agent with PPO (the paper's hyperparameters) and write a policy.
+
+    With no options this is the paper's recipe from scratch, which on the training piece does
+    not learn to follow a surface (its policy does not beat the fixed line on the door; why:
+    scanplan/policies/default/README.md); the shipped policy is warm-started (--bc-samples)."""
     # Deferred: learn loads torch and stable-baselines3.
     from scanplan.learn.checkpoint import CHECKPOINT_DIR
     from scanplan.learn.train import train
@@ -246,6 +253,7 @@ def sweep_cmd(
     fan_points: FanPointsOpt = None,
     log_std_init: LogStdInitOpt = "0",
     init_advance: InitAdvanceOpt = None,
+    start_offset: StartOffsetOpt = "0,0",
     bc_samples: BcSamplesOpt = 0,
     n_envs: NEnvsOpt = 16,
 ):

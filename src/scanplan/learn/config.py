@@ -22,6 +22,10 @@ VEC_ENVS = ("batched", "subproc")
 ACTIVATIONS = ("relu", "tanh")
 MAX_ENVS = 1024
 MAX_WIDTH = 4096  # units of a hidden layer
+# --start-offset bounds: within the depth window (Z_r/2 = 125 mm for the default sensor) and
+# SwathScanEnv's own pitch bound.
+MAX_START_OFFSET_MM = 1000.0
+MAX_START_PITCH_DEG = 60.0
 
 
 @dataclass
@@ -155,6 +159,7 @@ def recipe_config(
     fan_points: int | None = None,
     log_std_init: tuple[float, ...] = (0.0,),
     init_advance: float | None = None,
+    start_offset: tuple[float, ...] = (0.0, 0.0),
     bc_samples: int = 0,
     resume: str | None = None,
     progress_bar: bool = True,
@@ -171,6 +176,22 @@ def recipe_config(
         raise ValueError(
             "--log-std-init takes one value or one per action (Δy,Δz,Δθ[,Δφ with --env v1])"
         )
+    if len(start_offset) != 2:
+        raise ValueError("--start-offset takes two values: MM,DEG (depth and pitch)")
+    offset_mm, offset_deg = start_offset
+    if not (0 <= offset_mm <= MAX_START_OFFSET_MM and 0 <= offset_deg <= MAX_START_PITCH_DEG):
+        raise ValueError(
+            f"--start-offset {offset_mm:g},{offset_deg:g}: depth in [0, {MAX_START_OFFSET_MM:g}]"
+            f" mm and pitch in [0, {MAX_START_PITCH_DEG:g}]°"
+        )
+    if roll and (offset_mm or offset_deg):
+        raise ValueError("--start-offset is for --env v0 only")
+    # Recorded only when set: runs without it keep the env options they always had.
+    start = (
+        {"start_offset_mm": float(offset_mm), "start_pitch_deg": float(offset_deg)}
+        if offset_mm or offset_deg
+        else {}
+    )
     use_position, lookahead = STATES[state]
     return TrainConfig(
         output_dir=output_dir,
@@ -191,6 +212,7 @@ def recipe_config(
             "segment_mm": TRAINING_SEGMENT_MM,
             "procedural_parts": procedural,
             "roll": roll,
+            **start,
         },
         resume=resume,
         progress_bar=progress_bar,
