@@ -59,6 +59,14 @@ KSigmaOpt = Annotated[
 MinPointsOpt = Annotated[
     int, typer.Option(help="flagged points a call needs", callback=bounded(1, 10_000))
 ]
+DefectFreeOpt = Annotated[
+    bool,
+    typer.Option(
+        "--defect-free/--no-defect-free",
+        help="also scan the defect-free part with the plan: the false calls and the "
+        "predicted detectability map (a full scan of the plan; off: faster)",
+    ),
+]
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
 DirOpt = Annotated[
     Path | None,
@@ -97,6 +105,7 @@ def defects_cmd(
     units: UnitsOpt = "mm",
     views: EvaluateViewsOpt = None,
     scheduler: EvaluateSchedulerOpt = None,
+    defect_free: DefectFreeOpt = True,
     quiet: QuietOpt = False,
 ):
     """Inject seeded defects of one type at random places on the surface to inspect, simulate
@@ -138,13 +147,15 @@ def defects_cmd(
     with progress_bar("defect trials", quiet) as progress, trial_runner(scheduler, trials) as run:
         result = defect_run(tasks, counted(run, progress), seed)
     area = surface.area_mm2
-    with progress_bar("defect-free scan", quiet) as progress:
-        calls, detectability = survey(
-            inspected, spec.sensor, traj.poses[traj.scanning], detector, surface, seed,
-            progress=progress, swath=traj.swath[traj.scanning],
-        )  # fmt: skip
+    calls = detectability = None
+    if defect_free:
+        with progress_bar("defect-free scan", quiet) as progress:
+            calls, detectability = survey(
+                inspected, spec.sensor, traj.poses[traj.scanning], detector, surface, seed,
+                progress=progress, swath=traj.swath[traj.scanning],
+            )  # fmt: skip
     predicted: dict[str, float | None] = {}
-    if kind in PREDICTED:
+    if detectability is not None and kind in PREDICTED:
         predicted = {
             f"a{round(100 * share)}_mm": detectability.predicted_a(kind, detector, share, seed)
             for share in (0.5, 0.9)
@@ -154,8 +165,12 @@ def defects_cmd(
         "part": the_part.name,
         "planner": traj.planner,
         **result.to_json_dict(),
-        "false_calls": calls.to_json_dict(),
-        "predicted": {**predicted, **detectability.to_json_dict()} if predicted else None,
+        "false_calls": None if calls is None else calls.to_json_dict(),
+        "predicted": (
+            {**predicted, **detectability.to_json_dict()}
+            if predicted and detectability is not None
+            else None
+        ),
         "time_s": elapsed,
     }
     if output is not None:
@@ -175,7 +190,7 @@ def defects_cmd(
             )
         atomic_write_text(output / "defects.csv", "\n".join(rows) + "\n")
         plot_pod(result, output / "pod.png", f"{the_part.name}: {trajectory.name}")
-        if predicted:
+        if predicted and detectability is not None:
             from scanplan.report.pod import plot_detectability
 
             smallest = detectability.smallest_mm(kind, detector)
@@ -203,6 +218,9 @@ def defects_cmd(
             f"predicted from the defect-free scan's density and noise: a50 "
             f"{_mm(predicted['a50_mm'])}, a90 {_mm(predicted['a90_mm'])}"
         )
+    if calls is None:
+        typer.echo(f"no defect-free scan (--no-defect-free) | {elapsed:.1f} s")
+        return
     typer.echo(
         f"false calls on the defect-free part: {calls.count} ({calls.per_m2:.2f} per m² over "
         f"{area / 1e6:.3f} m², {calls.flagged_points} of {calls.valid_points:,} points flagged)"
