@@ -5,6 +5,8 @@ and says plainly when the data allow none; the predicted a90 matches the measure
 
 from __future__ import annotations
 
+import importlib.util
+
 import numpy as np
 import pytest
 import trimesh
@@ -24,6 +26,7 @@ from scanplan.metrics.evaluation import surface_samples
 from scanplan.metrics.pod import fit_pod
 from scanplan.part import part_from_mesh
 from scanplan.quantities import ScanSpec
+from scanplan.surface import VisibleSurface
 
 SPEC = ScanSpec()
 SENSOR = SPEC.sensor
@@ -111,3 +114,35 @@ def test_pod_fit_degenerate_data_are_stated_not_nan():
     for fit in (every, none, split):
         assert all(v is None or np.isfinite(v) for v in fit.to_json_dict().values()
                    if isinstance(v, float | type(None)))  # fmt: skip
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
+)
+def test_trials_on_a_loopback_dask_cluster_repeat_the_serial_run():
+    from dask.distributed import LocalCluster
+
+    from scanplan.cli.planning import trial_runner  # what defects --scheduler runs
+
+    part = part_from_mesh(_plate(160.0), "plate")
+    traj = straight(np.arange(300.0, 340.0, 0.5))
+    context = PlanContext(SPEC)
+    surface = surface_samples(part, SENSOR, context, 0)
+    near = np.abs(surface.points[:, 0]) < 15  # under the short pass
+    surface = VisibleSurface(surface.points[near], surface.area_mm2, surface.faces[near])
+    tasks = defect_tasks(part, SPEC, traj, "pit", (0.05, 0.5), 2, 3, 1, context, None, surface)
+    serial = defect_run(tasks)
+    with (
+        LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=":0",
+        ) as cluster,
+        trial_runner(cluster.scheduler_address, 2) as run,
+    ):
+        on_dask = defect_run(tasks, run)
+    assert np.array_equal(on_dask.hits, serial.hits)
+    assert np.array_equal(on_dask.flagged_points, serial.flagged_points)
+    assert serial.landed_points.sum() > 0
