@@ -287,7 +287,7 @@ def choose_views(
             if not more:
                 break
             candidates += more
-            on_faces += [np.isin(samples.faces, v.faces) for v in more]
+            on_faces += [np.isin(samples.faces, np.asarray(v.faces)) for v in more]
             continue
         vp, cov = evaluated.pop(best[1])
         on_faces[best[1]] = np.zeros_like(on_faces[best[1]])

@@ -233,6 +233,10 @@ def candidate_views(
 # wall at the bottom of a pocket is seen only by a beam that leaves it steeply enough to
 # clear the pocket's rim, at the cost of part of the angle tolerance.
 MISSED_AXIS_TILTS_DEG = (0.0, 5.0, 10.0)
+# Axes tried per group of missed samples: its mean normal and this many samples' normals;
+# and axes chosen per group, each for what the previous ones do not see.
+MISSED_AXIS_SAMPLES = 8
+MISSED_AXES_PER_GROUP = 3
 
 
 def missed_views(
@@ -242,46 +246,55 @@ def missed_views(
     missed: np.ndarray,
     min_samples: int,
     index: int = 1,
+    seed: int = 0,
 ) -> list[View]:
     """Views aimed at what the views chosen so far miss: the `missed` samples of `surface`
-    grouped by normal direction (`hemisphere_directions` bins), each group's axis the one
-    among its mean normal (at most `VIEW_AXIS_MAX_TILT_DEG` from +Z, `view_axis`) tilted
-    back towards +Z by `MISSED_AXIS_TILTS_DEG` from which most of its samples are within three
-    quarters of the angle tolerance and unobstructed, and those samples cut into depth
-    slabs along it (a gap of the distance tolerance: one raster holds one depth). One
-    view per slab of at least `min_samples` samples, its region the faces they lie on."""
+    grouped by normal direction (`hemisphere_directions` bins). Within a group, axes are
+    chosen one after another, each the one that sees most of the group's samples not yet
+    seen (within the angle tolerance of their normal, unobstructed) among
+    the group's mean normal and a few of its samples' normals (at most
+    `VIEW_AXIS_MAX_TILT_DEG` from +Z, `view_axis`), each also tilted back towards +Z by
+    `MISSED_AXIS_TILTS_DEG`; the samples an axis sees are cut into depth slabs along it (a
+    gap of the distance tolerance: one raster holds one depth). One view per slab of at
+    least `min_samples` samples, its region the faces they lie on."""
     idx = np.flatnonzero(missed)
     if len(idx) < min_samples:
         return []
+    rng = np.random.default_rng(seed)
     normals = oriented_normals(part)[surface.faces[idx]]
     points = surface.points[idx]
     dirs = hemisphere_directions()
     label = np.argmax(normals @ dirs.T, axis=1)
-    cos_tol = math.cos(0.75 * spec.tol_angle_rad)
+    cos_tol = math.cos(spec.tol_angle_rad)
     views: list[View] = []
     for b in np.unique(label):
         members = np.flatnonzero(label == b)
-        if len(members) < min_samples:
-            continue
-        mean = normals[members].sum(axis=0)
-        mean /= max(float(np.linalg.norm(mean)), 1e-12)
-        best: tuple[int, np.ndarray, np.ndarray] | None = None
-        for tilt in MISSED_AXIS_TILTS_DEG:
-            axis = towards_up(view_axis(mean)[None], math.radians(tilt))[0]
-            sees = _sees(part, points[members], normals[members], axis, cos_tol)
-            if best is None or int(sees.sum()) > best[0]:
-                best = (int(sees.sum()), axis, members[sees])
-        assert best is not None
-        count, axis, seen = best
-        if count < min_samples:
-            continue
-        depth = points[seen] @ axis
-        order = np.argsort(depth)
-        breaks = np.flatnonzero(np.diff(depth[order]) > spec.tolerance_mm) + 1
-        for group in np.split(order, breaks):
-            if len(group) >= min_samples:
-                faces = np.unique(surface.faces[idx[seen[group]]])
-                views.append(View.looking_along(axis, index + len(views), faces))
+        for _ in range(MISSED_AXES_PER_GROUP):
+            if len(members) < min_samples:
+                break
+            mean = normals[members].sum(axis=0)
+            mean /= max(float(np.linalg.norm(mean)), 1e-12)
+            picks = rng.choice(members, min(len(members), MISSED_AXIS_SAMPLES), replace=False)
+            bases = np.vstack([mean[None], normals[picks]])
+            bases = np.array([view_axis(n) for n in bases])
+            best: tuple[int, np.ndarray, np.ndarray] | None = None
+            for tilt in MISSED_AXIS_TILTS_DEG:
+                for axis in towards_up(bases, math.radians(tilt)):
+                    sees = _sees(part, points[members], normals[members], axis, cos_tol)
+                    if best is None or int(sees.sum()) > best[0]:
+                        best = (int(sees.sum()), axis, members[sees])
+            assert best is not None
+            count, axis, seen = best
+            if count < min_samples:
+                break
+            members = np.setdiff1d(members, seen)
+            depth = points[seen] @ axis
+            order = np.argsort(depth)
+            breaks = np.flatnonzero(np.diff(depth[order]) > spec.tolerance_mm) + 1
+            for group in np.split(order, breaks):
+                if len(group) >= min_samples:
+                    faces = np.unique(surface.faces[idx[seen[group]]])
+                    views.append(View.looking_along(axis, index + len(views), faces))
     return views
 
 
