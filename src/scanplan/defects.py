@@ -192,8 +192,14 @@ def _reaching(tri: np.ndarray, defects: list[Defect], coarse: float) -> np.ndarr
     edge = np.sqrt(((tri - np.roll(tri, 1, axis=1)) ** 2).sum(axis=2).max(axis=1))
     out = np.zeros(len(tri), bool)
     for d in defects:
-        dist = np.sqrt(((centroid - d.centre_mm) ** 2).sum(axis=1))
-        out |= (dist < d.radius_mm + spread) & (edge > coarse * d.resolution_mm)
+        rel = centroid - d.centre_mm
+        reach = d.radius_mm
+        if d.kind == "scratch":  # the groove's strip, not the disc its length spans
+            along = np.clip(rel @ d.direction, -d.length_mm / 2, d.length_mm / 2)
+            rel = rel - along[:, None] * d.direction
+            reach = d.width_mm / 2
+        dist = np.sqrt((rel**2).sum(axis=1))
+        out |= (dist < reach + spread) & (edge > coarse * d.resolution_mm)
     return out
 
 

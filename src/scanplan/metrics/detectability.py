@@ -9,7 +9,8 @@ offset uniform over one spacing, each with a chord of r_k's disc sampled at the 
 A defect there is found when the flagged points reach the call's minimum: the share of
 offsets for which they do is the probability of detection at that sample; its mean over the
 surface is the predicted POD (defects land uniformly by area, as `defects.place` puts them).
-A scratch is not predicted.
+A scratch (a groove of a half-width flagged over its length) is crossed by the profiles at
+a direction averaged over.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.defects import ASPECT
+from scanplan.defects import shape
 from scanplan.metrics.detection import (
     Detector,
     FalseCalls,
@@ -36,7 +37,8 @@ from scanplan.profilometer import LineProfilometer
 from scanplan.sensor import SensorSpec
 from scanplan.surface import VisibleSurface
 
-PREDICTED = ("dent", "bump", "pit")
+PREDICTED = ("dent", "bump", "pit", "scratch")
+ANGLES = 8  # a scratch's directions to the scan averaged over
 DENSITY_RADIUS_MM = 2.0
 COLUMN_STRIDE = 4  # the density is counted on every 4th column (x 4)
 OFFSETS = 16  # profile offsets averaged over, per sample
@@ -48,6 +50,8 @@ def flagged_radius(kind: str, q: np.ndarray) -> np.ndarray:
     """The radius over the defect's half-width (u) at which its depth profile falls to the
     share q of its depth (0 where q >= 1: nothing flagged)."""
     q = np.clip(q, 0.0, 1.0)
+    if kind == "scratch":
+        return np.sqrt(1.0 - np.sqrt(q))  # (1 - u^2)^2 = q, across the groove
     if kind == "pit":
         return (1.0 - np.sqrt(q)) ** (1.0 / 6.0)  # (1 - u^6)^2 = q
     return np.sqrt(1.0 - np.cbrt(q))  # (1 - u^2)^3 = q
@@ -82,15 +86,23 @@ class Detectability:
         sigma = np.where(seen, self.sigma_mm[idx], 1.0)
         gap = np.where(seen, self.spacing_mm[idx], 1.0)
         col = np.where(seen, self.column_mm[idx], 1.0)
-        half = ASPECT[kind] * size_mm / 2
-        rk = np.where(seen, half * flagged_radius(kind, detector.k_sigma * sigma / size_mm), 0.0)
+        _, width, length = shape(kind, size_mm)
+        rk = flagged_radius(kind, detector.k_sigma * sigma / size_mm)
+        rk = np.where(seen, width / 2 * rk, 0.0)
+
+        def share(rk: np.ndarray, gap: np.ndarray, col: np.ndarray) -> np.ndarray:
+            if kind == "scratch":
+                # Its ends taper over half a width each: flagged a width shorter, about.
+                return _found_share_groove(rk, length - width, gap, col, detector.min_points)
+            return _found_share(rk, gap, col, detector.min_points)
+
         if self.pass_sample is None or self.pass_share is None:
-            return np.where(seen, _found_share(rk, gap, col, detector.min_points), 0.0)
+            return np.where(seen, share(rk, gap, col), 0.0)
         mask = np.isin(self.pass_sample, idx)
         pos = np.searchsorted(idx, self.pass_sample[mask])
         # A pass with a share of the points there has its profiles that much farther apart.
         gap_pass = gap[pos] / self.pass_share[mask]
-        found = _found_share(rk[pos], gap_pass, col[pos], detector.min_points)
+        found = share(rk[pos], gap_pass, col[pos])
         log_miss = np.bincount(pos, np.log(np.maximum(1.0 - found, 1e-300)), len(idx))
         return np.where(seen, 1.0 - np.exp(log_miss), 0.0)
 
@@ -169,6 +181,25 @@ def _found_share(rk: np.ndarray, gap: np.ndarray, col: np.ndarray, min_points: i
         found += (chord / col[:, None]).sum(axis=1) >= min_points
     area_count = np.pi * rk**2 / (gap * col)
     return np.where(wide, (area_count >= min_points).astype(float), found / OFFSETS)
+
+
+def _found_share_groove(
+    hk: np.ndarray, length: float, gap: np.ndarray, col: np.ndarray, min_points: int
+) -> np.ndarray:
+    """(k,) the share of profile offsets and directions for which a groove `length` long,
+    flagged over a half-width hk, crossed by profiles `gap` apart and sampled `col` apart
+    along them, holds `min_points` points."""
+    found = np.zeros(len(hk))
+    for a in range(ANGLES):
+        phi = (a + 0.5) / ANGLES * np.pi / 2  # to the scan direction
+        cos, sin = np.cos(phi), np.sin(phi)
+        extent = length * cos + 2.0 * hk * sin  # along the scan: what the profiles cross
+        chord = np.minimum(2.0 * hk / max(cos, 1e-9), length / max(sin, 1e-9))
+        per_crossing = np.where(hk > 0, chord / col, 0.0)
+        for i in range(OFFSETS):
+            crossings = np.floor(extent / gap + (i + 0.5) / OFFSETS)
+            found += crossings * per_crossing >= min_points
+    return found / (ANGLES * OFFSETS)
 
 
 def _median(values: np.ndarray) -> float | None:
