@@ -22,10 +22,11 @@ def plot_pod(run: DefectRun, out_path: str | os.PathLike, title: str) -> Path:
     sizes, hits, fit = run.sizes_mm, run.hits, run.fit
     fig, ax = plt.subplots(figsize=(7, 4.5), layout="constrained")
     jitter = np.random.default_rng(0).uniform(-0.02, 0.02, len(sizes))
-    ax.scatter(
-        sizes, hits.astype(float) + jitter, s=10, c=np.where(hits, "tab:green", "tab:red"),
-        alpha=0.6, linewidths=0, label="found (1) / missed (0)",
-    )  # fmt: skip
+    for mask, colour, label in ((hits, "tab:green", "found"), (~hits, "tab:red", "missed")):
+        ax.scatter(
+            sizes[mask], hits[mask].astype(float) + jitter[mask], s=10, c=colour, alpha=0.6,
+            linewidths=0, label=f"{label} ({int(mask.sum())})",
+        )  # fmt: skip
     grid = np.geomspace(sizes.min(), sizes.max(), 200)
     pod = fit.pod(grid)
     if pod is not None:
