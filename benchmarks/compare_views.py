@@ -39,7 +39,7 @@ def main() -> None:
     planner = make_planner("geometric")
     print(
         "part | views | passes | in-spec top-surface | in-spec hemisphere | ceiling | "
-        "in-spec of ceiling | plan s"
+        "in-spec of ceiling | plan s | choice's estimate: greedy -> exact cover (views planned)"
     )
     for name, units in PARTS.items():
         if args.only and args.only not in name:
@@ -71,9 +71,16 @@ def main() -> None:
             print(
                 f"{name} {label} | {n_view} | {n_pass} | {up.in_spec_coverage:.3f} | "
                 f"{hemi.in_spec_coverage:.3f} | {hemi.visibility_ceiling:.3f} | "
-                f"{hemi.in_spec_of_ceiling:.3f} | {t:.1f}",
+                f"{hemi.in_spec_of_ceiling:.3f} | {t:.1f} | {_choice(traj)}",
                 flush=True,
             )
+
+
+def _choice(traj) -> str:
+    c = traj.meta.get("view_choice")
+    if c is None:
+        return "-"
+    return f"{c['in_spec_greedy']:.3f} -> {c['in_spec_chosen']:.3f} ({c['views_planned']})"
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import networkx as nx
@@ -19,6 +19,7 @@ from scanplan.bands import plan_adaptive_swaths
 from scanplan.cell import LOWEST, Cell
 from scanplan.collision import CellObstacles, checker_for
 from scanplan.context import PlanContext
+from scanplan.cover import max_cover
 from scanplan.limits import TooLarge
 from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
 from scanplan.motion import plan_transition, view_transition
@@ -189,11 +190,15 @@ def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
 
 @dataclass(frozen=True)
 class ViewSelection:
-    """The views chosen and their estimated in-spec coverage after each (`coverage`)."""
+    """The views chosen and their estimated in-spec coverage after each (`coverage`);
+    `in_spec` the (k,) in-spec sets on the view choice's samples of every view planned,
+    the chosen first (in order), then those left out."""
 
     plans: list[ViewPlan]
     coverage: list[float]
     candidates: int
+    in_spec: list[np.ndarray] = field(default_factory=list)
+    greedy_coverage: float | None = None  # the greedy choice's, before the exact cover
 
 
 def choose_views(
@@ -242,14 +247,14 @@ def choose_views(
     try:
         top = plan_view(part, View.looking_along(UP, 0), plan)
         covered = in_spec_set(top)
-        plans, coverage = [top], [float(covered.mean())]
+        plans, coverage, chosen = [top], [float(covered.mean())], [covered]
     except TooLarge:  # the user's numbers, not the view's fault
         raise
     except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
         covered = np.zeros(len(samples.points), bool)
-        plans, coverage = [], [0.0]
+        plans, coverage, chosen = [], [0.0], []
     if coverage[-1] >= coverage_target:
-        return ViewSelection(plans, coverage, 0)
+        return ViewSelection(plans, coverage, 0, chosen)
     candidates = candidate_views(part, spec)
     # The samples on each candidate's faces: the bound on its gain.
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
@@ -293,10 +298,28 @@ def choose_views(
         on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
         plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
         covered |= cov
+        chosen.append(cov)
         coverage.append(float(covered.mean()))
     if not plans:
         raise ValueError(f"no view of part {part.name} sees its surface to inspect")
-    return ViewSelection(plans, coverage, len(candidates))
+    greedy = coverage[-1]
+    if evaluated and len(plans) >= 2:
+        # The exact cover by as many views among all those planned: where greedy's first
+        # choices crowd out a better pair, take the better set.
+        pool = plans + [vp for vp, _ in evaluated.values()]
+        sets = chosen + [cov for _, cov in evaluated.values()]
+        best_set, share = max_cover(sets, len(plans))
+        if share > greedy + 1e-9:
+            plans = [
+                replace(pool[i], view=replace(pool[i].view, index=k))
+                for k, i in enumerate(best_set)
+            ]
+            chosen = [sets[i] for i in best_set]
+            coverage = [
+                float(np.logical_or.reduce(chosen[: k + 1]).mean()) for k in range(len(chosen))
+            ]
+    left_out = [cov for _, cov in evaluated.values()]
+    return ViewSelection(plans, coverage, len(candidates), chosen + left_out, greedy)
 
 
 def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
@@ -424,9 +447,19 @@ def plan_views(
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
-        plans = choose_views(part, spec, plan, coverage_target).plans
+        selection = choose_views(part, spec, plan, coverage_target)
+        plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
+    if views != "top" and selection.greedy_coverage is not None:
+        # The view choice's own estimate (its fan, its samples): greedy, then the exact
+        # cover by as many views, which it keeps where that holds more.
+        choice = {
+            "views_planned": len(selection.in_spec),
+            "in_spec_greedy": round(selection.greedy_coverage, 4),
+            "in_spec_chosen": round(selection.coverage[-1], 4),
+        }
+        traj = replace(traj, meta=traj.meta | {"view_choice": choice})
     if arm is not None:
         traj = fit_arm(part, traj, arm, context)
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
