@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -30,7 +31,7 @@ from scanplan.cli.planning import (
     judged_context,
     trial_runner,
 )
-from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, check_count
+from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, STEP_MM, check_count
 
 TypeOpt = Annotated[str, typer.Option("--type", help="dent, bump, pit or scratch")]
 SizesOpt = Annotated[
@@ -67,6 +68,16 @@ DefectFreeOpt = Annotated[
         "predicted detectability map (a full scan of the plan; off: faster)",
     ),
 ]
+LinkOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--link",
+        help="flagged points closer than this (mm) form one call; default: 1.5x the plan's "
+        "median profile spacing (give the same value to compare plans under one rule)",
+        callback=within(STEP_MM),
+        show_default=False,
+    ),
+]
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
 DirOpt = Annotated[
     Path | None,
@@ -100,6 +111,7 @@ def defects_cmd(
     seed: SeedOpt = 0,
     k_sigma: KSigmaOpt = 4.0,
     min_points: MinPointsOpt = 3,
+    link: LinkOpt = None,
     as_json: JsonOpt = False,
     output: DirOpt = None,
     units: UnitsOpt = "mm",
@@ -139,6 +151,8 @@ def defects_cmd(
     the_part = load_part(part, units)
     spec = context.spec
     detector = detector_for(traj, spec.sensor, k_sigma=k_sigma, min_points=min_points)
+    if link is not None:
+        detector = replace(detector, link_mm=link)
     inspected = the_part.with_roi(context.roi)
     surface = surface_samples(inspected, spec.sensor, context, seed)
     tasks = defect_tasks(
