@@ -39,7 +39,7 @@ def main() -> None:
     planner = make_planner("geometric")
     print(
         "part | views | passes | in-spec top-surface | in-spec hemisphere | ceiling | "
-        "in-spec of ceiling | plan s | choice's estimate: greedy -> exact cover (views planned)"
+        "in-spec of ceiling | plan s | choice estimate: greedy / exact, as many views (planned)"
     )
     for name, units in PARTS.items():
         if args.only and args.only not in name:
@@ -80,7 +80,7 @@ def _choice(traj) -> str:
     c = traj.meta.get("view_choice")
     if c is None:
         return "-"
-    return f"{c['in_spec_greedy']:.3f} -> {c['in_spec_chosen']:.3f} ({c['views_planned']})"
+    return f"{c['in_spec_greedy']:.3f} / {c['in_spec_exact']:.3f} ({c['views_planned']})"
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """The exact maximum cover: which k of several sets cover the most samples together, as a
 mixed-integer program solved by HiGHS (`scipy.optimize.milp`). `pipeline.choose_views`
-picks views greedily; this is what it is measured against (`benchmarks/view_cover.py`).
+picks views greedily and records how far that is from this (`benchmarks/compare_views.py`).
 """
 
 from __future__ import annotations
