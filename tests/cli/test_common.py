@@ -341,6 +341,7 @@ NEEDS = {
     "demo": ["-o", "{out}/demo"],
     "sweep": ["-o", "{out}/sweep"],
     "view": ["{good}", "-o", "{out}/v.html"],
+    "defects": ["{plate}", "{good}"],
 }
 
 
@@ -380,6 +381,7 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
     import scanplan.demo
     import scanplan.learn.sweep
     import scanplan.learn.train
+    import scanplan.metrics.detection
     import scanplan.robot.place
 
     out = tmp_path_factory.mktemp("out")
@@ -391,6 +393,7 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
         mp.setattr(scanplan.demo, "run_demo", _stop)
         mp.setattr(scanplan.robot.place, "place", _stop)
         mp.setattr(scanplan.learn.sweep, "connect", _stop)  # no cluster, no training
+        mp.setattr(scanplan.metrics.detection, "defect_tasks", _stop)  # no defect trials
         result = runner.invoke(app, argv)
     event(f"{args[0]} exit {result.exit_code}")
     assert result.exit_code in (0, 2), (argv, result.output, result.exception)
