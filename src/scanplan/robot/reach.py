@@ -173,7 +173,10 @@ def check_reach(
             cand = cand[inside]
             terms = np.abs(arm.singularity_terms(cand)) / tol
             score = np.minimum(terms.min(axis=1), limit_margin(cand, limits) / np.radians(5))
-            prev = cand[np.argmax(score)]
+            # Rounded: branches that tie (a margin set by the same joint limit) must not be
+            # told apart by a pose's last digits, or a plan read back from its file (to
+            # 1e-6 mm) is checked on another branch than it was fitted on.
+            prev = cand[np.argmax(np.round(score, 4))]
         else:
             cand, inside = fit_limits(prev + wrap(cand - prev), limits)
             if not inside.any():
