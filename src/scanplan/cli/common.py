@@ -79,6 +79,9 @@ class OneLineErrors(typer.core.TyperGroup):
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous[0])
                 signal.signal(signal.SIGINT, previous[1])
+            # The stop is answered: the writers of whatever runs next in this process (a
+            # test after an in-process run) must not take it for theirs.
+            files.stopped_by = None
         if not standalone_mode:
             return rv
         sys.exit(rv if isinstance(rv, int) else 0)
