@@ -221,8 +221,11 @@ def choose_views(
     view first (the paper's raster; on a panel it is all there is; none if nothing to
     inspect faces up), then, while in-spec
     coverage is below `coverage_target`, the candidate view (`candidate_views`) that adds
-    the most, unless it adds less than `min_gain` (`MIN_VIEW_GAIN`). A panel whose top
-    view reaches the target (the door) stays one view.
+    the most, unless it adds less than `min_gain` (`MIN_VIEW_GAIN`); when none does, views
+    aimed at what a beam could reach and no chosen view holds (`views.missed_views`) join
+    the candidates, `MISSED_ROUNDS` times at most. A panel whose top view reaches the
+    target (the door) stays one view. The exact cover by as many views among all those
+    planned (`cover.max_cover`) is computed for scale (`exact_coverage`), not kept.
     Weighing a view's gain against its profiles as well (at least a quarter of the top
     view's in-spec share per profile) was tried and left out: it cost the machined parts
     1-3 points of hemisphere coverage (`benchmarks/compare_views.py`) for views that each
