@@ -17,6 +17,10 @@ from scanplan.sensor import SensorSpec
 
 # In-spec coverage at which `--views auto` stops adding views.
 COVERAGE_TARGET = 0.9
+# A defect call (`metrics.detection`): points beyond this many σ of the sensor noise from the
+# nominal surface, clustered, at least this many points.
+DEFECT_K_SIGMA = 4.0
+DEFECT_MIN_POINTS = 3
 # The part frame's up: the top view looks along −UP.
 UP = np.array([0.0, 0.0, 1.0])
 UP.flags.writeable = False

@@ -32,6 +32,7 @@ from scanplan.cli.planning import (
     trial_runner,
 )
 from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, STEP_MM, check_count
+from scanplan.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS
 
 TypeOpt = Annotated[str, typer.Option("--type", help="dent, bump, pit or scratch")]
 SizesOpt = Annotated[
@@ -109,8 +110,8 @@ def defects_cmd(
     trials: DefectTrialsOpt = 16,
     per_trial: PerTrialOpt = 8,
     seed: SeedOpt = 0,
-    k_sigma: KSigmaOpt = 4.0,
-    min_points: MinPointsOpt = 3,
+    k_sigma: KSigmaOpt = DEFECT_K_SIGMA,
+    min_points: MinPointsOpt = DEFECT_MIN_POINTS,
     link: LinkOpt = None,
     as_json: JsonOpt = False,
     output: DirOpt = None,

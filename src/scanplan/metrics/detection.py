@@ -8,12 +8,13 @@ distance form a cluster; a cluster of at least `min_points` points is a call, an
 found when a call has a point on it (where it displaces the surface).
 
 A trial scans only the poses whose laser plane crosses one of its defects: the rest of the
-scan is the nominal part's, whose calls are the false-call count (`false_calls`).
+scan is the nominal part's, whose calls are the false-call count
+(`detectability.survey`, which scans it once for the map too).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,13 +31,13 @@ from scanplan.metrics.pod import PodFit, fit_pod
 from scanplan.metrics.robustness import TrialMap
 from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer, Scan
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.surface import VisibleSurface
 from scanplan.trajectory import Trajectory
 
-K_SIGMA = 4.0
-MIN_POINTS = 3
+K_SIGMA = DEFECT_K_SIGMA
+MIN_POINTS = DEFECT_MIN_POINTS
 # The cluster link distance over the plan's typical profile spacing.
 LINK_SPACINGS = 1.5
 # Poses a trial measures at once (4096 columns each: ~100 MB of arrays).
@@ -231,30 +232,6 @@ class FalseCalls:
             "flagged_points": self.flagged_points,
             "valid_points": self.valid_points,
         }
-
-
-def false_calls(
-    part: Part,
-    sensor: SensorSpec,
-    poses: np.ndarray,
-    detector: Detector,
-    area_mm2: float,
-    seed: int = 0,
-    chunk_poses: int = 256,
-    progress: Callable[[int, int], None] | None = None,
-) -> FalseCalls:
-    """The calls the plan's scanning `poses` make on the defect-free `part` (its surface to
-    inspect, of `area_mm2`): every call is false."""
-    profiler = LineProfilometer(part, sensor, seed=seed)
-    kept: list[np.ndarray] = []
-    n_flag = n_valid = 0
-    for _, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
-        hit = flagged(scan, scan.true_z_sensor, sensor, detector.k_sigma)
-        kept.append(scan.points_part[hit])
-        n_flag += int(hit.sum())
-        n_valid += int(scan.valid.sum())
-    points = np.concatenate(kept) if kept else np.zeros((0, 3))
-    return FalseCalls(len(calls(points, detector)), n_flag, n_valid, area_mm2)
 
 
 def defect_tasks(
