@@ -316,7 +316,10 @@ def choose_views(
         # How far greedy is from the exact cover by as many views among all those planned
         # (recorded, not used: a set without the top view first joins worse, and the
         # exact set held less on the quadrotor and the stepped plate when kept).
-        _, exact = max_cover(chosen + [cov for _, cov in evaluated.values()], len(plans))
+        try:
+            _, exact = max_cover(chosen + [cov for _, cov in evaluated.values()], len(plans))
+        except ValueError:  # HiGHS out of time: a figure for scale, not worth failing a plan
+            exact = None
     left_out = [cov for _, cov in evaluated.values()]
     return ViewSelection(plans, coverage, len(candidates), chosen + left_out, exact)
 
