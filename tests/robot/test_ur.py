@@ -113,3 +113,22 @@ def test_tool_spin_is_a_joint_jump() -> None:
     assert report.joints[1, 5] == pytest.approx(q[5] + np.pi) or report.joints[
         1, 5
     ] == pytest.approx(q[5] - np.pi)
+
+
+def test_tied_branches_are_not_told_apart_by_a_poses_last_digits():
+    # A UR5e pose (the first of a featuretype plan) where four branches tie on their joint
+    # limit margin: read back from a file, its last digits must not pick another branch.
+    pose = np.array(
+        [
+            [0.1507777329615, -0.9885676887513, 0.0, -156.3138252473],
+            [-0.9885676887513, -0.1507777329615, 0.0, 210.4715993407],
+            [0.0, 0.0, -1.0, 375.593151],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
+    rng = np.random.default_rng(0)
+    first = check_reach(pose[None], "ur5e").joints[0]
+    for _ in range(20):
+        nudged = pose.copy()
+        nudged[:3, 3] += rng.uniform(-5e-7, 5e-7, 3)
+        assert np.allclose(check_reach(nudged[None], "ur5e").joints[0], first, atol=1e-5)
