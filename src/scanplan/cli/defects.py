@@ -31,6 +31,7 @@ from scanplan.cli.planning import (
     judged_context,
     trial_runner,
 )
+from scanplan.files import atomic_write_text
 from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, STEP_MM, check_count
 from scanplan.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS
 
@@ -189,7 +190,6 @@ def defects_cmd(
         "time_s": elapsed,
     }
     if output is not None:
-        from scanplan.files import atomic_write_text
         from scanplan.report.pod import plot_pod
 
         output.mkdir(parents=True, exist_ok=True)
