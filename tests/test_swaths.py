@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -11,7 +12,7 @@ import trimesh
 from scanplan.part import part_from_mesh
 from scanplan.quantities import UP
 from scanplan.sensor import SensorSpec
-from scanplan.swaths import plan_swaths
+from scanplan.swaths import Swath, plan_swaths, swath_from_record, swath_record
 
 SENSOR = SensorSpec()
 W = SENSOR.line_width_mm  # 495 mm
@@ -90,3 +91,27 @@ def test_auto_direction_scans_across_curvature_a_pitch_only_planner_cannot_follo
     assert along_y < 0.5 * along_x
     piece = load_part("training-piece")
     assert np.allclose(np.abs(scan_direction(piece, sensor, "auto")), [1, 0, 0], atol=1e-6)
+
+
+def test_a_pass_line_record_reads_back_exactly_and_bad_ones_are_named():
+    u = np.array([0.6, 0.8, 0.0])
+    sw = Swath(
+        3,
+        np.array([0.1, -2.0 / 3.0, 400.0]),
+        np.array([5.0, 1.0, 400.0]),
+        u,
+        np.cross(UP, u),
+        (-1.5, 2.25),
+    )
+    back = swath_from_record(json.loads(json.dumps(swath_record(sw, 7))), "plan")
+    assert back.index == 7 and back.band_mm == sw.band_mm
+    for key in ("start_mm", "end_mm", "u", "v"):
+        assert np.array_equal(getattr(back, key), getattr(sw, key))
+    for bad, message in [
+        ([], "not a pass line"),
+        ({**swath_record(sw), "u": [1.0, 0.0]}, "3 finite numbers"),
+        ({**swath_record(sw), "u": [2.0, 0.0, 0.0]}, "unit vectors"),
+        ({**swath_record(sw), "start_mm": "here"}, "not a pass line"),
+    ]:
+        with pytest.raises(ValueError, match=f"plan: .*{message}"):
+            swath_from_record(bad, "plan")

@@ -29,7 +29,7 @@ from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_PO
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.surface import hemisphere_visible_samples, reachable_samples
-from scanplan.swaths import Swath, plan_swaths
+from scanplan.swaths import Swath, plan_swaths, swath_record
 from scanplan.trajectory import Trajectory
 from scanplan.views import (
     PlanView,
@@ -336,9 +336,10 @@ def join_views(
     swaths follow view k−1's), joined by `view_transition`s clear of the part and its cell
     by `spec.clearance_mm`. `meta["views"]` records, per view, its axis and its swath block
     (first, last), which is how a CSV reader tells the views apart: a view is the block of
-    consecutive swaths whose scanning poses look along its axis. A view no clear move
-    reaches is left out and counted (`meta["views_unreachable"]`). Returns the views kept,
-    renumbered, and the trajectory."""
+    consecutive swaths whose scanning poses look along its axis; and, where the view's plan
+    carries them (`meta["swaths"]`), its pass lines (`swaths.swath_record`, view frame). A
+    view no clear move reaches is left out and counted (`meta["views_unreachable"]`).
+    Returns the views kept, renumbered, and the trajectory."""
     checker = checker_for(part, spec.sensor, cell)
     centre = 0.5 * (part.bounds[0] + part.bounds[1])
     # Clear of the part's bounding sphere, and no nearer than the farthest scanning pose.
@@ -372,15 +373,19 @@ def join_views(
         pieces.append(replace(traj, swath=swath))
         kept.append(replace(vp, view=replace(vp.view, index=len(kept))))
         prev_axis = vp.view.axis
-        views.append(
-            {
-                "index": len(views),
-                "axis": [float(c) for c in vp.view.axis],
-                "first_swath": int(swath.min()),
-                "last_swath": int(swath.max()),
-                "passes": vp.passes,
-            }
-        )
+        record = {
+            "index": len(views),
+            "axis": [float(c) for c in vp.view.axis],
+            "first_swath": int(swath.min()),
+            "last_swath": int(swath.max()),
+            "passes": vp.passes,
+        }
+        if lines := traj.meta.get("swaths"):
+            # The pass lines (in the view's frame) numbered as the trajectory's swaths: what
+            # a controller steers along when the plan is run in closed loop (`trials`).
+            offset = first - int(traj.swath.min())
+            record["swaths"] = [swath_record(sw, sw.index + offset) for sw in lines]
+        views.append(record)
         first = int(swath.max()) + 1
     out = Trajectory.concatenate(pieces)
     meta = dict(out.meta)
@@ -443,7 +448,8 @@ def plan_views(
         swaths, traj = plan_scan(
             view_part, spec, planner, raster, direction, overlap, progress, cell.rotated(view.R)
         )
-        return len(swaths), traj
+        # The pass lines ride along to the view's record (`join_views`), for the closed loop.
+        return len(swaths), replace(traj, meta=traj.meta | {"swaths": swaths})
 
     start = time.perf_counter()
     if views == "top":

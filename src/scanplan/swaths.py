@@ -91,6 +91,42 @@ class Swath:
         return float(np.dot(d, self.u)), float(np.dot(d, UP)), theta
 
 
+def swath_record(swath: Swath, index: int | None = None) -> dict:
+    """A pass line as a plan file records it (JSON-able, exact floats), read back by
+    `swath_from_record`; index: its number in the file (default: the swath's own)."""
+    return {
+        "index": int(swath.index if index is None else index),
+        "start_mm": [float(c) for c in swath.start_mm],
+        "end_mm": [float(c) for c in swath.end_mm],
+        "u": [float(c) for c in swath.u],
+        "v": [float(c) for c in swath.v],
+        "band_mm": None if swath.band_mm is None else [float(c) for c in swath.band_mm],
+    }
+
+
+def swath_from_record(record: object, where: str) -> Swath:
+    """The Swath a plan file records (`swath_record`); ValueError naming `where`."""
+    if not isinstance(record, dict):
+        raise ValueError(f"{where}: not a pass line (index, start_mm, end_mm, u, v)")
+    try:
+        vectors = {
+            key: np.array(record[key], dtype=np.float64) for key in ("start_mm", "end_mm", "u", "v")
+        }
+        band = record.get("band_mm")
+        swath = Swath(
+            int(record["index"]),
+            **vectors,
+            band_mm=None if band is None else (float(band[0]), float(band[1])),
+        )
+    except (KeyError, IndexError, TypeError, ValueError):
+        raise ValueError(f"{where}: not a pass line (index, start_mm, end_mm, u, v)") from None
+    if any(a.shape != (3,) or not np.isfinite(a).all() for a in vectors.values()):
+        raise ValueError(f"{where}: a pass line's points and directions are 3 finite numbers")
+    if abs(np.linalg.norm(swath.u) - 1.0) > 1e-6 or abs(np.linalg.norm(swath.v) - 1.0) > 1e-6:
+        raise ValueError(f"{where}: a pass line's u and v must be unit vectors")
+    return swath
+
+
 def frame_poses(
     start_mm: np.ndarray,
     u: np.ndarray,

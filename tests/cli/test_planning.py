@@ -280,3 +280,29 @@ def test_evaluate_perturbed_zero_is_nominal_and_bad_specs_are_one_line(plate_fil
         result = runner.invoke(app, [*base, *bad])
         assert result.exit_code == 2 and message in result.output, result.output
         assert result.output.strip().count("\n") == 0
+
+
+def test_evaluate_closed_loop_runs_a_feedback_plan_and_refuses_the_others(plate_file, tmp_path):
+    plans = {}
+    for planner in ("feedback", "fixed"):
+        plans[planner] = tmp_path / f"{planner}.json"
+        args = ["plan", str(plate_file), "--planner", planner, "--no-roll", "-q"]
+        result = runner.invoke(app, [*args, "-o", str(plans[planner])])
+        assert result.exit_code == 0, result.output
+    loop = ["--perturb", "place:0mm", "--trials", "1", "--closed-loop"]
+    base = ["evaluate", str(plate_file), str(plans["feedback"]), "--points", "64", "-q"]
+    result = runner.invoke(app, [*base, "--json", *loop])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["robustness"]["loop"] == "closed"
+    assert data["robustness"]["per_trial"] == [data["in_spec_coverage"]]
+    fixed = ["evaluate", str(plate_file), str(plans["fixed"]), "--points", "64"]
+    for args, message in [
+        ([*fixed, *loop], "--closed-loop re-runs the controller of a feedback or rl plan"),
+        ([*base, "--closed-loop"], "--closed-loop runs --perturb's trials"),
+        ([*base, "--policy", "v1"], "--policy is the rl plan's policy for --closed-loop"),
+        ([*base, *loop, "--policy", "v1"], "--policy is the rl plan's policy"),
+    ]:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2 and message in result.output, result.output
+        assert result.output.strip().count("\n") == 0

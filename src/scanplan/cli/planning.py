@@ -388,6 +388,23 @@ EvaluateSchedulerOpt = Annotated[
     ),
 ]
 CLUSTER_HINT = "evaluate --scheduler needs the cluster extra: pip install 'scanplan[cluster]'"
+ClosedLoopOpt = Annotated[
+    bool,
+    typer.Option(
+        "--closed-loop",
+        help="with --perturb, a feedback or rl plan's controller runs again on each perturbed "
+        "part, acting on its profiles as on a cell (default: the plan is replayed)",
+    ),
+]
+EvaluatePolicyOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--policy",
+        help="--closed-loop of an rl plan: the policy it was planned with (default: the "
+        "shipped one, v1 if the plan rolls)",
+        show_default=False,
+    ),
+]
 
 
 @user_errors
@@ -410,11 +427,15 @@ def evaluate_cmd(
     perturb: PerturbOpt = None,
     trials: TrialsOpt = 16,
     scheduler: EvaluateSchedulerOpt = None,
+    closed_loop: ClosedLoopOpt = False,
+    policy: EvaluatePolicyOpt = None,
 ):
     """Simulate the scan of a trajectory and report its quality, judged as the plan file
     records it (sensor, tolerance, region of interest, surface) unless an option says
     otherwise. With --perturb, also how that in-spec coverage holds on seeded perturbed
-    parts (mean, p5, worst over the trials) and which surface is fragile."""
+    parts (mean, p5, worst over the trials) and which surface is fragile: the plan replayed
+    as planned, or with --closed-loop its controller (feedback, rl) acting on the profiles of
+    each perturbed part."""
     # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
     from scanplan.cli.training import check_cluster
     from scanplan.metrics import evaluate
@@ -425,11 +446,20 @@ def evaluate_cmd(
     model = Perturbation.parse(perturb) if perturb is not None else None
     if model is None and scheduler is not None:
         raise ValueError("--scheduler runs --perturb's trials: give --perturb too")
+    if model is None and closed_loop:
+        raise ValueError("--closed-loop runs --perturb's trials in closed loop: give --perturb")
+    if policy is not None and not closed_loop:
+        raise ValueError("--policy is the rl plan's policy for --closed-loop: give --closed-loop")
     check_cluster(scheduler, None)
     traj = read_trajectory(trajectory)
     context, note = judged_context(traj, sensor, tolerance, roi, views, table, fixture)
     the_part = load_part(part, units)
     context.cell(the_part.with_roi(context.roi))  # a bad ROI, table or fixture: fail first
+    if closed_loop:  # a plan the closed loop cannot run: say so before the long part
+        from scanplan.trials import closed_loop_planner, plan_swaths_of
+
+        closed_loop_planner(context, policy, f"plan {trajectory}")
+        plan_swaths_of(traj, f"plan {trajectory}")
     if note:
         typer.echo(note, err=True)
     targets, blended = program_targets(traj, context.spec)
@@ -447,7 +477,15 @@ def evaluate_cmd(
             blended=blended,
         )
     robust = None
-    if model is not None:
+    if model is not None and closed_loop:
+        from scanplan.trials import closed_loop_robustness, closed_loop_tasks
+
+        loop_tasks = closed_loop_tasks(
+            the_part, traj, context, model, trials, seed, points, policy, f"plan {trajectory}"
+        )
+        with progress_bar("trials", quiet) as progress, trial_runner(scheduler, trials) as run:
+            robust = closed_loop_robustness(loop_tasks, counted(run, progress))
+    elif model is not None:
         from scanplan.metrics import robustness, trial_tasks
 
         tasks = trial_tasks(

@@ -3,7 +3,8 @@
 A trial scans the part as built (the mesh warped and scaled, `perturb.Trial.as_built`) lying
 where it really sits (the placement error), along the path the robot really flies (the
 nominal poses with path noise), and judges the NOMINAL surface samples `evaluate` counts on.
-The open-loop plan is replayed: nobody re-plans against the perturbed part.
+The open-loop plan is replayed: nobody re-plans against the perturbed part. A closed-loop
+plan's controller runs again on each perturbed part (`scanplan.trials`), judged here too.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from scanplan.context import PlanContext, recorded
 from scanplan.metrics.evaluation import coverage_of, scanning_steps, surface_samples
 from scanplan.metrics.summary import SurfaceState
 from scanplan.part import Part
-from scanplan.perturb import Perturbation
+from scanplan.perturb import Perturbation, Trial
 from scanplan.profilometer import LineProfilometer, Scan
 from scanplan.quantities import ScanSpec, point_orientation_error
 from scanplan.sensor import SensorSpec
@@ -54,13 +55,58 @@ class TrialTask:
     chunk_poses: int
 
 
-def run_trial(task: TrialTask) -> np.ndarray:
-    """(k,) bool: which nominal surface samples trial `task.index` holds in spec."""
+@dataclass(frozen=True)
+class TrialWorld:
+    """Trial `index`'s part: `part` the mesh as built (vertices `built`, the nominal faces
+    in their order), lying at `T_part_placed` (4, 4) in the nominal frame."""
+
+    trial: Trial
+    part: Part
+    built: np.ndarray
+    T_part_placed: np.ndarray
+
+
+def trial_world(task: TrialTask) -> TrialWorld:
+    """The part of trial `task.index` as built and where it really sits."""
     trial = task.model.trial(task.seed, task.index)
     centre = task.vertices.min(axis=0) / 2 + task.vertices.max(axis=0) / 2
     built = trial.as_built(task.vertices, task.normals, centre)
     mesh = trimesh.Trimesh(built, task.faces, process=False)  # same faces, same order
     part = Part(mesh, name=task.name, source=task.name, inspect_faces=task.inspect_faces)
+    return TrialWorld(trial, part, built, trial.T_part_placed(centre))
+
+
+class PlacedProfilometer(LineProfilometer):
+    """A sensor on a part lying at `T_part_placed` in the frame the poses are given in: poses
+    in, profiles out in that frame (points, normals and poses), as a sensor on a cell sees
+    a part that is not where the CAD says. What a controller run in the loop of a trial
+    measures (`closed_loop.SensorFactory`)."""
+
+    def __init__(
+        self, part: Part, spec: SensorSpec, T_part_placed: np.ndarray, seed: int = 0
+    ) -> None:
+        super().__init__(part, spec, seed)
+        self.T_part_placed = np.asarray(T_part_placed, dtype=np.float64)
+        self._T_placed_part = np.linalg.inv(self.T_part_placed)
+
+    def measure_many(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> Scan:
+        poses = np.asarray(poses, dtype=np.float64)
+        if np.array_equal(self.T_part_placed, np.eye(4)):
+            return super().measure_many(poses, rng)
+        scan = super().measure_many(self._T_placed_part @ poses, rng)
+        R, t = self.T_part_placed[:3, :3], self.T_part_placed[:3, 3]
+        return replace(
+            scan,
+            poses=poses,
+            points_part=scan.points_part @ R.T + t,  # NaN stays NaN
+            normals_part=scan.normals_part @ R.T,  # 0 (no hit) stays 0
+        )
+
+
+def run_trial(task: TrialTask) -> np.ndarray:
+    """(k,) bool: which nominal surface samples trial `task.index` holds in spec."""
+    world = trial_world(task)
+    trial, part, built = world.trial, world.part, world.built
     # The part sits at T_placed in the nominal frame and the robot flies the noisy path there.
     # Measuring the part in its own frame with the poses moved by the inverse placement is the
     # same scan, and its points come out in the nominal frame: the placement error undone
@@ -68,7 +114,7 @@ def run_trial(task: TrialTask) -> np.ndarray:
     # associated with the nominal sample nearest it (within the coverage radii) as in
     # `evaluate`, and it is the path, the placement and the part's shape that decide which
     # points there are and whether they are in spec.
-    T_part_placed = trial.T_part_placed(centre)
+    T_part_placed = world.T_part_placed
     poses = trial.path_poses(task.poses)
     if not np.array_equal(T_part_placed, np.eye(4)):
         poses = np.linalg.inv(T_part_placed) @ poses
@@ -112,6 +158,7 @@ class Robustness:
     per_trial: np.ndarray
     points_part: np.ndarray
     in_spec_share: np.ndarray
+    closed_loop: bool = False  # the plan's controller ran on each perturbed part (`trials`)
 
     @property
     def mean(self) -> float:
@@ -127,8 +174,10 @@ class Robustness:
 
     def line(self, nominal: float | None = None) -> str:
         head = f"nominal {nominal:.1%}, " if nominal is not None else ""
+        loop = "closed loop" if self.closed_loop else "open loop"
         return (
-            f"robustness over {len(self.per_trial)} trials ({self.spec}, seed {self.seed}): "
+            f"robustness over {len(self.per_trial)} trials, {loop} ({self.spec}, seed "
+            f"{self.seed}): "
             f"in-spec coverage {head}mean {self.mean:.1%}, p5 {self.p5:.1%}, "
             f"worst {self.worst:.1%} | {self.fragile_fraction:.1%} of the surface fragile "
             "(in spec in some trials, not all)"
@@ -143,6 +192,7 @@ class Robustness:
         share = self.in_spec_share
         return {
             "trials": len(self.per_trial),
+            "loop": "closed" if self.closed_loop else "open",
             "mean": self.mean,
             "p5": self.p5,
             "worst": self.worst,
@@ -217,13 +267,21 @@ def robustness(tasks: Sequence[TrialTask], run: TrialMap = map) -> Robustness:  
     """Run the trials with `run` (the builtin map: here, one after another) and summarize."""
     if not tasks:
         raise ValueError("no trial to run")
-    in_spec = np.array(list(run(run_trial, tasks)), dtype=bool).reshape(len(tasks), -1)
-    per_trial = in_spec.mean(axis=1) if in_spec.shape[1] else np.zeros(len(tasks))
-    first = tasks[0]
+    return summarize(tasks[0], list(run(run_trial, tasks)))
+
+
+def summarize(
+    first: TrialTask, results: Sequence[np.ndarray], closed_loop: bool = False
+) -> Robustness:
+    """The `Robustness` of trials' in-spec sets (`run_trial`'s, in task order), `first` the
+    first trial's task (the model, seed and samples they share)."""
+    in_spec = np.array(results, dtype=bool).reshape(len(results), -1)
+    per_trial = in_spec.mean(axis=1) if in_spec.shape[1] else np.zeros(len(results))
     return Robustness(
         spec=first.model.text(),
         seed=first.seed,
         per_trial=per_trial,
         points_part=first.surface.points,
         in_spec_share=in_spec.mean(axis=0),
+        closed_loop=closed_loop,
     )

@@ -15,11 +15,16 @@ from scanplan.dynamics import PassDynamics, Step, pass_geometry, step_budget
 from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer, Profile
 from scanplan.quantities import ScanSpec, StepLimits
+from scanplan.sensor import SensorSpec
 from scanplan.swaths import Swath, frame_poses
 from scanplan.trajectory import Trajectory
 
 # (the sensor on the pass, the state it started the pass at) -> action in [-1, 1]^3 (^4 with roll)
 Controller = Callable[[PassDynamics, np.ndarray], np.ndarray]
+# (the part planned on, the planning sensor) -> the sensor whose profiles the controller acts
+# on: None in a planner is that sensor on the part itself; a robustness trial gives one on the
+# part as built and placed (`metrics.robustness.PlacedProfilometer`), the closed loop online.
+SensorFactory = Callable[[Part, SensorSpec], LineProfilometer]
 
 
 @dataclass(frozen=True)
@@ -72,18 +77,21 @@ def drive_passes(
     limits: StepLimits | None = None,
     guards: Guards | None = None,
     roll: bool = False,
+    measure_with: SensorFactory | None = None,
 ) -> list[Trajectory]:
     """Run `controller` over each whole pass on a noiseless sensor of `fan_points` columns,
     from an aligned start at the first station that sees the part to the last (SPEC §5's
     episode, planning form); every station becomes a scanning pose. roll: the controller
     gives 4-D actions (env v1's step model). The passes are independent and step in
     lockstep, so that each step measures every pass's proposed pose in one batch (a single
-    pose's ray cast is mostly overhead); each pass's poses are those it would have alone."""
+    pose's ray cast is mostly overhead); each pass's poses are those it would have alone.
+    measure_with: the sensor the controller measures with (`SensorFactory`); where each pass
+    starts and ends is the planned part's (the CAD's), whatever that sensor sees."""
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
     plan_spec = spec.with_sensor(sensor)
-    sim = LineProfilometer(part, sensor)
+    sim = LineProfilometer(part, sensor) if measure_with is None else measure_with(part, sensor)
     ds_opt = spec.delta_s_opt_mm
     hold = ds_opt / limits.dy_max_mm  # the action "advance Δs_opt"
     runs: list[_Run] = []

@@ -12,7 +12,7 @@ import numpy as np
 
 from scanplan.dynamics import PassDynamics
 from scanplan.part import Part
-from scanplan.planners.closed_loop import Guards, drive_passes
+from scanplan.planners.closed_loop import Guards, SensorFactory, drive_passes
 from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory
@@ -60,6 +60,7 @@ class FeedbackPlanner:
     roll: bool = False
     limits: StepLimits = field(default_factory=StepLimits)
     name: str = "feedback"
+    measure_with: SensorFactory | None = None  # `closed_loop.SensorFactory`
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         return self.plan_passes(part, [swath], spec)[0]
@@ -76,4 +77,5 @@ class FeedbackPlanner:
             guards=self.guards,
             limits=self.limits,
             roll=self.roll,
+            measure_with=self.measure_with,
         )

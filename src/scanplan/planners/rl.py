@@ -18,7 +18,7 @@ from torch import nn
 from scanplan.dynamics import PassDynamics
 from scanplan.observation import observe
 from scanplan.part import Part
-from scanplan.planners.closed_loop import Guards, drive_passes
+from scanplan.planners.closed_loop import Controller, Guards, SensorFactory, drive_passes
 from scanplan.policy import load_policy
 from scanplan.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.swaths import Swath
@@ -53,6 +53,7 @@ class RLPlanner:
     fan_points: int = PLANNING_FAN_POINTS
     guards: Guards = field(default_factory=Guards)
     name: str = "rl"
+    measure_with: SensorFactory | None = None  # `closed_loop.SensorFactory`
 
     @classmethod
     def from_file(cls, path: str | Path | None = None) -> RLPlanner:
@@ -117,6 +118,23 @@ class RLPlanner:
     def plan_passes(self, part: Part, swaths: list[Swath], spec: ScanSpec) -> list[Trajectory]:
         """Every pass at once, in lockstep (`closed_loop.drive_passes`)."""
         self.check_sensor(spec)
+        return drive_passes(
+            part,
+            swaths,
+            spec,
+            self.controller(),
+            self.name,
+            limits=self.limits,
+            fan_points=self.fan_points,
+            guards=self.guards,
+            roll=self.roll,
+            measure_with=self.measure_with,
+        )
+
+    def controller(self) -> Controller:
+        """The policy as a `closed_loop.Controller`: the observation the env gives
+        (`observation.observe`, with the options and the scale it was trained with) to the
+        deterministic actor."""
         env_cfg = self.config.get("env", {})
         use_position = bool(env_cfg.get("use_position", True))
         lookahead = bool(env_cfg.get("lookahead", False))
@@ -125,14 +143,4 @@ class RLPlanner:
         def policy(dyn: PassDynamics, start_state: np.ndarray) -> np.ndarray:
             return self.act(observe(dyn, start_state, use_position, lookahead, scale))
 
-        return drive_passes(
-            part,
-            swaths,
-            spec,
-            policy,
-            self.name,
-            limits=self.limits,
-            fan_points=self.fan_points,
-            guards=self.guards,
-            roll=self.roll,
-        )
+        return policy

@@ -1,0 +1,144 @@
+"""Closed-loop robustness trials (scanplan.trials): with no perturbation the controller flies
+the nominal plan again (the nominal figure exactly); on a part that is not where the CAD says
+it follows the part the open-loop replay misses; seeded runs repeat, worker processes and a
+Dask cluster give the serial numbers; only single-view feedback and rl plans are taken."""
+
+from __future__ import annotations
+
+import importlib.util
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import trimesh
+
+from scanplan.context import recorded
+from scanplan.metrics import evaluate, robustness, trial_tasks
+from scanplan.part import part_from_mesh
+from scanplan.perturb import Perturbation
+from scanplan.pipeline import plan_views
+from scanplan.planners import FeedbackPlanner, GeometricPlanner
+from scanplan.quantities import ScanSpec
+from scanplan.trajectory import read_json, write_json
+from scanplan.trials import closed_loop_robustness, closed_loop_tasks, plan_swaths_of
+
+SPEC = ScanSpec()
+POINTS = 128
+
+
+@pytest.fixture(scope="module")
+def bumpy():
+    """A 400 x 160 plate with a smooth bump 30 mm high across its middle (faces of 10 mm)."""
+    box = trimesh.creation.box((400.0, 160.0, 10.0))
+    box.apply_translation((0, 0, -5.0))
+    v, f = trimesh.remesh.subdivide_to_size(box.vertices, box.faces, 10.0)
+    top = v[:, 2] > -1e-6
+    v[top, 2] += 30.0 * np.exp(-((v[top, 0] / 60.0) ** 2))
+    return part_from_mesh(trimesh.Trimesh(v, f), "bump")
+
+
+@pytest.fixture(scope="module")
+def feedback_plan(bumpy, tmp_path_factory):
+    """The bump planned by the pitch-only feedback controller (one top view), read back from
+    its file as evaluate reads it."""
+    _, traj = plan_views(bumpy, SPEC, FeedbackPlanner(), "top")
+    path = tmp_path_factory.mktemp("plans") / "feedback.json"
+    write_json(traj, path)
+    return read_json(path)
+
+
+def _closed(part, traj, text, trials=2, seed=0, run=map):
+    model = Perturbation.parse(text)
+    tasks = closed_loop_tasks(part, traj, recorded(traj, SPEC), model, trials, seed, POINTS)
+    return closed_loop_robustness(tasks, run)
+
+
+def _open(part, traj, text, trials=2, seed=0):
+    model = Perturbation.parse(text)
+    return robustness(trial_tasks(part, SPEC, traj, model, trials, seed, POINTS))
+
+
+def test_the_plan_records_its_pass_lines(bumpy, feedback_plan):
+    swaths = plan_swaths_of(feedback_plan, "plan")
+    assert [sw.index for sw in swaths] == sorted(set(feedback_plan.swath.tolist()))
+    # Each pass's poses lie on its line: x_s along v, the sensor over the line's start.
+    for sw in swaths:
+        poses = feedback_plan.poses[feedback_plan.scanning & (feedback_plan.swath == sw.index)]
+        assert np.allclose(poses[:, :3, 0] @ sw.v, 1.0)
+        assert np.allclose((poses[:, :3, 3] - sw.start_mm) @ sw.v, 0.0, atol=1e-6)
+
+
+def test_zero_perturbation_is_the_nominal_figure_exactly(bumpy, feedback_plan):
+    nominal = evaluate(bumpy, SPEC, feedback_plan, points_per_profile=POINTS, ceiling=False)
+    zero = _closed(bumpy, feedback_plan, "place:0mm,0deg;warp:0mm@200mm", trials=1)
+    assert 0.3 < nominal.in_spec_coverage < 1.0
+    assert list(zero.per_trial) == [nominal.in_spec_coverage]
+    assert zero.closed_loop and zero.to_json_dict()["loop"] == "closed"
+
+
+def test_the_closed_loop_follows_a_displaced_part_the_replay_misses(bumpy, feedback_plan):
+    # Trial 0 of seed 4 lifts the part by 25 mm, twice the 12.5 mm depth tolerance: the plan
+    # replayed scans it out of spec, the controller measures the lift and follows it.
+    text = "place:15mm,1deg"
+    trial = Perturbation.parse(text).trial(4, 0)
+    assert trial.place_t_mm[2] > 20.0
+    closed = _closed(bumpy, feedback_plan, text, trials=1, seed=4)
+    replay = _open(bumpy, feedback_plan, text, trials=1, seed=4)
+    nominal = _open(bumpy, feedback_plan, "path:0mm", trials=1).mean
+    assert replay.mean < 0.5 * nominal
+    assert closed.mean > 0.9 * nominal
+
+
+def test_seeded_runs_repeat_and_workers_give_the_serial_numbers(bumpy, feedback_plan):
+    text = "place:5mm,2deg;warp:1mm@100mm"
+    a = _closed(bumpy, feedback_plan, text, seed=1)
+    with ProcessPoolExecutor(2) as pool:
+        b = _closed(bumpy, feedback_plan, text, seed=1, run=pool.map)
+    assert np.array_equal(a.per_trial, b.per_trial)
+    assert np.array_equal(a.in_spec_share, b.in_spec_share)
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
+)
+def test_a_loopback_dask_cluster_gives_the_local_numbers(bumpy, feedback_plan):
+    from dask.distributed import LocalCluster
+
+    from scanplan.cli.planning import trial_runner  # what evaluate --scheduler runs
+
+    text = "place:5mm,2deg;path:0.2mm"
+    with (
+        LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=":0",
+        ) as cluster,
+        trial_runner(cluster.scheduler_address, 1) as run,
+    ):
+        on_dask = _closed(bumpy, feedback_plan, text, trials=1, run=run)
+    assert np.array_equal(on_dask.per_trial, _closed(bumpy, feedback_plan, text, 1).per_trial)
+
+
+def test_open_loop_multi_view_and_robot_plans_are_refused(bumpy, feedback_plan):
+    _, geometric = plan_views(bumpy, SPEC, GeometricPlanner(), "top")
+    model = Perturbation.parse("place:1mm")
+    with pytest.raises(ValueError, match="made by geometric"):
+        closed_loop_tasks(bumpy, geometric, recorded(geometric, SPEC), model, 1)
+    context = recorded(feedback_plan, SPEC)
+    two = replace(
+        feedback_plan, meta=feedback_plan.meta | {"views": 2 * feedback_plan.meta["views"]}
+    )
+    with pytest.raises(ValueError, match="has 2 views"):
+        closed_loop_tasks(bumpy, two, context, model, 1)
+    old = replace(
+        feedback_plan,
+        meta=feedback_plan.meta | {"views": [{"index": 0, "axis": [0.0, 0.0, 1.0]}]},
+    )
+    with pytest.raises(ValueError, match="does not record its pass lines"):
+        closed_loop_tasks(bumpy, old, context, model, 1)
+    fitted = replace(feedback_plan, meta=feedback_plan.meta | {"robot": {"robot": "ur5e"}})
+    with pytest.raises(ValueError, match="fitted to a robot"):
+        closed_loop_tasks(bumpy, fitted, context, model, 1)
