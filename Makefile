@@ -19,8 +19,9 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/scanplan demo -o out/demo
 
+# One worker per core, each test file on one worker (its module fixtures built once).
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks

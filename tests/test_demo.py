@@ -1,4 +1,4 @@
-"""The main job end to end, on the small drone part to keep CI short (the door is `make demo`)."""
+"""The main job end to end, on the training piece to keep CI short (the door is `make demo`)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     result = CliRunner().invoke(
-        app, ["demo", "--part", "drone", "--points", "96", "-o", str(out)], terminal_width=200
+        app, ["demo", "--part", "training-piece", "--points", "96", "-o", str(out)], terminal_width=200
     )
     assert result.exit_code == 0, result.output
     return out, result.output

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+import shlex
 import sys
 
 import pytest
@@ -169,7 +170,7 @@ def test_reuse_neither_retrains_nor_reevaluates_a_finished_run(tmp_path, small_p
 
 @needs_dask
 @pytest.mark.slow
-def test_sweep_cli_writes_and_prints_the_table(tmp_path, small_plate):
+def test_sweep_cli_writes_and_prints_the_table(tmp_path, small_plate, monkeypatch):
     from typer.testing import CliRunner
 
     from scanplan.cli import app
@@ -178,6 +179,8 @@ def test_sweep_cli_writes_and_prints_the_table(tmp_path, small_plate):
     args = ["sweep", "-o", str(out), "--seeds", "0", "--timesteps", "64", "--n-envs", "2"]
     args += ["--fan-points", "32", "--workers", "1", "--baseline", "feedback", "--label", "tiny"]
     args += ["--part", f"{small_plate.source}:mm"]
+    # The command line recorded is the process's own (CliRunner leaves sys.argv as it is).
+    monkeypatch.setattr(sys, "argv", ["/usr/bin/scanplan", *args])
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "| v0 | tiny | small_plate | 1 |" in result.output
@@ -185,6 +188,6 @@ def test_sweep_cli_writes_and_prints_the_table(tmp_path, small_plate):
     rows = read_csv(out / "sweep.csv")
     assert [r["label"] for r in rows] == ["tiny", "feedback"]
     meta = json.loads((out / "runs" / "tiny-s0" / "policy.json").read_text())
-    assert meta["training"]["command"].startswith("scanplan ")  # the sweep's command line
+    assert meta["training"]["command"] == shlex.join(["scanplan", *args])
     bad = CliRunner().invoke(app, ["sweep", "-o", str(out), "--baseline", "rl"])
     assert bad.exit_code == 2 and "--baseline 'rl'" in bad.output
