@@ -235,6 +235,8 @@ class PassDynamics:
     Δs of that profile (`quantities`). `propose` an action (nothing changes), measure the
     proposed pose (`measure`, or many dynamics' poses in one batch), then `accept` it.
 
+    sim: the simulated sensor; None for a sensor online (`online.OnlinePass`), whose
+    profiles come in through `begin` and `accept` (nothing is measured here).
     rng: the Generator the simulator's noise draws from (an env's `np_random`).
     roll: the state is (s, h, θ, φ, l) and actions are 4-D (env v1); β is tracked too.
     align_iterations, start_pitch_max_rad: see `aligned_start`.
@@ -245,14 +247,14 @@ class PassDynamics:
         part: Part,
         swath: Swath,
         spec: ScanSpec,
-        sim: LineProfilometer,
+        sim: LineProfilometer | None,
         limits: StepLimits | None = None,
         rng: np.random.Generator | None = None,
         roll: bool = False,
         align_iterations: int = 4,
         start_pitch_max_rad: float = math.radians(15.0),
     ) -> None:
-        self.part, self.swath, self.spec, self.sim = part, swath, spec, sim
+        self.part, self.swath, self.spec, self._sim = part, swath, spec, sim
         self.roll = roll
         self.beta_rad = self.tilt_rad = math.nan
         self.limits = limits or StepLimits()
@@ -261,6 +263,13 @@ class PassDynamics:
         self.start_pitch_max_rad = start_pitch_max_rad
 
     # ---- measuring ----------------------------------------------------------------------
+    @property
+    def sim(self) -> LineProfilometer:
+        """The simulated sensor (RuntimeError for a pass run online: nothing to simulate)."""
+        if self._sim is None:
+            raise RuntimeError("this pass runs online: its profiles come from the sensor")
+        return self._sim
+
     def pose(self, state: np.ndarray | None = None) -> np.ndarray:
         """T_part_sensor at `state` (default: the current one)."""
         return self.swath.pose(*(self.state if state is None else state))
@@ -302,9 +311,13 @@ class PassDynamics:
     # ---- the pass -------------------------------------------------------------------------
     def start(self, state: np.ndarray) -> None:
         """Put the sensor at `state` and measure there."""
+        self.begin(state, self.measure(np.asarray(state, dtype=np.float64)))
+
+    def begin(self, state: np.ndarray, profile: Profile) -> None:
+        """Put the sensor at `state`, where `profile` was measured (no Δs yet)."""
         self.state = np.asarray(state, dtype=np.float64)
-        self.profile = self.measure(self.state)
-        self._take(self.profile)
+        self.profile = profile
+        self._take(profile)
         self.delta_s_mm = float("nan")
 
     def propose(self, action: np.ndarray) -> Step:
