@@ -142,3 +142,18 @@ def test_open_loop_multi_view_and_robot_plans_are_refused(bumpy, feedback_plan):
     fitted = replace(feedback_plan, meta=feedback_plan.meta | {"robot": {"robot": "ur5e"}})
     with pytest.raises(ValueError, match="fitted to a robot"):
         closed_loop_tasks(bumpy, fitted, context, model, 1)
+
+
+def test_an_rl_plan_runs_its_policy_in_the_loop(bumpy, tmp_path):
+    from scanplan.planners.rl import RLPlanner
+
+    _, traj = plan_views(bumpy, SPEC, RLPlanner.default(), "top")
+    write_json(traj, tmp_path / "rl.json")
+    plan = read_json(tmp_path / "rl.json")
+    nominal = evaluate(bumpy, SPEC, plan, points_per_profile=POINTS, ceiling=False)
+    zero = _closed(bumpy, plan, "place:0mm", trials=1)
+    assert list(zero.per_trial) == [nominal.in_spec_coverage]
+    with pytest.raises(ValueError, match="does not roll; policy .* does"):
+        closed_loop_tasks(
+            bumpy, plan, recorded(plan, SPEC), Perturbation.parse("place:1mm"), 1, policy="v1"
+        )
