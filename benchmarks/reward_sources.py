@@ -1,10 +1,12 @@
 """What the paper's reward pays in the training env, per action source: the untrained PPO
-policy (SB3's N(0, 1) around 0), a narrow spread around 0, `fixed`, `feedback`, and those two
-with N(0, 1) noise. Per source: mean per-step R_D, R_α, R_Δs and reward, episode length
-against the nominal steps, the undiscounted return and the discounted return from the start
-G0 (γ 0.99), the fractions truncated and lost, mean |D − W_d| and |α| (issue 22's evidence).
+policy (SB3's N(0, 1) around 0), a narrow spread around 0, `fixed`, `feedback`, those two
+with N(0, 1) noise, and `feedback` holding the pitch (Δθ = 0: depth following alone). Per
+source: mean per-step R_D, R_α, R_Δs and reward, episode length against the nominal steps,
+the undiscounted return and the discounted return from the start G0 (γ 0.99), the fractions
+truncated and lost, mean |D − W_d| and |α| (issue 22's evidence).
 
     python benchmarks/reward_sources.py [--episodes 24] [--start-offset 100,20]
+        [--reward-distance-scale MM]
 
 The env is `scanplan train`'s (the paper's recipe: training piece, 100-400 mm segments),
 stepped one env at a time; episodes use reset seeds 1000, 1001, ... for every source.
@@ -22,6 +24,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--episodes", type=int, default=24)
     ap.add_argument("--start-offset", default="0,0", help="MM,DEG as scanplan train's")
+    ap.add_argument("--reward-distance-scale", type=float, default=None, help="MM, as train's")
     args = ap.parse_args()
     import torch
 
@@ -31,7 +34,9 @@ def main() -> None:
 
     torch.set_num_threads(1)
     offset = tuple(float(v) for v in args.start_offset.split(","))
-    cfg = recipe_config("unused", start_offset=offset)
+    cfg = recipe_config(
+        "unused", start_offset=offset, reward_distance_scale=args.reward_distance_scale
+    )
     env = make_env(cfg.parts, cfg.env)
     feedback = FeedbackController()
     rng = np.random.default_rng(0)
@@ -47,6 +52,7 @@ def main() -> None:
         "fixed + N(0,1)": lambda: np.clip(np.array([0.5, 0.0, 0.0]) + noise(), -1, 1),
         "feedback": lambda: feedback(env.dynamics),
         "feedback + N(0,1)": lambda: np.clip(feedback(env.dynamics) + noise(), -1, 1),
+        "feedback, depth only": lambda: feedback(env.dynamics) * np.array([1.0, 1.0, 0.0]),
     }
     head = "R_D R_alpha R_ds R/step len nominal return G0 trunc lost |dD|mm |alpha|deg"
     print(f"{'source':26s} " + " ".join(f"{h:>8s}" for h in head.split()))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import gymnasium as gym
@@ -112,6 +113,8 @@ class SwathScanEnv(gym.Env):
     without a valid point) ends and is charged −1 for each of its remaining nominal steps
     (remaining length / Δs_opt, at most the steps left before truncation), in
     `info["lost_penalty"]`: ending early is never cheaper than finishing.
+    `reward_distance_scale_mm` (training, a deviation from the paper) sets the depth error at
+    which R_D reaches −1 instead of the paper's Z_r/2.
 
     ## Starting state
 
@@ -161,6 +164,7 @@ class SwathScanEnv(gym.Env):
         roll: bool = False,
         start_offset_mm: float = 0.0,
         start_pitch_deg: float = 0.0,
+        reward_distance_scale_mm: float | None = None,
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal).
@@ -170,7 +174,9 @@ class SwathScanEnv(gym.Env):
         the orientation reward on the full angle between beam and mean normal).
         start_offset_mm, start_pitch_deg: an episode starts off the aligned pose by a depth
         error U(−a, a) mm along the beam and a pitch error U(−b, b)° about the footprint
-        (beyond the paper, which is silent on the start; 0 = the aligned start, v0 only)."""
+        (beyond the paper, which is silent on the start; 0 = the aligned start, v0 only).
+        reward_distance_scale_mm: R_D's scale (`ScanSpec.reward_distance_scale_mm`; None keeps
+        the scan spec's, by default the paper's Z_r/2)."""
         super().__init__()
         if (start_offset_mm or start_pitch_deg) and roll:
             raise ValueError("start_offset_mm / start_pitch_deg: env v0 only")
@@ -184,6 +190,10 @@ class SwathScanEnv(gym.Env):
         spec = scan_spec or ScanSpec()
         sensor = spec.sensor.with_points(fan_points) if fan_points else spec.sensor
         self.scan_spec = spec.with_sensor(sensor if noise else sensor.without_noise())
+        if reward_distance_scale_mm is not None:
+            self.scan_spec = replace(
+                self.scan_spec, reward_distance_scale_mm=float(reward_distance_scale_mm)
+            )
         self.limits = limits or StepLimits()
         self._fixed_parts = list(parts) if parts is not None else None
         self._fixed_swaths = list(swaths) if swaths is not None else None

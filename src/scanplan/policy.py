@@ -106,6 +106,10 @@ class EnvOptions(_Model):
     # Training only (random start offsets, beyond the paper); planning starts aligned.
     start_offset_mm: Annotated[float, Field(ge=0, lt=1e4, allow_inf_nan=False)] = 0.0
     start_pitch_deg: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.0
+    # Training only (R_D's scale, a deviation from the paper's Z_r/2); None = the paper's.
+    reward_distance_scale_mm: Annotated[float, Field(gt=0, le=1e4, allow_inf_nan=False)] | None = (
+        None
+    )
 
     @field_validator("segment_mm")
     @classmethod

@@ -46,6 +46,8 @@ class ScanSpec:
     programs: scan speed = profile rate × Δs_opt (profiles land Δs_opt apart), moves between
     passes at the travel speed.
     clearance_mm: how far the sensor body stays from the part on every pose (SPEC §3b).
+    reward_distance_scale_mm: the depth error at which R_D reaches −1; None = Z_r/2, the
+    paper's (a training deviation, `scanplan train --reward-distance-scale`).
     """
 
     sensor: SensorSpec = field(default_factory=SensorSpec)
@@ -59,6 +61,7 @@ class ScanSpec:
     profile_rate_hz: float = 200.0
     travel_speed_mm_s: float = 250.0
     clearance_mm: float = 20.0
+    reward_distance_scale_mm: float | None = None
 
     def __post_init__(self) -> None:
         checks = [
@@ -68,6 +71,7 @@ class ScanSpec:
             (self.tol_angle_rad, "angle tolerance"),
             (self.profile_rate_hz, "profile rate (profile_rate_hz)"),
             (self.travel_speed_mm_s, "travel speed (travel_speed_mm_s)"),
+            (self.distance_scale_mm, "reward distance scale (reward_distance_scale_mm)"),
         ]
         for value, what in checks:
             if not (math.isfinite(value) and value > 0):
@@ -93,6 +97,13 @@ class ScanSpec:
     def half_range_mm(self) -> float:
         """Z_r/2: the depth window's half width, the scale of D in the reward and state."""
         return self.sensor.z_range_mm / 2
+
+    @property
+    def distance_scale_mm(self) -> float:
+        """R_D's scale: the depth error it charges −1 (the paper's Z_r/2 unless set)."""
+        if self.reward_distance_scale_mm is None:
+            return self.half_range_mm
+        return self.reward_distance_scale_mm
 
     @property
     def tolerance_mm(self) -> float:

@@ -16,9 +16,10 @@ from scanplan.quantities import ScanSpec
 
 
 def reward_distance(d_mm: ArrayLike, cfg: ScanSpec) -> np.ndarray:
-    """R_D = -(W_d - D)^2 / (Z_r/2)^2; -1 outside the range or with no valid point."""
+    """R_D = -(W_d - D)^2 / (Z_r/2)^2 (the scale is `cfg.distance_scale_mm`, Z_r/2 unless set);
+    -1 beyond the scale or with no valid point."""
     d = np.asarray(d_mm, dtype=np.float64)
-    half = cfg.z_range_mm / 2
+    half = cfg.distance_scale_mm
     with np.errstate(invalid="ignore"):
         e = cfg.working_distance_mm - d
         r = -(e * e) / half**2

@@ -222,6 +222,13 @@ StartOffsetOpt = Annotated[
         "start; 0,0 = the aligned start)"
     ),
 ]
+RewardDistanceScaleOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="R_D's scale in mm, the depth error charged -1 (a deviation from the paper, whose "
+        "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2)"
+    ),
+]
 BcSamplesOpt = Annotated[
     int,
     typer.Option(

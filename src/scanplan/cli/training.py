@@ -23,6 +23,7 @@ from scanplan.cli.options import (
     LogStdInitOpt,
     NEnvsOpt,
     ProceduralOpt,
+    RewardDistanceScaleOpt,
     StartOffsetOpt,
     StateOpt,
     bounded,
@@ -54,6 +55,7 @@ def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
         log_std_init=parse_floats(shared["log_std_init"], "--log-std-init"),
         init_advance=shared["init_advance"],
         start_offset=parse_floats(shared["start_offset"], "--start-offset"),
+        reward_distance_scale=shared["reward_distance_scale"],
         bc_samples=shared["bc_samples"],
         command=shlex.join(["scanplan", *sys.argv[1:]]),
         **own,
@@ -97,6 +99,7 @@ def train_cmd(
     log_std_init: LogStdInitOpt = "0",
     init_advance: InitAdvanceOpt = None,
     start_offset: StartOffsetOpt = "0,0",
+    reward_distance_scale: RewardDistanceScaleOpt = None,
     bc_samples: BcSamplesOpt = 0,
     no_progress: NoProgressOpt = False,
 ):
@@ -254,6 +257,7 @@ def sweep_cmd(
     log_std_init: LogStdInitOpt = "0",
     init_advance: InitAdvanceOpt = None,
     start_offset: StartOffsetOpt = "0,0",
+    reward_distance_scale: RewardDistanceScaleOpt = None,
     bc_samples: BcSamplesOpt = 0,
     n_envs: NEnvsOpt = 16,
 ):

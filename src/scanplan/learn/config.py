@@ -26,6 +26,7 @@ MAX_WIDTH = 4096  # units of a hidden layer
 # SwathScanEnv's own pitch bound.
 MAX_START_OFFSET_MM = 1000.0
 MAX_START_PITCH_DEG = 60.0
+MAX_DISTANCE_SCALE_MM = 1e4  # --reward-distance-scale (policy.json's bound)
 
 
 @dataclass
@@ -160,6 +161,7 @@ def recipe_config(
     log_std_init: tuple[float, ...] = (0.0,),
     init_advance: float | None = None,
     start_offset: tuple[float, ...] = (0.0, 0.0),
+    reward_distance_scale: float | None = None,
     bc_samples: int = 0,
     resume: str | None = None,
     progress_bar: bool = True,
@@ -192,6 +194,19 @@ def recipe_config(
         if offset_mm or offset_deg
         else {}
     )
+    if reward_distance_scale is not None and not (
+        math.isfinite(reward_distance_scale) and 0 < reward_distance_scale <= MAX_DISTANCE_SCALE_MM
+    ):
+        raise ValueError(
+            f"--reward-distance-scale {reward_distance_scale:g}: a depth error in "
+            f"(0, {MAX_DISTANCE_SCALE_MM:g}] mm"
+        )
+    # Recorded only when set, as the start offsets.
+    scale = (
+        {"reward_distance_scale_mm": float(reward_distance_scale)}
+        if reward_distance_scale is not None
+        else {}
+    )
     use_position, lookahead = STATES[state]
     return TrainConfig(
         output_dir=output_dir,
@@ -213,6 +228,7 @@ def recipe_config(
             "procedural_parts": procedural,
             "roll": roll,
             **start,
+            **scale,
         },
         resume=resume,
         progress_bar=progress_bar,
