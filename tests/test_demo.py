@@ -22,7 +22,9 @@ pytestmark = pytest.mark.slow
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     result = CliRunner().invoke(
-        app, ["demo", "--part", "training-piece", "--points", "96", "-o", str(out)], terminal_width=200
+        app,
+        ["demo", "--part", "training-piece", "--points", "96", "-o", str(out)],
+        terminal_width=200,
     )
     assert result.exit_code == 0, result.output
     return out, result.output

@@ -18,7 +18,8 @@ import numpy as np
 from scanplan.context import PlanContext, judged_alike, recorded
 from scanplan.export import ExportOptions, export_program, parse_pose_arg, parse_program
 from scanplan.export.common import plan_motion
-from scanplan.metrics import Metrics, evaluate
+from scanplan.metrics import Metrics
+from scanplan.metrics.detectability import evaluate_detectable
 from scanplan.part import Part, load_part
 from scanplan.pipeline import Arm, fit_arm, plan_views
 from scanplan.planners import Planner, make_planner
@@ -94,7 +95,7 @@ def run_demo(
         step(f"evaluating {name} ({int(traj.scanning.sum())} profiles, {context.surface} surface)")
         # The cycle timed as the exported program flies it: between its thinned targets.
         motion = plan_motion(traj, ExportOptions(scan=spec))
-        metrics[name] = evaluate(
+        metrics[name] = evaluate_detectable(
             part,
             spec,
             traj,

@@ -103,6 +103,10 @@ def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
     assert cycle["limits"]["name"] == "nominal" and cycle["total_s"] == data["cycle_time_s"]
     assert f"cycle time {data['cycle_time_s']:.1f} s (scanning " in planned
     assert f"in {cycle['passes']} pass" in planned
+    # The dent the plan would find, predicted from the same scan: a fixed pass over a flat
+    # plate at W_d finds sub-millimetre dents, and the JSON and the line say the same.
+    found = data["detectable"]
+    assert found["type"] == "dent" and 0.01 < found["a50_mm"] < found["a90_mm"] < 1.0
     report = tmp_path / "report"
     result = runner.invoke(
         app, ["evaluate", str(plate_file), str(traj), "--points", "128", "-o", str(report)]
@@ -111,8 +115,12 @@ def test_cli_plan_then_evaluate_json(plate_file, tmp_path):
     assert cycle_line(result.stdout) == planned
     share = f"{data['in_spec_of_ceiling']:.1%} of its visibility ceiling 100.0% | "
     assert share in result.stdout
+    assert f"| dent found at 90 %: {found['a90_mm']:.3f} mm deep (predicted) |" in result.stdout
     names = {p.name for p in report.iterdir()}
     assert {"distance_error.png", "orientation_error.png", "metrics.md", "metrics.json"} <= names
+    assert (
+        "detectability.png" in names and "dent found at 90 %" in (report / "metrics.md").read_text()
+    )
     assert "report.html" in names
 
 

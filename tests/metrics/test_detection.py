@@ -14,7 +14,7 @@ import trimesh
 from helpers import straight
 from scanplan.context import PlanContext
 from scanplan.defects import Defect
-from scanplan.metrics.detectability import survey
+from scanplan.metrics.detectability import DetectabilitySurvey, survey
 from scanplan.metrics.detection import (
     DefectTask,
     defect_run,
@@ -22,7 +22,7 @@ from scanplan.metrics.detection import (
     detector_for,
     run_defect_trial,
 )
-from scanplan.metrics.evaluation import surface_samples
+from scanplan.metrics.evaluation import evaluate, surface_samples
 from scanplan.metrics.pod import fit_pod
 from scanplan.part import part_from_mesh
 from scanplan.quantities import ScanSpec
@@ -146,3 +146,22 @@ def test_trials_on_a_loopback_dask_cluster_repeat_the_serial_run():
     assert np.array_equal(on_dask.hits, serial.hits)
     assert np.array_equal(on_dask.flagged_points, serial.flagged_points)
     assert serial.landed_points.sum() > 0
+
+
+def test_evaluate_predicts_the_full_fan_map_from_its_own_sub_sampled_scan():
+    # The map evaluate draws from its 256-column scan (no second scan) against the survey of
+    # the real 4096-column sensor: the real column pitch and the same predicted a90.
+    part = part_from_mesh(_plate(160.0), "plate")
+    traj = straight(np.arange(236.0, 404.0, 0.5))
+    detector = detector_for(traj, SENSOR)
+    surface = surface_samples(part, SENSOR, PlanContext(SPEC), 0)
+    _, full = survey(part, SENSOR, traj.poses, detector, surface)
+    acc = DetectabilitySurvey(SENSOR, detector, false_calls=False)
+    evaluate(part, SPEC, traj, points_per_profile=256, observers=[acc])
+    calls, fan = acc.finish()
+    assert calls is None
+    pitch = SENSOR.line_width_mm / (SENSOR.points_per_profile - 1)
+    assert np.median(fan.column_mm[fan.seen]) == pytest.approx(pitch, rel=0.1)
+    assert np.median(fan.spacing_mm[fan.seen]) == pytest.approx(0.5, rel=0.1)
+    predicted = fan.predicted_a("dent", detector, 0.9)
+    assert predicted == pytest.approx(full.predicted_a("dent", detector, 0.9), rel=0.1)

@@ -438,7 +438,7 @@ def evaluate_cmd(
     each perturbed part."""
     # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
     from scanplan.cli.training import check_cluster
-    from scanplan.metrics import evaluate
+    from scanplan.metrics.detectability import evaluate_detectable
     from scanplan.part import load_part
     from scanplan.perturb import Perturbation
     from scanplan.trajectory import read_trajectory
@@ -464,7 +464,7 @@ def evaluate_cmd(
         typer.echo(note, err=True)
     targets, blended = program_targets(traj, context.spec)
     with progress_bar("evaluating", quiet) as progress:
-        metrics = evaluate(
+        metrics = evaluate_detectable(
             the_part,
             context.spec,
             traj,
@@ -604,8 +604,8 @@ def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:
     return (
         f"in-spec coverage {metrics.in_spec_coverage:.1%} (±{tol['mm']:g} mm, {tol['deg']:g}°) "
         f"of the {metrics.surface} surface ({_grouped(metrics.visible_area_mm2)} mm²)"
-        f"{_of_ceiling(metrics)} | coverage {metrics.coverage_fraction:.1%} | "
-        f"{data['profiles']} profiles | "
+        f"{_of_ceiling(metrics)}{_detectable(metrics)} | "
+        f"coverage {metrics.coverage_fraction:.1%} | {data['profiles']} profiles | "
         f"|distance error| mean {metrics.distance_error_mean_abs_mm:.3f} "
         f"p95 {metrics.distance_error_p95_abs_mm:.3f} mm | orientation mean "
         f"{metrics.orientation_error_mean_deg:.2f} p95 {metrics.orientation_error_p95_deg:.2f} deg"
@@ -614,6 +614,16 @@ def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:
         f" | collisions {metrics.collisions_count} within {metrics.clearance_mm:g} mm, "
         f"{metrics.collisions_touching} touching (worst {metrics.worst_penetration_mm:.1f} mm)"
     )
+
+
+def _detectable(metrics: Metrics) -> str:
+    """' | dent found at 90 %: 0.089 mm deep (predicted)', or nothing where not predicted."""
+    found = metrics.detectable
+    if not found:
+        return ""
+    a90 = found.get("a90_mm")
+    size = f"{a90:.3f} mm deep" if a90 is not None else "none (too little of the surface seen)"
+    return f" | {found['type']} found at 90 %: {size} (predicted)"
 
 
 def _of_ceiling(metrics: Metrics) -> str:

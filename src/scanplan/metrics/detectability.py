@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -29,17 +29,24 @@ from scanplan.metrics.detection import (
     FalseCalls,
     calls,
     cos_incidence,
+    detector_for,
     flagged,
     sigma_mm,
 )
+from scanplan.metrics.evaluation import evaluate
+from scanplan.metrics.summary import Metrics
 from scanplan.part import Part
-from scanplan.profilometer import LineProfilometer
+from scanplan.profilometer import LineProfilometer, Scan
+from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.surface import VisibleSurface
+from scanplan.trajectory import Trajectory
 
 PREDICTED = ("dent", "bump", "pit", "scratch")
+DEFAULT_DEFECT = "dent"  # the one `scanplan evaluate` predicts
 ANGLES = 8  # a scratch's directions to the scan averaged over
 DENSITY_RADIUS_MM = 2.0
+NEAREST_POINTS = 8  # a sample's noise, pitch and passes: from its nearest points in a chunk
 COLUMN_STRIDE = 4  # the density is counted on every 4th column (x 4)
 OFFSETS = 16  # profile offsets averaged over, per sample
 MAX_PREDICTED_SAMPLES = 20_000
@@ -110,7 +117,7 @@ class Detectability:
         self, kind: str, sizes_mm: np.ndarray, detector: Detector, seed: int = 0
     ) -> np.ndarray:
         """(s,) the predicted POD over the surface at each size (a subsample of samples)."""
-        rows = self._rows(seed)
+        rows = self.sampled_rows(seed)
         return np.array([self.pod_at(kind, a, detector, rows).mean() for a in sizes_mm])
 
     def predicted_a(
@@ -118,7 +125,7 @@ class Detectability:
     ) -> float | None:
         """The depth at which the predicted POD reaches `share` (None if it never does
         below 100 mm: too much of the surface unseen)."""
-        rows = self._rows(seed)
+        rows = self.sampled_rows(seed)
         seen = self.seen if rows is None else self.seen[rows]
         if not seen.mean() >= share:  # unseen samples never find a defect
             return None
@@ -135,21 +142,26 @@ class Detectability:
             previous = pod
         return None
 
-    def smallest_mm(self, kind: str, detector: Detector, share: float = 0.9) -> np.ndarray:
-        """(k,) per sample the smallest depth found with probability `share` (inf: none
-        below 100 mm)."""
-        grid = np.geomspace(1e-3, 100.0, 61)
+    def smallest_mm(
+        self, kind: str, detector: Detector, share: float = 0.9, rows: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(k,) per sample (or (r,) per sorted sample index of `rows`) the smallest depth
+        found with probability `share` (inf: none below 100 mm)."""
+        grid = np.geomspace(1e-3, 100.0, 201)  # 6 % apart: the map shows no steps
+        idx = np.arange(len(self.seen)) if rows is None else np.asarray(rows)
         out = np.full(len(self.seen), np.inf)
-        todo = np.flatnonzero(self.seen)
+        todo = idx[self.seen[idx]]
         for a in grid:
             if len(todo) == 0:
                 break
             now = self.pod_at(kind, a, detector, todo) >= share
             out[todo[now]] = a
             todo = todo[~now]
-        return out
+        return out[idx]
 
-    def _rows(self, seed: int) -> np.ndarray | None:
+    def sampled_rows(self, seed: int) -> np.ndarray | None:
+        """Sorted indices of a seeded sample of `MAX_PREDICTED_SAMPLES` samples (None: all
+        of them, being no more)."""
         k = len(self.seen)
         if k <= MAX_PREDICTED_SAMPLES:
             return None
@@ -206,6 +218,136 @@ def _median(values: np.ndarray) -> float | None:
     return float(np.median(values)) if len(values) else None
 
 
+class DetectabilitySurvey:
+    """The detectability at each sample of `surface`, streamed from a scan's chunks
+    (`add`), and the calls the scan makes (`finish`; every one false on a defect-free
+    part). `evaluate` feeds it its own scan (`metrics.evaluation.ScanObserver`), so the
+    map costs no second scan.
+
+    sensor: the real sensor; fan: the fan the scan is simulated with (the real one, or a
+    sub-sample of it: the column pitch is then that of the real sensor's columns, as the
+    density rule judges); swath (m,): the pass of each scanning pose (None: one pass);
+    false_calls: also flag and cluster the points (off: the calls are not counted)."""
+
+    def __init__(
+        self,
+        sensor: SensorSpec,
+        detector: Detector,
+        surface: VisibleSurface | None = None,
+        swath: np.ndarray | None = None,
+        false_calls: bool = True,
+    ) -> None:
+        self.sensor = sensor
+        self.detector = detector
+        self.false_calls = false_calls
+        self.swath = swath
+        self.surface: VisibleSurface | None = None
+        self.fan = sensor
+        if surface is not None:
+            self.start(surface, sensor, swath)
+
+    def start(
+        self, surface: VisibleSurface, fan: SensorSpec, swath: np.ndarray | None = None
+    ) -> None:
+        """Begin a scan by `fan` of the samples `surface`, its poses in passes `swath`."""
+        self.surface, self.fan = surface, fan
+        swath = self.swath if swath is None else swath
+        k = len(surface.points)
+        self._count = np.zeros(k)
+        self._sig_sum, self._col_sum, self._n_sum = np.zeros(k), np.zeros(k), np.zeros(k)
+        self._kept: list[np.ndarray] = []
+        self._n_flag = self._n_valid = 0
+        self._pass_of = None if swath is None else np.unique(swath, return_inverse=True)[1]
+        self._n_pass = 1 if self._pass_of is None else int(self._pass_of.max(initial=0)) + 1
+        self._pair_keys: list[np.ndarray] = []
+        self._pair_counts: list[np.ndarray] = []
+        # Real columns per fan column: the fan's pitch over the real sensor's.
+        self._pitch_ratio = max(self.sensor.points_per_profile - 1, 1) / max(
+            fan.points_per_profile - 1, 1
+        )
+        self._stride = max(1, round(COLUMN_STRIDE / self._pitch_ratio))
+        # Points are counted in a disc several counted columns wide: a sparse fan's count
+        # would jump with where its columns fall.
+        pitch = fan.line_width_mm / max(fan.points_per_profile - 1, 1)
+        self._radius = max(DENSITY_RADIUS_MM, 2.0 * self._stride * pitch)
+
+    def add(self, lo: int, scan: Scan) -> None:
+        """The chunk of scanning poses lo, lo+1, ... measured."""
+        if self.surface is None:
+            raise RuntimeError("DetectabilitySurvey.start was not called")
+        fan, samples, k = self.fan, self.surface.points, len(self.surface.points)
+        valid = scan.valid
+        if self.false_calls:
+            hit = flagged(scan, scan.true_z_sensor, fan, self.detector.k_sigma)
+            self._kept.append(scan.points_part[hit])
+            self._n_flag += int(hit.sum())
+        self._n_valid += int(valid.sum())
+        sig_n = sigma_mm(scan, fan) * cos_incidence(scan, fan)
+        col = np.full(valid.shape, np.nan)
+        col[:, :-1] = np.linalg.norm(np.diff(scan.points_part, axis=1), axis=2)
+        col[:, :-1][~(valid[:, 1:] & valid[:, :-1])] = np.nan
+        pick = (slice(None), slice(None, None, self._stride))
+        v = valid[pick]
+        pts = scan.points_part[pick][v]
+        if len(pts) == 0:
+            return
+        rows = lo + np.nonzero(v)[0]
+        point_pass = np.zeros(len(pts), np.int64) if self._pass_of is None else self._pass_of[rows]
+        box_lo, box_hi = pts.min(axis=0) - self._radius, pts.max(axis=0) + self._radius
+        inside = np.flatnonzero(np.all((samples >= box_lo) & (samples <= box_hi), axis=1))
+        if len(inside) == 0:
+            return
+        near_tree = cKDTree(pts)
+        self._count[inside] += self._stride * np.asarray(
+            near_tree.query_ball_point(samples[inside], self._radius, return_length=True)
+        )
+        # Each sample's noise, pitch and passes from its nearest points (not each point's
+        # nearest sample: a sub-sampled fan's columns may lie farther apart than the samples).
+        dist, j = near_tree.query(
+            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius
+        )
+        c, s = col[pick][v], sig_n[pick][v]
+        j = np.where(np.isfinite(dist), j, 0)
+        good = np.isfinite(dist) & np.isfinite(c[j]) & np.isfinite(s[j])
+        sample = np.broadcast_to(inside[:, None], good.shape)[good]
+        j = j[good]
+        keys, counts = np.unique(sample * self._n_pass + point_pass[j], return_counts=True)
+        self._pair_keys.append(keys)
+        self._pair_counts.append(counts)
+        self._sig_sum += np.bincount(sample, s[j], k)
+        self._col_sum += np.bincount(sample, c[j], k)
+        self._n_sum += np.bincount(sample, minlength=k)
+
+    def finish(self) -> tuple[FalseCalls | None, Detectability]:
+        """The calls (None unless `false_calls`) and the detectability at every sample."""
+        if self.surface is None:
+            raise RuntimeError("DetectabilitySurvey.start was not called")
+        k, n_pass = len(self.surface.points), self._n_pass
+        false = None
+        if self.false_calls:
+            points = np.concatenate(self._kept) if self._kept else np.zeros((0, 3))
+            found = len(calls(points, self.detector))
+            false = FalseCalls(found, self._n_flag, self._n_valid, self.surface.area_mm2)
+        n_sum = self._n_sum
+        seen = (n_sum > 0) & (self._count > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sigma = np.where(seen, self._sig_sum / n_sum, np.inf)
+            column = np.where(seen, self._col_sum / n_sum, np.inf)  # the fan's pitch
+            density = self._count / (math.pi * self._radius**2)
+            spacing = np.where(seen, 1.0 / (density * column), np.inf)
+        column = column / self._pitch_ratio  # the real sensor's columns
+        keys = np.concatenate(self._pair_keys) if self._pair_keys else np.zeros(0, np.int64)
+        counts = np.concatenate(self._pair_counts) if self._pair_counts else np.zeros(0)
+        keys, inverse = np.unique(keys, return_inverse=True)
+        counts = np.bincount(inverse, counts, len(keys))
+        pass_sample = keys // n_pass
+        total = np.bincount(pass_sample, counts, k)
+        share = counts / np.maximum(total[pass_sample], 1.0)
+        return false, Detectability(
+            self.surface.points, sigma, column, spacing, seen, pass_sample, share
+        )
+
+
 def survey(
     part: Part,
     sensor: SensorSpec,
@@ -220,64 +362,43 @@ def survey(
     """Scan the defect-free `part` (restricted to its surface to inspect) along the plan's
     scanning `poses`: the calls it makes, every one false, and the detectability at each
     sample of `surface`; swath (m,): the pass of each pose (None: one pass)."""
-    profiler = LineProfilometer(part, sensor, seed=seed)
-    samples = surface.points
-    tree = cKDTree(samples)
-    k = len(samples)
-    count = np.zeros(k)
-    sig_sum, col_sum, n_sum = np.zeros(k), np.zeros(k), np.zeros(k)
-    kept: list[np.ndarray] = []
-    n_flag = n_valid = 0
-    pass_of = np.zeros(len(poses), np.int64) if swath is None else np.asarray(swath, np.int64)
-    pass_of = np.unique(pass_of, return_inverse=True)[1]
-    n_pass = int(pass_of.max(initial=0)) + 1
-    pair_keys: list[np.ndarray] = []
-    pair_counts: list[np.ndarray] = []
-    for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
-        hit = flagged(scan, scan.true_z_sensor, sensor, detector.k_sigma)
-        kept.append(scan.points_part[hit])
-        valid = scan.valid
-        n_flag += int(hit.sum())
-        n_valid += int(valid.sum())
-        sig_n = sigma_mm(scan, sensor) * cos_incidence(scan, sensor)
-        col = np.full(valid.shape, np.nan)
-        col[:, :-1] = np.linalg.norm(np.diff(scan.points_part, axis=1), axis=2)
-        col[:, :-1][~(valid[:, 1:] & valid[:, :-1])] = np.nan
-        pick = (slice(None), slice(None, None, COLUMN_STRIDE))
-        v = valid[pick]
-        pts = scan.points_part[pick][v]
-        point_pass = pass_of[lo + np.nonzero(v)[0]]
-        if len(pts) == 0:
-            continue
-        lo, hi = pts.min(axis=0) - DENSITY_RADIUS_MM, pts.max(axis=0) + DENSITY_RADIUS_MM
-        inside = np.flatnonzero(np.all((samples >= lo) & (samples <= hi), axis=1))
-        count[inside] += COLUMN_STRIDE * np.asarray(
-            cKDTree(pts).query_ball_point(samples[inside], DENSITY_RADIUS_MM, return_length=True)
-        )
-        dist, near = tree.query(pts, distance_upper_bound=DENSITY_RADIUS_MM)
-        ok = np.isfinite(dist)
-        c, s = col[pick][v][ok], sig_n[pick][v][ok]
-        good = np.isfinite(c) & np.isfinite(s)
-        near = near[ok][good]
-        keys, counts = np.unique(near * n_pass + point_pass[ok][good], return_counts=True)
-        pair_keys.append(keys)
-        pair_counts.append(counts)
-        sig_sum += np.bincount(near, s[good], k)
-        col_sum += np.bincount(near, c[good], k)
-        n_sum += np.bincount(near, minlength=k)
-    points = np.concatenate(kept) if kept else np.zeros((0, 3))
-    false = FalseCalls(len(calls(points, detector)), n_flag, n_valid, surface.area_mm2)
-    seen = (n_sum > 0) & (count > 0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sigma = np.where(seen, sig_sum / n_sum, np.inf)
-        column = np.where(seen, col_sum / n_sum, np.inf)
-        density = count / (math.pi * DENSITY_RADIUS_MM**2)
-        spacing = np.where(seen, 1.0 / (density * column), np.inf)
-    keys = np.concatenate(pair_keys) if pair_keys else np.zeros(0, np.int64)
-    counts = np.concatenate(pair_counts) if pair_counts else np.zeros(0, np.int64)
-    keys, inverse = np.unique(keys, return_inverse=True)
-    counts = np.bincount(inverse, counts, len(keys))
-    pass_sample = keys // n_pass
-    total = np.bincount(pass_sample, counts, k)
-    share = counts / np.maximum(total[pass_sample], 1.0)
-    return false, Detectability(samples, sigma, column, spacing, seen, pass_sample, share)
+    acc = DetectabilitySurvey(sensor, detector, surface, swath)
+    for lo, scan in LineProfilometer(part, sensor, seed=seed).measure_in_chunks(
+        poses, chunk_poses, progress
+    ):
+        acc.add(lo, scan)
+    false, detectability = acc.finish()
+    assert false is not None
+    return false, detectability
+
+
+def evaluate_detectable(
+    part: Part,
+    scan_spec: ScanSpec,
+    traj: Trajectory,
+    seed: int = 0,
+    points_per_profile: int | None = None,
+    kind: str = DEFAULT_DEFECT,
+    **kwargs: Any,
+) -> Metrics:
+    """`evaluate`, and from the same scan the `kind` defect the plan would find: its
+    predicted a50 and a90 over the surface to inspect (`Metrics.detectable`) and the
+    smallest depth found at 90 % on a seeded sample of the surface (`Metrics.
+    detectable_map`), at the plan's call rule (`detection.detector_for`)."""
+    detector = detector_for(traj, scan_spec.sensor)
+    acc = DetectabilitySurvey(scan_spec.sensor, detector, false_calls=False)
+    metrics = evaluate(part, scan_spec, traj, seed, points_per_profile, observers=[acc], **kwargs)
+    _, found = acc.finish()
+    picked = found.sampled_rows(seed)
+    rows = np.arange(len(found.seen)) if picked is None else picked
+    detectable = {
+        "type": kind,
+        "a50_mm": found.predicted_a(kind, detector, 0.5, seed),
+        "a90_mm": found.predicted_a(kind, detector, 0.9, seed),
+        "detector": detector.to_json_dict(),
+        **found.to_json_dict(),
+    }
+    smallest = found.smallest_mm(kind, detector, 0.9, rows)
+    return replace(
+        metrics, detectable=detectable, detectable_map=(found.points_part[rows], smallest)
+    )

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from scanplan.cycle import NOMINAL, MotionLimits, cycle_time
 from scanplan.metrics.accumulators import CloudSample, Coverage, PointErrors, Spacing
 from scanplan.metrics.summary import Metrics
 from scanplan.part import Part
-from scanplan.profilometer import LineProfilometer
+from scanplan.profilometer import LineProfilometer, Scan
 from scanplan.quantities import ScanSpec, point_orientation_error
 from scanplan.sensor import SensorSpec
 from scanplan.surface import (
@@ -28,6 +28,17 @@ from scanplan.surface import (
     upward_visible_samples,
 )
 from scanplan.trajectory import Trajectory
+
+
+class ScanObserver(Protocol):
+    """Something more to learn from the scan `evaluate` simulates (the detectability map,
+    `metrics.detectability.DetectabilitySurvey`), fed the same chunks: no second scan."""
+
+    def start(
+        self, surface: VisibleSurface, fan: SensorSpec, swath: np.ndarray | None = None
+    ) -> None: ...
+
+    def add(self, lo: int, scan: Scan) -> None: ...
 
 
 def coverage_spacing_mm(sensor: SensorSpec) -> float:
@@ -117,6 +128,7 @@ def evaluate(
     targets: np.ndarray | None = None,
     blended: np.ndarray | None = None,
     ceiling: bool = True,
+    observers: Sequence[ScanObserver] = (),
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
@@ -131,6 +143,8 @@ def evaluate(
     planned pose, each an exact stop).
     ceiling: also measure the visibility ceiling of the surface to inspect (about a second
     on the door); off where only the in-spec set is wanted (choosing views, fitting an arm).
+    observers: each started on the surface samples, the fan and the scanning poses' passes,
+    then fed every chunk of the scan.
     Raises ValueError if no scanning pose returns a valid point.
     """
     start_time = time.perf_counter()
@@ -157,6 +171,8 @@ def evaluate(
     coverage = coverage_of(surface, scan_spec, spec)
     cover_radius, in_spec_radius = coverage.cover_radius, coverage.in_spec_radius
     sample = CloudSample(m * n_cols, max_map_points, seed)
+    for observer in observers:
+        observer.start(surface, spec, swath)
     profiler = LineProfilometer(part, spec, seed=seed)
     for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
         ori = point_orientation_error(scan.normals_part, scan.poses)
@@ -164,6 +180,8 @@ def evaluate(
         spacing.add(lo, scan)
         coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
         sample.add(lo, scan, ori, swath[lo : lo + len(scan)], wd)
+        for observer in observers:
+            observer.add(lo, scan)
 
     if errors.n_valid == 0:
         raise ValueError(

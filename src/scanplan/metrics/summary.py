@@ -143,6 +143,13 @@ class Metrics:
     cloud: PointCloud | None = field(default=None, repr=False, compare=False)
     coverage_map: CoverageMap | None = field(default=None, repr=False, compare=False)
     cycle: CycleTime | None = field(default=None, repr=False, compare=False)
+    # The defect the plan would find, predicted from its own scan (`detectability.evaluate_
+    # detectable`): type, a50/a90 (mm, None where too little is seen) and its map (the
+    # sampled surface points (k, 3), the smallest depth found at 90 % there (k,), inf: none).
+    detectable: dict[str, Any] | None = None
+    detectable_map: tuple[np.ndarray, np.ndarray] | None = field(
+        default=None, repr=False, compare=False
+    )
 
     @property
     def in_spec_of_ceiling(self) -> float | None:
@@ -219,5 +226,6 @@ class Metrics:
                     "worst_penetration_mm": self.worst_penetration_mm,
                     "clearance_mm": self.clearance_mm,
                 },
+                "detectable": self.detectable,
             }
         )

@@ -13,6 +13,8 @@ TABLE_ROWS: list[tuple[str, tuple[str, ...], str]] = [
     ("in-spec share of the visibility ceiling", ("in_spec_of_ceiling",), "{:.1%}"),
     ("visibility ceiling (some beam within tolerance)", ("visibility_ceiling",), "{:.1%}"),
     ("coverage (any valid point)", ("coverage_fraction",), "{:.1%}"),
+    # Predicted from the scan's density and noise (`metrics.detectability`), no injection.
+    ("dent found at 90 %, predicted (mm)", ("detectable", "a90_mm"), "{:.3f}"),
     ("profiles", ("profiles",), "{:.0f}"),
     ("mean |distance error| (mm)", ("distance_error_mm", "mean_abs"), "{:.3f}"),
     ("RMS distance error (mm)", ("distance_error_mm", "rms"), "{:.3f}"),

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 
 # A directory holding one of these was written by scanplan and may be replaced.
 _REPORT_MARKERS = ("metrics.json", "report.html")
+DETECTABILITY_MAP_NAME = "detectability.png"
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,22 @@ def write_report(
                 path = tmp / f"{quantity}_error_maps.png"
                 maps.append(plot_comparison(sources, quantity, path, part=part.name))
             data = {r.name: r.metrics.to_json_dict() for r in results}
+        detectable = [
+            (r.name, *found, (r.metrics.detectable or {}).get("type", "defect"))
+            for r in results
+            if (found := r.metrics.detectable_map) is not None
+        ]
+        if detectable:
+            from scanplan.report.pod import plot_detectability_maps
+
+            maps.append(
+                plot_detectability_maps(
+                    [d[:3] for d in detectable],
+                    "/".join(sorted({d[3] for d in detectable})),
+                    tmp / DETECTABILITY_MAP_NAME,
+                    part.name,
+                )
+            )
         for name, content in (files or {}).items():
             target = tmp / name
             if isinstance(content, Path):
