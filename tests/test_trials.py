@@ -20,7 +20,7 @@ from scanplan.perturb import Perturbation
 from scanplan.pipeline import plan_views
 from scanplan.planners import FeedbackPlanner, GeometricPlanner
 from scanplan.quantities import ScanSpec
-from scanplan.trajectory import read_json, write_json
+from scanplan.trajectory import read_csv, read_json, write_csv, write_json
 from scanplan.trials import closed_loop_robustness, closed_loop_tasks, plan_swaths_of
 
 SPEC = ScanSpec()
@@ -59,8 +59,13 @@ def _open(part, traj, text, trials=2, seed=0):
     return robustness(trial_tasks(part, SPEC, traj, model, trials, seed, POINTS))
 
 
-def test_the_plan_records_its_pass_lines(bumpy, feedback_plan):
+def test_the_plan_records_its_pass_lines(bumpy, feedback_plan, tmp_path):
     swaths = plan_swaths_of(feedback_plan, "plan")
+    write_csv(feedback_plan, tmp_path / "plan.csv")  # the CSV carries them as exactly
+    from_csv = plan_swaths_of(read_csv(tmp_path / "plan.csv"), "plan.csv")
+    for a, b in zip(swaths, from_csv, strict=True):
+        assert a.index == b.index and np.array_equal(a.start_mm, b.start_mm)
+        assert np.array_equal(a.u, b.u) and np.array_equal(a.v, b.v)
     assert [sw.index for sw in swaths] == sorted(set(feedback_plan.swath.tolist()))
     # Each pass's poses lie on its line: x_s along v, the sensor over the line's start.
     for sw in swaths:
