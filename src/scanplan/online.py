@@ -5,7 +5,9 @@ The controller sees what it sees when the feedback and rl planners run it on the
 D, α (β with roll) and Δs of the profile, computed by `dynamics.PassDynamics` with the same
 functions (`quantities`), the same step model and limits. One thing differs: a real sensor
 gives points, not surface normals, so the normals behind α and β are estimated from the
-profile and the one before it (`estimate_normals`).
+profile and the one before it (`estimate_normals`). The planners' guards
+(`closed_loop.Guards`) are not applied: the forward-only guard measures a step before taking
+it, which a robot cannot.
 
     swaths = trials.plan_swaths_of(read_trajectory("plan.json"), "plan.json")
     loop = OnlinePass(swaths[0], spec, FeedbackController())   # or RLPlanner.controller()
