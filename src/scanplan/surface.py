@@ -7,6 +7,7 @@ within tolerance can reach (the visibility ceiling).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -137,15 +138,49 @@ def area_samples(
     return np.asarray(points, np.float64), np.asarray(faces, np.int64), cand_area
 
 
+# Samples drawn once per part while it lives: choosing views evaluates every candidate on
+# the same samples (on the NIST sheet metal part, 15 draws were 13 % of its planning time).
+_SAMPLES: weakref.WeakKeyDictionary[Part, dict[tuple[str, float, int], VisibleSurface]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def _once(
+    kind: str, part: Part, spacing_mm: float, seed: int, draw: Callable[[], VisibleSurface]
+) -> VisibleSurface:
+    """The samples `draw` gives, drawn once per (part, kind, spacing, seed), read-only."""
+    by_key = _SAMPLES.setdefault(part, {})
+    key = (kind, float(spacing_mm), int(seed))
+    if key not in by_key:
+        surface = draw()
+        surface.points.setflags(write=False)
+        surface.faces.setflags(write=False)
+        by_key[key] = surface
+    return by_key[key]
+
+
 def hemisphere_visible_samples(
     part: Part, spacing_mm: float, seed: int = 0, directions: np.ndarray | None = None
 ) -> VisibleSurface:
     """The surface a sensor can see from the upper hemisphere (`--views auto`): samples of
     the faces to inspect (any slope) kept if, along at least one of `directions` (default
     `hemisphere_directions`, 28 directions up to 75° from +Z), the face is within
-    COVERAGE_MAX_SLOPE_DEG of facing it (either winding) and a ray from it escapes the part."""
+    COVERAGE_MAX_SLOPE_DEG of facing it (either winding) and a ray from it escapes the part.
+    With the default directions, drawn once per part (read-only arrays)."""
+    if directions is None:
+        return _once(
+            "hemisphere",
+            part,
+            spacing_mm,
+            seed,
+            lambda: _hemisphere_visible(part, spacing_mm, seed, hemisphere_directions()),
+        )
+    return _hemisphere_visible(part, spacing_mm, seed, np.asarray(directions, float))
 
-    dirs = hemisphere_directions() if directions is None else np.asarray(directions, float)
+
+def _hemisphere_visible(
+    part: Part, spacing_mm: float, seed: int, dirs: np.ndarray
+) -> VisibleSurface:
     points, faces, cand_area = area_samples(part, part.inspect_mask, spacing_mm, seed)
     n = part.ray_engine.face_normals[faces]
     facing_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
@@ -165,7 +200,12 @@ def hemisphere_visible_samples(
 def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> VisibleSurface:
     """Sample faces within COVERAGE_MAX_SLOPE_DEG of horizontal (either winding) at about one
     point per spacing² of area; keep the samples from which a vertical ray escapes. Only the
-    part's faces to inspect (its region of interest) are sampled; the whole part occludes."""
+    part's faces to inspect (its region of interest) are sampled; the whole part occludes.
+    Drawn once per part (read-only arrays)."""
+    return _once("top", part, spacing_mm, seed, lambda: _upward_visible(part, spacing_mm, seed))
+
+
+def _upward_visible(part: Part, spacing_mm: float, seed: int) -> VisibleSurface:
     normals = part.ray_engine.face_normals
     steep_cos = math.cos(math.radians(COVERAGE_MAX_SLOPE_DEG))
     candidate = (np.abs(normals[:, 2]) > steep_cos) & part.inspect_mask
