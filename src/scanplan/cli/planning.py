@@ -136,7 +136,13 @@ def scan_cmd(
 
 # ---- plan ---------------------------------------------------------------------------------
 PlannerOpt = Annotated[str, typer.Option(help="fixed, feedback, geometric or rl")]
-PolicyOpt = Annotated[Path | None, typer.Option(help="trained policy file for --planner rl")]
+PolicyOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="trained policy (directory or policy.json) for --planner rl, or a shipped one: "
+        "default, v1 (rolls), paper (pure PPO from scratch)"
+    ),
+]
 DirectionOpt = Annotated[
     str,
     typer.Option(

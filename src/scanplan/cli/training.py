@@ -107,7 +107,10 @@ def train_cmd(
 
     With no options this is the paper's recipe from scratch, which on the training piece does
     not learn to follow a surface (its policy does not beat the fixed line on the door; why:
-    scanplan/policies/default/README.md); the shipped policy is warm-started (--bc-samples)."""
+    scanplan/policies/default/README.md); the shipped default policy is warm-started
+    (--bc-samples). --reward-distance-scale 12.5 (a deviation from the paper's reward) makes
+    it learn the depth from scratch: the shipped --policy paper, whose command is in its
+    policy.json."""
     # Deferred: learn loads torch and stable-baselines3.
     from scanplan.learn.checkpoint import CHECKPOINT_DIR
     from scanplan.learn.train import train

@@ -26,8 +26,9 @@ from scanplan.trajectory import Trajectory
 
 _SHIPPED = Path(__file__).resolve().parent.parent / "policies"
 DEFAULT_POLICY = _SHIPPED / "default"
-# Policies that ship with the package, by name: `--policy v1` (a path of that name wins).
-SHIPPED_POLICIES = {"default": DEFAULT_POLICY, "v1": _SHIPPED / "v1"}
+# Policies that ship with the package, by name: `--policy v1` (a path of that name wins);
+# `paper` is pure PPO from scratch (issue 22), the others are warm-started.
+SHIPPED_POLICIES = {"default": DEFAULT_POLICY, "v1": _SHIPPED / "v1", "paper": _SHIPPED / "paper"}
 # Step limits a planning run takes from the policy file's env options.
 _LIMIT_KEYS = ("dy_max_mm", "dz_max_mm", "dtheta_max_rad", "dphi_max_rad")
 # The most a planning sensor's working distance may differ from the policy's, as a share.
