@@ -3,6 +3,7 @@ options that reach the library (tolerance, views, region of interest), one-line 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 
 import numpy as np
@@ -14,7 +15,7 @@ from helpers import BLOCK_BOX, plate_with_block, run_cli, straight
 from scanplan.cli import app
 from scanplan.metrics import SurfaceState
 from scanplan.report.maps import COVERAGE_COLOURS
-from scanplan.trajectory import write_csv
+from scanplan.trajectory import read_trajectory, write_csv
 
 runner = CliRunner()
 
@@ -314,3 +315,50 @@ def test_evaluate_closed_loop_runs_a_feedback_plan_and_refuses_the_others(plate_
         result = runner.invoke(app, args)
         assert result.exit_code == 2 and message in result.output, result.output
         assert result.output.strip().count("\n") == 0
+
+
+def test_plan_a_folder_of_parts_on_two_processes_and_on_dask(tmp_path):
+    # A catalogue: each part planned as `plan` plans it alone, a bad part is its own one-line
+    # failure (the others still planned, exit 1), and a Dask cluster plans the same.
+    folder = tmp_path / "parts"
+    folder.mkdir()
+    trimesh.creation.box((300.0, 150.0, 20.0)).export(folder / "block.stl")
+    trimesh.creation.box((200.0, 120.0, 10.0)).export(folder / "plate.ply")
+    (folder / "broken.stl").write_text("solid x\nnot an stl\n")
+    (folder / "notes.txt").write_text("not a part")
+    opts = ["--planner", "fixed", "-q"]
+    result = runner.invoke(app, ["plan", str(folder), "-o", str(tmp_path / "plans"), *opts])
+    assert result.exit_code == 1
+    assert "broken.stl: error: " in result.stderr and "1 of 3 parts not planned" in result.stderr
+    assert "block.stl: fixed: 1 view" in result.stdout and "-> " in result.stdout
+    alone = tmp_path / "block_alone.json"
+    assert (
+        runner.invoke(app, ["plan", str(folder / "block.stl"), "-o", str(alone), *opts]).exit_code
+        == 0
+    )
+    by_catalogue = read_trajectory(tmp_path / "plans" / "block.json")
+    assert np.array_equal(by_catalogue.poses, read_trajectory(alone).poses)
+    assert (tmp_path / "plans" / "plate.json").is_file()
+    (folder / "broken.stl").unlink()
+    if importlib.util.find_spec("distributed") is not None:
+        from dask.distributed import LocalCluster
+
+        with LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+            dashboard_address=":0",
+        ) as cluster:  # fmt: skip
+            out = tmp_path / "on_dask"
+            args = ["plan", str(folder), "-o", str(out), "--scheduler", cluster.scheduler_address]
+            result = runner.invoke(app, [*args, *opts])
+        assert result.exit_code == 0, result.output
+        assert np.array_equal(read_trajectory(out / "block.json").poses, by_catalogue.poses)
+    for bad, message in (
+        (["-o", str(tmp_path / "x.json")], "-o is the folder the plans go to"),
+        (["-o", str(tmp_path / "empty_out")], "holds no part file"),
+    ):
+        target = folder if "x.json" in bad[1] else tmp_path / "plans"  # a folder of plans only
+        result = runner.invoke(app, ["plan", str(target), *bad, *opts])
+        assert result.exit_code == 2 and message in result.stderr
+    alone_scheduler = ["plan", str(folder / "block.stl"), "-o", str(alone), "--scheduler", "x"]
+    result = runner.invoke(app, alone_scheduler)
+    assert result.exit_code == 2 and "give a folder as the part" in result.stderr

@@ -10,7 +10,7 @@ import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -195,9 +195,51 @@ CoverageTargetOpt = Annotated[
 ]
 
 
+PlanSchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="a folder of parts: plan them on the Dask scheduler tcp://HOST:8786 (default: "
+        "every core here)",
+        show_default=False,
+    ),
+]
+
+
+@dataclass(frozen=True)
+class PlanJob:
+    """One part's `scanplan plan`, picklable: what a worker process or a Dask task plans."""
+
+    part: str
+    output: Path
+    planner: str
+    sensor: str
+    policy: Path | None
+    direction: str
+    overlap: float
+    raster: str
+    roll: bool
+    units: str
+    tolerance: str | None
+    roi: str | None
+    views: str | None
+    coverage_target: float
+    table: str | None
+    fixture: tuple[str, ...]
+    robot: str | None
+    tcp: str | None
+    part_pose: str | None
+
+
 @user_errors
 def plan_cmd(
-    part: PartArg,
+    part: Annotated[
+        str,
+        typer.Argument(
+            help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB), STEP file, or a folder "
+            "of them (each planned with the same options, -o then the folder for the plans)"
+        ),
+    ],
     output: OutOpt,
     planner: PlannerOpt = "geometric",
     sensor: SensorOpt = DEFAULT_SENSOR,
@@ -217,11 +259,35 @@ def plan_cmd(
     robot: PlanRobotOpt = None,
     tcp: TcpOpt = None,
     part_pose: PartPoseOpt = None,
+    scheduler: PlanSchedulerOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
     under (sensor, tolerances, views, region of interest, table and fixtures) for `evaluate`
     to judge it by. With --robot, a plan that arm can fly (placed by the tool unless
-    --part-pose is given), and what that cost."""
+    --part-pose is given), and what that cost. A folder of parts is a catalogue: each part
+    planned on its own core (or Dask worker) into -o/NAME.json, one line per part."""
+    job = PlanJob(
+        part, output, planner, sensor, policy, direction, overlap, raster, roll, units,
+        tolerance, roi, views, coverage_target, table, tuple(fixture or ()), robot, tcp,
+        part_pose,
+    )  # fmt: skip
+    if Path(part).is_dir():
+        plan_catalogue(job, scheduler, quiet)
+        return
+    if scheduler is not None:
+        raise ValueError("--scheduler plans a folder of parts: give a folder as the part")
+    if output.suffix.lower() not in (".csv", ".json"):
+        raise ValueError(f"output {output} must be a .csv or .json file")
+    with progress_bar(f"planning ({planner})", quiet) as progress:
+        lines = run_plan_job(job, progress)
+    for text, to_stderr in lines:
+        typer.echo(text, err=to_stderr)
+
+
+def run_plan_job(
+    job: PlanJob, progress: Callable[[int, int], None] | None = None
+) -> list[tuple[str, bool]]:
+    """Plan `job`, write its plan, and return what to print: (line, to stderr)."""
     # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
     from scanplan.cell import LOWEST
     from scanplan.cycle import cycle_time
@@ -230,40 +296,97 @@ def plan_cmd(
     from scanplan.planners import make_planner
     from scanplan.trajectory import write_csv, write_json
 
-    if output.suffix.lower() not in (".csv", ".json"):
-        raise ValueError(f"output {output} must be a .csv or .json file")
-    spec = scan_spec(sensor, tolerance)
-    the_part = load_part(part, units)
-    the_planner = make_planner(planner, policy, roll)
-    arm = robot_arm(robot, tcp, part_pose)
-    with progress_bar(f"planning ({the_planner.name})", quiet) as progress:
-        plans, traj = plan_views(
-            the_part,
-            spec,
-            the_planner,
-            views,
-            coverage_target,
-            raster,
-            direction,
-            overlap,
-            roi=roi,
-            progress=progress,
-            table=table or LOWEST,
-            fixtures=fixture or (),
-            fixture_units=units,
-            arm=arm,
-        )
+    output = job.output
+    spec = scan_spec(job.sensor, job.tolerance)
+    the_part = load_part(job.part, job.units)
+    the_planner = make_planner(job.planner, job.policy, job.roll)
+    arm = robot_arm(job.robot, job.tcp, job.part_pose)
+    plans, traj = plan_views(
+        the_part,
+        spec,
+        the_planner,
+        job.views,
+        job.coverage_target,
+        job.raster,
+        job.direction,
+        job.overlap,
+        roi=job.roi,
+        progress=progress,
+        table=job.table or LOWEST,
+        fixtures=job.fixture,
+        fixture_units=job.units,
+        arm=arm,
+    )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     n_view = f"{len(plans)} view{'s' * (len(plans) > 1)}, "
-    typer.echo(
-        f"{the_planner.name}: {n_view}{sum(p.passes for p in plans)} passes, "
-        f"{int(traj.scanning.sum())} profiles, {traj.path_length_mm():.0f} mm, "
-        f"planned in {traj.plan_time_s:.2f} s -> {output}"
-    )
     targets, blended = program_targets(traj, spec)
-    cycle = cycle_time(traj, spec, arm_limits(robot, traj), targets=targets, blended=blended)
-    typer.echo(cycle.line())
-    print_plan_notes(traj, spec)
+    cycle = cycle_time(traj, spec, arm_limits(job.robot, traj), targets=targets, blended=blended)
+    return [
+        (
+            f"{the_planner.name}: {n_view}{sum(p.passes for p in plans)} passes, "
+            f"{int(traj.scanning.sum())} profiles, {traj.path_length_mm():.0f} mm, "
+            f"planned in {traj.plan_time_s:.2f} s -> {output}",
+            False,
+        ),
+        (cycle.line(), False),
+        *plan_notes(traj, spec),
+    ]
+
+
+def catalogue_parts(folder: Path) -> list[Path]:
+    """The part files (meshes and STEP) directly in `folder`, sorted; each must have its own
+    name, as its plan is named after it."""
+    from scanplan.part import MESH_SUFFIXES, STEP_SUFFIXES
+
+    parts = sorted(
+        p
+        for p in folder.iterdir()
+        if p.is_file() and p.suffix.lower() in MESH_SUFFIXES + STEP_SUFFIXES
+    )
+    if not parts:
+        formats = ", ".join(MESH_SUFFIXES + STEP_SUFFIXES)
+        raise ValueError(f"folder {folder} holds no part file ({formats})")
+    stems = [p.stem for p in parts]
+    if twice := sorted({s for s in stems if stems.count(s) > 1}):
+        raise ValueError(f"folder {folder}: parts {', '.join(twice)} would share a plan name")
+    return parts
+
+
+def plan_one_of_catalogue(job: PlanJob) -> tuple[list[tuple[str, bool]], str | None]:
+    """In a worker: the lines of one part's plan, or the one-line reason it has none (a bad
+    part is that part's failure, not the catalogue's)."""
+    try:
+        return run_plan_job(job), None
+    except (ValueError, OSError) as exc:
+        return [], str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def plan_catalogue(job: PlanJob, scheduler: str | None, quiet: bool) -> None:
+    """Plan every part in the folder `job.part` with `job`'s options, into `job.output`
+    (a folder) as NAME.json: on the cores here, or on the Dask scheduler. Each part's
+    lines are printed under its name; if any part fails, the run exits 1 after the rest."""
+    output = job.output
+    if output.suffix:
+        raise ValueError(f"-o {output}: with a folder of parts, -o is the folder the plans go to")
+    parts = catalogue_parts(Path(job.part))
+    if output.exists() and not output.is_dir():
+        raise ValueError(f"-o {output} is a file: give a folder for the plans")
+    output.mkdir(parents=True, exist_ok=True)
+    jobs = [replace(job, part=str(p), output=output / f"{p.stem}.json") for p in parts]
+    with progress_bar(f"planning {len(jobs)} parts", quiet) as progress:
+        with trial_runner(scheduler, len(jobs)) as run:
+            results = list(counted(run, progress)(plan_one_of_catalogue, jobs))
+    failed = 0
+    for path, (lines, error) in zip(parts, results, strict=True):
+        if error is not None:
+            failed += 1
+            typer.echo(f"{path.name}: error: {error}", err=True)
+            continue
+        for text, to_stderr in lines:
+            typer.echo(f"{path.name}: {text}", err=to_stderr)
+    if failed:
+        typer.echo(f"error: {failed} of {len(jobs)} parts not planned", err=True)
+        raise typer.Exit(1)
 
 
 def program_targets(traj: Trajectory, spec: ScanSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -311,34 +434,45 @@ def robot_arm(robot: str | None, tcp: str | None, part_pose: str | None) -> Arm 
     return Arm(robot, parse_pose_arg(tcp or IDENTITY_POSE), pose)
 
 
-def print_plan_notes(traj: Trajectory, spec: ScanSpec) -> None:
-    """What the planner left out or overrode, one line each (nothing when all went to plan)."""
+def plan_notes(traj: Trajectory, spec: ScanSpec) -> list[tuple[str, bool]]:
+    """What the planner left out or overrode, one line each, (line, to stderr); none when
+    all went to plan."""
+    lines: list[tuple[str, bool]] = []
     if unreachable := traj.meta.get("views_unreachable", 0):
-        typer.echo(f"views: {unreachable} left out, no collision-free move reaches them")
+        lines.append((f"views: {unreachable} left out, no collision-free move reaches them", False))
     if dropped := traj.meta.get("collisions_dropped", 0):
-        typer.echo(
-            f"collisions: {dropped} scanning poses dropped (sensor body within "
-            f"{spec.clearance_mm:g} mm of the part, the table or a fixture)"
+        lines.append(
+            (
+                f"collisions: {dropped} scanning poses dropped (sensor body within "
+                f"{spec.clearance_mm:g} mm of the part, the table or a fixture)",
+                False,
+            )
         )
     if arm := traj.meta.get("robot"):
         given_up = ", ".join(f"view {k}: {v}" for k, v in arm["scanning_poses_given_up"].items())
-        typer.echo(
-            f"{arm['robot']} at --part-pose {arm['part_pose']}: "
-            f"{sum(arm['scanning_poses_given_up'].values())} scanning poses given up"
-            f"{f' ({given_up})' if given_up else ''}, {arm['moves_given_up']} move poses, "
-            f"{arm['passes_split']} passes split at a configuration flip, "
-            f"{arm.get('passes_turned', 0)} turned half a turn about the beam (links kept "
-            f"clear of the part, table and fixtures); in-spec coverage "
-            f"{arm['in_spec_without_robot']:.3f} without the arm, {arm['in_spec']:.3f} with it"
+        lines.append(
+            (
+                f"{arm['robot']} at --part-pose {arm['part_pose']}: "
+                f"{sum(arm['scanning_poses_given_up'].values())} scanning poses given up"
+                f"{f' ({given_up})' if given_up else ''}, {arm['moves_given_up']} move poses, "
+                f"{arm['passes_split']} passes split at a configuration flip, "
+                f"{arm.get('passes_turned', 0)} turned half a turn about the beam (links kept "
+                f"clear of the part, table and fixtures); in-spec coverage "
+                f"{arm['in_spec_without_robot']:.3f} without the arm, {arm['in_spec']:.3f} with it",
+                False,
+            )
         )
         if not arm.get("flyable", arm["reachable"]):
-            typer.echo(
-                f"warning: {arm['robot']} still cannot fly every pass; export will say where",
-                err=True,
+            lines.append(
+                (
+                    f"warning: {arm['robot']} still cannot fly every pass; export will say where",
+                    True,
+                )
             )
     if overrides := {k: v for k, v in traj.meta.items() if k.endswith("_overrides") and v}:
         # The rl planner's guards replaced some of the policy's steps: say how many.
-        typer.echo("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()))
+        lines.append(("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()), False))
+    return lines
 
 
 # ---- evaluate -----------------------------------------------------------------------------
@@ -393,7 +527,7 @@ EvaluateSchedulerOpt = Annotated[
         show_default=False,
     ),
 ]
-CLUSTER_HINT = "evaluate --scheduler needs the cluster extra: pip install 'scanplan[cluster]'"
+CLUSTER_HINT = "--scheduler needs the cluster extra: pip install 'scanplan[cluster]'"
 ClosedLoopOpt = Annotated[
     bool,
     typer.Option(
@@ -533,8 +667,9 @@ def evaluate_cmd(
 
 @contextmanager
 def trial_runner(scheduler: str | None, trials: int) -> Iterator[Any]:
-    """A map(function, tasks) for the trials: on the Dask scheduler at `scheduler`, else
-    over worker processes, one per core (one after another if one suffices)."""
+    """A map(function, tasks) for independent tasks (trials, a catalogue's parts): on the
+    Dask scheduler at `scheduler`, else over worker processes, one per core (one after
+    another if one suffices)."""
     if scheduler is not None:
         try:
             from dask.distributed import Client
