@@ -129,18 +129,21 @@ class Detectability:
         seen = self.seen if rows is None else self.seen[rows]
         if not seen.mean() >= share:  # unseen samples never find a defect
             return None
-        grid = np.geomspace(1e-4, 100.0, 145)
-        previous = 0.0
-        for i, a in enumerate(grid):
-            pod = float(self.pod_at(kind, a, detector, rows).mean())
-            if pod >= share:
-                if i == 0:
-                    return float(a)
-                # Interpolate in log size between the grid's neighbours.
-                w = (share - previous) / max(pod - previous, 1e-12)
-                return float(math.exp(math.log(grid[i - 1]) + w * math.log(a / grid[i - 1])))
-            previous = pod
-        return None
+
+        def pod(log_a: float) -> float:
+            return float(self.pod_at(kind, math.exp(log_a), detector, rows).mean())
+
+        # The POD only grows with the depth: bisect on log depth (20 halvings of 1e-4..100 mm
+        # leave 0.001 % of it), not a grid walk.
+        lo, hi = math.log(1e-4), math.log(100.0)
+        if pod(hi) < share:
+            return None
+        if pod(lo) >= share:
+            return math.exp(lo)
+        for _ in range(20):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if pod(mid) >= share else (mid, hi)
+        return math.exp(hi)
 
     def smallest_mm(
         self, kind: str, detector: Detector, share: float = 0.9, rows: np.ndarray | None = None
