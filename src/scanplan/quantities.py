@@ -21,6 +21,8 @@ COVERAGE_TARGET = 0.9
 # nominal surface, clustered, at least this many points.
 DEFECT_K_SIGMA = 4.0
 DEFECT_MIN_POINTS = 3
+# The defect `scanplan defects` injects and `scanplan evaluate` predicts unless told otherwise.
+DEFECT_TYPE = "dent"
 # The part frame's up: the top view looks along −UP.
 UP = np.array([0.0, 0.0, 1.0])
 UP.flags.writeable = False

@@ -33,7 +33,7 @@ from scanplan.cli.planning import (
 )
 from scanplan.files import atomic_write_text
 from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, STEP_MM, check_count
-from scanplan.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS
+from scanplan.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECT_TYPE
 
 TypeOpt = Annotated[str, typer.Option("--type", help="dent, bump, pit or scratch")]
 SizesOpt = Annotated[
@@ -106,7 +106,7 @@ def parse_sizes(text: str) -> tuple[float, float]:
 def defects_cmd(
     part: PartArg,
     trajectory: TrajectoryArg,
-    kind: TypeOpt = "dent",
+    kind: TypeOpt = DEFECT_TYPE,
     sizes: SizesOpt = "0.01:0.5",
     trials: DefectTrialsOpt = 16,
     per_trial: PerTrialOpt = 8,

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.defects import shape
+from scanplan.defects import KINDS, shape
 from scanplan.metrics.detection import (
     Detector,
     FalseCalls,
@@ -37,13 +37,12 @@ from scanplan.metrics.evaluation import evaluate
 from scanplan.metrics.summary import Metrics
 from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer, Scan
-from scanplan.quantities import ScanSpec
+from scanplan.quantities import DEFECT_TYPE, ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.surface import VisibleSurface
 from scanplan.trajectory import Trajectory
 
-PREDICTED = ("dent", "bump", "pit", "scratch")
-DEFAULT_DEFECT = "dent"  # the one `scanplan evaluate` predicts
+PREDICTED = KINDS  # every defect type has a prediction
 ANGLES = 8  # a scratch's directions to the scan averaged over
 DENSITY_RADIUS_MM = 2.0
 NEAREST_POINTS = 8  # a sample's noise, pitch and passes: from its nearest points in a chunk
@@ -381,7 +380,7 @@ def evaluate_detectable(
     traj: Trajectory,
     seed: int = 0,
     points_per_profile: int | None = None,
-    kind: str = DEFAULT_DEFECT,
+    kind: str = DEFECT_TYPE,
     **kwargs: Any,
 ) -> Metrics:
     """`evaluate`, and from the same scan the `kind` defect the plan would find: its
