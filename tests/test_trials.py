@@ -1,7 +1,8 @@
 """Closed-loop robustness trials (scanplan.trials): with no perturbation the controller flies
 the nominal plan again (the nominal figure exactly); on a part that is not where the CAD says
 it follows the part the open-loop replay misses; seeded runs repeat, worker processes and a
-Dask cluster give the serial numbers; only single-view feedback and rl plans are taken."""
+Dask cluster give the serial numbers; a plan of several views runs every view in its frame;
+only feedback and rl plans not fitted to a robot are taken."""
 
 from __future__ import annotations
 
@@ -14,14 +15,20 @@ import pytest
 import trimesh
 
 from scanplan.context import recorded
-from scanplan.metrics import evaluate, robustness, trial_tasks
+from scanplan.metrics import SurfaceState, evaluate, robustness, trial_tasks
 from scanplan.part import part_from_mesh
+from scanplan.parts import heightfield_solid
 from scanplan.perturb import Perturbation
 from scanplan.pipeline import plan_views
 from scanplan.planners import FeedbackPlanner, GeometricPlanner
 from scanplan.quantities import ScanSpec
 from scanplan.trajectory import read_csv, read_json, write_csv, write_json
-from scanplan.trials import closed_loop_robustness, closed_loop_tasks, plan_swaths_of
+from scanplan.trials import (
+    closed_loop_robustness,
+    closed_loop_tasks,
+    plan_swaths_of,
+    plan_views_of,
+)
 
 SPEC = ScanSpec()
 POINTS = 128
@@ -48,6 +55,27 @@ def feedback_plan(bumpy, tmp_path_factory):
     return read_json(path)
 
 
+@pytest.fixture(scope="module")
+def ramp():
+    """A 300 x 160 block, 10 mm high up to x = 0, then a 70° ramp to 50 mm and a flat top."""
+    xs = np.r_[np.arange(-150, 0.1, 10), np.arange(3, 15.1, 3), np.arange(25, 150.1, 10)]
+    z = np.interp(xs, [-150, 0, 15, 150], [10, 10, 50, 50])
+    ys = np.arange(-80, 80.1, 10)
+    return part_from_mesh(heightfield_solid(xs, ys, np.tile(z, (len(ys), 1))), "ramp")
+
+
+@pytest.fixture(scope="module")
+def two_views(ramp, tmp_path_factory):
+    """The ramp's top (its sides left out) planned by feedback with roll and --views auto:
+    a top view and one tilted 80° towards +x; read back from its file."""
+    _, traj = plan_views(
+        ramp, SPEC, FeedbackPlanner(roll=True), "auto", roi="box:-145,-75,5,145,75,60"
+    )
+    path = tmp_path_factory.mktemp("plans") / "two_views.json"
+    write_json(traj, path)
+    return read_json(path)
+
+
 def _closed(part, traj, text, trials=2, seed=0, run=map):
     model = Perturbation.parse(text)
     tasks = closed_loop_tasks(part, traj, recorded(traj, SPEC), model, trials, seed, POINTS)
@@ -56,7 +84,8 @@ def _closed(part, traj, text, trials=2, seed=0, run=map):
 
 def _open(part, traj, text, trials=2, seed=0):
     model = Perturbation.parse(text)
-    return robustness(trial_tasks(part, SPEC, traj, model, trials, seed, POINTS))
+    context = recorded(traj, SPEC)
+    return robustness(trial_tasks(part, SPEC, traj, model, trials, seed, POINTS, context=context))
 
 
 def test_the_plan_records_its_pass_lines(bumpy, feedback_plan, tmp_path):
@@ -136,8 +165,8 @@ def test_open_loop_multi_view_and_robot_plans_are_refused(bumpy, feedback_plan):
     two = replace(
         feedback_plan, meta=feedback_plan.meta | {"views": 2 * feedback_plan.meta["views"]}
     )
-    with pytest.raises(ValueError, match="has 2 views"):
-        closed_loop_tasks(bumpy, two, context, model, 1)
+    with pytest.raises(ValueError, match="has 2 views"):  # a robot-side loop takes one frame
+        plan_swaths_of(two, "plan")
     old = replace(
         feedback_plan,
         meta=feedback_plan.meta | {"views": [{"index": 0, "axis": [0.0, 0.0, 1.0]}]},
@@ -161,4 +190,79 @@ def test_an_rl_plan_runs_its_policy_in_the_loop(bumpy, tmp_path):
     with pytest.raises(ValueError, match="does not roll; policy .* does"):
         closed_loop_tasks(
             bumpy, plan, recorded(plan, SPEC), Perturbation.parse("place:1mm"), 1, policy="v1"
+        )
+
+
+def test_every_view_of_a_two_view_plan_runs_closed_loop_nominal_exactly(ramp, two_views):
+    views = plan_views_of(two_views, "plan")
+    assert len(views) == 2
+    assert np.allclose(views[0].view.axis, (0, 0, 1))
+    assert views[1].view.axis[2] < 0.5  # tilted 80°: its lines lie in its own frame
+    context = recorded(two_views, SPEC)
+    nominal = evaluate(
+        ramp, SPEC, two_views, points_per_profile=POINTS, ceiling=False, context=context
+    )
+    zero = _closed(ramp, two_views, "place:0mm,0deg;warp:0mm@200mm", trials=1)
+    assert 0.5 < nominal.in_spec_coverage < 1.0
+    assert list(zero.per_trial) == [nominal.in_spec_coverage]
+    assert nominal.coverage_map is not None
+    in_spec = nominal.coverage_map.state == SurfaceState.IN_SPEC
+    assert np.array_equal(zero.in_spec_share == 1.0, in_spec)  # sample by sample
+
+
+def test_each_view_follows_a_lifted_part_the_replay_misses(ramp, two_views):
+    # Trial 0 of seed 4 lifts the part by 25 mm: the tilted view's controller must follow it
+    # in its own frame too, so the samples only it holds in the nominal plan stay in spec.
+    context = recorded(two_views, SPEC)
+    nominal = evaluate(
+        ramp, SPEC, two_views, points_per_profile=POINTS, ceiling=False, context=context
+    )
+    tilted = two_views.meta["views"][1]
+    top = (two_views.swath < tilted["first_swath"]) | (two_views.swath > tilted["last_swath"])
+    top_only = replace(
+        two_views,
+        poses=two_views.poses[top],
+        swath=two_views.swath[top],
+        scanning=two_views.scanning[top],
+    )
+    alone = evaluate(
+        ramp, SPEC, top_only, points_per_profile=POINTS, ceiling=False, context=context
+    )
+    assert nominal.coverage_map is not None and alone.coverage_map is not None
+    only_tilted = (nominal.coverage_map.state == SurfaceState.IN_SPEC) & (
+        alone.coverage_map.state != SurfaceState.IN_SPEC
+    )
+    assert only_tilted.mean() > 0.05
+    closed = _closed(ramp, two_views, "place:15mm,1deg", trials=1, seed=4)
+    replay = _open(ramp, two_views, "place:15mm,1deg", trials=1, seed=4)
+    assert replay.mean < 0.2 * nominal.in_spec_coverage
+    assert closed.mean > 0.9 * nominal.in_spec_coverage
+    assert (
+        closed.in_spec_share[only_tilted].mean()
+        > 0.7
+        > 0.2
+        > replay.in_spec_share[only_tilted].mean()
+    )
+
+
+def test_a_two_view_closed_loop_repeats_seeded(ramp, two_views):
+    text = "place:5mm,2deg;warp:1mm@100mm"
+    a = _closed(ramp, two_views, text, seed=1)
+    b = _closed(ramp, two_views, text, seed=1)
+    assert np.array_equal(a.per_trial, b.per_trial)
+    assert np.array_equal(a.in_spec_share, b.in_spec_share)
+    assert not np.array_equal(a.per_trial, _closed(ramp, two_views, text, seed=2).per_trial)
+
+
+def test_a_look_ahead_policy_is_refused_on_a_tilted_view(ramp, two_views, monkeypatch):
+    import scanplan.trials as trials
+
+    class LooksAhead:  # an rl planner whose observation probes the view's region ahead
+        config = {"env": {"lookahead": True}}
+        source = "policy ahead"
+
+    monkeypatch.setattr(trials, "closed_loop_planner", lambda *_: LooksAhead())
+    with pytest.raises(ValueError, match="policy ahead looks ahead on each view's region"):
+        closed_loop_tasks(
+            ramp, two_views, recorded(two_views, SPEC), Perturbation.parse("place:1mm"), 1
         )

@@ -16,6 +16,9 @@ it, which a robot cannot.
         robot.servo(pose)                                       # part frame, mm
         x_mm, z_mm = sensor.profile()                           # NaN or 0 where no point
         pose = loop.step(robot.pose(), x_mm, z_mm)
+
+A plan of several views (or one tilted view): `trials.plan_views_of` gives each view's pass
+lines in that view's frame; run the loop there, a part-frame pose T being view.R @ T.
 """
 
 from __future__ import annotations

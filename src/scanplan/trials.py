@@ -1,7 +1,8 @@
 """Robustness trials of a closed-loop plan (feedback, rl): on each perturbed part the plan's
-controller drives the plan's passes again, acting on the profiles of the part as built and
-where it really sits, as it would on a cell streaming profiles to the robot; the poses it
-flew are then judged as an open-loop plan's trials are (`metrics.robustness.run_trial`).
+controller drives the plan's passes again, view by view, acting on the profiles of the part
+as built and where it really sits, as it would on a cell streaming profiles to the robot;
+the poses it flew are then judged as an open-loop plan's trials are
+(`metrics.robustness.run_trial`).
 """
 
 from __future__ import annotations
@@ -34,22 +35,33 @@ from scanplan.quantities import UP, ScanSpec
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import Swath, swath_from_record
 from scanplan.trajectory import Trajectory
+from scanplan.views import View, rotation_to_up
 
 # The planners whose controller acts on measured profiles: the only ones a closed loop re-runs.
 CLOSED_LOOP_PLANNERS = ("feedback", "rl")
 
 
 @dataclass(frozen=True)
+class ViewLines:
+    """One view of a plan as its file records it: `view` (its axis and rotation; no region,
+    the file does not keep it) and `swaths`, its pass lines in the view's frame, numbered
+    as the plan's passes."""
+
+    view: View
+    swaths: tuple[Swath, ...]
+
+
+@dataclass(frozen=True)
 class ClosedLoopTask:
     """One closed-loop trial, picklable (no ray engine): `judge` the open-loop trial task
     whose poses the closed loop replaces; `planner` the feedback or rl planner (its
-    `measure_with` set in the worker); `swaths` the plan's pass lines (part frame); the cell
+    `measure_with` set in the worker); `views` the plan's views and pass lines; the cell
     as planned: `table` (None: held in the air), `table_z_mm`, `fixtures` (vertices, faces,
     name) each; `spec` the plan's ScanSpec."""
 
     judge: TrialTask
     planner: Any
-    swaths: tuple[Swath, ...]
+    views: tuple[ViewLines, ...]
     table: Table | None
     table_z_mm: float | None
     fixtures: tuple[tuple[np.ndarray, np.ndarray, str], ...]
@@ -58,11 +70,13 @@ class ClosedLoopTask:
 
 def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     """(k,) bool: which nominal surface samples the closed loop holds in spec on trial
-    `task.judge.index`. The passes are planned as `pipeline.plan_path` plans them on the CAD
-    (where each starts and ends, the table's tilt limit, the poses dropped for the clearance
-    to the nominal part and cell), but every profile the controller acts on is measured on
-    the part as built and placed. The robot's path error is not seen by the controller: it
-    is drawn on the poses flown, as in the open-loop trials."""
+    `task.judge.index`. Each view's passes are planned as `pipeline.plan_views` plans them
+    on the CAD turned into the view's frame (where each starts and ends, the table's tilt
+    limit, the poses dropped for the clearance to the nominal part and cell), but every
+    profile the controller acts on is measured on the part as built and placed, turned the
+    same way; the views' poses, back in the part frame, are joined in the plan's order.
+    The robot's path error is not seen by the controller: it is drawn on the poses flown,
+    as in the open-loop trials."""
     judge = task.judge
     world = trial_world(judge)
     nominal = Part(
@@ -76,44 +90,82 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
         for v, f, name in task.fixtures
     )
     cell = Cell(task.table, fixtures, task.table_z_mm)
+    placed = world.T_part_placed
+    pieces = []
+    for lines in task.views:
+        view = lines.view
+        # The part as built turned as the CAD is (`View.part`: the very mesh at no
+        # perturbation), and its placement error seen from the view's frame.
+        built = view.part(world.part)
+        R = view.R
+        T = placed if np.array_equal(placed, np.eye(4)) else R @ placed @ np.linalg.inv(R)
 
-    def measured(_: Part, sensor: SensorSpec) -> PlacedProfilometer:
-        return PlacedProfilometer(world.part, sensor, world.T_part_placed)
+        def measured(_: Part, sensor: SensorSpec, built=built, T=T) -> PlacedProfilometer:
+            return PlacedProfilometer(built, sensor, T)
 
-    planner = replace(task.planner, measure_with=measured)
-    traj = plan_path(nominal, task.spec, planner, list(task.swaths), cell=cell)
+        planner = replace(task.planner, measure_with=measured)
+        flown = plan_path(
+            view.part(nominal),
+            task.spec,
+            planner,
+            list(lines.swaths),
+            cell=cell if np.array_equal(R, np.eye(4)) else cell.rotated(R),
+        )
+        pieces.append(view.to_part_frame(flown))
+    traj = Trajectory.concatenate(pieces)
     idx, has_prev = scanning_steps(traj)
     return run_trial(replace(judge, poses=traj.poses[idx], has_prev=has_prev))
 
 
-def plan_swaths_of(traj: Trajectory, where: str) -> list[Swath]:
-    """The pass lines a plan records, for running it in closed loop; ValueError (one line)
-    for a plan that has none or more than one view, or was fitted to a robot."""
+def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
+    """The views and pass lines a plan records, in its order, for running it in closed
+    loop; ValueError (one line) for a plan that records none, or was fitted to a robot."""
     if traj.meta.get("robot"):
         raise ValueError(
             f"{where} was fitted to a robot (passes split or turned): the closed loop runs "
             "the plan as planned on the CAD; evaluate the plan made without --robot"
         )
-    views = traj.meta.get("views") or []
+    records = traj.meta.get("views") or []
+    if not records:
+        raise ValueError(f"{where} records no views: plan it again to run it in closed loop")
+    out = []
+    for k, record in enumerate(records):
+        lines = record.get("swaths") if isinstance(record, dict) else None
+        if not lines:
+            raise ValueError(
+                f"{where} does not record its pass lines (made by an older scanplan): plan "
+                "it again to run it in closed loop"
+            )
+        try:
+            axis = np.array(record["axis"], dtype=np.float64).reshape(3)
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{where}: views[{k}] has no axis (3 numbers)") from None
+        if not (np.isfinite(axis).all() and abs(float(np.linalg.norm(axis)) - 1.0) < 1e-6):
+            raise ValueError(f"{where}: views[{k}].axis is not a unit vector")
+        swaths = tuple(
+            swath_from_record(r, f"{where}: views[{k}].swaths[{i}]") for i, r in enumerate(lines)
+        )
+        out.append(ViewLines(View(k, axis, rotation_to_up(axis)), swaths))
+    planned = set(np.unique(traj.swath[traj.scanning]).tolist())
+    if not planned <= {sw.index for v in out for sw in v.swaths}:
+        raise ValueError(f"{where}: its pass lines do not match its passes")
+    return out
+
+
+def plan_swaths_of(traj: Trajectory, where: str) -> list[Swath]:
+    """The pass lines of a plan of one view looking straight down (in the part frame, as a
+    robot-side loop takes them: `online`); ValueError (one line) for any other plan, whose
+    views' lines lie in their own frames (`plan_views_of`)."""
+    views = plan_views_of(traj, where)
     if len(views) != 1:
         raise ValueError(
-            f"{where} has {len(views)} views: the closed loop runs plans of one view "
-            "looking straight down (plan with --views top)"
+            f"{where} has {len(views)} views, each's pass lines in its own frame: take them "
+            "with trials.plan_views_of"
         )
-    view = views[0]
-    if not np.allclose(view["axis"], UP, atol=1e-9):
-        raise ValueError(f"{where}: its view looks along {view['axis']}, not straight down")
-    records = view.get("swaths")
-    if not records:
-        raise ValueError(
-            f"{where} does not record its pass lines (made by an older scanplan): plan it "
-            "again to run it in closed loop"
-        )
-    swaths = [swath_from_record(r, f"{where}: views[0].swaths[{i}]") for i, r in enumerate(records)]
-    planned = set(np.unique(traj.swath[traj.scanning]).tolist())
-    if not planned <= {sw.index for sw in swaths}:
-        raise ValueError(f"{where}: its pass lines do not match its passes")
-    return swaths
+    view = views[0].view
+    if not np.allclose(view.axis, UP, atol=1e-9):
+        raise ValueError(f"{where}: its view looks along {view.axis.tolist()}, not straight down")
+    return list(views[0].swaths)
 
 
 def closed_loop_planner(context: PlanContext, policy: str | None, where: str) -> Any:
@@ -142,6 +194,11 @@ def closed_loop_planner(context: PlanContext, policy: str | None, where: str) ->
     return rl
 
 
+def looks_ahead(planner: Any) -> bool:
+    """The planner is an rl policy whose observation probes the CAD ahead of the sensor."""
+    return bool(getattr(planner, "config", {}).get("env", {}).get("lookahead", False))
+
+
 def default_policy(context: PlanContext) -> str:
     """The shipped policy an rl plan was made with when none is given: v1 if it rolls."""
     return "v1" if context.full_beam_angle else "default"
@@ -158,10 +215,16 @@ def closed_loop_tasks(
     policy: str | None = None,
     where: str = "the plan",
 ) -> list[ClosedLoopTask]:
-    """The `trials` tasks of a closed-loop robustness run of `traj` (a feedback or rl plan
-    of one top view), judged as `metrics.robustness.trial_tasks` judges its replay."""
+    """The `trials` tasks of a closed-loop robustness run of `traj` (a feedback or rl plan,
+    every view of it), judged as `metrics.robustness.trial_tasks` judges its replay."""
     planner = closed_loop_planner(context, policy, where)
-    swaths = tuple(plan_swaths_of(traj, where))
+    views = tuple(plan_views_of(traj, where))
+    if looks_ahead(planner) and any(not np.array_equal(v.view.R, np.eye(4)) for v in views):
+        # Its look-ahead probes only the view's region, which the plan file does not keep.
+        raise ValueError(
+            f"{planner.source} looks ahead on each view's region, which {where} does not "
+            "record: only its views looking straight down could run in closed loop"
+        )
     judges = trial_tasks(
         part, context.spec, traj, model, trials, seed, points_per_profile, context=context
     )
@@ -170,7 +233,7 @@ def closed_loop_tasks(
         (np.asarray(f.mesh.vertices), np.asarray(f.mesh.faces), f.name) for f in cell.fixtures
     )
     return [
-        ClosedLoopTask(j, planner, swaths, cell.table, cell.table_z_mm, fixtures, context.spec)
+        ClosedLoopTask(j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec)
         for j in judges
     ]
 

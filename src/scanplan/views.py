@@ -98,6 +98,17 @@ def view_axis(normal: np.ndarray, max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG) 
     return math.sin(t) * horizontal + math.cos(t) * UP
 
 
+def rotation_to_up(axis: np.ndarray) -> np.ndarray:
+    """(4, 4) the smallest rotation taking the unit `axis` to +Z (the view's "up" tilts,
+    nothing spins). Not normalized again here: a view read back from a plan file (its
+    recorded unit axis) gets the very rotation it was planned with."""
+    R = np.eye(4)
+    if not np.allclose(axis, UP):
+        rot, _ = Rotation.align_vectors([UP], [np.asarray(axis, dtype=np.float64)])
+        R[:3, :3] = rot.as_matrix()
+    return R
+
+
 @dataclass(frozen=True)
 class View:
     """One raster of the scan, seen along −axis.
@@ -115,12 +126,7 @@ class View:
     @staticmethod
     def looking_along(axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None) -> View:
         axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
-        R = np.eye(4)
-        if not np.allclose(axis, UP):
-            # The smallest rotation taking axis to +Z: the view's "up" tilts, nothing spins.
-            rot, _ = Rotation.align_vectors([UP], [axis])
-            R[:3, :3] = rot.as_matrix()
-        return View(index, axis, R, faces)
+        return View(index, axis, rotation_to_up(axis), faces)
 
     def part(self, part: Part) -> Part:
         """The part in the view frame, restricted to the view's region (and the part's ROI).

@@ -596,10 +596,10 @@ def evaluate_cmd(
     the_part = load_part(part, units)
     context.cell(the_part.with_roi(context.roi))  # a bad ROI, table or fixture: fail first
     if closed_loop:  # a plan the closed loop cannot run: say so before the long part
-        from scanplan.trials import closed_loop_planner, plan_swaths_of
+        from scanplan.trials import closed_loop_planner, plan_views_of
 
         closed_loop_planner(context, policy, f"plan {trajectory}")
-        plan_swaths_of(traj, f"plan {trajectory}")
+        plan_views_of(traj, f"plan {trajectory}")
     if note:
         typer.echo(note, err=True)
     targets, blended = program_targets(traj, context.spec)
