@@ -165,3 +165,23 @@ def test_evaluate_predicts_the_full_fan_map_from_its_own_sub_sampled_scan():
     assert np.median(fan.spacing_mm[fan.seen]) == pytest.approx(0.5, rel=0.1)
     predicted = fan.predicted_a("dent", detector, 0.9)
     assert predicted == pytest.approx(full.predicted_a("dent", detector, 0.9), rel=0.1)
+
+
+def test_the_map_is_the_depth_where_each_sample_reaches_its_share():
+    # Per sample, the mapped depth is where its own POD crosses 90 %: found just above it,
+    # not just below; and the sub-sampled scan's map agrees with its a90 in the median.
+    part = part_from_mesh(_plate(160.0), "plate")
+    traj = straight(np.arange(236.0, 404.0, 0.5))
+    detector = detector_for(traj, SENSOR)
+    acc = DetectabilitySurvey(SENSOR, detector, false_calls=False)
+    evaluate(part, SPEC, traj, points_per_profile=256, observers=[acc])
+    _, found = acc.finish()
+    rows = found.sampled_rows(0)
+    rows = np.arange(len(found.seen)) if rows is None else rows
+    smallest = found.smallest_mm("dent", detector, 0.9, rows)
+    mapped = np.isfinite(smallest)
+    assert mapped.mean() > 0.9
+    assert (found.pod_at("dent", smallest * 1.001, detector, rows)[mapped] >= 0.9).all()
+    assert (found.pod_at("dent", smallest * 0.99, detector, rows)[mapped] < 0.9).mean() > 0.99
+    a90 = found.predicted_a("dent", detector, 0.9)
+    assert np.median(smallest[mapped]) == pytest.approx(a90, rel=0.15)

@@ -75,21 +75,24 @@ def detector_for(traj: Trajectory, sensor: SensorSpec, **kwargs: Any) -> Detecto
     return Detector(link_mm=link, **kwargs)
 
 
-def sigma_mm(scan: Scan, sensor: SensorSpec) -> np.ndarray:
+def sigma_mm(scan: Scan, sensor: SensorSpec, cos: np.ndarray | None = None) -> np.ndarray:
     """(m, N) the σ of each point's depth in the simulator: its noise model at the point's
-    depth and incidence, and the depth quantization (NaN where not valid)."""
+    depth and incidence, and the depth quantization (NaN where not valid); cos: the scan's
+    `cos_incidence` if the caller has it already."""
     z = np.where(scan.valid, scan.z_sensor, np.nan)
     quant = sensor.z_resolution_mm / np.sqrt(12.0)
     if sensor.noise is None:
         return np.where(scan.valid, quant, np.nan)
-    noise = sensor.noise.std_mm(z, cos_incidence(scan, sensor), sensor.working_distance_mm)
+    cos = cos_incidence(scan, sensor) if cos is None else cos
+    noise = sensor.noise.std_mm(z, cos, sensor.working_distance_mm)
     return np.hypot(noise, quant)
 
 
 def cos_incidence(scan: Scan, sensor: SensorSpec) -> np.ndarray:
     """(m, N) |cos| of the angle between each column's ray and the surface normal it hit."""
-    dirs = np.einsum("mij,nj->mni", scan.poses[:, :3, :3], sensor.ray_directions())
-    return np.abs(np.einsum("mni,mni->mn", dirs, scan.normals_part))
+    # In the sensor frame: the ray directions dotted with the normals turned into it.
+    normals_sensor = np.matmul(scan.normals_part, scan.poses[:, :3, :3])  # (m, N, 3)
+    return np.abs(np.einsum("mni,ni->mn", normals_sensor, sensor.ray_directions()))
 
 
 def flagged(scan: Scan, nominal_z: np.ndarray, sensor: SensorSpec, k_sigma: float) -> np.ndarray:
