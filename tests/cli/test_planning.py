@@ -361,4 +361,48 @@ def test_plan_a_folder_of_parts_on_two_processes_and_on_dask(tmp_path):
         assert result.exit_code == 2 and message in result.stderr
     alone_scheduler = ["plan", str(folder / "block.stl"), "-o", str(alone), "--scheduler", "x"]
     result = runner.invoke(app, alone_scheduler)
-    assert result.exit_code == 2 and "give a folder as the part" in result.stderr
+    assert result.exit_code == 2 and "give a folder or a .txt list as the part" in result.stderr
+
+
+def test_plan_a_list_of_parts_as_a_folder_is_planned(tmp_path):
+    # A .txt list: one path a line, relative to the list, # comments; each part planned as
+    # `plan` plans it alone, a bad entry its own one-line failure, the rest still planned.
+    parts = tmp_path / "cad"
+    (parts / "sub").mkdir(parents=True)
+    trimesh.creation.box((300.0, 150.0, 20.0)).export(parts / "sub" / "block.stl")
+    trimesh.creation.box((200.0, 120.0, 10.0)).export(tmp_path / "plate.ply")
+    listing = parts / "catalogue.txt"
+    listing.write_text(
+        "# parts of cell 3\n"
+        "sub/block.stl   # the block\n"
+        "\n"
+        f"{tmp_path / 'plate.ply'}\n"
+        "missing.stl\n"
+        "not-a-part\n"
+    )
+    opts = ["--planner", "fixed", "-q"]
+    out = tmp_path / "plans"
+    result = runner.invoke(app, ["plan", str(listing), "-o", str(out), *opts])
+    assert result.exit_code == 1
+    errors = result.stderr.strip().splitlines()
+    assert errors[0].startswith("missing.stl: error: part file ") and "does not exist" in errors[0]
+    assert errors[1].startswith("not-a-part: error: part 'not-a-part' is neither a file")
+    assert errors[2] == "error: 2 of 4 parts not planned" and len(errors) == 3
+    assert "sub/block.stl: fixed: 1 view" in result.stdout
+    assert sorted(p.name for p in out.iterdir()) == ["block.json", "plate.json"]
+    alone = tmp_path / "block_alone.json"
+    args = ["plan", str(parts / "sub" / "block.stl"), "-o", str(alone), *opts]
+    assert runner.invoke(app, args).exit_code == 0
+    assert np.array_equal(read_trajectory(out / "block.json").poses, read_trajectory(alone).poses)
+    for text, message in (
+        ("# nothing\n\n", "names no part"),
+        ("a/block.stl\nb/block.obj\n", "parts block would share a plan name"),
+    ):
+        listing.write_text(text)
+        result = runner.invoke(app, ["plan", str(listing), "-o", str(tmp_path / "p2"), *opts])
+        assert result.exit_code == 2 and message in result.stderr
+        assert result.stderr.strip().count("\n") == 0 and not (tmp_path / "p2").exists()
+    result = runner.invoke(app, ["plan", str(tmp_path / "none.txt"), "-o", str(out), *opts])
+    assert (
+        result.exit_code == 2 and "part list" in result.stderr and "does not exist" in result.stderr
+    )

@@ -199,8 +199,8 @@ PlanSchedulerOpt = Annotated[
     str | None,
     typer.Option(
         "--scheduler",
-        help="a folder of parts: plan them on the Dask scheduler tcp://HOST:8786 (default: "
-        "every core here)",
+        help="a catalogue of parts (a folder or a .txt list): plan them on the Dask scheduler "
+        "tcp://HOST:8786 (default: every core here)",
         show_default=False,
     ),
 ]
@@ -237,7 +237,8 @@ def plan_cmd(
         str,
         typer.Argument(
             help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB), STEP file, or a folder "
-            "of them (each planned with the same options, -o then the folder for the plans)"
+            "of them or a .txt list of them, one per line (each planned with the same options, "
+            "-o then the folder for the plans)"
         ),
     ],
     output: OutOpt,
@@ -264,18 +265,21 @@ def plan_cmd(
     """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
     under (sensor, tolerances, views, region of interest, table and fixtures) for `evaluate`
     to judge it by. With --robot, a plan that arm can fly (placed by the tool unless
-    --part-pose is given), and what that cost. A folder of parts is a catalogue: each part
+    --part-pose is given), and what that cost. A folder of parts, or a .txt file listing
+    them (one path a line, relative to the list; # comments), is a catalogue: each part
     planned on its own core (or Dask worker) into -o/NAME.json, one line per part."""
     job = PlanJob(
         part, output, planner, sensor, policy, direction, overlap, raster, roll, units,
         tolerance, roi, views, coverage_target, table, tuple(fixture or ()), robot, tcp,
         part_pose,
     )  # fmt: skip
-    if Path(part).is_dir():
+    if Path(part).is_dir() or Path(part).suffix.lower() == CATALOGUE_LIST_SUFFIX:
         plan_catalogue(job, scheduler, quiet)
         return
     if scheduler is not None:
-        raise ValueError("--scheduler plans a folder of parts: give a folder as the part")
+        raise ValueError(
+            "--scheduler plans a catalogue of parts: give a folder or a .txt list as the part"
+        )
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     with progress_bar(f"planning ({planner})", quiet) as progress:
@@ -352,6 +356,35 @@ def catalogue_parts(folder: Path) -> list[Path]:
     return parts
 
 
+# A catalogue listed in a text file rather than gathered in a folder: a .txt is no part file.
+CATALOGUE_LIST_SUFFIX = ".txt"
+
+
+def catalogue_list(listing: Path) -> list[tuple[str, str]]:
+    """(the entry as written, the part to load) for each part a list file names: one a line,
+    a path relative to the list's folder (or absolute, or a built-in part's name); blank
+    lines and what follows a '#' are skipped. A missing or unreadable part is that part's
+    failure, not the list's; the list itself must exist and name parts of distinct plan
+    names."""
+    try:
+        text = listing.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"part list {listing} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"part list {listing}: cannot read it ({exc})") from None
+    entries = [e for line in text.splitlines() if (e := line.split("#", 1)[0].strip())]
+    if not entries:
+        raise ValueError(f"part list {listing} names no part (one path a line, # comments)")
+    base = listing.parent
+    # A name with no suffix that is no file next to the list is left to `load_part`: a
+    # built-in part, or its one-line error.
+    parts = [(e, str(base / e) if (base / e).exists() or Path(e).suffix else e) for e in entries]
+    stems = [Path(e).stem for e in entries]
+    if twice := sorted({s for s in stems if stems.count(s) > 1}):
+        raise ValueError(f"part list {listing}: parts {', '.join(twice)} would share a plan name")
+    return parts
+
+
 def plan_one_of_catalogue(job: PlanJob) -> tuple[list[tuple[str, bool]], str | None]:
     """In a worker: the lines of one part's plan, or the one-line reason it has none (a bad
     part is that part's failure, not the catalogue's)."""
@@ -362,28 +395,35 @@ def plan_one_of_catalogue(job: PlanJob) -> tuple[list[tuple[str, bool]], str | N
 
 
 def plan_catalogue(job: PlanJob, scheduler: str | None, quiet: bool) -> None:
-    """Plan every part in the folder `job.part` with `job`'s options, into `job.output`
-    (a folder) as NAME.json: on the cores here, or on the Dask scheduler. Each part's
-    lines are printed under its name; if any part fails, the run exits 1 after the rest."""
+    """Plan every part in the folder, or named by the list file, `job.part` with `job`'s
+    options, into `job.output` (a folder) as NAME.json: on the cores here, or on the Dask
+    scheduler. Each part's lines are printed under its name (a list's: its entry); if any
+    part fails, the run exits 1 after the rest."""
     output = job.output
     if output.suffix:
-        raise ValueError(f"-o {output}: with a folder of parts, -o is the folder the plans go to")
-    parts = catalogue_parts(Path(job.part))
+        raise ValueError(
+            f"-o {output}: with a catalogue of parts, -o is the folder the plans go to"
+        )
+    source = Path(job.part)
+    if source.is_dir():
+        parts = [(p.name, str(p)) for p in catalogue_parts(source)]
+    else:
+        parts = catalogue_list(source)
     if output.exists() and not output.is_dir():
         raise ValueError(f"-o {output} is a file: give a folder for the plans")
     output.mkdir(parents=True, exist_ok=True)
-    jobs = [replace(job, part=str(p), output=output / f"{p.stem}.json") for p in parts]
+    jobs = [replace(job, part=p, output=output / f"{Path(p).stem}.json") for _, p in parts]
     with progress_bar(f"planning {len(jobs)} parts", quiet) as progress:
         with trial_runner(scheduler, len(jobs)) as run:
             results = list(counted(run, progress)(plan_one_of_catalogue, jobs))
     failed = 0
-    for path, (lines, error) in zip(parts, results, strict=True):
+    for (name, _), (lines, error) in zip(parts, results, strict=True):
         if error is not None:
             failed += 1
-            typer.echo(f"{path.name}: error: {error}", err=True)
+            typer.echo(f"{name}: error: {error}", err=True)
             continue
         for text, to_stderr in lines:
-            typer.echo(f"{path.name}: {text}", err=to_stderr)
+            typer.echo(f"{name}: {text}", err=to_stderr)
     if failed:
         typer.echo(f"error: {failed} of {len(jobs)} parts not planned", err=True)
         raise typer.Exit(1)
