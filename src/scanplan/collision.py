@@ -253,14 +253,21 @@ class CollisionChecker:
         return float(min(depths)) if depths else 0.0
 
 
+_MESH_OBJECTS: weakref.WeakKeyDictionary[Part, fcl.CollisionObject] = weakref.WeakKeyDictionary()
+
+
 def _mesh_object(part: Part) -> fcl.CollisionObject:
-    """The part's mesh as an FCL object (its BVH), in part coordinates."""
-    mesh = part.mesh
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(mesh.vertices), len(mesh.faces))
-    bvh.addSubModel(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32))
-    bvh.endModel()
-    return fcl.CollisionObject(bvh, fcl.Transform())
+    """The part's mesh as an FCL object (its BVH), in part coordinates; built once while the
+    part lives (seconds for a large mesh), shared by the sensor's and the arm's checks,
+    which never move it."""
+    if part not in _MESH_OBJECTS:
+        mesh = part.mesh
+        bvh = fcl.BVHModel()
+        bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+        bvh.addSubModel(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32))
+        bvh.endModel()
+        _MESH_OBJECTS[part] = fcl.CollisionObject(bvh, fcl.Transform())
+    return _MESH_OBJECTS[part]
 
 
 _CHECKERS: weakref.WeakKeyDictionary[Part, dict[bytes, CollisionChecker]] = (

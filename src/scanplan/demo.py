@@ -28,6 +28,7 @@ from scanplan.report import Evaluated, write_report
 from scanplan.robot import get_robot
 from scanplan.robot.flyable import check_flyable
 from scanplan.robot.links import obstacles_for
+from scanplan.sensor import DEMO_POINTS
 from scanplan.trajectory import Trajectory, dumps_json, to_csv_text, to_json_dict
 
 PLANNER_ORDER = ("fixed", "geometric", "rl")
@@ -57,7 +58,7 @@ def run_demo(
     part_name: str = "door",
     units: str = "mm",
     spec: ScanSpec | None = None,
-    points_per_profile: int | None = 1024,
+    points_per_profile: int | None = DEMO_POINTS,
     seed: int = 0,
     step: Callable[[str], None] = lambda message: None,
     roi: str | None = None,

@@ -21,7 +21,7 @@ from scanplan.cli.options import (
     UnitsOpt,
     scan_spec,
 )
-from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
+from scanplan.sensor import DEFAULT_SENSOR, DEMO_POINTS, SensorSpec
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -46,7 +46,7 @@ def demo_cmd(
     part: DemoPartOpt = "door",
     units: UnitsOpt = "mm",
     sensor: SensorOpt = DEFAULT_SENSOR,
-    points: DemoPointsOpt = 1024,
+    points: DemoPointsOpt = DEMO_POINTS,
     seed: SeedOpt = 0,
     tolerance: ToleranceOpt = None,
     roi: RoiOpt = None,

@@ -187,7 +187,9 @@ class GeometricPlanner:
     roll_rate: float = ROLL_RATE
     probe_step_mm: float = 2.0
     probe_columns: int = 48
-    sensor_points: int = 64
+    # Columns its candidates are judged by: 32 rank them as 64 do (door in-spec 0.935 vs
+    # 0.934, quadrotor 0.676 vs 0.673) for a fifth less planning.
+    sensor_points: int = 32
     refinements: int = 2
     roll: bool = False
     name: str = "geometric"
@@ -206,7 +208,7 @@ class GeometricPlanner:
         probe = probe_swath(
             part, swath, spec, self.probe_step_mm, self.probe_columns, roll=self.roll
         )
-        # A band of a few cm needs more than the 64 columns that judge a whole line.
+        # A band of a few cm needs more columns than a whole line.
         points = self.sensor_points if swath.band_mm is None else 2 * self.sensor_points
         fan = LineProfilometer(part, spec.sensor.without_noise().with_points(points))
         best: tuple[float, np.ndarray] | None = None
