@@ -175,9 +175,7 @@ class Detectability:
             mid = 0.5 * (lo + hi)
             found = pod(np.exp(mid)) >= share
             lo, hi = np.where(found, lo, mid), np.where(found, mid, hi)
-        return np.where(
-            found_at_lo, math.exp(math.log(1e-3)), np.where(found_at_hi, np.exp(hi), np.inf)
-        )
+        return np.where(found_at_lo, 1e-3, np.where(found_at_hi, np.exp(hi), np.inf))
 
     def sampled_rows(self, seed: int) -> np.ndarray | None:
         """Sorted indices of a seeded sample of `MAX_PREDICTED_SAMPLES` samples (None: all

@@ -43,11 +43,11 @@ from scanplan.trajectory import Trajectory
 MAX_POINTS_PER_PLANNER = 10_000
 MAX_PATH_POINTS = 3_000
 MAX_ARROWS = 120
-# Pictures larger than this are embedded downscaled to twice a grid column's width (700 px
-# on the 1400 px page, twice for sharp screens), as the smaller of a 256-colour PNG and a
-# JPEG; the files keep every pixel.
+# Pictures larger than this are embedded downscaled to about twice a grid column's width
+# (700 px on the 1400 px page, twice for sharp screens; 1280 keeps the door's three-planner
+# page under 5 MB), as the smaller of a 256-colour PNG and a JPEG; the files keep every pixel.
 PICTURE_MAX_BYTES = 300_000
-PICTURE_MAX_WIDTH_PX = 1400
+PICTURE_MAX_WIDTH_PX = 1280
 
 
 @dataclass(frozen=True)
