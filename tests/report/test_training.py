@@ -59,3 +59,40 @@ def test_training_comparison_plots_every_run_in_every_panel(tmp_path, monkeypatc
     np.testing.assert_allclose(reward[1].get_ydata(), ys / 2)
     with pytest.raises(ValueError, match="no log"):
         plot_training_comparison({}, tmp_path / "none.png")
+
+
+def test_seeds_of_one_recipe_are_drawn_as_their_mean_with_the_sd_shaded(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    from scanplan.planners.rl import DEFAULT_POLICY
+    from scanplan.report.training import plot_training_comparison
+
+    shipped = DEFAULT_POLICY / "training_log.csv"
+    rows = list(csv.DictReader(shipped.open()))
+    seeds = []
+    for k, scale in enumerate((1.0, 3.0)):
+        path = tmp_path / f"seed{k}.csv"
+        with path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, list(rows[0]))
+            writer.writeheader()
+            for r in rows:
+                writer.writerow(r | {"ep_rew_mean": str(float(r["ep_rew_mean"]) * scale)})
+        seeds.append(path)
+    figures = []
+    monkeypatch.setattr(plt, "close", lambda fig: figures.append(fig))
+    plot_training_comparison({"two seeds": seeds, "one": shipped}, tmp_path / "s.png")
+    (fig,) = figures
+    ax = fig.axes[0]
+    ys = read_log(shipped)["ep_rew_mean"]
+    mean, one = ax.get_lines()
+    np.testing.assert_allclose(mean.get_ydata(), 2 * ys)  # the mean of 1x and 3x
+    np.testing.assert_allclose(one.get_ydata(), ys)
+    (band,) = [c for c in ax.collections if isinstance(c, PolyCollection)]  # one band: the pair
+    lo, hi = band.get_paths()[0].vertices[:, 1].min(), band.get_paths()[0].vertices[:, 1].max()
+    assert lo == pytest.approx(np.nanmin(2 * ys - np.abs(ys))) and hi == pytest.approx(
+        np.nanmax(2 * ys + np.abs(ys))
+    )

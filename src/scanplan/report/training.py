@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -118,10 +120,25 @@ COMPARISON_PANELS = (
 )
 
 
-def plot_training_comparison(logs: dict[str, str | Path], out_png: str | Path) -> Path:
+def _seed_band(logs: list[dict[str, np.ndarray]], key: str) -> tuple[np.ndarray, ...]:
+    """(timesteps, mean, sd) of `key` over runs of one recipe, on the updates all of them
+    logged (the same n_steps: the same timesteps); NaN where none has a value."""
+    n = min(len(log["timesteps"]) for log in logs)
+    values = np.stack([log[key][:n] for log in logs])
+    seen = np.isfinite(values).any(axis=0)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an update no run logged: NaN
+        mean, sd = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+    return logs[0]["timesteps"][:n][seen], mean[seen], sd[seen]
+
+
+def plot_training_comparison(
+    logs: Mapping[str, str | Path | Sequence[str | Path]], out_png: str | Path
+) -> Path:
     """The paper's training figures for several runs side by side: one panel per quantity
     (`COMPARISON_PANELS`), one line per run ({label: progress.csv or training_log.csv}),
-    against PPO timesteps."""
+    against PPO timesteps. A label given several logs (seeds of one recipe) is drawn as
+    their mean with ±1 sd shaded."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -130,12 +147,17 @@ def plot_training_comparison(logs: dict[str, str | Path], out_png: str | Path) -
 
     if not logs:
         raise ValueError("plot_training_comparison: no log")
-    read = {label: read_log(path) for label, path in logs.items()}
+    read = {
+        label: [read_log(p) for p in ([path] if isinstance(path, str | Path) else path)]
+        for label, path in logs.items()
+    }
     fig, axes = plt.subplots(2, 3, figsize=(14, 7.2))
     for ax, (key, title) in zip(axes.flat, COMPARISON_PANELS, strict=True):
-        for label, log in read.items():
-            ok = np.isfinite(log[key])
-            ax.plot(log["timesteps"][ok], log[key][ok], lw=1.2, label=label)
+        for label, runs in read.items():
+            t, mean, sd = _seed_band(runs, key)
+            (line,) = ax.plot(t, mean, lw=1.2, label=label)
+            if len(runs) > 1:
+                ax.fill_between(t, mean - sd, mean + sd, color=line.get_color(), alpha=0.2, lw=0)
         ax.set_title(title)
         ax.set_xlabel("PPO timesteps")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
