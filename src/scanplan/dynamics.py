@@ -36,6 +36,18 @@ from scanplan.quantities import (
 )
 from scanplan.swaths import Swath, frame_poses
 
+# Where a pitch step turns (`scanplan train --pitch-pivot`): the sensor's origin (the default,
+# v0 as it always was) or the footprint, W_d along the beam (a robot TCP set there), so that
+# a pitch step does not swing the footprint by W_d·Δθ.
+PITCH_PIVOTS = ("sensor", "footprint")
+
+
+def pitch_pivot_mm(pivot: str, spec: ScanSpec) -> float:
+    """The distance along the beam a pitch step turns about (`PITCH_PIVOTS`)."""
+    if pivot not in PITCH_PIVOTS:
+        raise ValueError(f"unknown pitch pivot {pivot!r}; use one of {', '.join(PITCH_PIVOTS)}")
+    return spec.working_distance_mm if pivot == "footprint" else 0.0
+
 
 def _towards(value: float, limit: float) -> tuple[float, float]:
     """The paper's sign limitation: only towards the target (0 width when it is unknown)."""
@@ -98,10 +110,17 @@ def _rolled_step(
     return s, h, th, phi2, lat
 
 
-def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float | None = None) -> np.ndarray:
+def apply_step(
+    state: np.ndarray,
+    step: np.ndarray,
+    pivot_mm: float | None = None,
+    pitch_pivot_mm: float = 0.0,
+) -> np.ndarray:
     """(s, h, θ) after the step (Δy, Δz, Δθ) in mm and rad; (s, h, θ, φ, l) after
     (Δy, Δz, Δθ, Δφ), the roll about the point `pivot_mm` (W_d) along the beam. The beam is
-    z_s = −sinθ·u + cosθ·(sinφ·v − cosφ·w) (`Swath.poses`)."""
+    z_s = −sinθ·u + cosθ·(sinφ·v − cosφ·w) (`Swath.poses`). Pitch turns about the point
+    `pitch_pivot_mm` along the beam: 0 is the sensor's origin (the default), W_d the
+    footprint (`PITCH_PIVOTS`; the rolled step keeps the origin)."""
     if len(state) == 5:
         if pivot_mm is None:
             raise ValueError("a rolled step needs its pivot distance (W_d)")
@@ -110,7 +129,12 @@ def apply_step(state: np.ndarray, step: np.ndarray, pivot_mm: float | None = Non
         return np.array(_rolled_step(s, h, th, phi, lat, dy, dz, dth, dphi, pivot_mm))
     s, h, th = state
     dy, dz, dth = step
-    return np.array([s + dy - dz * math.sin(th), h - dz * math.cos(th), th + dth])
+    s, h, th2 = s + dy - dz * math.sin(th), h - dz * math.cos(th), th + dth
+    if pitch_pivot_mm:
+        # The pivot p·z_s(θ) stays put: the origin moves by p·(z_s(θ) − z_s(θ + Δθ)).
+        s += pitch_pivot_mm * (math.sin(th2) - math.sin(th))
+        h += pitch_pivot_mm * (math.cos(th2) - math.cos(th))
+    return np.array([s, h, th2])
 
 
 def steps_between(s_mm: np.ndarray, h_mm: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
@@ -240,6 +264,7 @@ class PassDynamics:
     rng: the Generator the simulator's noise draws from (an env's `np_random`).
     roll: the state is (s, h, θ, φ, l) and actions are 4-D (env v1); β is tracked too.
     align_iterations, start_pitch_max_rad: see `aligned_start`.
+    pitch_pivot: where a pitch step turns (`PITCH_PIVOTS`, v0 only).
     """
 
     def __init__(
@@ -253,9 +278,13 @@ class PassDynamics:
         roll: bool = False,
         align_iterations: int = 4,
         start_pitch_max_rad: float = math.radians(15.0),
+        pitch_pivot: str = "sensor",
     ) -> None:
         self.part, self.swath, self.spec, self._sim = part, swath, spec, sim
         self.roll = roll
+        if roll and pitch_pivot != "sensor":
+            raise ValueError("pitch about the footprint: env v0 only (v1 keeps the sensor's)")
+        self.pitch_pivot_mm = pitch_pivot_mm(pitch_pivot, spec)
         self.beta_rad = self.tilt_rad = math.nan
         self.limits = limits or StepLimits()
         self.rng = rng
@@ -330,7 +359,8 @@ class PassDynamics:
             self.spec.working_distance_mm,
             self.beta_rad,
         )
-        return Step(limited, apply_step(self.state, limited, self.spec.working_distance_mm))
+        wd = self.spec.working_distance_mm
+        return Step(limited, apply_step(self.state, limited, wd, self.pitch_pivot_mm))
 
     def accept(self, step: Step, profile: Profile, delta_s_mm: float | None = None) -> None:
         """Move to `step.state`, where `profile` was measured; `delta_s_mm`: its

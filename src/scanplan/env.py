@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from scanplan.dynamics import PassDynamics, pass_geometry, step_budget
+from scanplan.dynamics import PITCH_PIVOTS, PassDynamics, pass_geometry, step_budget
 from scanplan.dynamics import Step as PassStep
 from scanplan.observation import OBS_LIMIT, observation_size, observe
 from scanplan.part import Part, load_part, part_from_mesh
@@ -80,7 +80,7 @@ class SwathScanEnv(gym.Env):
     |-------|--------|----------------------------------|---------------------------------------|
     | 0     | Δy     | along u                          | none                                  |
     | 1     | Δz     | along z_s, + = towards the part  | [0, max] if D ≥ W_d else [−max, 0]    |
-    | 2     | Δθ     | pitch about x_s                  | [0, max] if α ≥ 0 else [−max, 0]      |
+    | 2     | Δθ     | pitch about x_s (`pitch_pivot`)  | [0, max] if α ≥ 0 else [−max, 0]      |
     | 3 (v1)| Δφ     | roll about u (≈ y_s), pivot W_d  | [0, max] if β ≥ 0 else [−max, 0]      |
 
     Where the profile has no valid point, D and α are unknown: Δz and Δθ are held at 0.
@@ -115,6 +115,8 @@ class SwathScanEnv(gym.Env):
     `info["lost_penalty"]`: ending early is never cheaper than finishing.
     `reward_distance_scale_mm` (training, a deviation from the paper) sets the depth error at
     which R_D reaches −1 instead of the paper's Z_r/2.
+    `pitch_pivot="footprint"` (beyond the paper, which does not say where the sensor frame's
+    origin is) turns Δθ about the point W_d along the beam instead of the sensor's origin.
 
     ## Starting state
 
@@ -138,7 +140,8 @@ class SwathScanEnv(gym.Env):
     | version | change |
     |---------|--------|
     | v0      | the paper's state, action, reward; options: look-ahead, no-P state,    |
-    |         | sub-segments of passes, procedural parts                                |
+    |         | sub-segments of passes, procedural parts, start offsets, R_D's scale,   |
+    |         | the pitch pivot                                                         |
     | v1      | roll: Δφ (about the point W_d along the beam), φ and β observed,        |
     |         | orientation reward on the full angle; v0 unchanged                      |
     """
@@ -165,6 +168,7 @@ class SwathScanEnv(gym.Env):
         start_offset_mm: float = 0.0,
         start_pitch_deg: float = 0.0,
         reward_distance_scale_mm: float | None = None,
+        pitch_pivot: str = "sensor",
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal).
@@ -176,7 +180,8 @@ class SwathScanEnv(gym.Env):
         error U(−a, a) mm along the beam and a pitch error U(−b, b)° about the footprint
         (beyond the paper, which is silent on the start; 0 = the aligned start, v0 only).
         reward_distance_scale_mm: R_D's scale (`ScanSpec.reward_distance_scale_mm`; None keeps
-        the scan spec's, by default the paper's Z_r/2)."""
+        the scan spec's, by default the paper's Z_r/2). pitch_pivot: where Δθ turns,
+        "sensor" (its origin) or "footprint" (W_d along the beam; v0 only)."""
         super().__init__()
         if (start_offset_mm or start_pitch_deg) and roll:
             raise ValueError("start_offset_mm / start_pitch_deg: env v0 only")
@@ -206,6 +211,9 @@ class SwathScanEnv(gym.Env):
         self.lost_patience = lost_patience
         self.max_episode_steps = max_episode_steps
         self.roll = roll
+        if pitch_pivot not in PITCH_PIVOTS or (roll and pitch_pivot != "sensor"):
+            raise ValueError(f"pitch_pivot {pitch_pivot!r}: one of {PITCH_PIVOTS}, v1 'sensor'")
+        self.pitch_pivot = pitch_pivot
         n_obs = observation_size(use_position, lookahead, roll)
         self.action_space = spaces.Box(-1.0, 1.0, (4 if roll else 3,), np.float32)
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (n_obs,), np.float32)
@@ -257,7 +265,14 @@ class SwathScanEnv(gym.Env):
         else:
             part, swath, sim = self._draw_swath()
         self.dynamics = dyn = PassDynamics(
-            part, swath, self.scan_spec, sim, self.limits, self.np_random, roll=self.roll
+            part,
+            swath,
+            self.scan_spec,
+            sim,
+            self.limits,
+            self.np_random,
+            roll=self.roll,
+            pitch_pivot=self.pitch_pivot,
         )
         geo = pass_geometry(part, swath, self.scan_spec)
         s0, s1 = geo.s_first_mm, geo.s_last_mm

@@ -95,7 +95,8 @@ class OnlinePass:
     `FeedbackController()` or `RLPlanner.controller()`; limits: the plan's step limits;
     roll: the controller gives 4-D actions (a v1 policy, feedback with roll); part: the CAD,
     needed only by a policy that looks ahead on it; end_mm: the advance along the pass at
-    which it is `done` (default: the pass line's end).
+    which it is `done` (default: the pass line's end); pitch_pivot: where pitch steps turn
+    (a policy's `RLPlanner.pitch_pivot`).
     """
 
     def __init__(
@@ -107,12 +108,21 @@ class OnlinePass:
         roll: bool = False,
         part: Part | None = None,
         end_mm: float | None = None,
+        pitch_pivot: str = "sensor",
     ) -> None:
         self.swath, self.spec, self.controller = swath, spec, controller
         self.roll = roll
         self.end_mm = swath.length_mm if end_mm is None else float(end_mm)
         # The CAD is read only by a look-ahead observation; a pass without it has none.
-        self.dynamics = PassDynamics(part, swath, spec, None, limits, roll=roll)  # type: ignore[arg-type]
+        self.dynamics = PassDynamics(
+            part,  # type: ignore[arg-type]
+            swath,
+            spec,
+            None,
+            limits,
+            roll=roll,
+            pitch_pivot=pitch_pivot,
+        )
         self._start: np.ndarray | None = None
         self._last: Step | None = None
 

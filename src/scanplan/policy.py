@@ -13,11 +13,12 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Annotated, Any, Literal
 
 import torch
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictStr, ValidationError, field_validator
 from pydantic import model_validator as _model_validator
 from torch import nn
 
 from scanplan.context import scan_spec_from_record
+from scanplan.dynamics import PITCH_PIVOTS
 from scanplan.limits import (
     ANGLE_RAD,
     LENGTH_MM,
@@ -110,12 +111,21 @@ class EnvOptions(_Model):
     reward_distance_scale_mm: Annotated[float, Field(gt=0, le=1e4, allow_inf_nan=False)] | None = (
         None
     )
+    # Where a pitch step turns (dynamics.PITCH_PIVOTS): planning steps the same way.
+    pitch_pivot: StrictStr = "sensor"
 
     @field_validator("segment_mm")
     @classmethod
     def _ordered(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
         if v is not None and v[0] > v[1]:
             raise ValueError(f"[lo, hi] needs lo <= hi, got {list(v)}")
+        return v
+
+    @field_validator("pitch_pivot")
+    @classmethod
+    def _known_pivot(cls, v: str) -> str:
+        if v not in PITCH_PIVOTS:
+            raise ValueError(f"pitch_pivot {v!r}: one of {', '.join(PITCH_PIVOTS)}")
         return v
 
     def env_kwargs(self) -> dict[str, Any]:

@@ -27,6 +27,9 @@ def test_paper_policy_is_pure_ppo_made_by_scanplan_train():
     assert training["config"]["bc_samples"] == 0 and training["behaviour_cloning_mse"] is None
     assert f"--seed {training['seed']}" in training["command"]
     assert meta["env"]["reward_distance_scale_mm"] == 12.5  # its deviation, recorded
+    # Its pitch pivot, recorded (and read by the planner, which steps the policy so).
+    assert meta["env"]["pitch_pivot"] == "footprint"
+    assert "--pitch-pivot footprint" in training["command"]
 
 
 def test_policy_paper_plans_a_procedural_part_within_the_distance_tolerance(tmp_path):
@@ -40,7 +43,7 @@ def test_policy_paper_plans_a_procedural_part_within_the_distance_tolerance(tmp_
     traj = read_trajectory(out)
     assert traj.scanning.sum() > 1000  # the whole ~600 mm pass at ~0.5 mm a profile
     m = evaluate(part, SPEC, traj, points_per_profile=64)
-    # It follows the relief in depth (5.0 mm here; the fixed line 3.6 mm on this strip),
+    # It follows the relief in depth (3.8 mm here; the fixed line 3.6 mm on this strip),
     # well inside the in-spec tolerance.
     assert m.distance_error_mean_abs_mm < SPEC.tolerance_mm / 2
     assert m.in_spec_coverage > 0.5

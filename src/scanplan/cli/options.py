@@ -229,6 +229,13 @@ RewardDistanceScaleOpt = Annotated[
         "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2)"
     ),
 ]
+PitchPivotOpt = Annotated[
+    str,
+    typer.Option(
+        help="where a pitch step turns: sensor (its origin) | footprint (W_d along the beam, so "
+        "pitching does not swing the footprint; beyond the paper, recorded in policy.json)"
+    ),
+]
 BcSamplesOpt = Annotated[
     int,
     typer.Option(

@@ -22,6 +22,7 @@ from scanplan.cli.options import (
     InitAdvanceOpt,
     LogStdInitOpt,
     NEnvsOpt,
+    PitchPivotOpt,
     ProceduralOpt,
     RewardDistanceScaleOpt,
     StartOffsetOpt,
@@ -56,6 +57,7 @@ def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
         init_advance=shared["init_advance"],
         start_offset=parse_floats(shared["start_offset"], "--start-offset"),
         reward_distance_scale=shared["reward_distance_scale"],
+        pitch_pivot=shared["pitch_pivot"],
         bc_samples=shared["bc_samples"],
         command=shlex.join(["scanplan", *sys.argv[1:]]),
         **own,
@@ -100,6 +102,7 @@ def train_cmd(
     init_advance: InitAdvanceOpt = None,
     start_offset: StartOffsetOpt = "0,0",
     reward_distance_scale: RewardDistanceScaleOpt = None,
+    pitch_pivot: PitchPivotOpt = "sensor",
     bc_samples: BcSamplesOpt = 0,
     no_progress: NoProgressOpt = False,
 ):
@@ -109,7 +112,8 @@ def train_cmd(
     not learn to follow a surface (its policy does not beat the fixed line on the door; why:
     scanplan/policies/default/README.md); the shipped default policy is warm-started
     (--bc-samples). --reward-distance-scale 12.5 (a deviation from the paper's reward) makes
-    it learn the depth from scratch: the shipped --policy paper, whose command is in its
+    it learn the depth from scratch, and --pitch-pivot footprint (a pitch step that does not
+    swing the footprint) the pitch: the shipped --policy paper, whose command is in its
     policy.json."""
     # Deferred: learn loads torch and stable-baselines3.
     from scanplan.learn.checkpoint import CHECKPOINT_DIR
@@ -261,6 +265,7 @@ def sweep_cmd(
     init_advance: InitAdvanceOpt = None,
     start_offset: StartOffsetOpt = "0,0",
     reward_distance_scale: RewardDistanceScaleOpt = None,
+    pitch_pivot: PitchPivotOpt = "sensor",
     bc_samples: BcSamplesOpt = 0,
     n_envs: NEnvsOpt = 16,
 ):

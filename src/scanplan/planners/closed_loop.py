@@ -78,6 +78,7 @@ def drive_passes(
     guards: Guards | None = None,
     roll: bool = False,
     measure_with: SensorFactory | None = None,
+    pitch_pivot: str = "sensor",
 ) -> list[Trajectory]:
     """Run `controller` over each whole pass on a noiseless sensor of `fan_points` columns,
     from an aligned start at the first station that sees the part to the last (SPEC §5's
@@ -86,7 +87,8 @@ def drive_passes(
     lockstep, so that each step measures every pass's proposed pose in one batch (a single
     pose's ray cast is mostly overhead); each pass's poses are those it would have alone.
     measure_with: the sensor the controller measures with (`SensorFactory`); where each pass
-    starts and ends is the planned part's (the CAD's), whatever that sensor sees."""
+    starts and ends is the planned part's (the CAD's), whatever that sensor sees.
+    pitch_pivot: where the controller's pitch steps turn (`dynamics.PITCH_PIVOTS`)."""
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
@@ -97,7 +99,7 @@ def drive_passes(
     runs: list[_Run] = []
     for swath in swaths:
         start_time = time.perf_counter()
-        dyn = PassDynamics(part, swath, plan_spec, sim, limits, roll=roll)
+        dyn = PassDynamics(part, swath, plan_spec, sim, limits, roll=roll, pitch_pivot=pitch_pivot)
         geo = pass_geometry(part, swath, plan_spec)
         _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
         dyn.start(dyn.aligned_start(geo.s_first_mm))

@@ -130,7 +130,13 @@ class RLPlanner:
             guards=self.guards,
             roll=self.roll,
             measure_with=self.measure_with,
+            pitch_pivot=self.pitch_pivot,
         )
+
+    @property
+    def pitch_pivot(self) -> str:
+        """Where the policy's pitch steps turn (policy.json `env`; trained so)."""
+        return str(self.config.get("env", {}).get("pitch_pivot", "sensor"))
 
     def controller(self) -> Controller:
         """The policy as a `closed_loop.Controller`: the observation the env gives
