@@ -12,9 +12,12 @@ Everything here is arrays and a seed: the same (seed, index) always draws the sa
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 import trimesh
+
+Size = TypeVar("Size", float, np.ndarray)  # one defect size, or one per sample
 
 KINDS = ("dent", "bump", "pit", "scratch")
 # Width (diameter; a scratch's width) over depth when a defect is sized by its depth alone
@@ -101,12 +104,13 @@ class Defect:
         }
 
 
-def shape(kind: str, size_mm: float) -> tuple[float, float, float]:
-    """(depth, width, length) mm of a `kind` defect of size (depth) `size_mm`, by `ASPECT`."""
+def shape(kind: str, size_mm: Size) -> tuple[Size, Size, Size]:
+    """(depth, width, length) mm of a `kind` defect of size (depth) `size_mm`, by `ASPECT`;
+    element-wise for an array of sizes."""
     if kind not in KINDS:
         raise ValueError(f"unknown defect type {kind!r}; use {', '.join(KINDS)}")
     width = ASPECT[kind] * size_mm
-    return size_mm, width, SCRATCH_LENGTH * width if kind == "scratch" else 0.0
+    return size_mm, width, (SCRATCH_LENGTH if kind == "scratch" else 0.0) * width
 
 
 def place(
