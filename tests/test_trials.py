@@ -266,3 +266,30 @@ def test_a_look_ahead_policy_is_refused_on_a_tilted_view(ramp, two_views, monkey
         closed_loop_tasks(
             ramp, two_views, recorded(two_views, SPEC), Perturbation.parse("place:1mm"), 1
         )
+
+
+def test_a_view_the_loop_cannot_join_is_lost_for_the_trial(ramp, two_views, monkeypatch):
+    import scanplan.trials as trials
+
+    def no_clear_move_in_tilted_views(part, spec, planner, swaths, cell=None):
+        if swaths[0].index >= two_views.meta["views"][1]["first_swath"]:
+            raise ValueError("no collision-free transition")
+        return plan_path(part, spec, planner, swaths, cell=cell)
+
+    plan_path = trials.plan_path
+    monkeypatch.setattr(trials, "plan_path", no_clear_move_in_tilted_views)
+    tilted = two_views.meta["views"][1]
+    top = (two_views.swath < tilted["first_swath"]) | (two_views.swath > tilted["last_swath"])
+    top_only = replace(
+        two_views,
+        poses=two_views.poses[top],
+        swath=two_views.swath[top],
+        scanning=two_views.scanning[top],
+    )
+    context = recorded(two_views, SPEC)
+    alone = evaluate(
+        ramp, SPEC, top_only, points_per_profile=POINTS, ceiling=False, context=context
+    )
+    with pytest.warns(UserWarning, match="trial 0: view 1 lost: no collision-free transition"):
+        zero = _closed(ramp, two_views, "place:0mm", trials=1)
+    assert list(zero.per_trial) == [alone.in_spec_coverage]

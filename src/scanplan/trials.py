@@ -7,6 +7,7 @@ the poses it flew are then judged as an open-loop plan's trials are
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -74,7 +75,8 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     on the CAD turned into the view's frame (where each starts and ends, the table's tilt
     limit, the poses dropped for the clearance to the nominal part and cell), but every
     profile the controller acts on is measured on the part as built and placed, turned the
-    same way; the views' poses, back in the part frame, are joined in the plan's order.
+    same way; the views' poses, back in the part frame, are joined in the plan's order. A
+    view whose flown passes no clear move joins is lost for the trial (a warning says so).
     The robot's path error is not seen by the controller: it is drawn on the poses flown,
     as in the open-loop trials."""
     judge = task.judge
@@ -104,14 +106,23 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
             return PlacedProfilometer(built, sensor, T)
 
         planner = replace(task.planner, measure_with=measured)
-        flown = plan_path(
-            view.part(nominal),
-            task.spec,
-            planner,
-            list(lines.swaths),
-            cell=cell if np.array_equal(R, np.eye(4)) else cell.rotated(R),
-        )
+        try:
+            flown = plan_path(
+                view.part(nominal),
+                task.spec,
+                planner,
+                list(lines.swaths),
+                cell=cell if np.array_equal(R, np.eye(4)) else cell.rotated(R),
+            )
+        except ValueError as exc:
+            # The controller left a pass where no clear move (checked on the CAD) reaches
+            # the next: the cell would stop this view; the trial goes on without it, as
+            # `pipeline.join_views` leaves out a view no clear move reaches.
+            warnings.warn(f"trial {judge.index}: view {view.index} lost: {exc}", stacklevel=1)
+            continue
         pieces.append(view.to_part_frame(flown))
+    if not pieces:
+        return np.zeros(len(judge.surface.points), bool)
     traj = Trajectory.concatenate(pieces)
     idx, has_prev = scanning_steps(traj)
     return run_trial(replace(judge, poses=traj.poses[idx], has_prev=has_prev))
