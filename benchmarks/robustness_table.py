@@ -7,8 +7,11 @@ the README's robustness table. The figures are those of
 run here in one process, one trial after another (the command spreads them over the cores;
 its pool gives the serial numbers). Usage:
 
-    python benchmarks/robustness_table.py PART PLAN.json... [--points 256] [--trials 16]
-        [--seed 0] [--perturb 'place:5mm,2deg'] [--perturb 'place:2mm,1deg;warp:1mm@200mm']
+    python benchmarks/robustness_table.py PART PLAN.json... [--units mm] [--points 256]
+        [--trials 16] [--seed 0] [--perturb 'place:5mm,2deg']
+        [--perturb 'place:2mm,1deg;warp:1mm@200mm'] [--loops open,closed]
+
+Each row ends with the seconds it took (an HTML comment) and the plan's views.
 """
 
 from __future__ import annotations
@@ -37,9 +40,14 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=16)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--perturb", action="append", default=None)
+    parser.add_argument("--units", default="mm", help="units of a mesh file: mm, m or in")
+    parser.add_argument(
+        "--loops", default="open,closed", help="open, closed or both (closed: feedback, rl only)"
+    )
     args = parser.parse_args()
     specs = args.perturb or list(SPECS)
-    part = load_part(args.part)
+    part = load_part(args.part, args.units)
+    wanted = {loop.strip() for loop in args.loops.split(",")}
     header = " | ".join(f"{s}: mean / p5 / worst" for s in specs)
     print(f"| plan | loop | nominal | {header} |", flush=True)
     for path in args.plans:
@@ -49,6 +57,8 @@ def main() -> None:
             part, context.spec, traj, args.seed, args.points, context=context
         ).in_spec_coverage
         loops = ["open"] + (["closed"] if context.planner in CLOSED_LOOP_PLANNERS else [])
+        loops = [loop for loop in loops if loop in wanted]
+        views = len(traj.meta.get("views") or [])
         for loop in loops:
             cells = []
             start = time.perf_counter()
@@ -77,7 +87,7 @@ def main() -> None:
                 print(json.dumps(record), file=sys.stderr, flush=True)
             print(
                 f"| {context.planner} | {loop} | {nominal:.3f} | {' | '.join(cells)} |"
-                f" <!-- {time.perf_counter() - start:.0f} s -->",
+                f" <!-- {time.perf_counter() - start:.0f} s, {views} views -->",
                 flush=True,
             )
 
