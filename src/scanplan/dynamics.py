@@ -39,13 +39,24 @@ from scanplan.swaths import Swath, frame_poses
 # Where a pitch step turns (`scanplan train --pitch-pivot`): the sensor's origin (the default,
 # v0 as it always was) or the footprint, W_d along the beam (a robot TCP set there), so that
 # a pitch step does not swing the footprint by W_d·Δθ.
-PITCH_PIVOTS = ("sensor", "footprint")
+DEFAULT_PITCH_PIVOT = "sensor"
+PITCH_PIVOTS = (DEFAULT_PITCH_PIVOT, "footprint")
+
+
+def check_pitch_pivot(pivot: str, roll: bool = False, name: str = "pitch_pivot") -> str:
+    """`pivot` if it is one of `PITCH_PIVOTS` and allowed (a rolling step model, env v1,
+    keeps the sensor's); ValueError (one line, naming the option `name`) otherwise."""
+    if pivot not in PITCH_PIVOTS or (roll and pivot != DEFAULT_PITCH_PIVOT):
+        raise ValueError(
+            f"{name} {pivot!r}: one of {', '.join(PITCH_PIVOTS)}, and {DEFAULT_PITCH_PIVOT} "
+            "with roll (env v1)"
+        )
+    return pivot
 
 
 def pitch_pivot_mm(pivot: str, spec: ScanSpec) -> float:
     """The distance along the beam a pitch step turns about (`PITCH_PIVOTS`)."""
-    if pivot not in PITCH_PIVOTS:
-        raise ValueError(f"unknown pitch pivot {pivot!r}; use one of {', '.join(PITCH_PIVOTS)}")
+    check_pitch_pivot(pivot)
     return spec.working_distance_mm if pivot == "footprint" else 0.0
 
 
@@ -278,13 +289,11 @@ class PassDynamics:
         roll: bool = False,
         align_iterations: int = 4,
         start_pitch_max_rad: float = math.radians(15.0),
-        pitch_pivot: str = "sensor",
+        pitch_pivot: str = DEFAULT_PITCH_PIVOT,
     ) -> None:
         self.part, self.swath, self.spec, self._sim = part, swath, spec, sim
         self.roll = roll
-        if roll and pitch_pivot != "sensor":
-            raise ValueError("pitch about the footprint: env v0 only (v1 keeps the sensor's)")
-        self.pitch_pivot_mm = pitch_pivot_mm(pitch_pivot, spec)
+        self.pitch_pivot_mm = pitch_pivot_mm(check_pitch_pivot(pitch_pivot, roll), spec)
         self.beta_rad = self.tilt_rad = math.nan
         self.limits = limits or StepLimits()
         self.rng = rng

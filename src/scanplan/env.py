@@ -17,7 +17,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from scanplan.dynamics import PITCH_PIVOTS, PassDynamics, pass_geometry, step_budget
+from scanplan.dynamics import (
+    DEFAULT_PITCH_PIVOT,
+    PassDynamics,
+    check_pitch_pivot,
+    pass_geometry,
+    step_budget,
+)
 from scanplan.dynamics import Step as PassStep
 from scanplan.observation import OBS_LIMIT, observation_size, observe
 from scanplan.part import Part, load_part, part_from_mesh
@@ -168,7 +174,7 @@ class SwathScanEnv(gym.Env):
         start_offset_mm: float = 0.0,
         start_pitch_deg: float = 0.0,
         reward_distance_scale_mm: float | None = None,
-        pitch_pivot: str = "sensor",
+        pitch_pivot: str = DEFAULT_PITCH_PIVOT,
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal).
@@ -211,9 +217,7 @@ class SwathScanEnv(gym.Env):
         self.lost_patience = lost_patience
         self.max_episode_steps = max_episode_steps
         self.roll = roll
-        if pitch_pivot not in PITCH_PIVOTS or (roll and pitch_pivot != "sensor"):
-            raise ValueError(f"pitch_pivot {pitch_pivot!r}: one of {PITCH_PIVOTS}, v1 'sensor'")
-        self.pitch_pivot = pitch_pivot
+        self.pitch_pivot = check_pitch_pivot(pitch_pivot, roll)
         n_obs = observation_size(use_position, lookahead, roll)
         self.action_space = spaces.Box(-1.0, 1.0, (4 if roll else 3,), np.float32)
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (n_obs,), np.float32)

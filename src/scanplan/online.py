@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from scanplan.dynamics import PassDynamics, Step
+from scanplan.dynamics import DEFAULT_PITCH_PIVOT, PassDynamics, Step
 from scanplan.part import Part
 from scanplan.planners.closed_loop import Controller
 from scanplan.profilometer import PointStatus, Profile
@@ -108,7 +108,7 @@ class OnlinePass:
         roll: bool = False,
         part: Part | None = None,
         end_mm: float | None = None,
-        pitch_pivot: str = "sensor",
+        pitch_pivot: str = DEFAULT_PITCH_PIVOT,
     ) -> None:
         self.swath, self.spec, self.controller = swath, spec, controller
         self.roll = roll

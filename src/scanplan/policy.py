@@ -18,7 +18,7 @@ from pydantic import model_validator as _model_validator
 from torch import nn
 
 from scanplan.context import scan_spec_from_record
-from scanplan.dynamics import PITCH_PIVOTS
+from scanplan.dynamics import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.limits import (
     ANGLE_RAD,
     LENGTH_MM,
@@ -112,7 +112,7 @@ class EnvOptions(_Model):
         None
     )
     # Where a pitch step turns (dynamics.PITCH_PIVOTS): planning steps the same way.
-    pitch_pivot: StrictStr = "sensor"
+    pitch_pivot: StrictStr = DEFAULT_PITCH_PIVOT
 
     @field_validator("segment_mm")
     @classmethod
@@ -124,9 +124,7 @@ class EnvOptions(_Model):
     @field_validator("pitch_pivot")
     @classmethod
     def _known_pivot(cls, v: str) -> str:
-        if v not in PITCH_PIVOTS:
-            raise ValueError(f"pitch_pivot {v!r}: one of {', '.join(PITCH_PIVOTS)}")
-        return v
+        return check_pitch_pivot(v)
 
     def env_kwargs(self) -> dict[str, Any]:
         """The options as `SwathScanEnv` keyword arguments (limits left out when None)."""

@@ -230,10 +230,11 @@ RewardDistanceScaleOpt = Annotated[
     ),
 ]
 PitchPivotOpt = Annotated[
-    str,
+    str | None,
     typer.Option(
-        help="where a pitch step turns: sensor (its origin) | footprint (W_d along the beam, so "
-        "pitching does not swing the footprint; beyond the paper, recorded in policy.json)"
+        help="where a pitch step turns: sensor (its origin; the paper's model, when not "
+        "given) | footprint (W_d along the beam, so pitching does not swing the footprint; "
+        "beyond the paper, recorded in policy.json)"
     ),
 ]
 BcSamplesOpt = Annotated[

@@ -102,7 +102,7 @@ def train_cmd(
     init_advance: InitAdvanceOpt = None,
     start_offset: StartOffsetOpt = "0,0",
     reward_distance_scale: RewardDistanceScaleOpt = None,
-    pitch_pivot: PitchPivotOpt = "sensor",
+    pitch_pivot: PitchPivotOpt = None,
     bc_samples: BcSamplesOpt = 0,
     no_progress: NoProgressOpt = False,
 ):
@@ -265,7 +265,7 @@ def sweep_cmd(
     init_advance: InitAdvanceOpt = None,
     start_offset: StartOffsetOpt = "0,0",
     reward_distance_scale: RewardDistanceScaleOpt = None,
-    pitch_pivot: PitchPivotOpt = "sensor",
+    pitch_pivot: PitchPivotOpt = None,
     bc_samples: BcSamplesOpt = 0,
     n_envs: NEnvsOpt = 16,
 ):

@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import TypeAdapter, ValidationError
 
-from scanplan.dynamics import PITCH_PIVOTS
+from scanplan.dynamics import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.env import TRAINING_SEGMENT_MM, SwathScanEnv
 from scanplan.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, MAX_TIMESTEPS
 from scanplan.policy import EnvOptions, first_error
@@ -163,7 +163,7 @@ def recipe_config(
     init_advance: float | None = None,
     start_offset: tuple[float, ...] = (0.0, 0.0),
     reward_distance_scale: float | None = None,
-    pitch_pivot: str = "sensor",
+    pitch_pivot: str | None = None,
     bc_samples: int = 0,
     resume: str | None = None,
     progress_bar: bool = True,
@@ -209,12 +209,9 @@ def recipe_config(
         if reward_distance_scale is not None
         else {}
     )
-    if pitch_pivot not in PITCH_PIVOTS or (roll and pitch_pivot != "sensor"):
-        raise ValueError(
-            f"--pitch-pivot {pitch_pivot}: one of {', '.join(PITCH_PIVOTS)} (--env v0 only)"
-        )
+    pitch_pivot = check_pitch_pivot(pitch_pivot or DEFAULT_PITCH_PIVOT, roll, "--pitch-pivot")
     # Recorded only when set, as the start offsets.
-    pivot = {"pitch_pivot": pitch_pivot} if pitch_pivot != "sensor" else {}
+    pivot = {"pitch_pivot": pitch_pivot} if pitch_pivot != DEFAULT_PITCH_PIVOT else {}
     use_position, lookahead = STATES[state]
     return TrainConfig(
         output_dir=output_dir,

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.dynamics import PassDynamics, Step, pass_geometry, step_budget
+from scanplan.dynamics import DEFAULT_PITCH_PIVOT, PassDynamics, Step, pass_geometry, step_budget
 from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer, Profile
 from scanplan.quantities import ScanSpec, StepLimits
@@ -78,7 +78,7 @@ def drive_passes(
     guards: Guards | None = None,
     roll: bool = False,
     measure_with: SensorFactory | None = None,
-    pitch_pivot: str = "sensor",
+    pitch_pivot: str = DEFAULT_PITCH_PIVOT,
 ) -> list[Trajectory]:
     """Run `controller` over each whole pass on a noiseless sensor of `fan_points` columns,
     from an aligned start at the first station that sees the part to the last (SPEC §5's

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from scanplan.dynamics import PassDynamics
+from scanplan.dynamics import DEFAULT_PITCH_PIVOT, PassDynamics
 from scanplan.observation import observe
 from scanplan.part import Part
 from scanplan.planners.closed_loop import Controller, Guards, SensorFactory, drive_passes
@@ -136,7 +136,7 @@ class RLPlanner:
     @property
     def pitch_pivot(self) -> str:
         """Where the policy's pitch steps turn (policy.json `env`; trained so)."""
-        return str(self.config.get("env", {}).get("pitch_pivot", "sensor"))
+        return str(self.config.get("env", {}).get("pitch_pivot", DEFAULT_PITCH_PIVOT))
 
     def controller(self) -> Controller:
         """The policy as a `closed_loop.Controller`: the observation the env gives
