@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import math
+import os
 import re
 
 import numpy as np
@@ -103,3 +105,31 @@ def test_every_planner_is_judged_on_one_surface(demo):
     assert surface["name"] == "hemisphere" and surface["area_mm2"] > 0
     # The printed table wraps its first column: read it as words.
     assert "hemisphere surface," in " ".join(re.sub(r"[│┃]", " ", printed).split())
+
+
+def test_the_second_process_returns_results_in_order_and_raises_as_here():
+    # The rl plan's evaluation and fit run there: its answers and its errors must come back
+    # as if computed here (a ValueError stays one clear line), and a process that dies is
+    # said to have died, not waited for.
+    from scanplan.demo import _SecondProcess
+
+    with _SecondProcess(int, "0") as second:
+        second.submit(divmod, 7, 2)
+        second.submit(math.sqrt, -1.0)
+        second.submit(divmod, 9, 4)
+        assert second.result() == (3, 1)
+        with pytest.raises(ValueError, match="math domain error"):
+            second.result()
+        assert second.result() == (2, 1)
+        second.submit(os._exit, 3)
+        with pytest.raises(RuntimeError, match="ended unexpectedly .exit code 3"):
+            second.result()
+
+
+def test_a_failing_setup_of_the_second_process_fails_its_calls():
+    from scanplan.demo import _SecondProcess
+
+    with _SecondProcess(int, "not a number") as second:
+        second.submit(divmod, 7, 2)
+        with pytest.raises(ValueError, match="invalid literal for int"):
+            second.result()

@@ -8,10 +8,17 @@ demo-only.
 
 from __future__ import annotations
 
+import multiprocessing
+import signal
+import threading
 import time
-from collections.abc import Callable
+import traceback
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from multiprocessing.connection import Connection
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -22,7 +29,7 @@ from scanplan.metrics import Metrics
 from scanplan.metrics.detectability import evaluate_detectable
 from scanplan.part import Part, load_part
 from scanplan.pipeline import Arm, fit_arm, plan_views
-from scanplan.planners import Planner, make_planner
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.report import Evaluated, write_report
 from scanplan.robot import get_robot
@@ -75,47 +82,44 @@ def run_demo(
     sensor = spec.sensor
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
-    part: Part = load_part(part_name, units)
-
-    metrics: dict[str, Metrics] = {}
-    trajectories: dict[str, Trajectory] = {}
-    files: dict[str, str | bytes | Path] = {}
-    for name in PLANNER_ORDER:
-        planner: Planner = make_planner(name)
-        step(f"planning {name}")
-        # Each planner with its own default views.
-        plans, traj = plan_views(part, spec, planner, roi=roi)
-        passes = sum(p.passes for p in plans)
-        step(f"planned {name}: {len(plans)} view{'s' * (len(plans) > 1)}, {passes} passes")
-        trajectories[name] = traj
-        files[f"trajectory_{name}.csv"] = to_csv_text(traj)
-    # All judged on one surface: a table of figures over different surfaces compares nothing.
-    judged = judged_alike([recorded(t, spec) for t in trajectories.values()])
-    contexts = dict(zip(trajectories, judged, strict=True))
-    for (name, traj), context in zip(trajectories.items(), contexts.values(), strict=True):
-        step(f"evaluating {name} ({int(traj.scanning.sum())} profiles, {context.surface} surface)")
-        # The cycle timed as the exported program flies it: between its thinned targets.
-        motion = plan_motion(traj, ExportOptions(scan=spec))
-        metrics[name] = evaluate_detectable(
-            part,
-            spec,
-            traj,
-            seed,
-            points_per_profile,
-            context=context,
-            targets=motion.source,
-            blended=motion.blend_mm > 0,
+    # The rl plan is evaluated and fitted to the arm in a second process, beside the other
+    # evaluations (threads would share one interpreter); it loads the part while the plans
+    # are made here, one after another so that each plan time is the planner's alone.
+    with _SecondProcess(_load_part_here, part_name, units) as second:
+        part: Part = load_part(part_name, units)
+        plans: dict[str, tuple[int, int, Trajectory]] = {}
+        for name in PLANNER_ORDER:
+            step(f"planning {name}")
+            plans[name] = _plan(part, name, spec, roi)
+            step(_planned_line(name, plans[name]))
+        trajectories = {name: plans[name][2] for name in PLANNER_ORDER}
+        files: dict[str, str | bytes | Path] = {
+            f"trajectory_{name}.csv": to_csv_text(traj) for name, traj in trajectories.items()
+        }
+        # All judged on one surface: a table of figures over different surfaces compares
+        # nothing.
+        judged = judged_alike([recorded(t, spec) for t in trajectories.values()])
+        contexts = dict(zip(trajectories, judged, strict=True))
+        rl = trajectories["rl"]
+        second.submit(_evaluate_and_fit_here, rl, contexts["rl"], spec, seed, points_per_profile)
+        step(
+            f"evaluating rl ({int(rl.scanning.sum())} profiles, {contexts['rl'].surface} "
+            f"surface) and fitting it to an {DEMO_ROBOT} (placing the part), in the second "
+            "process"
         )
-
-    step(f"fitting the rl plan to an {DEMO_ROBOT} (placing the part)")
-    fit_started = time.perf_counter()
-    fitted, robot_line, text, error_m = _robot_program(
-        part, trajectories["rl"], contexts["rl"], spec
-    )
+        metrics: dict[str, Metrics] = {}
+        for name in PLANNER_ORDER[:-1]:
+            traj, context = trajectories[name], contexts[name]
+            step(
+                f"evaluating {name} ({int(traj.scanning.sum())} profiles, "
+                f"{context.surface} surface)"
+            )
+            metrics[name] = _evaluate(part, spec, traj, context, seed, points_per_profile)
+        metrics["rl"], fitted, robot_line, text, error_m, fit_seconds = second.result()
     files[PROGRAM_FILE] = text
     # The fitted plan records the arm, part pose and TCP: `scanplan export` takes it as is.
     files[FITTED_FILE] = dumps_json(to_json_dict(fitted), indent=1)
-    step(f"{robot_line} ({time.perf_counter() - fit_started:.0f} s)")
+    step(f"{robot_line} ({fit_seconds:.0f} s)")
 
     # Deferred: the rl planner's module loads torch.
     from scanplan.planners.rl import DEFAULT_POLICY
@@ -148,6 +152,71 @@ def run_demo(
         robot_line,
         time.perf_counter() - start,
     )
+
+
+def _plan(part: Part, name: str, spec: ScanSpec, roi: str | None) -> tuple[int, int, Trajectory]:
+    """(views, passes, trajectory) of planner `name` with its own default views."""
+    plans, traj = plan_views(part, spec, make_planner(name), roi=roi)
+    return len(plans), sum(p.passes for p in plans), traj
+
+
+def _planned_line(name: str, planned: tuple[int, int, Trajectory]) -> str:
+    views, passes, _ = planned
+    return f"planned {name}: {views} view{'s' * (views > 1)}, {passes} passes"
+
+
+def _evaluate(
+    part: Part,
+    spec: ScanSpec,
+    traj: Trajectory,
+    context: PlanContext,
+    seed: int,
+    points_per_profile: int | None,
+) -> Metrics:
+    """The demo's figures of one plan, its cycle timed as the exported program flies it:
+    between its thinned targets."""
+    motion = plan_motion(traj, ExportOptions(scan=spec))
+    return evaluate_detectable(
+        part,
+        spec,
+        traj,
+        seed,
+        points_per_profile,
+        context=context,
+        targets=motion.source,
+        blended=motion.blend_mm > 0,
+    )
+
+
+# The second process's part (`_load_part_here`); None in the main process.
+_part_here: Part | None = None
+
+
+def _load_part_here(part_name: str, units: str) -> None:
+    global _part_here
+    _part_here = load_part(part_name, units)
+
+
+def _loaded_part() -> Part:
+    if _part_here is None:
+        raise RuntimeError("no part loaded in this process")
+    return _part_here
+
+
+def _evaluate_and_fit_here(
+    traj: Trajectory,
+    context: PlanContext,
+    spec: ScanSpec,
+    seed: int,
+    points_per_profile: int | None,
+) -> tuple[Metrics, Trajectory, str, str, float, float]:
+    """The rl plan's figures and its robot program (`_robot_program`), and the seconds the
+    fit took."""
+    part = _loaded_part()
+    metrics = _evaluate(part, spec, traj, context, seed, points_per_profile)
+    started = time.perf_counter()
+    fitted, line, text, error_m = _robot_program(part, traj, context, spec)
+    return metrics, fitted, line, text, error_m, time.perf_counter() - started
 
 
 def _robot_program(
@@ -188,6 +257,95 @@ def _robot_program(
         f"{record['in_spec_without_robot']:.3f} without it, {record['in_spec']:.3f} with it)"
     )
     return fitted, line, text, error_m
+
+
+class _SecondProcess:
+    """A spawned process that runs the calls `submit`ted to it one after another, beside
+    this one, after `setup(*args)`; `result` returns the next call's result, or raises its
+    exception as the call would have raised it here (the other process's traceback as its
+    cause). Leaving the `with` block ends the process, busy or not: on Ctrl-C or a failure
+    here nobody waits for work no longer wanted."""
+
+    def __init__(self, setup: Callable[..., None], *args: Any) -> None:
+        # Spawned, not forked: this process may already run Embree's and torch's threads.
+        context = multiprocessing.get_context("spawn")
+        self._conn, child = context.Pipe()
+        self._process = context.Process(
+            target=_serve, args=(child, setup, args), name="scanplan-demo", daemon=True
+        )
+        with _sigint_ignored():  # inherited: Ctrl-C is this process's to handle
+            self._process.start()
+        child.close()
+
+    def __enter__(self) -> _SecondProcess:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._conn.close()  # an idle process returns on it; a busy one is stopped
+        if exc_info[0] is not None:
+            self._process.terminate()
+        self._process.join(10.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> None:
+        self._conn.send((fn, args))
+
+    def result(self) -> Any:
+        try:
+            ok, value, trace = self._conn.recv()
+        except EOFError:
+            self._process.join(10.0)
+            raise RuntimeError(
+                f"the demo's second process ended unexpectedly (exit code {self._process.exitcode})"
+            ) from None
+        if not ok:
+            raise value from _RemoteTraceback(trace)
+        return value
+
+
+class _RemoteTraceback(Exception):
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def _serve(conn: Connection, setup: Callable[..., None], args: tuple[Any, ...]) -> None:
+    """The second process: setup, then each call received, its result or exception sent
+    back, until the other end closes."""
+    failed: tuple[bool, BaseException, str] | None = None
+    try:
+        setup(*args)
+    except Exception as exc:  # told at the first call: the main process raises it
+        failed = (False, exc, traceback.format_exc())
+    while True:
+        try:
+            fn, fn_args = conn.recv()
+        except EOFError:
+            return
+        reply = failed
+        if reply is None:
+            try:
+                reply = (True, fn(*fn_args), "")
+            except Exception as exc:
+                reply = (False, exc, traceback.format_exc())
+        try:
+            conn.send(reply)
+        except Exception as exc:  # a result or exception that does not pickle
+            conn.send((False, RuntimeError(f"{type(exc).__name__}: {exc}"), reply[2]))
+
+
+@contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored meanwhile (in the main thread; signals go there only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _training_files(policy_dir: Path) -> tuple[Path | None, dict[str, Path]]:
