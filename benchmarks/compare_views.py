@@ -3,6 +3,7 @@
 the latter's visibility ceiling and share of it), views, passes and planning time (and its
 ratio to the paper's single raster planned in the same run), geometric planner with its
 default raster; and the view choice's own estimate of its greedy cover and of the exact one.
+Then the same for the parts of other kinds made in `kinds.py` (a heightfield, a housing).
 
     PYTHONPATH=src python benchmarks/compare_views.py [PARTS_DIR] [--points 256]
 """
@@ -11,7 +12,10 @@ from __future__ import annotations
 
 import argparse
 import time
+from functools import partial
 from pathlib import Path
+
+from kinds import KINDS  # parts of kinds the shared set lacks (benchmarks/)
 
 from scanplan.context import PlanContext
 from scanplan.metrics import evaluate
@@ -34,7 +38,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("parts_dir", nargs="?", default="../shared/parts")
     ap.add_argument("--points", type=int, default=256)
-    ap.add_argument("--only", default="")
+    ap.add_argument("--only", default="", help="comma-separated parts of names to keep")
     args = ap.parse_args()
     spec = ScanSpec()
     planner = make_planner("geometric")
@@ -44,10 +48,10 @@ def main() -> None:
         "in-spec of ceiling | plan s (x the paper's raster) | "
         "choice estimate: greedy / exact, as many views (planned)"
     )
-    for name, units in PARTS.items():
-        if args.only and args.only not in name:
+    for name, load in _parts(args.parts_dir):
+        if args.only and not any(word in name for word in args.only.split(",")):
             continue
-        part = load_part(Path(args.parts_dir) / name, units)
+        part = load()
         # The reference measured in the same run: the paper's single raster (pitch only,
         # nominal passes, one top view).
         start = time.perf_counter()
@@ -82,6 +86,13 @@ def main() -> None:
                 f"{hemi.in_spec_of_ceiling:.3f} | {t:.1f} ({t / t_paper:.1f}x) | {_choice(traj)}",
                 flush=True,
             )
+
+
+def _parts(parts_dir: str):
+    """(name, loader) for the shared parts, then the kinds made in `kinds.py`."""
+    for name, units in PARTS.items():
+        yield name, partial(load_part, Path(parts_dir) / name, units)
+    yield from KINDS.items()
 
 
 def _choice(traj) -> str:

@@ -46,10 +46,11 @@ RASTERS = ("auto", "adaptive", "nominal")
 MISSED_ROUNDS = 2
 # The least a view must add to the in-spec share to be kept, and the most views. At 1 %
 # (the earlier "useful amount") the walls of small pockets, each under 1 %, got no view:
-# at 0.4 % the machined shared parts hold 0.79-0.97 of their ceiling against 0.68-0.96,
-# in 6-66 s against 5-82 s on a loaded machine (`benchmarks/compare_views.py`).
-MIN_VIEW_GAIN = 0.004
-MAX_VIEWS = 24
+# at 0.4 % and 24 views the machined shared parts held 0.79-0.97 of their ceiling; at
+# 0.2 % and 40 views the quadrotor, the stepped and pocket plates 0.85, 0.89, 0.84 against
+# 0.79, 0.86, 0.81, each in at most 30 s (`benchmarks/compare_views.py`).
+MIN_VIEW_GAIN = 0.002
+MAX_VIEWS = 40
 
 
 def plan_path(
@@ -219,9 +220,10 @@ def choose_views(
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
-    inspect faces up), then, while in-spec
-    coverage is below `coverage_target`, the candidate view (`candidate_views`) that adds
-    the most, unless it adds less than `min_gain` (`MIN_VIEW_GAIN`); when none does, views
+    inspect faces up), then, while in-spec coverage is below `coverage_target` of the
+    visibility ceiling (`surface.reachable_samples` on the same samples), the candidate
+    view (`candidate_views`) that adds the most, unless it adds less than `min_gain`
+    (`MIN_VIEW_GAIN`); when none does, views
     aimed at what a beam could reach and no chosen view holds (`views.missed_views`) join
     the candidates, `MISSED_ROUNDS` times at most. A panel whose top view reaches the
     target (the door) stays one view. The exact cover by as many views among all those
@@ -236,8 +238,8 @@ def choose_views(
     only on the points of one pass (the in-spec test and the density rule look at a point,
     its profile's columns and its neighbouring profiles of the same pass): the in-spec set
     of several views is the union of their in-spec sets on the same (seeded) samples, so the
-    set cover is computed exactly on these sets, and a fan of 128 columns finds the same
-    samples (the search radius grows with the evaluated column pitch; density is judged on
+    set cover is computed exactly on these sets, and a fan of 128 columns finds nearly the
+    same samples (the search radius grows with the evaluated column pitch; density is judged on
     the real sensor's columns). Candidates are tried largest possible gain first (their
     region's area not yet in spec) and skipped once that bound is below the best gain found
     (lazy greedy: a view's gain only shrinks as others are chosen)."""
@@ -262,15 +264,25 @@ def choose_views(
     except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
         covered = np.zeros(len(samples.points), bool)
         plans, coverage, chosen = [], [0.0], []
-    if coverage[-1] >= coverage_target:
+    reachable: np.ndarray | None = None
+
+    def target_reached() -> bool:
+        # The ceiling is at most 1, so it is drawn only when the plain share falls short.
+        nonlocal reachable
+        if coverage[-1] >= coverage_target:
+            return True
+        if reachable is None:
+            reachable = reachable_samples(part, samples, spec.tol_angle_rad)
+        return coverage[-1] >= coverage_target * float(reachable.mean())
+
+    if target_reached():
         return ViewSelection(plans, coverage, 0, chosen)
     candidates = candidate_views(part, spec)
     # The samples on each candidate's faces: the bound on its gain.
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
     evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
-    reachable: np.ndarray | None = None
     rounds = 0
-    while len(plans) < max_views and coverage[-1] < coverage_target:
+    while len(plans) < max_views and not target_reached():
         bounds = [float((m & ~covered).mean()) for m in on_faces]
         best: tuple[float, int] | None = None
         for i in np.argsort(bounds)[::-1]:
@@ -293,8 +305,7 @@ def choose_views(
             if rounds == MISSED_ROUNDS:
                 break
             rounds += 1
-            if reachable is None:
-                reachable = reachable_samples(part, samples, spec.tol_angle_rad)
+            assert reachable is not None  # drawn by target_reached
             more = missed_views(
                 part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
             )

@@ -51,9 +51,12 @@ def segment_regions(
     part: Part,
     directions: np.ndarray | None = None,
     min_area_fraction: float = MIN_REGION_AREA_FRACTION,
+    max_normal_tilt_rad: float = math.pi / 2,
 ) -> list[Region]:
-    """The surface to inspect (the part's region of interest, else every face that faces the
-    upper hemisphere) cut into regions: each face goes to the nearest of `directions` by its
+    """The surface to inspect (the part's region of interest, else every face whose normal
+    leans at most `max_normal_tilt_rad` from +Z: the upper hemisphere by default; a wall
+    with a draft leaning a few degrees down is still in reach of a tilted beam) cut into
+    regions: each face goes to the nearest of `directions` by its
     (oriented) normal, and the connected components of same-direction faces over the mesh's
     face adjacency are the regions. Regions below `min_area_fraction` of the surface are
     dropped (they still count in coverage; a view for each would add nothing measurable).
@@ -62,7 +65,7 @@ def segment_regions(
     normals = oriented_normals(part)
     mesh = part.mesh
     area = np.asarray(mesh.area_faces)
-    inspect = part.inspect_mask & (normals[:, 2] > -1e-6)
+    inspect = part.inspect_mask & (normals[:, 2] > math.cos(max_normal_tilt_rad) - 1e-6)
     label = np.argmax(normals @ dirs.T, axis=1)
     adj = np.asarray(mesh.face_adjacency)
     same = inspect[adj[:, 0]] & inspect[adj[:, 1]] & (label[adj[:, 0]] == label[adj[:, 1]])
@@ -206,10 +209,12 @@ def candidate_views(
     along it (`depth_slabs`: half the Z range at most, a gap of a tenth of it), one view
     per slab of at least `min_area_fraction` of the surface. A wall facing sideways gets a
     view tilted `VIEW_AXIS_MAX_TILT_DEG` from +Z: within 10° of its normal, the sensor
-    still above it."""
+    still above it; a wall leaning up to the angle tolerance the other way (a draft) too."""
     axes: list[np.ndarray] = []
     groups: list[list[np.ndarray]] = []
-    regions = segment_regions(part, min_area_fraction=0.0)
+    # Faces a beam at most VIEW_AXIS_MAX_TILT_DEG from +Z holds within tolerance.
+    reach = math.radians(VIEW_AXIS_MAX_TILT_DEG) + spec.tol_angle_rad
+    regions = segment_regions(part, min_area_fraction=0.0, max_normal_tilt_rad=reach)
     total = sum(r.area_mm2 for r in regions)
     for region in regions:
         axis = view_axis(region.normal)

@@ -191,7 +191,11 @@ PlanRobotOpt = Annotated[
     ),
 ]
 CoverageTargetOpt = Annotated[
-    float, typer.Option(help="--views auto: in-spec coverage to stop adding views at")
+    float,
+    typer.Option(
+        help="--views auto: stop adding views once in-spec coverage reaches this share of "
+        "the visibility ceiling (what any beam within tolerance reaches)"
+    ),
 ]
 
 

@@ -1,0 +1,54 @@
+"""Parts of kinds the shared set lacks, made here for the view benchmarks (not shipped: the
+package's parts are the door, the drone and the training piece). Each is a closed solid in
+mm, resting on z = 0:
+
+- `heightfield`: a sin·cos heightfield (±15 mm over 240 x 200 mm) on a 40 mm base;
+- `housing`: a cast gearbox housing, simplified: a 300 x 200 mm flange plate, a rounded body
+  on it with a bowl-shaped cavity 70 mm deep, ribs standing on the flange against the body,
+  bolt bosses at the flange's corners.
+
+Both are heightfields over a grid (vertical walls, no overhangs), so they are watertight by
+construction (`scanplan.parts.heightfield.heightfield_solid`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scanplan.part import Part, part_from_mesh
+from scanplan.parts.heightfield import heightfield_solid
+
+
+def heightfield() -> Part:
+    xs = np.linspace(0.0, 240.0, 161)
+    ys = np.linspace(0.0, 200.0, 135)
+    gx, gy = np.meshgrid(xs, ys)
+    z = 40.0 + 15.0 * np.sin(2 * np.pi * gx / 120.0) * np.cos(2 * np.pi * gy / 100.0)
+    return part_from_mesh(heightfield_solid(xs, ys, z), "heightfield")
+
+
+def housing() -> Part:
+    xs = np.linspace(0.0, 300.0, 241)
+    ys = np.linspace(0.0, 200.0, 161)
+    gx, gy = np.meshgrid(xs, ys)
+    z = np.full(gx.shape, 15.0)  # the flange
+    # The body: a rounded rectangle 220 x 140 mm, 110 mm high.
+    u, v = (gx - 150.0) / 110.0, (gy - 100.0) / 70.0
+    body = u**4 + v**4 <= 1.0
+    z[body] = 110.0
+    # The bowl: an ellipsoidal cavity 190 x 110 mm, 70 mm deep.
+    r2 = ((gx - 150.0) / 95.0) ** 2 + ((gy - 100.0) / 55.0) ** 2
+    bowl = r2 < 1.0
+    z[bowl] = 110.0 - 70.0 * np.sqrt(1.0 - r2[bowl])
+    # Ribs on the flange, 5 mm thick, against the body's long sides, 80 mm high.
+    for x0 in (90.0, 150.0, 210.0):
+        rib = (np.abs(gx - x0) <= 2.5) & ~body & (np.abs(gy - 100.0) < 95.0)
+        z[rib] = np.maximum(z[rib], 80.0)
+    # Bolt bosses at the corners: 24 mm across, 35 mm high.
+    for cx in (20.0, 280.0):
+        for cy in (20.0, 180.0):
+            z[np.hypot(gx - cx, gy - cy) <= 12.0] = 35.0
+    return part_from_mesh(heightfield_solid(xs, ys, z), "housing")
+
+
+KINDS = {"heightfield": heightfield, "housing": housing}
