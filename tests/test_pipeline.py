@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from helpers import HEMISPHERE, fcl_distance
 from scanplan.cli import app
 from scanplan.collision import checker_for
+from scanplan.context import PlanContext
 from scanplan.metrics import evaluate
 from scanplan.pipeline import default_views, order_views, plan_scan, plan_views
 from scanplan.planners import make_planner
@@ -145,6 +146,36 @@ def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_v
     assert (
         checker_for(part, SPEC.sensor).check(joined.poses, SPEC.clearance_mm).colliding.sum() == 0
     )
+
+
+def test_a_pass_no_clear_move_reaches_is_given_up_and_counted(housing, housing_top, monkeypatch):
+    """A piece of pass that no move reaches (neither lifting along +Z nor along the table's
+    normal) is given up, counted, instead of failing the whole view; the rest is planned."""
+    import scanplan.pipeline as pipeline_module
+
+    swaths, _ = housing_top
+    assert len(swaths) >= 3
+    cell = PlanContext(SPEC).cell(housing)  # the table at the lowest point
+    planner = make_planner("geometric")
+    whole = pipeline_module.plan_path(housing, SPEC, planner, swaths, cell=cell)
+    real = pipeline_module.plan_transition
+    calls: list[np.ndarray] = []
+
+    def first_blocked(checker, start, end, clearance_mm, up=UP):
+        calls.append(np.asarray(up))
+        if len(calls) <= 2:  # both ways to the second pass
+            raise ValueError("no collision-free transition")
+        return real(checker, start, end, clearance_mm, up=up)
+
+    monkeypatch.setattr(pipeline_module, "plan_transition", first_blocked)
+    traj = pipeline_module.plan_path(housing, SPEC, planner, swaths, cell=cell)
+    assert cell.table is not None
+    assert np.allclose(calls[0], UP) and np.allclose(calls[1], cell.table.normal)
+    second = swaths[1].index
+    assert not (traj.scanning & (traj.swath == second)).any()
+    given_up = int((whole.scanning & (whole.swath == second)).sum())
+    assert traj.meta["unreachable_dropped"] == given_up > 0
+    assert (traj.scanning & (traj.swath == swaths[2].index)).any()
 
 
 def test_an_roi_of_walls_only_is_planned_by_side_views():

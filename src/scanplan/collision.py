@@ -102,7 +102,7 @@ class CollisionChecker:
         self.sensor = sensor
         mesh = part.mesh
         self._ray_engine = part.ray_engine
-        self._face_normals = np.asarray(mesh.face_normals)
+        self._face_normals = self._ray_engine.face_normals  # (a turned part: turned, not redone)
         self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
         self._part_obj = _mesh_object(part)
         self.bounds = np.asarray(part.bounds, dtype=np.float64)
@@ -114,7 +114,8 @@ class CollisionChecker:
         self._point_obj = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform())
         # A box inside a closed mesh touches no triangle: FCL calls it apart. Only a closed
         # mesh has an inside to test.
-        self._closed = bool(mesh.is_watertight)
+        closed_mesh = mesh if part.turned_from is None else part.turned_from[0].mesh
+        self._closed = bool(closed_mesh.is_watertight)  # (cached on the original's mesh)
         self._grown: dict[float, fcl.CollisionObject] = {}
         self._vertex_tree: Any = None  # a cKDTree of the vertices, built on first need
 
@@ -253,20 +254,34 @@ class CollisionChecker:
         return float(min(depths)) if depths else 0.0
 
 
+_BVHS: weakref.WeakKeyDictionary[Part, fcl.BVHModel] = weakref.WeakKeyDictionary()
 _MESH_OBJECTS: weakref.WeakKeyDictionary[Part, fcl.CollisionObject] = weakref.WeakKeyDictionary()
 
 
-def _mesh_object(part: Part) -> fcl.CollisionObject:
-    """The part's mesh as an FCL object (its BVH), in part coordinates; built once while the
-    part lives (seconds for a large mesh), shared by the sensor's and the arm's checks,
-    which never move it."""
-    if part not in _MESH_OBJECTS:
+def _mesh_bvh(part: Part) -> fcl.BVHModel:
+    """The part's mesh as an FCL BVH, in its own coordinates; built once while the part
+    lives (seconds for a large mesh)."""
+    if part not in _BVHS:
         mesh = part.mesh
         bvh = fcl.BVHModel()
         bvh.beginModel(len(mesh.vertices), len(mesh.faces))
         bvh.addSubModel(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32))
         bvh.endModel()
-        _MESH_OBJECTS[part] = fcl.CollisionObject(bvh, fcl.Transform())
+        _BVHS[part] = bvh
+    return _BVHS[part]
+
+
+def _mesh_object(part: Part) -> fcl.CollisionObject:
+    """The part's mesh as an FCL object in part coordinates, shared by the sensor's and the
+    arm's checks, which never move it. A part turned from another (`Part.turned`, a view)
+    is that one's BVH, turned."""
+    if part not in _MESH_OBJECTS:
+        if part.turned_from is not None:
+            base, R = part.turned_from
+            transform = fcl.Transform(np.asarray(R[:3, :3], np.float64), np.zeros(3))
+            _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(base), transform)
+        else:
+            _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(part), fcl.Transform())
     return _MESH_OBJECTS[part]
 
 

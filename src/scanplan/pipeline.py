@@ -66,17 +66,22 @@ def plan_path(
     around the part).
 
     A scanning pose whose body would come closer than the clearance is not emitted: the pass
-    is cut there and its pieces are joined like passes (lift over, descend).
-    meta["collisions_dropped"] counts the dropped poses. progress(done, total) is called
-    after each pass (a caller's progress bar).
+    is cut there and its pieces are joined like passes (lift over, descend; along the
+    table's normal where lifting along +Z finds no clear way, a view tilted towards a wall).
+    A piece no clear move reaches is given up. meta["collisions_dropped"] and
+    meta["unreachable_dropped"] count the scanning poses dropped each way.
+    progress(done, total) is called after each pass (a caller's progress bar).
     """
     if not swaths:
         raise ValueError("no swath to plan")
     start = time.perf_counter()
     checker = checker_for(part, spec.sensor, cell)
     pieces: list[Trajectory] = []
-    dropped = 0
+    dropped = unreachable = 0
     last_pose: np.ndarray | None = None
+    # The table's up in this frame: in a view tilted towards a wall, lifting along the
+    # view's axis runs along the table, lifting away from the table clears it.
+    uphill = None if cell is None or cell.table is None else cell.table.normal
     # Passes are independent: planned all in one call by a planner that steps them together
     # (`plan_passes`, the closed loop), else on `pass_workers` threads; taken in order.
     plan_passes = getattr(planner, "plan_passes", None)
@@ -100,7 +105,10 @@ def plan_path(
             for k, run in enumerate(_runs(~colliding)):
                 poses = planned.poses[run]
                 if last_pose is not None:
-                    moves = plan_transition(checker, last_pose, poses[0], spec.clearance_mm)
+                    moves = _move(checker, last_pose, poses[0], spec.clearance_mm, uphill)
+                    if moves is None:  # no clear way there: this piece is given up
+                        unreachable += len(poses)
+                        continue
                     pieces.append(
                         Trajectory(
                             moves, np.full(len(moves), swath.index), np.zeros(len(moves), bool)
@@ -131,8 +139,27 @@ def plan_path(
         traj.scanning,
         plan_time_s=time.perf_counter() - start,
         planner=planner.name,
-        meta={**traj.meta, "collisions_dropped": dropped},
+        meta={
+            **traj.meta,
+            "collisions_dropped": dropped,
+            **({"unreachable_dropped": unreachable} if unreachable else {}),
+        },
     )
+
+
+def _move(
+    checker, start: np.ndarray, end: np.ndarray, clearance_mm: float, uphill: np.ndarray | None
+) -> np.ndarray | None:
+    """A clear move from `start` to `end` (`motion.plan_transition`): lifting along this
+    frame's +Z, else along the table's `uphill` normal; None if neither is clear."""
+    for up in (UP, uphill):
+        if up is None:
+            continue
+        try:
+            return plan_transition(checker, start, end, clearance_mm, up=up)
+        except ValueError:
+            continue
+    return None
 
 
 def _done(result: Trajectory) -> Future[Trajectory]:

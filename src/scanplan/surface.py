@@ -50,6 +50,9 @@ def oriented_normals(part: Part) -> np.ndarray:
     """(f, 3) face normals pointing out of the part, towards where a sensor could be. A closed,
     consistently wound mesh's own normals; otherwise (real CAD exports) each face's normal
     is turned to the side from which a ray escapes the part (if both, upwards)."""
+    if part.turned_from is not None:  # the original's, turned (a view of the part)
+        base, R = part.turned_from
+        return oriented_normals(base) @ R[:3, :3].T
     mesh = part.mesh
     normals = np.asarray(part.ray_engine.face_normals)
     if mesh.is_watertight and mesh.is_winding_consistent:

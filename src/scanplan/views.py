@@ -132,19 +132,18 @@ class View:
         return View(index, axis, rotation_to_up(axis), faces)
 
     def part(self, part: Part) -> Part:
-        """The part in the view frame, restricted to the view's region (and the part's ROI).
-        Face order is kept (no re-validation), so face masks carry over. The top view of
+        """The part in the view frame (`Part.turned`: its ray engine and collision model
+        reused), restricted to the view's region (and the part's ROI). Face order is kept
+        (no re-validation), so face masks carry over. The top view of
         the whole surface is the part itself (its ray engine and collision model reused)."""
         if self.faces is None and np.array_equal(self.R, np.eye(4)):
             return part
-        mesh = part.mesh.copy()
-        mesh.apply_transform(self.R)
         mask = part.inspect_mask.copy()
         if self.faces is not None:
             region = np.zeros(len(mask), bool)
             region[self.faces] = True
             mask &= region
-        return Part(mesh, name=part.name, source=part.source, inspect_faces=mask)
+        return replace(part.turned(self.R), inspect_faces=mask)
 
     def to_part_frame(self, traj: Trajectory) -> Trajectory:
         """A trajectory planned in the view frame, back in the part frame (R⁻¹ @ T)."""

@@ -492,6 +492,14 @@ def plan_notes(traj: Trajectory, spec: ScanSpec) -> list[tuple[str, bool]]:
                 False,
             )
         )
+    if unreached := traj.meta.get("unreachable_dropped", 0):
+        lines.append(
+            (
+                f"moves: {unreached} scanning poses given up (no move clear of the part and "
+                "the cell reaches the piece of pass they are on)",
+                False,
+            )
+        )
     if arm := traj.meta.get("robot"):
         given_up = ", ".join(f"view {k}: {v}" for k, v in arm["scanning_poses_given_up"].items())
         lines.append(
