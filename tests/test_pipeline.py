@@ -195,3 +195,21 @@ def test_an_roi_of_walls_only_is_planned_by_side_views():
     assert m.surface == "roi" and m.in_spec_coverage > 0.3
     assert m.spacing_mean_mm == pytest.approx(SPEC.delta_s_opt_mm, abs=0.02)
     assert m.backward_steps == 0
+
+
+def test_the_view_choice_keeps_what_it_has_when_its_time_is_up(housing, housing_views):
+    plans, _ = housing_views
+    assert len(plans) >= 2
+    kept, traj = plan_views(housing, SPEC, make_planner("geometric"), "auto", view_seconds=1e-6)
+    assert len(kept) == 1 and np.allclose(kept[0].view.axis, UP)  # the top view, planned first
+    assert traj.meta["view_choice_out_of_time"] == 1e-6
+    assert "view_choice_out_of_time" not in housing_views[1].meta
+
+
+def test_view_seconds_must_be_positive(tmp_path):
+    result = CliRunner().invoke(
+        app, ["plan", "door", "-o", str(tmp_path / "p.json"), "--view-seconds", "0"]
+    )
+    assert result.exit_code == 2
+    assert "--view-seconds must be a number of seconds > 0" in result.output
+    assert not (tmp_path / "p.json").exists()

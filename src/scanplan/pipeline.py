@@ -25,7 +25,14 @@ from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
 from scanplan.motion import plan_transition, view_transition
 from scanplan.part import Part
 from scanplan.planners import Planner, pass_workers
-from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
+from scanplan.quantities import (
+    COVERAGE_TARGET,
+    OVERLAP,
+    UP,
+    VIEW_CHOICE_FAN_POINTS,
+    VIEW_CHOICE_SECONDS,
+    ScanSpec,
+)
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.surface import hemisphere_visible_samples, reachable_samples
@@ -43,14 +50,15 @@ from scanplan.views import (
 
 RASTERS = ("auto", "adaptive", "nominal")
 # Rounds of views aimed at what the chosen views still miss (`views.missed_views`).
-MISSED_ROUNDS = 2
+MISSED_ROUNDS = 4
 # The least a view must add to the in-spec share to be kept, and the most views. At 1 %
 # (the earlier "useful amount") the walls of small pockets, each under 1 %, got no view:
 # at 0.4 % and 24 views the machined shared parts held 0.79-0.97 of their ceiling; at
-# 0.2 % and 40 views the quadrotor, the stepped and pocket plates 0.85, 0.89, 0.84 against
-# 0.79, 0.86, 0.81, each in at most 30 s (`benchmarks/compare_views.py`).
-MIN_VIEW_GAIN = 0.002
-MAX_VIEWS = 40
+# 0.1 % and 80 views the quadrotor and the pocket plate 0.90 and 0.84 against 0.86 and
+# 0.83 at 0.2 % and 40 (`benchmarks/compare_views.py`; the quadrotor's thin arms take a
+# view per 30° of their round, each under 0.2 %).
+MIN_VIEW_GAIN = 0.001
+MAX_VIEWS = 80
 
 
 def plan_path(
@@ -233,6 +241,7 @@ class ViewSelection:
     candidates: int
     in_spec: list[np.ndarray] = field(default_factory=list)
     exact_coverage: float | None = None  # the exact cover's by as many views, for scale
+    out_of_time: bool = False  # stopped by the time budget, not by gain or target
 
 
 def choose_views(
@@ -244,6 +253,7 @@ def choose_views(
     max_views: int = MAX_VIEWS,
     points_per_profile: int = VIEW_CHOICE_FAN_POINTS,
     seed: int = 0,
+    seconds: float | None = VIEW_CHOICE_SECONDS,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -269,9 +279,15 @@ def choose_views(
     same samples (the search radius grows with the evaluated column pitch; density is judged on
     the real sensor's columns). Candidates are tried largest possible gain first (their
     region's area not yet in spec) and skipped once that bound is below the best gain found
-    (lazy greedy: a view's gain only shrinks as others are chosen)."""
+    (lazy greedy: a view's gain only shrinks as others are chosen). After `seconds` (None:
+    no limit) no further candidate is planned: the views chosen by then are kept
+    (`out_of_time`)."""
 
     hemisphere = PlanContext(spec, views="auto")
+    deadline = None if seconds is None else time.perf_counter() + seconds
+
+    def out_of_time() -> bool:
+        return deadline is not None and time.perf_counter() > deadline
 
     def in_spec_set(vp: ViewPlan) -> np.ndarray:
         m = evaluate(
@@ -316,6 +332,8 @@ def choose_views(
             if bounds[i] < min_gain or (best is not None and bounds[i] <= best[0]):
                 break
             if i not in evaluated:
+                if out_of_time():
+                    break
                 try:
                     vp = plan_view(part, replace(candidates[i], index=len(plans)), plan)
                     evaluated[i] = (vp, in_spec_set(vp))
@@ -329,7 +347,7 @@ def choose_views(
                 best = (gain, int(i))
         if best is None or best[0] < min_gain:
             # Nothing left among the candidates: aim new ones at what is still missed.
-            if rounds == MISSED_ROUNDS:
+            if rounds == MISSED_ROUNDS or out_of_time():
                 break
             rounds += 1
             assert reachable is not None  # drawn by target_reached
@@ -359,7 +377,7 @@ def choose_views(
         except ValueError:  # HiGHS out of time: a figure for scale, not worth failing a plan
             exact = None
     left_out = [cov for _, cov in evaluated.values()]
-    return ViewSelection(plans, coverage, len(candidates), chosen + left_out, exact)
+    return ViewSelection(plans, coverage, len(candidates), chosen + left_out, exact, out_of_time())
 
 
 def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
@@ -455,6 +473,7 @@ def plan_views(
     fixtures: Sequence[str] = (),
     fixture_units: str = "mm",
     arm: Arm | None = None,
+    view_seconds: float | None = VIEW_CHOICE_SECONDS,
 ) -> tuple[list[ViewPlan], Trajectory]:
     """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text),
     in its cell (`cell.Cell.around`: the table and the fixture files), by views: 'top' the
@@ -493,10 +512,12 @@ def plan_views(
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
-        selection = choose_views(part, spec, plan, coverage_target)
+        selection = choose_views(part, spec, plan, coverage_target, seconds=view_seconds)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
+    if views != "top" and selection.out_of_time:
+        traj = replace(traj, meta=traj.meta | {"view_choice_out_of_time": view_seconds})
     if views != "top" and selection.exact_coverage is not None:
         # The view choice's own estimate (its fan, its samples) of the greedy choice, and
         # of the exact cover by as many views among those it planned.

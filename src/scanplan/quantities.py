@@ -20,6 +20,9 @@ from scanplan.sensor import SensorSpec
 # reads 1-4 points above the full fan on curved parts, so a target of 0.9 stopped a sin·cos
 # heightfield at 0.88 of its ceiling; the door's top view (0.94) still holds 0.93 alone.
 COVERAGE_TARGET = 0.93
+# Seconds the view choice may take before it keeps the views chosen by then (a user waits
+# for the plan; each view of a large casting costs seconds). `--view-seconds` sets it.
+VIEW_CHOICE_SECONDS = 45.0
 # A defect call (`metrics.detection`): points beyond this many σ of the sensor noise from the
 # nominal surface, clustered, at least this many points.
 DEFECT_K_SIGMA = 4.0

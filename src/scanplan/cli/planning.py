@@ -5,6 +5,7 @@ measures, and the quality of that scan.
 from __future__ import annotations
 
 import json
+import math
 import multiprocessing
 import os
 from collections.abc import Callable, Iterator
@@ -38,7 +39,7 @@ from scanplan.cli.options import (
     parse_tolerance,
     scan_spec,
 )
-from scanplan.quantities import COVERAGE_TARGET, OVERLAP, ScanSpec
+from scanplan.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_SECONDS, ScanSpec
 from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
 
 if TYPE_CHECKING:
@@ -199,6 +200,13 @@ CoverageTargetOpt = Annotated[
 ]
 
 
+ViewSecondsOpt = Annotated[
+    float,
+    typer.Option(
+        help="--views auto: seconds the choice of views may take; past them the views "
+        "chosen so far are kept (plan says so)"
+    ),
+]
 PlanSchedulerOpt = Annotated[
     str | None,
     typer.Option(
@@ -233,6 +241,7 @@ class PlanJob:
     robot: str | None
     tcp: str | None
     part_pose: str | None
+    view_seconds: float = VIEW_CHOICE_SECONDS
 
 
 @user_errors
@@ -265,6 +274,7 @@ def plan_cmd(
     tcp: TcpOpt = None,
     part_pose: PartPoseOpt = None,
     scheduler: PlanSchedulerOpt = None,
+    view_seconds: ViewSecondsOpt = VIEW_CHOICE_SECONDS,
 ):
     """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
     under (sensor, tolerances, views, region of interest, table and fixtures) for `evaluate`
@@ -275,8 +285,10 @@ def plan_cmd(
     job = PlanJob(
         part, output, planner, sensor, policy, direction, overlap, raster, roll, units,
         tolerance, roi, views, coverage_target, table, tuple(fixture or ()), robot, tcp,
-        part_pose,
+        part_pose, view_seconds,
     )  # fmt: skip
+    if not (math.isfinite(view_seconds) and view_seconds > 0):
+        raise ValueError(f"--view-seconds must be a number of seconds > 0, got {view_seconds}")
     if Path(part).is_dir() or Path(part).suffix.lower() == CATALOGUE_LIST_SUFFIX:
         plan_catalogue(job, scheduler, quiet)
         return
@@ -324,6 +336,7 @@ def run_plan_job(
         fixtures=job.fixture,
         fixture_units=job.units,
         arm=arm,
+        view_seconds=job.view_seconds,
     )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     n_view = f"{len(plans)} view{'s' * (len(plans) > 1)}, "
@@ -489,6 +502,14 @@ def plan_notes(traj: Trajectory, spec: ScanSpec) -> list[tuple[str, bool]]:
             (
                 f"collisions: {dropped} scanning poses dropped (sensor body within "
                 f"{spec.clearance_mm:g} mm of the part, the table or a fixture)",
+                False,
+            )
+        )
+    if seconds := traj.meta.get("view_choice_out_of_time"):
+        lines.append(
+            (
+                f"views: the choice stopped after {seconds:g} s with the views chosen by then "
+                "(--view-seconds gives it longer)",
                 False,
             )
         )
