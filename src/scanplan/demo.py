@@ -9,14 +9,15 @@ demo-only.
 from __future__ import annotations
 
 import multiprocessing
+import pickle
+import queue
 import signal
 import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
-from multiprocessing.connection import Connection
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ from scanplan.export.common import plan_motion
 from scanplan.metrics import Metrics
 from scanplan.metrics.detectability import evaluate_detectable
 from scanplan.part import Part, load_part
-from scanplan.pipeline import Arm, fit_arm, plan_views
+from scanplan.pipeline import Arm, default_views, fit_arm, plan_views
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.report import Evaluated, write_report
@@ -82,16 +83,25 @@ def run_demo(
     sensor = spec.sensor
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
-    # The rl plan is evaluated and fitted to the arm in a second process, beside the other
-    # evaluations (threads would share one interpreter); it loads the part while the plans
-    # are made here, one after another so that each plan time is the planner's alone.
+    # The rl plan is fitted to the arm and evaluated in a second process, beside the other
+    # plans and evaluations here (threads would share one interpreter). It loads the part
+    # meanwhile; rl is planned first so that its fit (the longest step) can start at once,
+    # judged on the surface the other planners' default views will make the comparison's
+    # (checked once they are planned: refitted if that guess was wrong).
     with _SecondProcess(_load_part_here, part_name, units) as second:
         part: Part = load_part(part_name, units)
         plans: dict[str, tuple[int, int, Trajectory]] = {}
-        for name in PLANNER_ORDER:
+        for name in ("rl", *PLANNER_ORDER[:-1]):
             step(f"planning {name}")
             plans[name] = _plan(part, name, spec, roi)
             step(_planned_line(name, plans[name]))
+            if name == "rl":
+                rl = plans[name][2]
+                guess = _judged_guess(rl, spec)
+                second.submit(_fit_here, rl, guess, spec)
+                step(
+                    f"fitting the rl plan to an {DEMO_ROBOT} (placing the part) in a second process"
+                )
         trajectories = {name: plans[name][2] for name in PLANNER_ORDER}
         files: dict[str, str | bytes | Path] = {
             f"trajectory_{name}.csv": to_csv_text(traj) for name, traj in trajectories.items()
@@ -100,22 +110,23 @@ def run_demo(
         # nothing.
         judged = judged_alike([recorded(t, spec) for t in trajectories.values()])
         contexts = dict(zip(trajectories, judged, strict=True))
-        rl = trajectories["rl"]
-        second.submit(_evaluate_and_fit_here, rl, contexts["rl"], spec, seed, points_per_profile)
-        step(
-            f"evaluating rl ({int(rl.scanning.sum())} profiles, {contexts['rl'].surface} "
-            f"surface) and fitting it to an {DEMO_ROBOT} (placing the part), in the second "
-            "process"
-        )
+        refit = contexts["rl"] != guess
+        second.submit(_evaluate_here, rl, contexts["rl"], spec, seed, points_per_profile)
+        if refit:
+            second.submit(_fit_here, rl, contexts["rl"], spec)
         metrics: dict[str, Metrics] = {}
-        for name in PLANNER_ORDER[:-1]:
+        for name in PLANNER_ORDER:
             traj, context = trajectories[name], contexts[name]
             step(
                 f"evaluating {name} ({int(traj.scanning.sum())} profiles, "
-                f"{context.surface} surface)"
+                f"{context.surface} surface){' in the second process' * (name == 'rl')}"
             )
-            metrics[name] = _evaluate(part, spec, traj, context, seed, points_per_profile)
-        metrics["rl"], fitted, robot_line, text, error_m, fit_seconds = second.result()
+            if name != "rl":
+                metrics[name] = _evaluate(part, spec, traj, context, seed, points_per_profile)
+        fitted, robot_line, text, error_m, fit_seconds = second.result()
+        metrics["rl"] = second.result()
+        if refit:
+            fitted, robot_line, text, error_m, fit_seconds = second.result()
     files[PROGRAM_FILE] = text
     # The fitted plan records the arm, part pose and TCP: `scanplan export` takes it as is.
     files[FITTED_FILE] = dumps_json(to_json_dict(fitted), indent=1)
@@ -136,7 +147,11 @@ def run_demo(
         [Evaluated(name, trajectories[name], m) for name, m in metrics.items()],
         spec,
         pictures=list(curves.values()),
-        notes=[f"Evaluated with {fan} pixel columns per profile, noise seed {seed}."],
+        notes=[
+            f"Evaluated with {fan} pixel columns per profile, noise seed {seed}.",
+            "Planned one after another (rl first) while a second process loaded the part and "
+            "fitted the rl plan to the arm: the plan times include sharing the CPU with it.",
+        ],
         training_log=training_log,
         files=files,
         title=f"{part.name}: scan quality by planner",
@@ -203,20 +218,31 @@ def _loaded_part() -> Part:
     return _part_here
 
 
-def _evaluate_and_fit_here(
+def _evaluate_here(
     traj: Trajectory,
     context: PlanContext,
     spec: ScanSpec,
     seed: int,
     points_per_profile: int | None,
-) -> tuple[Metrics, Trajectory, str, str, float, float]:
-    """The rl plan's figures and its robot program (`_robot_program`), and the seconds the
-    fit took."""
-    part = _loaded_part()
-    metrics = _evaluate(part, spec, traj, context, seed, points_per_profile)
+) -> Metrics:
+    return _evaluate(_loaded_part(), spec, traj, context, seed, points_per_profile)
+
+
+def _fit_here(
+    traj: Trajectory, context: PlanContext, spec: ScanSpec
+) -> tuple[Trajectory, str, str, float, float]:
+    """`_robot_program`, and the seconds it took."""
     started = time.perf_counter()
-    fitted, line, text, error_m = _robot_program(part, traj, context, spec)
-    return metrics, fitted, line, text, error_m, time.perf_counter() - started
+    out = _robot_program(_loaded_part(), traj, context, spec)
+    return (*out, time.perf_counter() - started)
+
+
+def _judged_guess(rl: Trajectory, spec: ScanSpec) -> PlanContext:
+    """The rl plan's context as `judged_alike` will make it, told before the other plans
+    are made: from the views each planner plans by default."""
+    own = recorded(rl, spec)
+    others = [replace(own, views=default_views(make_planner(n))) for n in PLANNER_ORDER[:-1]]
+    return judged_alike([own, *others])[0]
 
 
 def _robot_program(
@@ -263,26 +289,32 @@ class _SecondProcess:
     """A spawned process that runs the calls `submit`ted to it one after another, beside
     this one, after `setup(*args)`; `result` returns the next call's result, or raises its
     exception as the call would have raised it here (the other process's traceback as its
-    cause). Leaving the `with` block ends the process, busy or not: on Ctrl-C or a failure
-    here nobody waits for work no longer wanted."""
+    cause). Calls and results go through queues that never block the sender, so neither side
+    waits for the other to read. Leaving the `with` block ends the process, busy or not: on
+    Ctrl-C or a failure here nobody waits for work no longer wanted."""
 
     def __init__(self, setup: Callable[..., None], *args: Any) -> None:
         # Spawned, not forked: this process may already run Embree's and torch's threads.
         context = multiprocessing.get_context("spawn")
-        self._conn, child = context.Pipe()
+        self._calls: multiprocessing.Queue[Any] = context.Queue()
+        self._results: multiprocessing.Queue[Any] = context.Queue()
         self._process = context.Process(
-            target=_serve, args=(child, setup, args), name="scanplan-demo", daemon=True
+            target=_serve,
+            args=(self._calls, self._results, setup, args),
+            name="scanplan-demo",
+            daemon=True,
         )
         with _sigint_ignored():  # inherited: Ctrl-C is this process's to handle
             self._process.start()
-        child.close()
 
     def __enter__(self) -> _SecondProcess:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
-        self._conn.close()  # an idle process returns on it; a busy one is stopped
-        if exc_info[0] is not None:
+        self._calls.cancel_join_thread()  # calls it will not read are dropped at exit
+        if exc_info[0] is None:
+            self._calls.put(None)  # done: an idle process returns on it
+        else:
             self._process.terminate()
         self._process.join(10.0)
         if self._process.is_alive():
@@ -290,16 +322,19 @@ class _SecondProcess:
             self._process.join()
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> None:
-        self._conn.send((fn, args))
+        self._calls.put((fn, args))
 
     def result(self) -> Any:
-        try:
-            ok, value, trace = self._conn.recv()
-        except EOFError:
-            self._process.join(10.0)
-            raise RuntimeError(
-                f"the demo's second process ended unexpectedly (exit code {self._process.exitcode})"
-            ) from None
+        while True:
+            try:
+                ok, value, trace = pickle.loads(self._results.get(timeout=1.0))
+                break
+            except queue.Empty:
+                if not self._process.is_alive():
+                    raise RuntimeError(
+                        f"the demo's second process ended unexpectedly (exit code "
+                        f"{self._process.exitcode})"
+                    ) from None
         if not ok:
             raise value from _RemoteTraceback(trace)
         return value
@@ -310,29 +345,43 @@ class _RemoteTraceback(Exception):
         return str(self.args[0])
 
 
-def _serve(conn: Connection, setup: Callable[..., None], args: tuple[Any, ...]) -> None:
+def _serve(
+    calls: multiprocessing.Queue[Any],
+    results: multiprocessing.Queue[Any],
+    setup: Callable[..., None],
+    args: tuple[Any, ...],
+) -> None:
     """The second process: setup, then each call received, its result or exception sent
-    back, until the other end closes."""
+    back, until told it is done (None)."""
     failed: tuple[bool, BaseException, str] | None = None
     try:
         setup(*args)
     except Exception as exc:  # told at the first call: the main process raises it
         failed = (False, exc, traceback.format_exc())
-    while True:
-        try:
-            fn, fn_args = conn.recv()
-        except EOFError:
-            return
+    while (call := _next_call(calls)) is not None:
+        fn, fn_args = call
         reply = failed
         if reply is None:
             try:
                 reply = (True, fn(*fn_args), "")
             except Exception as exc:
                 reply = (False, exc, traceback.format_exc())
+        try:  # pickled here, so that one that does not pickle is told, not lost
+            results.put(pickle.dumps(reply))
+        except Exception as exc:
+            reply = (False, RuntimeError(f"{type(exc).__name__}: {exc}"), reply[2])
+            results.put(pickle.dumps(reply))
+
+
+def _next_call(calls: multiprocessing.Queue[Any]) -> Any:
+    """The next call, or None once told so or once the process that gives them has gone."""
+    parent = multiprocessing.parent_process()
+    while True:
         try:
-            conn.send(reply)
-        except Exception as exc:  # a result or exception that does not pickle
-            conn.send((False, RuntimeError(f"{type(exc).__name__}: {exc}"), reply[2]))
+            return calls.get(timeout=1.0)
+        except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                return None
 
 
 @contextmanager
