@@ -104,7 +104,11 @@ class CollisionChecker:
         self._ray_engine = part.ray_engine
         self._face_normals = self._ray_engine.face_normals  # (a turned part: turned, not redone)
         self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        self._part_obj = _mesh_object(part)
+        # The BVH is built on the first pose that comes near the part (seconds on a large
+        # mesh; a plan whose poses all keep their distance never needs it). Weakly: see above.
+        self._part_ref = weakref.ref(part)
+        self._faces = np.asarray(mesh.faces)
+        self._part_fcl: fcl.CollisionObject | None = None
         self.bounds = np.asarray(part.bounds, dtype=np.float64)
         lo, hi = sensor.body_bounds_mm
         self.body_lo, self.body_hi = lo, hi
@@ -194,6 +198,17 @@ class CollisionChecker:
 
     # ---- internals --------------------------------------------------------------------------
 
+    @property
+    def _part_obj(self) -> fcl.CollisionObject:
+        if self._part_fcl is None:
+            part = self._part_ref()
+            if part is not None:  # shared with the arm's checks of the same part
+                self._part_fcl = _mesh_object(part)
+            else:  # the checker outlived its part: its own copy
+                bvh = _bvh(self.vertices, self._faces)
+                self._part_fcl = fcl.CollisionObject(bvh, fcl.Transform())
+        return self._part_fcl
+
     def _grown_box(self, clearance_mm: float) -> fcl.CollisionObject:
         obj = self._grown.get(clearance_mm)
         if obj is None:
@@ -262,13 +277,16 @@ def _mesh_bvh(part: Part) -> fcl.BVHModel:
     """The part's mesh as an FCL BVH, in its own coordinates; built once while the part
     lives (seconds for a large mesh)."""
     if part not in _BVHS:
-        mesh = part.mesh
-        bvh = fcl.BVHModel()
-        bvh.beginModel(len(mesh.vertices), len(mesh.faces))
-        bvh.addSubModel(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32))
-        bvh.endModel()
-        _BVHS[part] = bvh
+        _BVHS[part] = _bvh(part.mesh.vertices, part.mesh.faces)
     return _BVHS[part]
+
+
+def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(vertices), len(faces))
+    bvh.addSubModel(np.asarray(vertices, np.float64), np.asarray(faces, np.int32))
+    bvh.endModel()
+    return bvh
 
 
 def _mesh_object(part: Part) -> fcl.CollisionObject:
