@@ -257,10 +257,9 @@ def choose_views(
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
-    inspect faces up), then, while in-spec coverage is below `coverage_target` of the
-    visibility ceiling (`surface.reachable_samples` on the same samples), the candidate
-    view (`candidate_views`) that adds the most, unless it adds less than `min_gain`
-    (`MIN_VIEW_GAIN`); when none does, views
+    inspect faces up), then, while in-spec coverage is below `coverage_target`, the
+    candidate view (`candidate_views`) that adds the most, unless it adds less than
+    `min_gain` (`MIN_VIEW_GAIN`); when none does, views
     aimed at what a beam could reach and no chosen view holds (`views.missed_views`) join
     the candidates, `MISSED_ROUNDS` times at most. A panel whose top view reaches the
     target (the door) stays one view. The exact cover by as many views among all those
@@ -310,13 +309,10 @@ def choose_views(
     reachable: np.ndarray | None = None
 
     def target_reached() -> bool:
-        # The ceiling is at most 1, so it is drawn only when the plain share falls short.
-        nonlocal reachable
-        if coverage[-1] >= coverage_target:
-            return True
-        if reachable is None:
-            reachable = reachable_samples(part, samples, spec.tol_angle_rad)
-        return coverage[-1] >= coverage_target * float(reachable.mean())
+        # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
+        # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
+        # under the ceiling then stopped it at 6 views where 12 held 0.77.
+        return coverage[-1] >= coverage_target
 
     if target_reached():
         return ViewSelection(plans, coverage, 0, chosen)
@@ -350,7 +346,8 @@ def choose_views(
             if rounds == MISSED_ROUNDS or out_of_time():
                 break
             rounds += 1
-            assert reachable is not None  # drawn by target_reached
+            if reachable is None:
+                reachable = reachable_samples(part, samples, spec.tol_angle_rad)
             more = missed_views(
                 part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
             )

@@ -15,10 +15,10 @@ import numpy as np
 
 from scanplan.sensor import SensorSpec
 
-# In-spec coverage, as a share of the visibility ceiling (what any beam within tolerance
-# reaches), at which `--views auto` stops adding views. The view choice's sub-sampled fan
-# reads 1-4 points above the full fan on curved parts, so a target of 0.9 stopped a sin·cos
-# heightfield at 0.88 of its ceiling; the door's top view (0.94) still holds 0.93 alone.
+# In-spec coverage (as the view choice estimates it) at which `--views auto` stops adding
+# views. Its sub-sampled fan reads 1-4 points above the full sensor on curved parts, so 0.9
+# stopped a sin·cos heightfield at 0.88 of the surface; the door's top view (0.94) still
+# holds 0.93 alone.
 COVERAGE_TARGET = 0.93
 # Seconds the view choice may take before it keeps the views chosen by then (a user waits
 # for the plan; each view of a large casting costs seconds). `--view-seconds` sets it.

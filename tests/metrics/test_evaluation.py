@@ -183,3 +183,24 @@ def test_in_spec_coverage_is_reported_against_the_visibility_ceiling(plate):
     # Not measured on request (choosing views): None, and no share of it.
     off = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE, ceiling=False)
     assert off.visibility_ceiling is None and off.to_json_dict()["in_spec_of_ceiling"] is None
+
+
+def test_a_point_does_not_hold_in_spec_the_surface_across_an_edge():
+    """A sheet 2 mm thick scanned from above at 128 columns (an in-spec radius of about
+    2 mm): its top is in spec, and its 2 mm rims, within that radius of top points but
+    facing sideways, are not (they are within the visibility ceiling: a tilted view could
+    hold them). Counting them was how a sub-sampled fan read more than the ceiling."""
+    from scanplan.context import PlanContext
+
+    mesh = trimesh.creation.box((600.0, 300.0, 2.0))
+    mesh.apply_translation((0, 0, -1.0))  # top face at z = 0
+    sheet = part_from_mesh(mesh, "sheet")
+    traj = straight(np.arange(0.0, 640.0, 0.5))  # over the whole sheet, the line across it
+    m = evaluate(sheet, SPEC, traj, points_per_profile=128, context=PlanContext(SPEC, views="auto"))
+    assert m.coverage_map is not None and m.visibility_ceiling is not None
+    pts, state = m.coverage_map.points_part, m.coverage_map.state
+    rim = pts[:, 2] < -0.2  # below the top face: on the side walls
+    assert rim.sum() > 20
+    assert (state[~rim] == SurfaceState.IN_SPEC).mean() > 0.95
+    assert not (state[rim] == SurfaceState.IN_SPEC).any()
+    assert m.in_spec_coverage <= m.visibility_ceiling

@@ -194,8 +194,7 @@ PlanRobotOpt = Annotated[
 CoverageTargetOpt = Annotated[
     float,
     typer.Option(
-        help="--views auto: stop adding views once in-spec coverage reaches this share of "
-        "the visibility ceiling (what any beam within tolerance reaches)"
+        help="--views auto: in-spec coverage (of the surface to inspect) to stop adding views at"
     ),
 ]
 

@@ -167,6 +167,13 @@ class Spacing:
         }
 
 
+# A point marks the samples within the in-spec radius whose outward normal lies within 45°
+# of its own: across an edge or a thin sheet the samples are another side's. Without this,
+# a 128-column fan read 0.91 on the NIST sheet metal part (above its 0.85 ceiling) where
+# the full sensor reads 0.76.
+SAME_SIDE_COS = math.cos(math.radians(45.0))
+
+
 class Coverage:
     """Plain and in-spec coverage of the surface samples (see the two definitions).
 
@@ -174,8 +181,10 @@ class Coverage:
     qualifies if it passes `quantities.in_spec` and the real scan is dense enough where it
     lies (across: `real_column_pitch`; along: the column's displacement to its neighbouring
     profiles of the pass); a sample is in spec if a qualifying point lies within
-    `in_spec_radius`. The gap to the next profile is only known once the next profile is
-    measured, so the last profile of each chunk waits for the next chunk.
+    `in_spec_radius` on the sample's side (`SAME_SIDE_COS` between the point's normal and
+    the sample's outward normal, `normals` (k, 3)). The gap to the next profile is only
+    known once the next profile is measured, so the last profile of each chunk waits for
+    the next chunk.
     """
 
     def __init__(
@@ -185,8 +194,10 @@ class Coverage:
         col_stride: int,
         cover_radius: float,
         in_spec_radius: float,
+        normals: np.ndarray,
     ) -> None:
         self.surface, self.spec = surface, scan_spec
+        self.normals = normals
         self.cols = slice(None, None, col_stride)
         self.cover_radius, self.in_spec_radius = cover_radius, in_spec_radius
         self.limit_mm = 2.0 * scan_spec.delta_s_opt_mm
@@ -202,7 +213,7 @@ class Coverage:
             self.k_in_spec = int(np.clip(math.ceil(2 * expected + 4), 4, 64))
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous profile's columns
         # The held-back last profile: points, qualifies-but-for-the-along-gap, gap to previous.
-        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def add(self, scan: Scan, ori_rad: np.ndarray, has_prev: np.ndarray) -> None:
         if self.tree is None:
@@ -210,6 +221,7 @@ class Coverage:
         c = self.cols
         valid = scan.valid[:, c]
         pts = scan.points_part[:, c]
+        nrm = scan.normals_part[:, c]
         near = pts[valid]
         if len(near):
             # k nearest: a sample with a small Voronoi cell is still marked.
@@ -233,29 +245,41 @@ class Coverage:
             pts = np.concatenate([self._pending[0][None], pts])
             ok = np.concatenate([self._pending[1][None], ok])
             gap_prev = np.concatenate([self._pending[2][None], gap_prev])
+            nrm = np.concatenate([self._pending[3][None], nrm])
         gap_next = np.full_like(gap_prev, np.nan)
         gap_next[:-1] = gap_prev[1:]
-        self._pending = (pts[-1], ok[-1], gap_prev[-1])
-        self._mark_in_spec(pts[:-1], ok[:-1], gap_prev[:-1], gap_next[:-1])
+        self._pending = (pts[-1], ok[-1], gap_prev[-1], nrm[-1])
+        self._mark_in_spec(pts[:-1], ok[:-1], gap_prev[:-1], gap_next[:-1], nrm[:-1])
 
     def _mark_in_spec(
-        self, pts: np.ndarray, ok: np.ndarray, gap_prev: np.ndarray, gap_next: np.ndarray
+        self,
+        pts: np.ndarray,
+        ok: np.ndarray,
+        gap_prev: np.ndarray,
+        gap_next: np.ndarray,
+        nrm: np.ndarray,
     ) -> None:
         # The larger of the two gaps, or the one there is; none (an isolated profile) fails.
         along = np.fmax(gap_prev, gap_next)
         with np.errstate(invalid="ignore"):
-            good = pts[ok & (along <= self.limit_mm)]
+            qualifies = ok & (along <= self.limit_mm)
+        good = pts[qualifies]
         if len(good) and self.tree is not None:
             dist, which = self.tree.query(
                 good, k=self.k_in_spec, distance_upper_bound=self.in_spec_radius, workers=-1
             )
-            self.in_spec[which[np.isfinite(dist)]] = True
+            found = np.isfinite(dist)
+            point = np.broadcast_to(np.arange(len(good))[:, None], found.shape)[found]
+            cos = np.einsum("ij,ij->i", nrm[qualifies][point], self.normals[which[found]])
+            self.in_spec[which[found][cos >= SAME_SIDE_COS]] = True
 
     def finish(self) -> tuple[float, float, CoverageMap]:
         """(coverage fraction, in-spec fraction, the map)."""
         if self._pending is not None:
-            p, ok, gap = self._pending
-            self._mark_in_spec(p[None], ok[None], gap[None], np.full_like(gap[None], np.nan))
+            p, ok, gap, nrm = self._pending
+            self._mark_in_spec(
+                p[None], ok[None], gap[None], np.full_like(gap[None], np.nan), nrm[None]
+            )
             self._pending = None
         state = np.where(
             self.in_spec,

@@ -24,6 +24,7 @@ from scanplan.sensor import SensorSpec
 from scanplan.surface import (
     VisibleSurface,
     hemisphere_visible_samples,
+    oriented_normals,
     reachable_samples,
     upward_visible_samples,
 )
@@ -103,15 +104,21 @@ def surface_samples(
     return sampler(part, coverage_spacing_mm(spec), seed)
 
 
-def coverage_of(surface: VisibleSurface, scan_spec: ScanSpec, spec: SensorSpec) -> Coverage:
-    """The coverage accumulator for a scan by the evaluated fan `spec` (perhaps sub-sampled)."""
+def coverage_of(
+    surface: VisibleSurface,
+    scan_spec: ScanSpec,
+    spec: SensorSpec,
+    normals: np.ndarray,
+) -> Coverage:
+    """The coverage accumulator for a scan by the evaluated fan `spec` (perhaps sub-sampled);
+    normals: (k, 3) the samples' outward normals (`surface.oriented_normals`)."""
     lateral_spacing = spec.line_width_mm / max(spec.points_per_profile - 1, 1)
     # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
     col_stride = max(1, int(coverage_spacing_mm(spec) / 3 / lateral_spacing))
     # Wide enough that every sample between two measured lines has a point within reach.
     cover_radius = max(1.0, lateral_spacing * col_stride)
     in_spec_radius = in_spec_radius_mm(scan_spec, lateral_spacing * col_stride)
-    return Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius)
+    return Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius, normals)
 
 
 def evaluate(
@@ -168,7 +175,7 @@ def evaluate(
 
     errors = PointErrors(wd, spec.z_range_mm)
     spacing = Spacing(u_dir, has_prev, context.full_beam_angle)
-    coverage = coverage_of(surface, scan_spec, spec)
+    coverage = coverage_of(surface, scan_spec, spec, oriented_normals(part)[surface.faces])
     cover_radius, in_spec_radius = coverage.cover_radius, coverage.in_spec_radius
     sample = CloudSample(m * n_cols, max_map_points, seed)
     for observer in observers:

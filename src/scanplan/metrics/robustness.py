@@ -24,7 +24,7 @@ from scanplan.perturb import Perturbation, Trial
 from scanplan.profilometer import LineProfilometer, Scan
 from scanplan.quantities import ScanSpec, point_orientation_error
 from scanplan.sensor import SensorSpec
-from scanplan.surface import VisibleSurface
+from scanplan.surface import VisibleSurface, oriented_normals
 from scanplan.trajectory import Trajectory
 
 # (function, tasks) -> results in task order: the builtin map, an executor's, a Dask client's.
@@ -37,7 +37,7 @@ class TrialTask:
 
     vertices, normals: (v, 3) the nominal mesh's vertices and unit vertex normals; faces
     (f, 3); inspect_faces (f,) bool or None; poses (m, 4, 4) the scanning poses, has_prev
-    (m,) bool; surface: the nominal samples judged."""
+    (m,) bool; surface: the nominal samples judged, surface_normals their outward normals."""
 
     name: str
     vertices: np.ndarray
@@ -49,6 +49,7 @@ class TrialTask:
     poses: np.ndarray
     has_prev: np.ndarray
     surface: VisibleSurface
+    surface_normals: np.ndarray  # (k, 3) the samples' outward normals
     model: Perturbation
     seed: int
     index: int
@@ -118,7 +119,7 @@ def run_trial(task: TrialTask) -> np.ndarray:
     poses = trial.path_poses(task.poses)
     if not np.array_equal(T_part_placed, np.eye(4)):
         poses = np.linalg.inv(T_part_placed) @ poses
-    coverage = coverage_of(task.surface, task.scan_spec, task.sensor)
+    coverage = coverage_of(task.surface, task.scan_spec, task.sensor, task.surface_normals)
     # The sensor noise is the nominal evaluation's (same seed): trials differ by the
     # perturbation only.
     profiler = LineProfilometer(part, task.sensor, seed=task.seed)
@@ -242,6 +243,7 @@ def trial_tasks(
     surface = surface_samples(part, spec, context, seed)
     scan_idx, has_prev = scanning_steps(traj)
     mesh = part.mesh
+    surface_normals = oriented_normals(part)[surface.faces]
     return [
         TrialTask(
             name=part.name,
@@ -254,6 +256,7 @@ def trial_tasks(
             poses=traj.poses[scan_idx],
             has_prev=has_prev,
             surface=surface,
+            surface_normals=surface_normals,
             model=model,
             seed=seed,
             index=i,
