@@ -6,6 +6,7 @@ import json
 import math
 import os
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -133,3 +134,31 @@ def test_a_failing_setup_of_the_second_process_fails_its_calls():
         second.submit(divmod, 7, 2)
         with pytest.raises(ValueError, match="invalid literal for int"):
             second.result()
+
+
+def test_a_wrong_guess_of_the_rl_plans_surface_is_fitted_again(demo, tmp_path, monkeypatch):
+    # The rl plan is fitted before the others are planned, on the surface their default
+    # views should make the comparison's; if that guess is wrong the fit is made again, and
+    # the demo writes what it writes when the guess is right.
+    import scanplan.demo
+
+    guess = scanplan.demo._judged_guess
+
+    def wrong(rl, spec):
+        right = guess(rl, spec)
+        return replace(right, views="top" if right.views == "auto" else "auto")
+
+    monkeypatch.setattr(scanplan.demo, "_judged_guess", wrong)
+    out = tmp_path / "demo"
+    result = CliRunner().invoke(
+        app,
+        ["demo", "--part", "training-piece", "--points", "96", "-o", str(out)],
+        terminal_width=200,
+    )
+    assert result.exit_code == 0, result.output
+    first, _ = demo
+    assert (out / "scan_rl.mod").read_text() == (first / "scan_rl.mod").read_text()
+    fitted = [json.loads((d / "trajectory_rl_irb2400.json").read_text()) for d in (first, out)]
+    for plan in fitted:
+        del plan["plan_time_s"]  # the rl planner's wall time, that run's
+    assert fitted[0] == fitted[1]
