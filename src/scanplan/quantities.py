@@ -22,7 +22,7 @@ from scanplan.sensor import SensorSpec
 COVERAGE_TARGET = 0.93
 # Seconds the view choice may take before it keeps the views chosen by then (a user waits
 # for the plan; each view of a large casting costs seconds). `--view-seconds` sets it.
-VIEW_CHOICE_SECONDS = 45.0
+VIEW_CHOICE_SECONDS = 40.0
 # A defect call (`metrics.detection`): points beyond this many σ of the sensor noise from the
 # nominal surface, clustered, at least this many points.
 DEFECT_K_SIGMA = 4.0

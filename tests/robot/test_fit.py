@@ -131,3 +131,36 @@ def test_a_pass_the_wrist_reaches_only_turned_is_turned_not_given_up() -> None:
     flown = fit.traj.poses
     assert np.allclose(flown[:, :3, 2], traj.poses[:, :3, 2])  # the same beam
     assert np.allclose(flown[:, :3, 3], traj.poses[:, :3, 3])  # from the same place
+
+
+def test_a_pass_is_not_turned_where_its_move_turned_would_bring_the_body_into_the_cell(
+    monkeypatch,
+):
+    """The move into a pass turns with it: two passes both kept better turned, but the
+    second's move, turned, puts the sensor body into the cell where it was clear as
+    planned, so only the first is turned."""
+    import scanplan.robot.fit as fit_module
+    from scanplan.robot.place import HALF_TURN
+    from scanplan.trajectory import Trajectory
+
+    swath = np.array([0, 0, 0, 1, 1, 1])
+    scanning = np.array([True, True, True, False, True, True])  # pose 3: the move into pass 1
+    traj = Trajectory(np.tile(np.eye(4), (6, 1, 1)), swath, scanning)
+    planned = np.array([False, False, False, True, False, False])
+    turned = np.ones(6, bool)
+    sensor_planned, sensor_turned = np.ones(6, bool), np.ones(6, bool)
+    sensor_turned[3] = False
+    monkeypatch.setattr(
+        fit_module,
+        "flyable_poses",
+        lambda *a, **k: (planned & sensor_planned, turned & sensor_turned),
+    )
+    monkeypatch.setattr(
+        fit_module, "sensor_clear_both", lambda poses, obs: (sensor_planned, sensor_turned)
+    )
+    out, count = fit_module._turned(traj, None, np.eye(4), np.eye(4), object())  # type: ignore[arg-type]
+    assert count == 1
+    assert np.allclose(out.poses[:3], HALF_TURN) and np.allclose(out.poses[3:], np.eye(4))
+    # Without a cell there is no body to keep clear: both passes turn.
+    monkeypatch.setattr(fit_module, "flyable_poses", lambda *a, **k: (planned, turned))
+    assert fit_module._turned(traj, None, np.eye(4), np.eye(4), None)[1] == 2  # type: ignore[arg-type]

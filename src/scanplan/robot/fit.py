@@ -14,7 +14,14 @@ import numpy as np
 from scanplan.collision import CellObstacles
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links
-from scanplan.robot.place import HALF_TURN, Placement, flyable_poses, place, turned_passes
+from scanplan.robot.place import (
+    HALF_TURN,
+    Placement,
+    flyable_poses,
+    place,
+    sensor_clear_both,
+    turned_passes,
+)
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.trajectory import Trajectory
@@ -163,9 +170,16 @@ def _turned(
     """`traj` with each pass (and the move into it, which carries its swath index) turned
     half a turn about the beam where more of its poses are reachable and clear that way,
     and how many were."""
-    planned, turned = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles)
+    sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses, obstacles)
+    planned, turned = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, sensor_ok=sensor_ok)
     scanning = traj.scanning
     better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
+    if sensor_ok is not None and len(better):
+        # The move into a pass turns with it: not a pass whose move, turned, would bring
+        # the body (not symmetric about the beam) into the cell where it was clear (a move
+        # down to a wall view beside the table).
+        spoiled = ~scanning & sensor_ok[0] & ~sensor_ok[1]
+        better = np.setdiff1d(better, traj.swath[spoiled])
     if not len(better):
         return traj, 0
     turn = np.isin(traj.swath, better)
