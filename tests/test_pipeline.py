@@ -204,6 +204,14 @@ def test_the_view_choice_keeps_what_it_has_when_its_time_is_up(housing, housing_
     assert len(kept) == 1 and np.allclose(kept[0].view.axis, UP)  # the top view, planned first
     assert traj.meta["view_choice_out_of_time"] == 1e-6
     assert "view_choice_out_of_time" not in housing_views[1].meta
+    # A choice that needed no candidate (the door's top view reaches the target) does not
+    # claim the time cut it short, however long the top view took.
+    from scanplan.part import load_part
+
+    door, door_traj = plan_views(
+        load_part("door"), SPEC, make_planner("geometric"), "auto", view_seconds=1e-6
+    )
+    assert len(door) == 1 and "view_choice_out_of_time" not in door_traj.meta
 
 
 def test_view_seconds_must_be_positive(tmp_path):

@@ -284,9 +284,13 @@ def choose_views(
 
     hemisphere = PlanContext(spec, views="auto")
     deadline = None if seconds is None else time.perf_counter() + seconds
+    timed_out = False
 
     def out_of_time() -> bool:
-        return deadline is not None and time.perf_counter() > deadline
+        # Asked only where another candidate would be planned: True means one was not.
+        nonlocal timed_out
+        timed_out = timed_out or (deadline is not None and time.perf_counter() > deadline)
+        return timed_out
 
     def in_spec_set(vp: ViewPlan) -> np.ndarray:
         m = evaluate(
@@ -374,7 +378,7 @@ def choose_views(
         except ValueError:  # HiGHS out of time: a figure for scale, not worth failing a plan
             exact = None
     left_out = [cov for _, cov in evaluated.values()]
-    return ViewSelection(plans, coverage, len(candidates), chosen + left_out, exact, out_of_time())
+    return ViewSelection(plans, coverage, len(candidates), chosen + left_out, exact, timed_out)
 
 
 def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
