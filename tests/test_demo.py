@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import scanplan.demo
 from scanplan.cli import app
+from scanplan.demo import _SecondProcess
 from scanplan.export import ExportOptions, parse_program
 from scanplan.export.common import plan_motion
 from scanplan.quantities import ScanSpec
@@ -112,8 +114,6 @@ def test_the_second_process_returns_results_in_order_and_raises_as_here():
     # The rl plan's evaluation and fit run there: its answers and its errors must come back
     # as if computed here (a ValueError stays one clear line), and a process that dies is
     # said to have died, not waited for.
-    from scanplan.demo import _SecondProcess
-
     with _SecondProcess(int, "0") as second:
         second.submit(divmod, 7, 2)
         second.submit(math.sqrt, -1.0)
@@ -128,8 +128,6 @@ def test_the_second_process_returns_results_in_order_and_raises_as_here():
 
 
 def test_a_failing_setup_of_the_second_process_fails_its_calls():
-    from scanplan.demo import _SecondProcess
-
     with _SecondProcess(int, "not a number") as second:
         second.submit(divmod, 7, 2)
         with pytest.raises(ValueError, match="invalid literal for int"):
@@ -140,8 +138,6 @@ def test_a_wrong_guess_of_the_rl_plans_surface_is_fitted_again(demo, tmp_path, m
     # The rl plan is fitted before the others are planned, on the surface their default
     # views should make the comparison's; if that guess is wrong the fit is made again, and
     # the demo writes what it writes when the guess is right.
-    import scanplan.demo
-
     guess = scanplan.demo._judged_guess
 
     def wrong(rl, spec):

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import scanplan.pipeline as pipeline_module
 from helpers import HEMISPHERE, fcl_distance
 from scanplan.cli import app
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext
 from scanplan.metrics import evaluate
+from scanplan.part import load_part
 from scanplan.pipeline import default_views, order_views, plan_scan, plan_views
 from scanplan.planners import make_planner
 from scanplan.quantities import UP, ScanSpec
@@ -123,8 +125,6 @@ def test_default_views_follow_whether_the_planner_rolls():
 
 
 def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_views, monkeypatch):
-    import scanplan.pipeline as pipeline_module
-
     part = housing
     plans, _ = housing_views
     assert len(plans) >= 3
@@ -151,8 +151,6 @@ def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_v
 def test_a_pass_no_clear_move_reaches_is_given_up_and_counted(housing, housing_top, monkeypatch):
     """A piece of pass that no move reaches (neither lifting along +Z nor along the table's
     normal) is given up, counted, instead of failing the whole view; the rest is planned."""
-    import scanplan.pipeline as pipeline_module
-
     swaths, _ = housing_top
     assert len(swaths) >= 3
     cell = PlanContext(SPEC).cell(housing)  # the table at the lowest point
@@ -206,8 +204,6 @@ def test_the_view_choice_keeps_what_it_has_when_its_time_is_up(housing, housing_
     assert "view_choice_out_of_time" not in housing_views[1].meta
     # A choice that needed no candidate (the door's top view reaches the target) does not
     # claim the time cut it short, however long the top view took.
-    from scanplan.part import load_part
-
     door, door_traj = plan_views(
         load_part("door"), SPEC, make_planner("geometric"), "auto", view_seconds=1e-6
     )

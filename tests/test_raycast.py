@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
-from scanplan.part import part_from_mesh
+from scanplan.collision import CollisionChecker
+from scanplan.part import Part, part_from_mesh
+from scanplan.sensor import SensorSpec
 
 
 def _moller_trumbore(origins, dirs, triangles):
@@ -56,12 +59,6 @@ def test_a_turned_part_answers_rays_like_a_part_built_turned_without_a_scene_of_
     """`Part.turned` (a view of the part): first hits, occlusion and the collision checks of
     the turned part agree with a part built from the turned mesh, and its engine asks the
     original's Embree scene (no second build: seconds on a large mesh)."""
-    from scipy.spatial.transform import Rotation
-
-    from scanplan.collision import CollisionChecker
-    from scanplan.part import Part
-    from scanplan.sensor import SensorSpec
-
     mesh = trimesh.creation.annulus(r_min=30.0, r_max=60.0, height=40.0, sections=48)
     mesh.apply_translation([300.0, -120.0, 20.0])  # off the origin: the offsets must agree
     base = part_from_mesh(mesh, "ring")

@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from helpers import straight
+from scanplan.context import PlanContext
 from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import part_from_mesh
 from scanplan.quantities import ScanSpec
@@ -190,8 +191,6 @@ def test_a_point_does_not_hold_in_spec_the_surface_across_an_edge():
     2 mm): its top is in spec, and its 2 mm rims, within that radius of top points but
     facing sideways, are not (they are within the visibility ceiling: a tilted view could
     hold them). Counting them was how a sub-sampled fan read more than the ceiling."""
-    from scanplan.context import PlanContext
-
     mesh = trimesh.creation.box((600.0, 300.0, 2.0))
     mesh.apply_translation((0, 0, -1.0))  # top face at z = 0
     sheet = part_from_mesh(mesh, "sheet")

@@ -7,12 +7,14 @@ import json
 import numpy as np
 from typer.testing import CliRunner
 
+import scanplan.robot.fit as fit_module
 from scanplan.cli import app
 from scanplan.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.export.common import plan_motion
 from scanplan.robot import check_reach
 from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.place import HALF_TURN
 from scanplan.swaths import Swath
 from scanplan.trajectory import Trajectory, read_json
 
@@ -139,10 +141,6 @@ def test_a_pass_is_not_turned_where_its_move_turned_would_bring_the_body_into_th
     """The move into a pass turns with it: two passes both kept better turned, but the
     second's move, turned, puts the sensor body into the cell where it was clear as
     planned, so only the first is turned."""
-    import scanplan.robot.fit as fit_module
-    from scanplan.robot.place import HALF_TURN
-    from scanplan.trajectory import Trajectory
-
     swath = np.array([0, 0, 0, 1, 1, 1])
     scanning = np.array([True, True, True, False, True, True])  # pose 3: the move into pass 1
     traj = Trajectory(np.tile(np.eye(4), (6, 1, 1)), swath, scanning)
