@@ -305,3 +305,13 @@ def rot_err(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def listing(directory) -> list[str]:
     return sorted(p.name for p in directory.iterdir())
+
+
+def overhang_part() -> Part:
+    """A 30 mm plate 500 mm wide over a 40 mm block 380 mm wide: the block's four walls lie
+    60 mm under the plate's edge, reached only by a beam tilted well off vertical."""
+    plate = trimesh.creation.box((300.0, 500.0, 30.0))
+    plate.apply_translation((0, 0, 15.0))
+    block = trimesh.creation.box((200.0, 380.0, 40.0))
+    block.apply_translation((0, 0, -20.0))
+    return part_from_mesh(trimesh.util.concatenate([plate, block]), "overhang")

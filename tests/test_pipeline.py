@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 import scanplan.pipeline as pipeline_module
-from helpers import HEMISPHERE, fcl_distance
+from helpers import HEMISPHERE, fcl_distance, overhang_part
 from scanplan.cli import app
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext
@@ -217,3 +217,23 @@ def test_view_seconds_must_be_positive(tmp_path):
     assert result.exit_code == 2
     assert "--view-seconds must be a number of seconds > 0" in result.output
     assert not (tmp_path / "p.json").exists()
+
+
+def test_views_for_what_is_missed_are_also_scanned_level_and_none_is_planned_twice(
+    monkeypatch,
+):
+    planned = []
+    plan_view = pipeline_module.plan_view
+
+    def recording(part, view, plan):
+        planned.append(pipeline_module._view_key(view))
+        return plan_view(part, view, plan)
+
+    monkeypatch.setattr(pipeline_module, "plan_view", recording)
+    part = overhang_part()
+    plans, traj = plan_views(part, SPEC, make_planner("geometric"), "auto")
+    assert len(planned) == len(set(planned))
+    assert any(level for _, _, level in planned)
+    # The block's walls under the plate's edge are held: only a level scan holds them.
+    m = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE)
+    assert m.in_spec_of_ceiling > 0.9

@@ -9,11 +9,13 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from helpers import HEMISPHERE
+from helpers import HEMISPHERE, overhang_part
+from scanplan.cell import Cell
 from scanplan.collision import checker_for
-from scanplan.metrics import evaluate
+from scanplan.context import PlanContext
+from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import part_from_mesh
-from scanplan.pipeline import plan_views
+from scanplan.pipeline import plan_scan, plan_views
 from scanplan.planners import make_planner
 from scanplan.quantities import UP, ScanSpec
 from scanplan.surface import hemisphere_visible_samples
@@ -24,6 +26,7 @@ from scanplan.views import (
     depth_slabs,
     limit_beam_tilt,
     missed_views,
+    plan_view,
     segment_regions,
     view_axis,
 )
@@ -184,3 +187,43 @@ def test_a_beam_leaning_past_the_view_tilt_is_turned_back_about_its_footprint():
     assert out[0, 2, 3] > 30.0 + 60.0  # the sensor lifted above the footprint
     assert np.allclose(out[0, :3, 0] @ out[0, :3, 1], 0.0)
     assert np.array_equal(out[1], down)  # a beam within the tilt is left as it was
+
+
+def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():
+    # A 40 mm wall 60 mm under a plate's edge: the beam at the view's tilt clears the edge,
+    # and the camera beside the laser clears it too only at the laser's height (a level
+    # scan); scanning up the tilt puts the camera above the beam, the plate in its way.
+    part = overhang_part()
+    centres = part.mesh.triangles_center
+    wall = np.flatnonzero((part.mesh.face_normals[:, 1] < -0.99) & (centres[:, 2] < 0))
+    wall_y, wall_top = centres[wall[0], 1], part.mesh.vertices[part.mesh.faces[wall], 2].max()
+    axis = view_axis(np.array([0.0, -1.0, 0.0]))
+    level = View.looking_along(axis, 1, wall, level=True)
+    along = level.level_direction()
+    assert along is not None and abs(along[2]) < 1e-9  # level in the view frame ...
+    assert abs((np.linalg.inv(level.R)[:3, :3] @ along)[2]) < 1e-9  # ... and the part's
+    assert View.looking_along(UP).level_direction() is None
+    cell = Cell.around(part)
+    planner = make_planner("geometric")
+    held = {}
+    for name, direction in (("level", along), ("up the tilt", np.cross(UP, along))):
+
+        def plan(view_part, view, direction=direction):
+            swaths, traj = plan_scan(
+                view_part, SPEC, planner, direction=direction, cell=cell.rotated(view.R)
+            )
+            return len(swaths), traj
+
+        traj = plan_view(part, level, plan).traj
+        try:
+            m = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE)
+        except ValueError:  # no valid point: the camera saw none of the part
+            held[name] = 0.0
+            continue
+        assert m.coverage_map is not None
+        points = m.coverage_map.points_part
+        on_wall = (np.abs(points[:, 1] - wall_y) < 1e-6) & (points[:, 2] < wall_top)
+        assert on_wall.sum() > 100
+        held[name] = float((m.coverage_map.state[on_wall] == SurfaceState.IN_SPEC).mean())
+    assert held["level"] > 0.8, held
+    assert held["up the tilt"] < 0.3, held

@@ -254,6 +254,7 @@ def choose_views(
     points_per_profile: int = VIEW_CHOICE_FAN_POINTS,
     seed: int = 0,
     seconds: float | None = VIEW_CHOICE_SECONDS,
+    scan_level: bool = True,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -261,7 +262,9 @@ def choose_views(
     candidate view (`candidate_views`) that adds the most, unless it adds less than
     `min_gain` (`MIN_VIEW_GAIN`); when none does, views
     aimed at what a beam could reach and no chosen view holds (`views.missed_views`) join
-    the candidates, `MISSED_ROUNDS` times at most. A panel whose top view reaches the
+    the candidates, `MISSED_ROUNDS` times at most, each also scanned level (`View.level`,
+    with `scan_level`: the direction rule left to the raster's 'auto'), none planned twice.
+    A panel whose top view reaches the
     target (the door) stays one view. The exact cover by as many views among all those
     planned (`cover.max_cover`) is computed for scale (`exact_coverage`), not kept.
     Weighing a view's gain against its profiles as well (at least a quarter of the top
@@ -321,6 +324,7 @@ def choose_views(
     if target_reached():
         return ViewSelection(plans, coverage, 0, chosen)
     candidates = candidate_views(part, spec)
+    tried = {_view_key(v) for v in candidates}
     # The samples on each candidate's faces: the bound on its gain.
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
     evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
@@ -355,8 +359,16 @@ def choose_views(
             more = missed_views(
                 part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
             )
+            # Each also scanned level: a strip under an overhang or down a pocket is seen only
+            # so (the camera beside the laser), but level costs the stepped plate and the
+            # quadrotor 7 and 2 points of their ceiling when every view is scanned so.
+            if scan_level:
+                more += [replace(v, level=True) for v in more if v.level_direction() is not None]
+            # A view planned before would add what it added then: nothing worth a view.
+            more = [v for v in more if _view_key(v) not in tried]
             if not more:
                 break
+            tried |= {_view_key(v) for v in more}
             candidates += more
             on_faces += [np.isin(samples.faces, np.asarray(v.faces)) for v in more]
             continue
@@ -379,6 +391,12 @@ def choose_views(
             exact = None
     left_out = [cov for _, cov in evaluated.values()]
     return ViewSelection(plans, coverage, len(candidates), chosen + left_out, exact, timed_out)
+
+
+def _view_key(view: View) -> tuple[bytes, bytes, bool]:
+    """What makes two proposed views the same view: their axis, region and scan rule."""
+    faces = b"" if view.faces is None else np.sort(np.asarray(view.faces)).tobytes()
+    return np.round(view.axis, 9).tobytes(), faces, view.level
 
 
 def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:
@@ -503,8 +521,16 @@ def plan_views(
     cell = context.cell(part)
 
     def plan(view_part: Part, view: View, progress=None) -> tuple[int, Trajectory]:
+        level = view.level_direction() if view.level and direction == "auto" else None
         swaths, traj = plan_scan(
-            view_part, spec, planner, raster, direction, overlap, progress, cell.rotated(view.R)
+            view_part,
+            spec,
+            planner,
+            raster,
+            direction if level is None else level,
+            overlap,
+            progress,
+            cell.rotated(view.R),
         )
         # The pass lines ride along to the view's record (`join_views`), for the closed loop.
         return len(swaths), replace(traj, meta=traj.meta | {"swaths": swaths})
@@ -513,7 +539,9 @@ def plan_views(
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
-        selection = choose_views(part, spec, plan, coverage_target, seconds=view_seconds)
+        selection = choose_views(
+            part, spec, plan, coverage_target, seconds=view_seconds, scan_level=direction == "auto"
+        )
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})

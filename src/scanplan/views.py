@@ -118,18 +118,22 @@ class View:
 
     index: order of the view; axis: (3,) unit, the view's up (part frame); R: (4, 4) the
     rotation mapping the part frame to the view frame (axis → +Z); faces: (k,) int the
-    faces of its region (None: the whole surface to inspect, the top view).
+    faces of its region (None: the whole surface to inspect, the top view); level: scanned
+    level (`level_direction`) rather than by the raster's direction rule.
     """
 
     index: int
     axis: np.ndarray
     R: np.ndarray
     faces: np.ndarray | None = None
+    level: bool = False
 
     @staticmethod
-    def looking_along(axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None) -> View:
+    def looking_along(
+        axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None, level: bool = False
+    ) -> View:
         axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
-        return View(index, axis, rotation_to_up(axis), faces)
+        return View(index, axis, rotation_to_up(axis), faces, level)
 
     def part(self, part: Part) -> Part:
         """The part in the view frame (`Part.turned`: its ray engine and collision model
@@ -144,6 +148,18 @@ class View:
             region[self.faces] = True
             mask &= region
         return replace(part.turned(self.R), inspect_faces=mask)
+
+    def level_direction(self) -> np.ndarray | None:
+        """The scan direction of a tilted view, in its frame: level in the part frame
+        (across the tilt). The camera sits beside the laser along the scan; scanning level
+        keeps it at the laser's height, so it sees under an overhang and past a rim the beam
+        clears; stepping up the tilt it would look from above or below the beam. None for a
+        view looking straight down."""
+        across = np.cross(UP, self.axis)
+        norm = float(np.linalg.norm(across))
+        if norm < 1e-9:
+            return None
+        return self.R[:3, :3] @ (across / norm)
 
     def to_part_frame(self, traj: Trajectory) -> Trajectory:
         """A trajectory planned in the view frame, back in the part frame (R⁻¹ @ T)."""
