@@ -12,7 +12,6 @@ from scipy.spatial.transform import Rotation
 from helpers import HEMISPHERE, overhang_part
 from scanplan.cell import Cell
 from scanplan.collision import checker_for
-from scanplan.context import PlanContext
 from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import part_from_mesh
 from scanplan.pipeline import plan_scan, plan_views
