@@ -188,7 +188,7 @@ def plan_scan(
     spec: ScanSpec,
     planner: Planner,
     raster: str = "auto",
-    direction: str = "auto",
+    direction: str | np.ndarray = "auto",
     overlap: float = OVERLAP,
     progress: Callable[[int, int], None] | None = None,
     cell: Cell | None = None,
@@ -196,7 +196,8 @@ def plan_scan(
     """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral
     step = line width x (1 − overlap)); 'adaptive' spaces passes by the band of the line that
     stays in spec (SPEC §3b) — it assumes the line rolls with the surface; 'auto' takes
-    adaptive for a planner that rolls, else nominal."""
+    adaptive for a planner that rolls, else nominal. direction: a rule (`swaths.direction_rule`)
+    or a scan direction in the part's frame."""
     if raster not in RASTERS:
         raise ValueError(f"unknown raster {raster!r}; use one of {', '.join(RASTERS)}")
     uphill = None if cell is None or cell.table is None else cell.table.normal
