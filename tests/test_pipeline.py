@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 import scanplan.pipeline as pipeline_module
+import scanplan.view_workers as view_workers_module
 from helpers import HEMISPHERE, fcl_distance, overhang_part
 from scanplan.cli import app
 from scanplan.collision import checker_for
@@ -223,13 +224,15 @@ def test_views_for_what_is_missed_are_also_scanned_level_and_none_is_planned_twi
     monkeypatch,
 ):
     planned = []
-    plan_view = pipeline_module.plan_view
+    plan_view = view_workers_module.plan_view
 
     def recording(part, view, plan):
         planned.append(pipeline_module._view_key(view))
         return plan_view(part, view, plan)
 
-    monkeypatch.setattr(pipeline_module, "plan_view", recording)
+    # Planned here, one at a time, to see each view planned.
+    monkeypatch.setattr(pipeline_module, "view_worker_count", lambda: 0)
+    monkeypatch.setattr(view_workers_module, "plan_view", recording)
     part = overhang_part()
     plans, traj = plan_views(part, SPEC, make_planner("geometric"), "auto")
     assert len(planned) == len(set(planned))

@@ -105,6 +105,10 @@ class Part:
             return vertices
         return vertices[np.unique(np.asarray(self.mesh.faces)[self.inspect_faces])]
 
+    def __getstate__(self) -> dict:
+        # Pickled (for another process) without its ray engine, rebuilt there when first used.
+        return {**self.__dict__, "_engine": None}
+
     @property
     def ray_engine(self) -> RayEngine:
         if self._engine is None and self.turned_from is not None:

@@ -21,7 +21,7 @@ from scanplan.collision import CellObstacles, checker_for
 from scanplan.context import PlanContext
 from scanplan.cover import max_cover
 from scanplan.limits import TooLarge
-from scanplan.metrics import SurfaceState, coverage_spacing_mm, evaluate
+from scanplan.metrics import coverage_spacing_mm, evaluate
 from scanplan.motion import plan_transition, view_transition
 from scanplan.part import Part
 from scanplan.planners import Planner, pass_workers
@@ -38,6 +38,7 @@ from scanplan.robot.links import obstacles_for
 from scanplan.surface import hemisphere_visible_samples, reachable_samples
 from scanplan.swaths import Swath, plan_swaths, swath_record
 from scanplan.trajectory import Trajectory
+from scanplan.view_workers import ViewJudge, ViewWorkers, view_worker_count
 from scanplan.views import (
     PlanView,
     View,
@@ -256,6 +257,7 @@ def choose_views(
     seed: int = 0,
     seconds: float | None = VIEW_CHOICE_SECONDS,
     scan_level: bool = True,
+    workers: int = 0,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -284,9 +286,9 @@ def choose_views(
     region's area not yet in spec) and skipped once that bound is below the best gain found
     (lazy greedy: a view's gain only shrinks as others are chosen). After `seconds` (None:
     no limit) no further candidate is planned: the views chosen by then are kept
-    (`out_of_time`)."""
+    (`out_of_time`). With `workers` (`view_workers.view_worker_count`), candidates are planned
+    on that many processes, each the next one the choice would try: the same views, sooner."""
 
-    hemisphere = PlanContext(spec, views="auto")
     deadline = None if seconds is None else time.perf_counter() + seconds
     timed_out = False
 
@@ -296,89 +298,103 @@ def choose_views(
         timed_out = timed_out or (deadline is not None and time.perf_counter() > deadline)
         return timed_out
 
-    def in_spec_set(vp: ViewPlan) -> np.ndarray:
-        m = evaluate(
-            part, spec, vp.traj, seed, points_per_profile, context=hemisphere, ceiling=False
-        )
-        assert m.coverage_map is not None
-        return m.coverage_map.state == SurfaceState.IN_SPEC
+    judge = ViewJudge(spec, plan, points_per_profile, seed)
+    # Started now: the workers get ready while the top view is planned here.
+    with ViewWorkers(part, judge, workers) as pool:
+        # The samples the views are judged on (`evaluate` draws the same).
+        samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
+        try:
+            top, covered = judge(part, View.looking_along(UP, 0))
+            plans, coverage, chosen = [top], [float(covered.mean())], [covered]
+        except TooLarge:  # the user's numbers, not the view's fault
+            raise
+        except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
+            covered = np.zeros(len(samples.points), bool)
+            plans, coverage, chosen = [], [0.0], []
+        reachable: np.ndarray | None = None
 
-    # The samples the views are judged on (`evaluate` draws the same).
-    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
-    try:
-        top = plan_view(part, View.looking_along(UP, 0), plan)
-        covered = in_spec_set(top)
-        plans, coverage, chosen = [top], [float(covered.mean())], [covered]
-    except TooLarge:  # the user's numbers, not the view's fault
-        raise
-    except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
-        covered = np.zeros(len(samples.points), bool)
-        plans, coverage, chosen = [], [0.0], []
-    reachable: np.ndarray | None = None
+        def target_reached() -> bool:
+            # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
+            # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
+            # under the ceiling then stopped it at 6 views (0.61) where 16 hold 0.77.
+            return coverage[-1] >= coverage_target
 
-    def target_reached() -> bool:
-        # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
-        # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
-        # under the ceiling then stopped it at 6 views (0.61) where 16 hold 0.77.
-        return coverage[-1] >= coverage_target
+        if target_reached():
+            return ViewSelection(plans, coverage, 0, chosen)
+        candidates = candidate_views(part, spec)
+        tried = {_view_key(v) for v in candidates}
+        # The samples on each candidate's faces: the bound on its gain.
+        on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
+        evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
+        # Asked of the workers, not yet taken: with workers, the next candidates the choice
+        # would try (those not planned yet with the largest bounds), one per worker, so the
+        # workers plan ahead of it. Asking for every candidate at once wastes more than it gains:
+        # the lazy order plans 7 of the heightfield's views where every one is 30.
+        pending: dict[int, Future[tuple[ViewPlan, np.ndarray]]] = {}
+        rounds = 0
 
-    if target_reached():
-        return ViewSelection(plans, coverage, 0, chosen)
-    candidates = candidate_views(part, spec)
-    tried = {_view_key(v) for v in candidates}
-    # The samples on each candidate's faces: the bound on its gain.
-    on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
-    evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
-    rounds = 0
-    while len(plans) < max_views and not target_reached():
-        bounds = [float((m & ~covered).mean()) for m in on_faces]
-        best: tuple[float, int] | None = None
-        for i in np.argsort(bounds)[::-1]:
-            if bounds[i] < min_gain or (best is not None and bounds[i] <= best[0]):
-                break
-            if i not in evaluated:
-                if out_of_time():
+        def ask(i: int) -> None:
+            pending[i] = pool.submit(replace(candidates[i], index=len(plans)))
+
+        while len(plans) < max_views and not target_reached():
+            bounds = [float((m & ~covered).mean()) for m in on_faces]
+            order = [int(i) for i in np.argsort(bounds)[::-1] if bounds[i] >= min_gain]
+            best: tuple[float, int] | None = None
+            for i in order:
+                if best is not None and bounds[i] <= best[0]:
                     break
-                try:
-                    vp = plan_view(part, replace(candidates[i], index=len(plans)), plan)
-                    evaluated[i] = (vp, in_spec_set(vp))
-                except TooLarge:  # the user's numbers, not the view's fault
-                    raise
-                except ValueError:  # a view whose passes see nothing of the part
-                    on_faces[i] = np.zeros_like(on_faces[i])
-                    continue
-            gain = float((evaluated[i][1] & ~covered).mean())
-            if best is None or gain > best[0]:
-                best = (gain, int(i))
-        if best is None or best[0] < min_gain:
-            # Nothing left among the candidates: aim new ones at what is still missed.
-            if rounds == MISSED_ROUNDS or out_of_time():
-                break
-            rounds += 1
-            if reachable is None:
-                reachable = reachable_samples(part, samples, spec.tol_angle_rad)
-            more = missed_views(
-                part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
-            )
-            # Each also scanned level: a strip under an overhang or down a pocket is seen only
-            # so (the camera beside the laser), but level costs the stepped plate and the
-            # quadrotor 7 and 2 points of their ceiling when every view is scanned so.
-            if scan_level:
-                more += [replace(v, level=True) for v in more if v.level_direction() is not None]
-            # A view planned before would add what it added then: nothing worth a view.
-            more = [v for v in more if _view_key(v) not in tried]
-            if not more:
-                break
-            tried |= {_view_key(v) for v in more}
-            candidates += more
-            on_faces += [np.isin(samples.faces, np.asarray(v.faces)) for v in more]
-            continue
-        vp, cov = evaluated.pop(best[1])
-        on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
-        plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
-        covered |= cov
-        chosen.append(cov)
-        coverage.append(float(covered.mean()))
+                if i not in evaluated:
+                    if i not in pending:
+                        if out_of_time():
+                            break
+                        ask(i)
+                    elif not pending[i].done() and out_of_time():
+                        break
+                    ahead = [j for j in order if j not in evaluated][:workers]
+                    for j in ahead:
+                        if j not in pending and not out_of_time():
+                            ask(j)
+                    try:
+                        evaluated[i] = pending.pop(i).result()
+                    except TooLarge:  # the user's numbers, not the view's fault
+                        raise
+                    except ValueError:  # a view whose passes see nothing of the part
+                        on_faces[i] = np.zeros_like(on_faces[i])
+                        continue
+                gain = float((evaluated[i][1] & ~covered).mean())
+                if best is None or gain > best[0]:
+                    best = (gain, i)
+            if best is None or best[0] < min_gain:
+                # Nothing left among the candidates: aim new ones at what is still missed.
+                if rounds == MISSED_ROUNDS or out_of_time():
+                    break
+                rounds += 1
+                if reachable is None:
+                    reachable = reachable_samples(part, samples, spec.tol_angle_rad)
+                more = missed_views(
+                    part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
+                )
+                # Each also scanned level: a strip under an overhang or down a pocket is seen
+                # only so (the camera beside the laser), but level costs the stepped plate and
+                # the quadrotor 7 and 2 points of their ceiling when every view is scanned so.
+                if scan_level:
+                    more += [
+                        replace(v, level=True) for v in more if v.level_direction() is not None
+                    ]
+                # A view planned before would add what it added then: nothing worth a view.
+                more = [v for v in more if _view_key(v) not in tried]
+                if not more:
+                    break
+                tried |= {_view_key(v) for v in more}
+                candidates += more
+                on_faces += [np.isin(samples.faces, np.asarray(v.faces)) for v in more]
+                continue
+            vp, cov = evaluated.pop(best[1])
+            on_faces[best[1]] = np.zeros_like(on_faces[best[1]])
+            plans.append(replace(vp, view=replace(vp.view, index=len(plans))))
+            covered |= cov
+            chosen.append(cov)
+            coverage.append(float(covered.mean()))
     if not plans:
         raise ValueError(f"no view of part {part.name} sees its surface to inspect")
     exact = None
@@ -471,6 +487,37 @@ def join_views(
     return kept, replace(out, meta=meta)
 
 
+@dataclass(frozen=True)
+class ViewRaster:
+    """How `plan_views` plans a view (a `views.PlanView`): `plan_scan` of the part turned
+    into the view's frame, in the cell turned with it; a level view (`View.level`) scanned
+    level unless a direction was given. Picklable, for the view workers."""
+
+    spec: ScanSpec
+    planner: Planner
+    raster: str
+    direction: str
+    overlap: float
+    cell: Cell
+
+    def __call__(
+        self, view_part: Part, view: View, progress: Callable[[int, int], None] | None = None
+    ) -> tuple[int, Trajectory]:
+        level = view.level_direction() if view.level and self.direction == "auto" else None
+        swaths, traj = plan_scan(
+            view_part,
+            self.spec,
+            self.planner,
+            self.raster,
+            self.direction if level is None else level,
+            self.overlap,
+            progress,
+            self.cell.rotated(view.R),
+        )
+        # The pass lines ride along to the view's record (`join_views`), for the closed loop.
+        return len(swaths), replace(traj, meta=traj.meta | {"swaths": swaths})
+
+
 def default_views(planner: Planner) -> str:
     """`--views` when none is given: auto for a planner that rolls (as `--raster auto`
     adapts its passes), top for the paper's pitch-only planners and a v0 policy, so the
@@ -521,27 +568,20 @@ def plan_views(
     part = part.with_roi(roi)
     cell = context.cell(part)
 
-    def plan(view_part: Part, view: View, progress=None) -> tuple[int, Trajectory]:
-        level = view.level_direction() if view.level and direction == "auto" else None
-        swaths, traj = plan_scan(
-            view_part,
-            spec,
-            planner,
-            raster,
-            direction if level is None else level,
-            overlap,
-            progress,
-            cell.rotated(view.R),
-        )
-        # The pass lines ride along to the view's record (`join_views`), for the closed loop.
-        return len(swaths), replace(traj, meta=traj.meta | {"swaths": swaths})
+    plan = ViewRaster(spec, planner, raster, direction, overlap, cell)
 
     start = time.perf_counter()
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
         selection = choose_views(
-            part, spec, plan, coverage_target, seconds=view_seconds, scan_level=direction == "auto"
+            part,
+            spec,
+            plan,
+            coverage_target,
+            seconds=view_seconds,
+            scan_level=direction == "auto",
+            workers=view_worker_count(),
         )
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)

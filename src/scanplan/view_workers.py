@@ -1,0 +1,122 @@
+"""Candidate views planned and judged on worker processes, one per core (`ViewWorkers`): the
+view choice asks for the next few candidates in the order it would try them, and each worker
+holds the part, its ray engine built once, for the whole choice. Passes share one process's
+GIL (threads gave the view choice nothing); processes do not.
+
+On one core, or in a process that is itself a worker (a catalogue's part, the demo's second
+process), the views are planned in this process, one at a time.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import threading
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanplan.context import PlanContext
+from scanplan.metrics import SurfaceState, evaluate
+from scanplan.part import Part
+from scanplan.quantities import ScanSpec
+from scanplan.views import PlanView, View, ViewPlan, plan_view
+
+
+@dataclass(frozen=True)
+class ViewJudge:
+    """A view planned by `plan` (on the part turned into its frame: `views.plan_view`) and
+    judged: its in-spec set on the samples of the surface seen from the upper hemisphere
+    (`evaluate` with a fan of `points_per_profile` columns and samples drawn with `seed`).
+    Picklable when `plan` is."""
+
+    spec: ScanSpec
+    plan: PlanView
+    points_per_profile: int
+    seed: int = 0
+
+    def __call__(self, part: Part, view: View) -> tuple[ViewPlan, np.ndarray]:
+        planned = plan_view(part, view, self.plan)
+        m = evaluate(
+            part,
+            self.spec,
+            planned.traj,
+            self.seed,
+            self.points_per_profile,
+            context=PlanContext(self.spec, views="auto"),
+            ceiling=False,
+        )
+        assert m.coverage_map is not None
+        return planned, m.coverage_map.state == SurfaceState.IN_SPEC
+
+
+def view_worker_count() -> int:
+    """Worker processes to plan views on: one per core; none (plan here) on one core or in
+    a process that is itself a worker, whose parent already keeps the cores busy."""
+    if multiprocessing.parent_process() is not None:
+        return 0
+    cores = os.cpu_count() or 1
+    return cores if cores > 1 else 0
+
+
+class ViewWorkers:
+    """`submit(view)`: a future of `judge(part, view)`, run on `workers` spawned processes
+    in the order submitted (0: here, when submitted). Leaving the `with` block drops the
+    views not started and waits for those running."""
+
+    def __init__(self, part: Part, judge: ViewJudge, workers: int) -> None:
+        self._part, self._judge = part, judge
+        self._pool: ProcessPoolExecutor | None = None
+        if workers:
+            # Forked from a fresh server process that has imported this module once, not from
+            # this one (it already runs Embree's and the passes' threads), nor spawned: a
+            # spawned worker imports numpy, trimesh and Embree while this process waits to
+            # hand it the part (1.3 s a worker here).
+            context = multiprocessing.get_context("forkserver")
+            context.set_forkserver_preload([__name__])
+            self._pool = ProcessPoolExecutor(
+                workers,
+                mp_context=context,
+                initializer=_start_worker,
+                initargs=(part, judge),
+            )
+            # The workers start (a few seconds' wait for the first submit) beside the caller's
+            # next work, not in its way.
+            self._warm_up = threading.Thread(target=self._pool.submit, args=(int,), daemon=True)
+            self._warm_up.start()
+
+    def __enter__(self) -> ViewWorkers:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self._pool is not None:
+            self._warm_up.join()
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def submit(self, view: View) -> Future[tuple[ViewPlan, np.ndarray]]:
+        if self._pool is not None:
+            return self._pool.submit(_judge_in_worker, view)
+        done: Future[tuple[ViewPlan, np.ndarray]] = Future()
+        try:
+            done.set_result(self._judge(self._part, view))
+        except Exception as exc:  # raised by result(), as a worker's would be
+            done.set_exception(exc)
+        return done
+
+
+# A worker's part and judge, set once when it starts.
+_WORKER: tuple[Part, ViewJudge] | None = None
+
+
+def _start_worker(part: Part, judge: ViewJudge) -> None:
+    global _WORKER
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _WORKER = (part, judge)
+
+
+def _judge_in_worker(view: View) -> tuple[ViewPlan, np.ndarray]:
+    assert _WORKER is not None
+    part, judge = _WORKER
+    return judge(part, view)

@@ -1,0 +1,62 @@
+"""Views planned on worker processes (view_workers): the same plan and in-spec set as planned
+here, a failing view's error raised where it is taken, and a part pickled for a worker without
+its ray engine."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from helpers import overhang_part
+from scanplan.cell import Cell
+from scanplan.pipeline import ViewRaster
+from scanplan.planners import make_planner
+from scanplan.quantities import OVERLAP, UP, ScanSpec
+from scanplan.view_workers import ViewJudge, ViewWorkers
+from scanplan.views import View, view_axis
+
+SPEC = ScanSpec()
+
+
+def test_a_part_is_pickled_without_its_ray_engine_and_answers_rays_the_same():
+    part = overhang_part()
+    starts = np.array([[0.0, 0.0, 200.0], [0.0, -240.0, 200.0], [0.0, -400.0, 200.0]])
+    down = np.tile([0.0, 0.0, -1.0], (3, 1))
+    hits = part.ray_engine.first_hit(starts, down)
+    copy = pickle.loads(pickle.dumps(part))
+    assert copy._engine is None  # rebuilt where it is used
+    again = copy.ray_engine.first_hit(starts, down)
+    assert [np.array_equal(a, b) for a, b in zip(hits, again, strict=True)] == [True] * len(hits)
+
+
+def test_views_planned_on_a_worker_are_those_planned_here():
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, level=True)
+    views = [View.looking_along(UP, 0), side]
+    here = [judge(part, v) for v in views]
+    with ViewWorkers(part, judge, workers=1) as pool:
+        futures = [pool.submit(v) for v in views]
+        there = [f.result() for f in futures]
+    for (plan_here, set_here), (plan_there, set_there) in zip(here, there, strict=True):
+        assert np.array_equal(plan_here.traj.poses, plan_there.traj.poses)
+        assert plan_here.passes == plan_there.passes
+        assert np.array_equal(set_here, set_there)
+        assert set_here.any()
+
+
+def test_a_view_that_sees_nothing_raises_where_it_is_taken():
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    # A view of the plate's bottom face, turned to look up at it: nothing of it to scan.
+    below = np.flatnonzero(part.mesh.face_normals[:, 2] < -0.99)
+    blind = View.looking_along(UP, 1, below)
+    for workers in (0, 1):
+        with ViewWorkers(part, judge, workers) as pool:
+            failed = pool.submit(blind)
+            with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
+                failed.result()
