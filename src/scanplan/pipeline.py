@@ -258,6 +258,7 @@ def choose_views(
     seconds: float | None = VIEW_CHOICE_SECONDS,
     scan_level: bool = True,
     workers: int = 0,
+    scheduler: str | None = None,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -287,7 +288,8 @@ def choose_views(
     (lazy greedy: a view's gain only shrinks as others are chosen). After `seconds` (None:
     no limit) no further candidate is planned: the views chosen by then are kept
     (`out_of_time`). With `workers` (`view_workers.view_worker_count`), candidates are planned
-    on that many processes, each the next one the choice would try: the same views, sooner."""
+    on that many processes, each the next one the choice would try: the same views, sooner;
+    with `scheduler`, as Dask tasks on that cluster."""
 
     deadline = None if seconds is None else time.perf_counter() + seconds
     timed_out = False
@@ -300,7 +302,7 @@ def choose_views(
 
     judge = ViewJudge(spec, plan, points_per_profile, seed)
     # Started now: the workers get ready while the top view is planned here.
-    with ViewWorkers(part, judge, workers) as pool:
+    with ViewWorkers(part, judge, workers, scheduler) as pool:
         # The samples the views are judged on (`evaluate` draws the same).
         samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
         try:
@@ -350,7 +352,7 @@ def choose_views(
                         ask(i)
                     elif not pending[i].done() and out_of_time():
                         break
-                    ahead = [j for j in order if j not in evaluated][:workers]
+                    ahead = [j for j in order if j not in evaluated][: pool.width]
                     for j in ahead:
                         if j not in pending and not out_of_time():
                             ask(j)
@@ -541,6 +543,7 @@ def plan_views(
     fixture_units: str = "mm",
     arm: Arm | None = None,
     view_seconds: float | None = VIEW_CHOICE_SECONDS,
+    scheduler: str | None = None,
 ) -> tuple[list[ViewPlan], Trajectory]:
     """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text),
     in its cell (`cell.Cell.around`: the table and the fixture files), by views: 'top' the
@@ -549,8 +552,15 @@ def plan_views(
     overlap as there) on the rotated part. Returns the views and the joined trajectory
     (`join_views`), whose plan time is the whole choice's and whose `meta["context"]` records
     what it was planned under (`context.PlanContext`). progress(done, total): the top
-    view's passes. With an `arm`, the plan is made flyable by it (`fit_arm`)."""
+    view's passes. With an `arm`, the plan is made flyable by it (`fit_arm`). scheduler: a
+    Dask scheduler (tcp://HOST:PORT) the candidate views are planned on (None: the cores
+    here)."""
     views = default_views(planner) if views is None else views
+    if scheduler is not None and views == "top":
+        raise ValueError(
+            "--scheduler plans the candidate views of --views auto on the cluster; this plan "
+            "is the single top view"
+        )
     context = PlanContext(
         spec,
         planner.limits,
@@ -582,6 +592,7 @@ def plan_views(
             seconds=view_seconds,
             scan_level=direction == "auto",
             workers=view_worker_count(),
+            scheduler=scheduler,
         )
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)

@@ -4,7 +4,8 @@ holds the part, its ray engine built once, for the whole choice. Passes share on
 GIL (threads gave the view choice nothing); processes do not.
 
 On one core, or in a process that is itself a worker (a catalogue's part, the demo's second
-process), the views are planned in this process, one at a time.
+process), the views are planned in this process, one at a time. With a Dask scheduler
+(`plan --scheduler` for one part), they are Dask tasks on its cluster.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import signal
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +25,9 @@ from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
 from scanplan.views import PlanView, View, ViewPlan, plan_view
+
+# How long to wait for a Dask scheduler to answer.
+CONNECT_SECONDS = 10.0
 
 
 @dataclass(frozen=True)
@@ -62,14 +67,22 @@ def view_worker_count() -> int:
 
 
 class ViewWorkers:
-    """`submit(view)`: a future of `judge(part, view)`, run on `workers` spawned processes
-    in the order submitted (0: here, when submitted). Leaving the `with` block drops the
-    views not started and waits for those running."""
+    """`submit(view)`: a future of `judge(part, view)`, run on `workers` worker processes
+    in the order submitted (0: here, when submitted), or with `scheduler` (tcp://HOST:PORT)
+    as Dask tasks on that cluster, the part and judge sent to each of its workers once.
+    `width`: how many views are planned at once. Leaving the `with` block drops the views
+    not started and waits for those running (here; a cluster's are cancelled)."""
 
-    def __init__(self, part: Part, judge: ViewJudge, workers: int) -> None:
+    def __init__(
+        self, part: Part, judge: ViewJudge, workers: int, scheduler: str | None = None
+    ) -> None:
         self._part, self._judge = part, judge
         self._pool: ProcessPoolExecutor | None = None
-        if workers:
+        self._client: Any = None
+        self.width = max(1, workers)
+        if scheduler is not None:
+            self._connect(scheduler)
+        elif workers:
             # Forked from a fresh server process that has imported this module once, not from
             # this one (it already runs Embree's and the passes' threads), nor spawned: a
             # spawned worker imports numpy, trimesh and Embree while this process waits to
@@ -90,12 +103,36 @@ class ViewWorkers:
     def __enter__(self) -> ViewWorkers:
         return self
 
+    def _connect(self, scheduler: str) -> None:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise ValueError(
+                "--scheduler needs the cluster extra: pip install 'scanplan[cluster]'"
+            ) from None
+        try:
+            self._client = Client(scheduler, timeout=CONNECT_SECONDS)
+        except (OSError, TimeoutError) as exc:  # no scheduler there
+            raise ValueError(f"--scheduler {scheduler}: {exc}".splitlines()[0]) from None
+        threads = sum(self._client.nthreads().values())
+        if threads == 0:
+            self._client.close()
+            raise ValueError(f"--scheduler {scheduler}: the cluster has no worker")
+        self.width = threads
+        # Sent once to every worker; each task is given the workers' own copy, whose ray
+        # engine is built by the first task there and kept.
+        self._state = self._client.scatter((self._part, self._judge), broadcast=True)
+
     def __exit__(self, *exc_info: object) -> None:
         if self._pool is not None:
             self._warm_up.join()
             self._pool.shutdown(wait=True, cancel_futures=True)
+        if self._client is not None:
+            self._client.close()
 
-    def submit(self, view: View) -> Future[tuple[ViewPlan, np.ndarray]]:
+    def submit(self, view: View) -> Any:
+        if self._client is not None:
+            return self._client.submit(_judge_with, self._state, view, pure=False)
         if self._pool is not None:
             return self._pool.submit(_judge_in_worker, view)
         done: Future[tuple[ViewPlan, np.ndarray]] = Future()
@@ -118,5 +155,9 @@ def _start_worker(part: Part, judge: ViewJudge) -> None:
 
 def _judge_in_worker(view: View) -> tuple[ViewPlan, np.ndarray]:
     assert _WORKER is not None
-    part, judge = _WORKER
+    return _judge_with(_WORKER, view)
+
+
+def _judge_with(state: tuple[Part, ViewJudge], view: View) -> tuple[ViewPlan, np.ndarray]:
+    part, judge = state
     return judge(part, view)

@@ -11,7 +11,7 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-from helpers import BLOCK_BOX, plate_with_block, run_cli, straight
+from helpers import BLOCK_BOX, overhang_part, plate_with_block, run_cli, straight
 from scanplan.cli import app
 from scanplan.metrics import SurfaceState
 from scanplan.report.maps import COVERAGE_COLOURS
@@ -361,7 +361,34 @@ def test_plan_a_folder_of_parts_on_two_processes_and_on_dask(tmp_path):
         assert result.exit_code == 2 and message in result.stderr
     alone_scheduler = ["plan", str(folder / "block.stl"), "-o", str(alone), "--scheduler", "x"]
     result = runner.invoke(app, alone_scheduler)
-    assert result.exit_code == 2 and "give a folder or a .txt list as the part" in result.stderr
+    assert result.exit_code == 2 and "expected tcp://HOST:PORT" in result.stderr
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
+)
+def test_one_part_s_views_planned_on_dask_are_those_planned_here(tmp_path):
+    from dask.distributed import LocalCluster
+
+    part = tmp_path / "overhang.stl"
+    overhang_part().mesh.export(part)
+    here = tmp_path / "here.json"
+    assert runner.invoke(app, ["plan", str(part), "-o", str(here), "-q"]).exit_code == 0
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=True, host="127.0.0.1",
+        dashboard_address=":0",
+    ) as cluster:  # fmt: skip
+        on_dask = tmp_path / "dask.json"
+        args = ["plan", str(part), "-o", str(on_dask), "--scheduler", cluster.scheduler_address]
+        result = runner.invoke(app, [*args, "-q"])
+        assert result.exit_code == 0, result.output
+        top = ["plan", str(part), "-o", str(tmp_path / "top.json"), "--views", "top"]
+        refused = runner.invoke(app, [*top, "--scheduler", cluster.scheduler_address])
+    assert refused.exit_code == 2
+    assert "--scheduler plans the candidate views of --views auto" in refused.stderr
+    planned, there = read_trajectory(here), read_trajectory(on_dask)
+    assert len(planned.meta["views"]) > 2
+    assert np.array_equal(planned.poses, there.poses)
 
 
 def test_plan_a_list_of_parts_as_a_folder_is_planned(tmp_path):

@@ -210,8 +210,9 @@ PlanSchedulerOpt = Annotated[
     str | None,
     typer.Option(
         "--scheduler",
-        help="a catalogue of parts (a folder or a .txt list): plan them on the Dask scheduler "
-        "tcp://HOST:8786 (default: every core here)",
+        help="plan on the Dask scheduler tcp://HOST:8786 (default: every core here): a "
+        "catalogue's parts (a folder or a .txt list), or one part's candidate views "
+        "(--views auto)",
         show_default=False,
     ),
 ]
@@ -241,6 +242,7 @@ class PlanJob:
     tcp: str | None
     part_pose: str | None
     view_seconds: float = VIEW_CHOICE_SECONDS
+    scheduler: str | None = None  # one part's candidate views on this Dask scheduler
 
 
 @user_errors
@@ -292,9 +294,10 @@ def plan_cmd(
         plan_catalogue(job, scheduler, quiet)
         return
     if scheduler is not None:
-        raise ValueError(
-            "--scheduler plans a catalogue of parts: give a folder or a .txt list as the part"
-        )
+        from scanplan.cli.training import check_cluster  # deferred as in evaluate
+
+        check_cluster(scheduler, None)
+        job = replace(job, scheduler=scheduler)
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     with progress_bar(f"planning ({planner})", quiet) as progress:
@@ -336,6 +339,7 @@ def run_plan_job(
         fixture_units=job.units,
         arm=arm,
         view_seconds=job.view_seconds,
+        scheduler=job.scheduler,
     )
     (write_json if output.suffix.lower() == ".json" else write_csv)(traj, output)
     n_view = f"{len(plans)} view{'s' * (len(plans) > 1)}, "
