@@ -342,7 +342,7 @@ def choose_views(
             bounds = [float((m & ~covered).mean()) for m in on_faces]
             order = [int(i) for i in np.argsort(bounds)[::-1] if bounds[i] >= min_gain]
             best: tuple[float, int] | None = None
-            for i in order:
+            for rank, i in enumerate(order):
                 if best is not None and bounds[i] <= best[0]:
                     break
                 if i not in evaluated:
@@ -352,7 +352,8 @@ def choose_views(
                         ask(i)
                     elif not pending[i].done() and out_of_time():
                         break
-                    ahead = [j for j in order if j not in evaluated][: pool.width]
+                    # From this one on: those before it were planned, or failed.
+                    ahead = [j for j in order[rank:] if j not in evaluated][: pool.width]
                     for j in ahead:
                         if j not in pending and not out_of_time():
                             ask(j)
