@@ -301,43 +301,44 @@ def choose_views(
         return timed_out
 
     judge = ViewJudge(spec, plan, points_per_profile, seed)
-    # Started now: the workers get ready while the top view is planned here.
+    # The samples the views are judged on (`evaluate` draws the same).
+    samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
+    try:
+        top, covered = judge(part, View.looking_along(UP, 0))
+        plans, coverage, chosen = [top], [float(covered.mean())], [covered]
+    except TooLarge:  # the user's numbers, not the view's fault
+        raise
+    except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
+        covered = np.zeros(len(samples.points), bool)
+        plans, coverage, chosen = [], [0.0], []
+    reachable: np.ndarray | None = None
+
+    def target_reached() -> bool:
+        # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
+        # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
+        # under the ceiling then stopped it at 6 views (0.61) where 16 hold 0.77.
+        return coverage[-1] >= coverage_target
+
+    if target_reached():
+        return ViewSelection(plans, coverage, 0, chosen)
+    candidates = candidate_views(part, spec)
+    tried = {_view_key(v) for v in candidates}
+    # The samples on each candidate's faces: the bound on its gain.
+    on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
+    evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
+    # Asked of the workers, not yet taken: with workers, the next candidates the choice
+    # would try (those not planned yet with the largest bounds), one per worker, so the
+    # workers plan ahead of it. Asking for every candidate at once wastes more than it gains:
+    # the lazy order plans 7 of the heightfield's views where every one is 30.
+    pending: dict[int, Future[tuple[ViewPlan, np.ndarray]]] = {}
+    rounds = 0
+
+    def ask(i: int) -> None:
+        pending[i] = pool.submit(replace(candidates[i], index=len(plans)))
+
+    # Started only now: a part whose top view is enough (the door) needs no worker, and
+    # starting them cost the demo 10 s of its 60 beside its second process.
     with ViewWorkers(part, judge, workers, scheduler) as pool:
-        # The samples the views are judged on (`evaluate` draws the same).
-        samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
-        try:
-            top, covered = judge(part, View.looking_along(UP, 0))
-            plans, coverage, chosen = [top], [float(covered.mean())], [covered]
-        except TooLarge:  # the user's numbers, not the view's fault
-            raise
-        except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
-            covered = np.zeros(len(samples.points), bool)
-            plans, coverage, chosen = [], [0.0], []
-        reachable: np.ndarray | None = None
-
-        def target_reached() -> bool:
-            # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
-            # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
-            # under the ceiling then stopped it at 6 views (0.61) where 16 hold 0.77.
-            return coverage[-1] >= coverage_target
-
-        if target_reached():
-            return ViewSelection(plans, coverage, 0, chosen)
-        candidates = candidate_views(part, spec)
-        tried = {_view_key(v) for v in candidates}
-        # The samples on each candidate's faces: the bound on its gain.
-        on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
-        evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
-        # Asked of the workers, not yet taken: with workers, the next candidates the choice
-        # would try (those not planned yet with the largest bounds), one per worker, so the
-        # workers plan ahead of it. Asking for every candidate at once wastes more than it gains:
-        # the lazy order plans 7 of the heightfield's views where every one is 30.
-        pending: dict[int, Future[tuple[ViewPlan, np.ndarray]]] = {}
-        rounds = 0
-
-        def ask(i: int) -> None:
-            pending[i] = pool.submit(replace(candidates[i], index=len(plans)))
-
         while len(plans) < max_views and not target_reached():
             bounds = [float((m & ~covered).mean()) for m in on_faces]
             order = [int(i) for i in np.argsort(bounds)[::-1] if bounds[i] >= min_gain]

@@ -95,8 +95,8 @@ class ViewWorkers:
                 initializer=_start_worker,
                 initargs=(part, judge),
             )
-            # The workers start (a few seconds' wait for the first submit) beside the caller's
-            # next work, not in its way.
+            # The workers start (about a second before the first submit returns) beside the
+            # caller's next work, not in its way.
             self._warm_up = threading.Thread(target=self._pool.submit, args=(int,), daemon=True)
             self._warm_up.start()
 
