@@ -7,13 +7,19 @@ mm, resting on z = 0:
   on it with a bowl-shaped cavity 70 mm deep, ribs standing on the flange against the body,
   bolt bosses at the flange's corners.
 
-Both are heightfields over a grid (vertical walls, no overhangs), so they are watertight by
-construction (`scanplan.parts.heightfield.heightfield_solid`).
+These two are heightfields over a grid (vertical walls, no overhangs), so they are
+watertight by construction (`scanplan.parts.heightfield.heightfield_solid`). One more has
+overhangs, made of boxes (closed solids that touch, not merged: rays and the body check see
+the same surface):
+
+- `slotted`: a slotted holder: a 240 x 160 x 30 mm block with two T-rails along it, each a
+  20 mm web under a 40 mm wide cap, so the webs' walls lie 10 mm under the caps' edges.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 
 from scanplan.part import Part, part_from_mesh
 from scanplan.parts.heightfield import heightfield_solid
@@ -51,4 +57,17 @@ def housing() -> Part:
     return part_from_mesh(heightfield_solid(xs, ys, z), "housing")
 
 
-KINDS = {"heightfield": heightfield, "housing": housing}
+def slotted() -> Part:
+    boxes = [((120.0, 80.0, 15.0), (240.0, 160.0, 30.0))]  # the block: centre, extents
+    for y in (45.0, 115.0):
+        boxes.append(((120.0, y, 42.5), (240.0, 20.0, 25.0)))  # the web
+        boxes.append(((120.0, y, 60.0), (240.0, 40.0, 10.0)))  # the cap over it
+    meshes = []
+    for centre, extents in boxes:
+        box = trimesh.creation.box(extents=extents)
+        box.apply_translation(centre)
+        meshes.append(box)
+    return part_from_mesh(trimesh.util.concatenate(meshes), "slotted")
+
+
+KINDS = {"heightfield": heightfield, "housing": housing, "slotted": slotted}
