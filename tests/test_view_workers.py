@@ -4,7 +4,10 @@ its ray engine."""
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import pickle
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -60,3 +63,30 @@ def test_a_view_that_sees_nothing_raises_where_it_is_taken():
             failed = pool.submit(blind)
             with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
                 failed.result()
+
+
+@dataclass(frozen=True)
+class DiesInAWorker:
+    """A view raster whose worker process dies on its first view (killed, out of memory)."""
+
+    raster: ViewRaster
+
+    def __call__(self, view_part, view):
+        if multiprocessing.parent_process() is not None:
+            os._exit(1)
+        return self.raster(view_part, view)
+
+
+def test_a_view_whose_worker_dies_is_planned_here_and_the_rest_too():
+    part = overhang_part()
+    raster = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, DiesInAWorker(raster), points_per_profile=64)
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, level=True)
+    here = judge(part, side)
+    with ViewWorkers(part, judge, workers=1) as pool:
+        lost = pool.submit(side)
+        with pytest.warns(UserWarning, match="view worker stopped"):
+            planned, in_spec = lost.result()
+        later = pool.submit(side).result()  # no worker left: planned here
+    assert np.array_equal(planned.traj.poses, here[0].traj.poses)
+    assert np.array_equal(in_spec, here[1]) and np.array_equal(later[1], here[1])

@@ -556,7 +556,8 @@ def plan_views(
     what it was planned under (`context.PlanContext`). progress(done, total): the top
     view's passes. With an `arm`, the plan is made flyable by it (`fit_arm`). scheduler: a
     Dask scheduler (tcp://HOST:PORT) the candidate views are planned on (None: the cores
-    here)."""
+    here; the workers import the calling script, so a script keeps its call under
+    `if __name__ == "__main__":`, Python's rule for any worker process)."""
     views = default_views(planner) if views is None else views
     if scheduler is not None and views == "top":
         raise ValueError(

@@ -14,7 +14,9 @@ import multiprocessing
 import os
 import signal
 import threading
+import warnings
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
@@ -134,13 +136,47 @@ class ViewWorkers:
         if self._client is not None:
             return self._client.submit(_judge_with, self._state, view, pure=False)
         if self._pool is not None:
-            return self._pool.submit(_judge_in_worker, view)
+            try:
+                return _OrHere(self._pool.submit(_judge_in_worker, view), self, view)
+            except BrokenProcessPool:
+                self._lost_workers()
         done: Future[tuple[ViewPlan, np.ndarray]] = Future()
         try:
             done.set_result(self._judge(self._part, view))
         except Exception as exc:  # raised by result(), as a worker's would be
             done.set_exception(exc)
         return done
+
+    def instead(self, view: View) -> tuple[ViewPlan, np.ndarray]:
+        """`view` planned here: the worker that had it died."""
+        self._lost_workers()
+        return self._judge(self._part, view)
+
+    def _lost_workers(self) -> None:
+        """A worker died (killed, out of memory): the views left are planned here."""
+        if self._pool is not None:
+            warnings.warn(
+                "a view worker stopped; the views left are planned in this process",
+                stacklevel=3,
+            )
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+
+
+class _OrHere:
+    """A worker's future whose result, if the worker died, is planned here instead."""
+
+    def __init__(self, future: Future, workers: ViewWorkers, view: View) -> None:
+        self._future, self._workers, self._view = future, workers, view
+
+    def done(self) -> bool:
+        return self._future.done()
+
+    def result(self) -> tuple[ViewPlan, np.ndarray]:
+        try:
+            return self._future.result()
+        except BrokenProcessPool:
+            return self._workers.instead(self._view)
 
 
 # A worker's part and judge, set once when it starts.
