@@ -315,3 +315,17 @@ def overhang_part() -> Part:
     block = trimesh.creation.box((200.0, 380.0, 40.0))
     block.apply_translation((0, 0, -20.0))
     return part_from_mesh(trimesh.util.concatenate([plate, block]), "overhang")
+
+
+def loopback_cluster(threads: int = 1):
+    """A Dask cluster of one worker process on this machine, for the --scheduler tests
+    (dask.distributed imported here: the tests that call this skip without it)."""
+    from dask.distributed import LocalCluster
+
+    return LocalCluster(
+        n_workers=1,
+        threads_per_worker=threads,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=":0",
+    )

@@ -11,7 +11,14 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-from helpers import BLOCK_BOX, overhang_part, plate_with_block, run_cli, straight
+from helpers import (
+    BLOCK_BOX,
+    loopback_cluster,
+    overhang_part,
+    plate_with_block,
+    run_cli,
+    straight,
+)
 from scanplan.cli import app
 from scanplan.metrics import SurfaceState
 from scanplan.report.maps import COVERAGE_COLOURS
@@ -341,12 +348,7 @@ def test_plan_a_folder_of_parts_on_two_processes_and_on_dask(tmp_path):
     assert (tmp_path / "plans" / "plate.json").is_file()
     (folder / "broken.stl").unlink()
     if importlib.util.find_spec("distributed") is not None:
-        from dask.distributed import LocalCluster
-
-        with LocalCluster(
-            n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-            dashboard_address=":0",
-        ) as cluster:  # fmt: skip
+        with loopback_cluster() as cluster:
             out = tmp_path / "on_dask"
             args = ["plan", str(folder), "-o", str(out), "--scheduler", cluster.scheduler_address]
             result = runner.invoke(app, [*args, *opts])
@@ -368,16 +370,11 @@ def test_plan_a_folder_of_parts_on_two_processes_and_on_dask(tmp_path):
     importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
 )
 def test_one_part_s_views_planned_on_dask_are_those_planned_here(tmp_path):
-    from dask.distributed import LocalCluster
-
     part = tmp_path / "overhang.stl"
     overhang_part().mesh.export(part)
     here = tmp_path / "here.json"
     assert runner.invoke(app, ["plan", str(part), "-o", str(here), "-q"]).exit_code == 0
-    with LocalCluster(
-        n_workers=1, threads_per_worker=2, processes=True, host="127.0.0.1",
-        dashboard_address=":0",
-    ) as cluster:  # fmt: skip
+    with loopback_cluster(threads=2) as cluster:
         on_dask = tmp_path / "dask.json"
         args = ["plan", str(part), "-o", str(on_dask), "--scheduler", cluster.scheduler_address]
         result = runner.invoke(app, [*args, "-q"])
