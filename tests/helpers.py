@@ -308,8 +308,8 @@ def listing(directory) -> list[str]:
 
 
 def overhang_part() -> Part:
-    """A 30 mm plate 500 mm wide over a 40 mm block 380 mm wide: the block's four walls lie
-    60 mm under the plate's edge, reached only by a beam tilted well off vertical."""
+    """A 300 x 500 x 30 mm plate over a 200 x 380 x 40 mm block: the block's four walls lie
+    50-60 mm in under the plate's edge, reached only by a beam tilted well off vertical."""
     plate = trimesh.creation.box((300.0, 500.0, 30.0))
     plate.apply_translation((0, 0, 15.0))
     block = trimesh.creation.box((200.0, 380.0, 40.0))

@@ -189,7 +189,7 @@ def test_a_beam_leaning_past_the_view_tilt_is_turned_back_about_its_footprint():
 
 
 def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():
-    # A 40 mm wall 60 mm under a plate's edge: the beam at the view's tilt clears the edge,
+    # A 40 mm wall 60 mm in under a plate's edge: the beam at the view's tilt clears it,
     # and the camera beside the laser clears it too only at the laser's height (a level
     # scan); scanning up the tilt puts the camera above the beam, the plate in its way.
     part = overhang_part()
