@@ -106,12 +106,9 @@ class ViewWorkers:
         return self
 
     def _connect(self, scheduler: str) -> None:
-        try:
-            from dask.distributed import Client
-        except ImportError:
-            raise ValueError(
-                "--scheduler needs the cluster extra: pip install 'scanplan[cluster]'"
-            ) from None
+        # Deferred: Dask is an optional extra (the CLI says so before any work).
+        from dask.distributed import Client
+
         try:
             self._client = Client(scheduler, timeout=CONNECT_SECONDS)
         except (OSError, TimeoutError) as exc:  # no scheduler there

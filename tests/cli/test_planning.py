@@ -430,3 +430,17 @@ def test_plan_a_list_of_parts_as_a_folder_is_planned(tmp_path):
     assert (
         result.exit_code == 2 and "part list" in result.stderr and "does not exist" in result.stderr
     )
+
+
+def test_one_part_on_a_scheduler_without_dask_is_refused_in_one_line(tmp_path, monkeypatch):
+    real = importlib.util.find_spec
+
+    def without_dask(name, *args):
+        return None if name == "distributed" else real(name, *args)
+
+    monkeypatch.setattr(importlib.util, "find_spec", without_dask)
+    out = tmp_path / "p.json"
+    result = runner.invoke(app, ["plan", "door", "-o", str(out), "--scheduler", "tcp://h:8786"])
+    assert result.exit_code == 2
+    assert "--scheduler needs the cluster extra" in result.stderr
+    assert result.stderr.strip().count("\n") == 0 and not out.exists()

@@ -4,6 +4,7 @@ measures, and the quality of that scan.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import multiprocessing
@@ -39,6 +40,7 @@ from scanplan.cli.options import (
     parse_tolerance,
     scan_spec,
 )
+from scanplan.cli.training import check_cluster
 from scanplan.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_SECONDS, ScanSpec
 from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
 
@@ -294,9 +296,9 @@ def plan_cmd(
         plan_catalogue(job, scheduler, quiet)
         return
     if scheduler is not None:
-        from scanplan.cli.training import check_cluster  # deferred as in evaluate
-
         check_cluster(scheduler, None)
+        if importlib.util.find_spec("distributed") is None:
+            raise ValueError(CLUSTER_HINT)
         job = replace(job, scheduler=scheduler)
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
@@ -653,7 +655,6 @@ def evaluate_cmd(
     as planned, or with --closed-loop its controller (feedback, rl) acting on the profiles of
     each perturbed part."""
     # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
-    from scanplan.cli.training import check_cluster
     from scanplan.metrics.detectability import evaluate_detectable
     from scanplan.part import load_part
     from scanplan.perturb import Perturbation
