@@ -60,3 +60,40 @@ def test_tracked_rolled_stations_are_reachable_by_the_step_model():
         assert abs(dth) <= lim[2] + 1e-12 and abs(dphi) <= lim[3] + 1e-12
     np.testing.assert_allclose(states[:, 3], phi, atol=1e-12)
     np.testing.assert_allclose(states[:, 1], h, atol=1e-6)
+
+
+def tracked_at_every_station(s, h, th, phi, lateral0, limits, pivot):
+    """`track_rolled`'s recurrence run at every station, through `apply_step`."""
+    lim = limits.array_roll * (1 - 1e-9)
+    states = [np.array([s[0], h[0], th[0], phi[0], lateral0])]
+    for i in range(1, len(s)):
+        s0, h0, th0, phi0, _ = states[-1]
+        dphi = float(np.clip(phi[i] - phi0, -lim[3], lim[3]))
+        dth = float(np.clip(th[i] - th0, -lim[2], lim[2]))
+        pivot_h = pivot * math.cos(th0 + dth) * (math.cos(phi0) - math.cos(phi0 + dphi))
+        dz = float(
+            np.clip(-(h[i] - h0 + pivot_h) / (math.cos(th0) * math.cos(phi0)), -lim[1], lim[1])
+        )
+        dy = float(np.clip(s[i] - s0 + dz * math.sin(th0), -lim[0], lim[0]))
+        states.append(apply_step(states[-1], np.array([dy, dz, dth, dphi]), pivot))
+    return np.array(states)
+
+
+def test_tracking_skips_only_what_the_recurrence_would_not_change():
+    """Stations mostly within the limits, with steps in height, pitch and roll that the
+    tracker must ramp through: the same states as the recurrence at every station."""
+    rng = np.random.default_rng(5)
+    n = 400
+    s = np.arange(n) * 0.5
+    h = 2.0 * np.sin(s / 25.0)
+    th = np.radians(4.0) * np.sin(s / 40.0)
+    phi = np.radians(3.0) * np.cos(s / 35.0)
+    for k in rng.integers(0, n, 6):  # steps the limits cannot follow at once
+        h[k:] += rng.normal(0.0, 6.0)
+        th[k:] += rng.normal(0.0, 0.1)
+        phi[k:] += rng.normal(0.0, 0.1)
+    want = tracked_at_every_station(s, h, th, phi, 0.7, StepLimits(), WD)
+    got = track_rolled(s, h, th, phi, 0.7, StepLimits(), WD)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    on_stations = np.isclose(got[:, 1], h, atol=1e-9) & np.isclose(got[:, 2], th, atol=1e-12)
+    assert 0.3 < on_stations.mean() < 0.99  # both stretches were exercised

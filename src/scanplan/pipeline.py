@@ -21,7 +21,7 @@ from scanplan.collision import CellObstacles, checker_for
 from scanplan.context import PlanContext
 from scanplan.cover import max_cover
 from scanplan.limits import TooLarge
-from scanplan.metrics import coverage_spacing_mm, evaluate
+from scanplan.metrics import coverage_spacing_mm, in_spec_samples
 from scanplan.motion import plan_transition, view_transition
 from scanplan.part import Part
 from scanplan.planners import Planner, pass_workers
@@ -643,8 +643,6 @@ def fit_arm(
     fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
     record = fit.record(arm.tcp)
     for key, plan in (("in_spec_without_robot", traj), ("in_spec", fit.traj)):
-        m = evaluate(
-            part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context=context, ceiling=False
-        )
-        record[key] = m.in_spec_coverage
+        held = in_spec_samples(part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context)
+        record[key] = float(held.mean()) if len(held) else 0.0
     return replace(fit.traj, meta=fit.traj.meta | {"robot": record})

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d
 
 # The pitch rate the shapers allow, as a fraction of 1/W_d rad per mm of advance (a pitch
 # step swings the footprint by W_d·Δθ), and the roll rate as a fraction of Δφ_max per
@@ -30,8 +30,18 @@ class Lookahead(Protocol):
 def _rate_limit(values: np.ndarray, max_step: float, backwards: bool = False) -> np.ndarray:
     """One pass of |v[i] - v[i-1]| <= max_step (a sequential recurrence, over grid cells)."""
     v = values[::-1].copy() if backwards else values.copy()
-    for i in range(1, len(v)):
-        v[i] = min(max(v[i], v[i - 1] - max_step), v[i - 1] + max_step)
+    # Where v follows the values, it changes nothing until a step steeper than max_step;
+    # from there the recurrence runs until it meets the values again.
+    steep = np.flatnonzero(np.abs(np.diff(v)) > max_step) + 1
+    i = 0  # v[i] is on the values
+    for k in steep:
+        if k <= i:
+            continue
+        for i in range(k, len(v)):
+            follows = v[i]
+            v[i] = min(max(v[i], v[i - 1] - max_step), v[i - 1] + max_step)
+            if v[i] == follows:
+                break
     return v[::-1] if backwards else v
 
 
@@ -88,8 +98,12 @@ class RobustLookahead:
         totals = np.empty((len(values), len(levels)))
         totals[0] = cost[0]
         for i in range(1, len(values)):
-            totals[i] = minimum_filter1d(totals[i - 1], 3, mode="constant", cval=np.inf)
-            totals[i] += cost[i]
+            row = totals[i]
+            prev = totals[i - 1]
+            np.minimum(prev[1:], prev[:-1], out=row[1:])  # a 3-wide running minimum
+            row[0] = prev[0]
+            np.minimum(row[:-1], prev[1:], out=row[:-1])
+            row += cost[i]
         path = np.zeros(len(values), np.int64)
         path[-1] = int(np.argmin(totals[-1]))
         padded = np.pad(totals, ((0, 0), (1, 1)), constant_values=np.inf)

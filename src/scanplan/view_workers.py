@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from scanplan.context import PlanContext
-from scanplan.metrics import SurfaceState, evaluate
+from scanplan.metrics import in_spec_samples
 from scanplan.part import Part
 from scanplan.quantities import ScanSpec
 from scanplan.views import PlanView, View, ViewPlan, plan_view
@@ -36,7 +36,8 @@ CONNECT_SECONDS = 10.0
 class ViewJudge:
     """A view planned by `plan` (on the part turned into its frame: `views.plan_view`) and
     judged: its in-spec set on the samples of the surface seen from the upper hemisphere
-    (`evaluate` with a fan of `points_per_profile` columns and samples drawn with `seed`).
+    (`in_spec_samples` with a fan of `points_per_profile` columns and samples drawn with
+    `seed`).
     Picklable when `plan` is."""
 
     spec: ScanSpec
@@ -46,17 +47,11 @@ class ViewJudge:
 
     def __call__(self, part: Part, view: View) -> tuple[ViewPlan, np.ndarray]:
         planned = plan_view(part, view, self.plan)
-        m = evaluate(
-            part,
-            self.spec,
-            planned.traj,
-            self.seed,
-            self.points_per_profile,
-            context=PlanContext(self.spec, views="auto"),
-            ceiling=False,
+        context = PlanContext(self.spec, views="auto")
+        held = in_spec_samples(
+            part, self.spec, planned.traj, self.seed, self.points_per_profile, context
         )
-        assert m.coverage_map is not None
-        return planned, m.coverage_map.state == SurfaceState.IN_SPEC
+        return planned, held
 
 
 def view_worker_count() -> int:

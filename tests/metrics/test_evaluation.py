@@ -5,16 +5,19 @@ their definitions; on the door, in-spec coverage ranks the planners."""
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import trimesh
 
-from helpers import straight
+from helpers import HEMISPHERE, sloped_housing, straight
 from scanplan.context import PlanContext
-from scanplan.metrics import SurfaceState, evaluate
+from scanplan.metrics import SurfaceState, evaluate, in_spec_samples
 from scanplan.part import part_from_mesh
+from scanplan.pipeline import plan_scan
+from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
 
@@ -95,8 +98,28 @@ def test_full_and_subsampled_fans_agree(plate):
 
 
 def test_out_of_reach_raises(plate):
+    far = straight(np.arange(0, 20.0, 0.5), h_mm=500.0)
     with pytest.raises(ValueError, match="outside the sensor's reach"):
-        evaluate(plate, SPEC, straight(np.arange(0, 20.0, 0.5), h_mm=500.0), points_per_profile=64)
+        evaluate(plate, SPEC, far, points_per_profile=64)
+    with pytest.raises(ValueError, match="outside the sensor's reach"):
+        in_spec_samples(plate, SPEC, far, points_per_profile=64)
+
+
+def test_the_in_spec_set_alone_is_evaluates_map_whatever_the_cores(monkeypatch):
+    """`in_spec_samples` measures each pass on its own, with its own noise: the set is
+    `evaluate`'s in-spec map but for a few samples the noise decides, and the same on one
+    core as on several."""
+    part = sloped_housing()
+    _, traj = plan_scan(part, SPEC, make_planner("geometric"))
+    assert len(np.unique(traj.swath[traj.scanning])) >= 3
+    m = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE, ceiling=False)
+    assert m.coverage_map is not None
+    whole = m.coverage_map.state == SurfaceState.IN_SPEC
+    held = in_spec_samples(part, SPEC, traj, 0, 128, HEMISPHERE)
+    assert held.shape == whole.shape and 0.2 < held.mean() < 0.95
+    assert (held != whole).mean() < 0.002
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)
+    assert np.array_equal(in_spec_samples(part, SPEC, traj, 0, 128, HEMISPHERE), held)
 
 
 def test_flat_plate_at_working_distance_is_all_in_spec(plate):
@@ -162,8 +185,6 @@ def test_door_in_spec_coverage_by_planner(door_plans):
 
 
 def test_in_spec_coverage_is_reported_against_the_visibility_ceiling(plate):
-    from helpers import HEMISPHERE
-
     m = evaluate(plate, SPEC, straight(np.arange(20.25, 620.0, 0.5)), points_per_profile=128)
     assert m.visibility_ceiling == pytest.approx(1.0, abs=1e-3)  # a plate is all in reach
     # A shelf 60 mm over a plate hides the plate under it from every beam within 15°.

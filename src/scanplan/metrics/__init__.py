@@ -3,7 +3,12 @@ spacing, coverage and in-spec coverage of the surface to inspect (`Metrics`), an
 coverage holds on seeded perturbed parts (`robustness`).
 """
 
-from scanplan.metrics.evaluation import coverage_spacing_mm, evaluate, in_spec_radius_mm
+from scanplan.metrics.evaluation import (
+    coverage_spacing_mm,
+    evaluate,
+    in_spec_radius_mm,
+    in_spec_samples,
+)
 from scanplan.metrics.robustness import Robustness, TrialTask, robustness, run_trial, trial_tasks
 from scanplan.metrics.summary import (
     COVERAGE_DEFINITION,
@@ -26,6 +31,7 @@ __all__ = [
     "coverage_spacing_mm",
     "evaluate",
     "in_spec_radius_mm",
+    "in_spec_samples",
     "robustness",
     "run_trial",
     "trial_tasks",

@@ -184,7 +184,7 @@ class Coverage:
     `in_spec_radius` on the sample's side (`SAME_SIDE_COS` between the point's normal and
     the sample's outward normal, `normals` (k, 3)). The gap to the next profile is only
     known once the next profile is measured, so the last profile of each chunk waits for
-    the next chunk.
+    the next chunk. plain=False: the in-spec set alone. tree: the samples' cKDTree, if built.
     """
 
     def __init__(
@@ -195,18 +195,21 @@ class Coverage:
         cover_radius: float,
         in_spec_radius: float,
         normals: np.ndarray,
+        plain: bool = True,
+        tree: cKDTree | None = None,
     ) -> None:
         self.surface, self.spec = surface, scan_spec
         self.normals = normals
         self.cols = slice(None, None, col_stride)
         self.cover_radius, self.in_spec_radius = cover_radius, in_spec_radius
+        self.plain = plain
         self.limit_mm = 2.0 * scan_spec.delta_s_opt_mm
         k = len(surface.points)
         self.covered = np.zeros(k, bool)
         self.in_spec = np.zeros(k, bool)
         self.tree = None
         if k:
-            self.tree = cKDTree(surface.points)
+            self.tree = cKDTree(surface.points) if tree is None else tree
             # Enough neighbours that every sample within the radius of a point is returned.
             per_mm2 = k / max(surface.area_mm2, 1e-9)
             expected = per_mm2 * math.pi * in_spec_radius**2
@@ -222,7 +225,7 @@ class Coverage:
         valid = scan.valid[:, c]
         pts = scan.points_part[:, c]
         nrm = scan.normals_part[:, c]
-        near = pts[valid]
+        near = pts[valid] if self.plain else pts[:0]
         if len(near):
             # k nearest: a sample with a small Voronoi cell is still marked.
             dist, which = self.tree.query(

@@ -6,17 +6,20 @@ door fits in memory.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Protocol
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext, recorded
 from scanplan.cycle import NOMINAL, MotionLimits, cycle_time
 from scanplan.metrics.accumulators import CloudSample, Coverage, PointErrors, Spacing
-from scanplan.metrics.summary import Metrics
+from scanplan.metrics.summary import Metrics, SurfaceState
 from scanplan.part import Part
 from scanplan.profilometer import LineProfilometer, Scan
 from scanplan.quantities import ScanSpec, point_orientation_error
@@ -109,16 +112,79 @@ def coverage_of(
     scan_spec: ScanSpec,
     spec: SensorSpec,
     normals: np.ndarray,
+    plain: bool = True,
+    tree: cKDTree | None = None,
 ) -> Coverage:
     """The coverage accumulator for a scan by the evaluated fan `spec` (perhaps sub-sampled);
-    normals: (k, 3) the samples' outward normals (`surface.oriented_normals`)."""
+    normals: (k, 3) the samples' outward normals (`surface.oriented_normals`); plain, tree:
+    as `Coverage`'s."""
     lateral_spacing = spec.line_width_mm / max(spec.points_per_profile - 1, 1)
     # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
     col_stride = max(1, int(coverage_spacing_mm(spec) / 3 / lateral_spacing))
     # Wide enough that every sample between two measured lines has a point within reach.
     cover_radius = max(1.0, lateral_spacing * col_stride)
     in_spec_radius = in_spec_radius_mm(scan_spec, lateral_spacing * col_stride)
-    return Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius, normals)
+    return Coverage(
+        surface, scan_spec, col_stride, cover_radius, in_spec_radius, normals, plain, tree
+    )
+
+
+def in_spec_samples(
+    part: Part,
+    scan_spec: ScanSpec,
+    traj: Trajectory,
+    seed: int = 0,
+    points_per_profile: int | None = None,
+    context: PlanContext | None = None,
+) -> np.ndarray:
+    """Which of the surface samples `evaluate` draws (same seed, fan and context) the scan of
+    `traj` holds in spec, (k,) bool: its in-spec map alone, for choosing views and fitting an
+    arm, in about 0.6x `evaluate`'s time (the door). Each pass is measured on its own (a
+    sample's in-spec state depends on one pass's points), on a thread per core, its noise
+    drawn from its own child of `seed`: the same set whatever the number of cores, within
+    the noise of `evaluate`'s. Raises ValueError, as `evaluate` does, if no scanning pose
+    returns a valid point."""
+    sensor = scan_spec.sensor
+    spec = sensor.with_points(points_per_profile) if points_per_profile else sensor
+    if not traj.scanning.any():
+        raise ValueError("trajectory has no scanning pose")
+    scan_idx, has_prev = scanning_steps(traj)
+    poses = traj.poses[scan_idx]
+    context = recorded(traj, scan_spec) if context is None else context
+    part = part.with_roi(context.roi)
+    surface = surface_samples(part, spec, context, seed)
+    if not len(surface.points):
+        return np.zeros(0, bool)
+    normals = oriented_normals(part)[surface.faces]
+    tree = cKDTree(surface.points)
+    # A pass starts wherever the pass index changes: the in-spec test looks no further.
+    swath = traj.swath[scan_idx]
+    starts = np.flatnonzero(np.r_[True, swath[1:] != swath[:-1]])
+    bounds = list(zip(starts, np.r_[starts[1:], len(poses)], strict=True))
+    seeds = np.random.SeedSequence(seed).generate_state(len(bounds))
+
+    def one_pass(k: int) -> tuple[np.ndarray, bool]:
+        lo, hi = bounds[k]
+        coverage = coverage_of(surface, scan_spec, spec, normals, plain=False, tree=tree)
+        profiler = LineProfilometer(part, spec, seed=int(seeds[k]), threads=1)
+        seen = False
+        for at, scan in profiler.measure_in_chunks(poses[lo:hi]):
+            ori = point_orientation_error(scan.normals_part, scan.poses)
+            coverage.add(scan, ori, has_prev[lo + at : lo + at + len(scan)])
+            seen = seen or bool(scan.valid.any())
+        return coverage.finish()[2].state == SurfaceState.IN_SPEC, seen
+
+    held = np.zeros(len(surface.points), bool)
+    seen = False
+    with ThreadPoolExecutor(max_workers=min(len(bounds), os.cpu_count() or 1)) as pool:
+        for pass_held, pass_seen in pool.map(one_pass, range(len(bounds))):
+            held |= pass_held
+            seen |= pass_seen
+    if not seen:
+        raise ValueError(
+            f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
+        )
+    return held
 
 
 def evaluate(

@@ -208,8 +208,12 @@ class GeometricPlanner:
         probe = probe_swath(
             part, swath, spec, self.probe_step_mm, self.probe_columns, roll=self.roll
         )
-        # A band of a few cm needs more columns than a whole line.
-        points = self.sensor_points if swath.band_mm is None else 2 * self.sensor_points
+        # A band of a few cm needs more columns than a whole line: as many more as the line
+        # is wider than the band, up to twice (a band of most of the line needs none more).
+        points = self.sensor_points
+        if swath.band_mm is not None:
+            wider = spec.sensor.line_width_mm / max(swath.band_mm[1] - swath.band_mm[0], 1e-9)
+            points = int(round(self.sensor_points * min(2.0, max(1.0, wider))))
         fan = LineProfilometer(part, spec.sensor.without_noise().with_points(points))
         best: tuple[float, np.ndarray] | None = None
         for lookahead in self.lookaheads:
