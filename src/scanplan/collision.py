@@ -9,6 +9,8 @@ and the table plane, and says which of them each pose comes nearest.
 
 from __future__ import annotations
 
+import functools
+
 import weakref
 from dataclasses import dataclass, field
 from typing import Any
@@ -117,11 +119,15 @@ class CollisionChecker:
         self._box_obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform())
         self._point_obj = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform())
         # A box inside a closed mesh touches no triangle: FCL calls it apart. Only a closed
-        # mesh has an inside to test.
-        closed_mesh = mesh if part.turned_from is None else part.turned_from[0].mesh
-        self._closed = bool(closed_mesh.is_watertight)  # (cached on the original's mesh)
+        # mesh has an inside to test; asked on the first body near the part (0.3 s on the
+        # door's mesh, cached on the original's).
+        self._closed_mesh = mesh if part.turned_from is None else part.turned_from[0].mesh
         self._grown: dict[float, fcl.CollisionObject] = {}
         self._vertex_tree: Any = None  # a cKDTree of the vertices, built on first need
+
+    @functools.cached_property
+    def _closed(self) -> bool:
+        return bool(self._closed_mesh.is_watertight)
 
     @property
     def body_radius_mm(self) -> float:

@@ -103,7 +103,10 @@ class Part:
         vertices = np.asarray(self.mesh.vertices)
         if self.inspect_faces is None:
             return vertices
-        return vertices[np.unique(np.asarray(self.mesh.faces)[self.inspect_faces])]
+        # A mask, not np.unique: the same vertices in the same order, without the sort.
+        used = np.zeros(len(vertices), bool)
+        used[np.asarray(self.mesh.faces)[self.inspect_faces].ravel()] = True
+        return vertices[used]
 
     def __getstate__(self) -> dict:
         # Pickled (for another process) without its ray engine, rebuilt there when first used.

@@ -56,7 +56,11 @@ def oriented_normals(part: Part) -> np.ndarray:
     mesh = part.mesh
     normals = np.asarray(part.ray_engine.face_normals)
     if mesh.is_watertight and mesh.is_winding_consistent:
-        return normals * (1.0 if mesh.volume >= 0 else -1.0)
+        # The sign of the enclosed volume: trimesh's `volume` integrates the inertia too
+        # (0.3 s on the door's 350k faces).
+        tri = np.asarray(mesh.triangles)
+        volume6 = np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
+        return normals * (1.0 if volume6 >= 0 else -1.0)
     centre = np.asarray(mesh.triangles_center)
     far = np.full(len(normals), 1e6)
     eps = 1e-3 * float(np.linalg.norm(part.extents)) + 0.05
