@@ -10,7 +10,6 @@ and the table plane, and says which of them each pose comes nearest.
 from __future__ import annotations
 
 import functools
-
 import weakref
 from dataclasses import dataclass, field
 from typing import Any

@@ -37,8 +37,7 @@ class ViewJudge:
     """A view planned by `plan` (on the part turned into its frame: `views.plan_view`) and
     judged: its in-spec set on the samples of the surface seen from the upper hemisphere
     (`in_spec_samples` with a fan of `points_per_profile` columns and samples drawn with
-    `seed`).
-    Picklable when `plan` is."""
+    `seed`). Picklable when `plan` is."""
 
     spec: ScanSpec
     plan: PlanView

@@ -129,6 +129,12 @@ def coverage_of(
     )
 
 
+def _out_of_reach(part: Part) -> ValueError:
+    return ValueError(
+        f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
+    )
+
+
 def in_spec_samples(
     part: Part,
     scan_spec: ScanSpec,
@@ -181,9 +187,7 @@ def in_spec_samples(
             held |= pass_held
             seen |= pass_seen
     if not seen:
-        raise ValueError(
-            f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
-        )
+        raise _out_of_reach(part)
     return held
 
 
@@ -257,9 +261,7 @@ def evaluate(
             observer.add(lo, scan)
 
     if errors.n_valid == 0:
-        raise ValueError(
-            f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
-        )
+        raise _out_of_reach(part)
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
     ceiling_share = None
     if ceiling and len(surface.points):
