@@ -7,6 +7,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import pickle
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,7 @@ from scanplan.cell import Cell
 from scanplan.pipeline import ViewRaster
 from scanplan.planners import make_planner
 from scanplan.quantities import OVERLAP, UP, ScanSpec
-from scanplan.view_workers import ViewJudge, ViewWorkers
+from scanplan.view_workers import ViewJudge, ViewWorkers, _warm_up
 from scanplan.views import View, view_axis
 
 SPEC = ScanSpec()
@@ -90,3 +91,13 @@ def test_a_view_whose_worker_dies_is_planned_here_and_the_rest_too():
         later = pool.submit(side).result()  # no worker left: planned here
     assert np.array_equal(planned.traj.poses, here[0].traj.poses)
     assert np.array_equal(in_spec, here[1]) and np.array_equal(later[1], here[1])
+
+
+def test_starting_the_workers_after_the_pool_is_gone_is_no_error():
+    """The warm-up runs on its own thread: a pool that broke or was shut down before that
+    thread ran leaves it nothing to start, not an exception printed from a stray thread."""
+    pool = ProcessPoolExecutor(1)
+    pool.shutdown()
+    _warm_up(pool)  # submit() on this pool raises RuntimeError
+    with pytest.raises(RuntimeError):
+        pool.submit(int)

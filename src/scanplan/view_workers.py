@@ -93,7 +93,7 @@ class ViewWorkers:
             )
             # The workers start (about a second before the first submit returns) beside the
             # caller's next work, not in its way.
-            self._warm_up = threading.Thread(target=self._pool.submit, args=(int,), daemon=True)
+            self._warm_up = threading.Thread(target=_warm_up, args=(self._pool,), daemon=True)
             self._warm_up.start()
 
     def __enter__(self) -> ViewWorkers:
@@ -168,6 +168,16 @@ class _OrHere:
             return self._future.result()
         except BrokenProcessPool:
             return self._workers.instead(self._view)
+
+
+def _warm_up(pool: ProcessPoolExecutor) -> None:
+    """Start the pool's workers with a task that does nothing."""
+    try:
+        pool.submit(int)
+    except (BrokenProcessPool, RuntimeError):
+        # A worker died, or the choice ended, before this thread ran: nothing left to start
+        # (an exception here would only be printed from a stray thread).
+        pass
 
 
 # A worker's part and judge, set once when it starts.
