@@ -25,18 +25,20 @@ class RayEngine:
         vertices = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
         self.offset = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-        self.triangles = vertices[faces]  # (f, 3, 3) float64, for exact refinement
-        edge1 = self.triangles[:, 1] - self.triangles[:, 0]
-        edge2 = self.triangles[:, 2] - self.triangles[:, 0]
-        normals = np.cross(edge1, edge2)
+        corner = vertices[faces[:, 0]]
+        normals = np.cross(vertices[faces[:, 1]] - corner, vertices[faces[:, 2]] - corner)
         lengths = np.linalg.norm(normals, axis=1, keepdims=True)
         self.face_normals = normals / np.where(lengths > 0, lengths, 1.0)
         # The same normals as three flat arrays with a trailing zero normal, so that indexing
         # with a face index of -1 (a miss) gives 0 (flat arrays gather several times faster).
         self.face_normals_by_axis = tuple(np.append(self.face_normals[:, k], 0.0) for k in range(3))
         self._scene = rtcore_scene.EmbreeScene()
-        # The TriangleMesh registers itself with the scene; keep a reference alive.
-        self._mesh = TriangleMesh(self._scene, (self.triangles - self.offset).astype(np.float32))
+        # The TriangleMesh registers itself with the scene; keep a reference alive. Given
+        # as vertices and indices: the same float32 corners and face order as (f, 3, 3)
+        # triangles (the same hits), built in half the time.
+        self._mesh = TriangleMesh(
+            self._scene, (vertices - self.offset).astype(np.float32), faces.astype(np.int32)
+        )
 
     def turned(self, rotation: np.ndarray) -> RayEngine:
         """This engine for the mesh turned by `rotation` ((3, 3), about the origin): the
@@ -121,7 +123,6 @@ class _TurnedRayEngine(RayEngine):
         rot = np.asarray(rotation, dtype=np.float64)
         self._base, self._rotation = base, rot
         self.offset = rot @ base.offset
-        self.triangles = base.triangles @ rot.T
         self.face_normals = base.face_normals @ rot.T
         self.face_normals_by_axis = tuple(np.append(self.face_normals[:, k], 0.0) for k in range(3))
 
