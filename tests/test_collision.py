@@ -51,6 +51,33 @@ def test_a_box_far_from_the_part_is_clear_at_the_right_distance():
     assert quick.distance_mm[1] == pytest.approx(7.25, abs=1e-6)
 
 
+def test_poses_cleared_by_a_neighbour_agree_with_measuring_each():
+    """A dense wavy path over, near and into a plate with a post, turning as it goes: the
+    poses cleared by the one measured before them are exactly those measuring every pose
+    finds clear, and their distance is a lower bound of the measured one."""
+    post = trimesh.creation.box((40.0, 40.0, 120.0))
+    post.apply_translation((60.0, 0.0, 60.0))
+    plate = trimesh.creation.box((400.0, 400.0, 100.0))
+    plate.apply_translation((0.0, 0.0, -50.0))
+    checker = CollisionChecker(Part(trimesh.util.concatenate([plate, post]), name="post"), CUBE)
+    t = np.linspace(0.0, 1.0, 4000)
+    poses = np.stack([at(-180.0 + 360.0 * s, 30.0 * np.sin(9 * s), 0.0) for s in t])
+    poses[:, 2, 3] = 5.0 + 60.0 * (1 + np.sin(23 * t))  # from 5 (into the plate) to 125
+    angle = 0.6 * np.sin(17 * t)
+    poses[:, 0, 0] = poses[:, 2, 2] = np.cos(angle)
+    poses[:, 0, 2], poses[:, 2, 0] = np.sin(angle), -np.sin(angle)
+    quick = checker.check(poses, clearance_mm=20.0)
+    every = checker.check(poses, clearance_mm=20.0, exact=True)
+    assert every.colliding.any() and (~every.colliding).sum() > 1000
+    assert every.touching.any()
+    np.testing.assert_array_equal(quick.colliding, every.colliding)
+    np.testing.assert_array_equal(quick.touching, every.touching)
+    assert np.all(quick.distance_mm <= every.distance_mm + 1e-6)
+    # Most clear poses ride on a neighbour's measurement.
+    clear = ~every.colliding
+    assert quick.exact[clear].sum() < 0.1 * clear.sum()
+
+
 def test_a_box_pressed_into_a_plate_collides_by_its_depth():
     checker = CollisionChecker(plate_part(thickness=20.0), CUBE)
     depths = np.array([0.5, 3.0, 7.5])

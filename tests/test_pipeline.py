@@ -16,11 +16,19 @@ from helpers import HEMISPHERE, fcl_distance, overhang_part
 from scanplan.cli import app
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext
+from scanplan.cycle import view_seconds
 from scanplan.metrics import evaluate
 from scanplan.part import load_part
-from scanplan.pipeline import default_views, order_views, plan_scan, plan_views
+from scanplan.pipeline import (
+    ViewRaster,
+    choose_views,
+    default_views,
+    order_views,
+    plan_scan,
+    plan_views,
+)
 from scanplan.planners import make_planner
-from scanplan.quantities import UP, ScanSpec
+from scanplan.quantities import OVERLAP, UP, ScanSpec
 from scanplan.trajectory import read_json, read_trajectory, write_json
 
 SPEC = ScanSpec()
@@ -240,3 +248,23 @@ def test_views_for_what_is_missed_are_also_scanned_level_and_none_is_planned_twi
     # The block's walls under the plate's edge are held: only a level scan holds them.
     m = evaluate(part, SPEC, traj, points_per_profile=128, context=HEMISPHERE)
     assert m.in_spec_of_ceiling > 0.9
+
+
+def test_below_the_least_gain_a_view_is_kept_only_if_it_pays_for_its_seconds(housing):
+    """With no view adding MIN_VIEW_GAIN (1.0 here), a view is kept on its gain per second
+    of its time in the cycle: none at an impossible rate, and at a reachable one only views
+    that pay it and add the floor."""
+    cell = PlanContext(SPEC, views="auto").cell(housing)
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
+    strict = choose_views(housing, SPEC, plan, min_gain=1.0, min_gain_per_s=1.0, workers=0)
+    assert len(strict.plans) == 1 and np.allclose(strict.plans[0].view.axis, UP)
+    rate, floor = 1e-3, 0.01
+    paid = choose_views(
+        housing, SPEC, plan, min_gain=1.0, min_gain_per_s=rate, gain_floor=floor, workers=0
+    )
+    assert len(paid.plans) >= 3  # the top and side views
+    entry_mm = 0.5 * float(np.linalg.norm(housing.extents))
+    gains = np.diff(paid.coverage)
+    for vp, gain in zip(paid.plans[1:], gains, strict=True):
+        assert gain >= floor
+        assert gain >= rate * view_seconds(vp.traj, SPEC, entry_mm)

@@ -6,7 +6,9 @@ only feedback and rl plans not fitted to a robot are taken."""
 
 from __future__ import annotations
 
+import functools
 import importlib.util
+import math
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
@@ -14,6 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 
+import scanplan.pipeline as pipeline
 from scanplan.context import recorded
 from scanplan.metrics import SurfaceState, evaluate, robustness, trial_tasks
 from scanplan.part import part_from_mesh
@@ -67,10 +70,14 @@ def ramp():
 @pytest.fixture(scope="module")
 def two_views(ramp, tmp_path_factory):
     """The ramp's top (its sides left out) planned by feedback with roll and --views auto:
-    a top view and one tilted 80° towards +x; read back from its file."""
-    _, traj = plan_views(
-        ramp, SPEC, FeedbackPlanner(roll=True), "auto", roi="box:-145,-75,5,145,75,60"
-    )
+    a top view and one tilted 80° towards +x; read back from its file. Views adding less
+    than MIN_VIEW_GAIN are left out (no per-second rule), so there are just these two."""
+    choose = functools.partial(pipeline.choose_views, min_gain_per_s=math.inf)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(pipeline, "choose_views", choose)
+        _, traj = plan_views(
+            ramp, SPEC, FeedbackPlanner(roll=True), "auto", roi="box:-145,-75,5,145,75,60"
+        )
     path = tmp_path_factory.mktemp("plans") / "two_views.json"
     write_json(traj, path)
     return read_json(path)

@@ -25,6 +25,8 @@ from scanplan.sensor import SensorSpec
 _CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 # An inside test casts one ray in a direction no axis-aligned edge of a mesh lies along.
 _INSIDE_RAY = np.array([0.267, 0.534, 0.802]) / np.linalg.norm([0.267, 0.534, 0.802])
+# The most poses after a measured one that may be cleared by it (`CollisionChecker.check`).
+_RIDE = 256
 
 
 @dataclass(frozen=True)
@@ -117,11 +119,11 @@ class CollisionChecker:
         self.body_half = 0.5 * (hi - lo)
         self._box_obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform())
         self._point_obj = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform())
+        self._grown: dict[float, fcl.CollisionObject] = {}
         # A box inside a closed mesh touches no triangle: FCL calls it apart. Only a closed
         # mesh has an inside to test; asked on the first body near the part (0.3 s on the
         # door's mesh, cached on the original's).
         self._closed_mesh = mesh if part.turned_from is None else part.turned_from[0].mesh
-        self._grown: dict[float, fcl.CollisionObject] = {}
         self._vertex_tree: Any = None  # a cKDTree of the vertices, built on first need
 
     @functools.cached_property
@@ -150,17 +152,30 @@ class CollisionChecker:
         gap = np.maximum(lo - (centre + half), (centre - half) - hi)
         return np.linalg.norm(np.maximum(gap, 0.0), axis=1)
 
-    def check(self, poses: np.ndarray, clearance_mm: float, exact: bool = False) -> CollisionReport:
+    def check(
+        self,
+        poses: np.ndarray,
+        clearance_mm: float,
+        exact: bool = False,
+        colliding_only: bool = False,
+    ) -> CollisionReport:
         """Body vs part for every pose (n, 4, 4).
 
         Stages: poses whose body AABB is at least the clearance from the part's AABB are
         clear without FCL; the rest collide with the body grown by the clearance (a box that
-        holds every point within the clearance of the body), and only those touching it get
-        an exact `fcl.distance`. Penetrating poses get a depth: the deepest a body corner lies
+        holds every point within the clearance of the body), and those touching it are
+        taken in order: a pose gets an exact `fcl.distance`, and the poses after it whose body
+        corners have moved less than that distance minus the clearance are clear without one
+        (no point of a box moves farther than its farthest corner: their distance is at
+        least the measured one minus that move; a pass's poses 0.5 mm apart mostly ride on
+        one measurement). Penetrating poses get a depth: the deepest a body corner lies
         inside the part or a part vertex inside the body (a lower bound on the translation
         that separates them, exact when a face or a corner presses in), else, for an edge
         crossing an edge, FCL's contact depth. A body wholly inside a closed part counts as
         penetrating by its corners' depth. exact=True: every pose gets `fcl.distance`.
+        colliding_only=True: only `colliding` is asked for; poses within the clearance ride
+        on a measured one too (their distance an upper bound below the clearance, their
+        depth unknown: `touching` and the depths are not to be read).
         """
         if not (np.isfinite(clearance_mm) and clearance_mm >= 0):
             raise ValueError(f"clearance must be a finite number >= 0 mm, got {clearance_mm}")
@@ -180,26 +195,44 @@ class CollisionChecker:
                     keep.append(i)
                 else:  # apart by more than the clearance, unless wholly inside
                     distance[i] = max(gap[i], clearance_mm)
-            near_inside = np.setdiff1d(near, keep)
+            away = np.setdiff1d(near, keep)
+            if self._closed and len(away):
+                inside = away[
+                    self._inside(poses[away, :3, :3] @ self.body_centre + poses[away, :3, 3])
+                ]
+                for i in inside:
+                    distance[i] = -self._penetration_mm(poses[i])
+                    measured[i] = True
             near = np.asarray(keep, dtype=np.int64)
-        else:
-            near_inside = np.zeros(0, np.int64)
-        request = fcl.DistanceRequest()
-        for i in near:
-            self._box_obj.setTransform(self._transform(poses[i]))
-            d = fcl.distance(self._box_obj, self._part_obj, request, fcl.DistanceResult())
-            distance[i] = d if d > 0 else -self._penetration_mm(poses[i])
-            measured[i] = True
-        # A body apart from every triangle may still be inside a closed part.
-        apart = np.concatenate([near_inside, near[distance[near] > 0]])
-        if self._closed and len(apart):
-            inside = apart[
-                self._inside(poses[apart, :3, :3] @ self.body_centre + poses[apart, :3, 3])
-            ]
-            for i in inside:
-                distance[i] = -self._penetration_mm(poses[i])
-                measured[i] = True
+        corners = self.body_corners_part(poses[near]) if len(near) and not exact else None
+        at = 0
+        while at < len(near):
+            distance[near[at]] = d = self._distance_mm(poses[near[at]])
+            measured[near[at]] = True
+            at += 1
+            if corners is None or (d <= clearance_mm and not colliding_only):
+                continue
+            moved = np.linalg.norm(corners[at : at + _RIDE] - corners[at - 1], axis=2).max(axis=1)
+            # Apart by more than the clearance: at least d - moved. Within it: at most
+            # max(d, 0) + moved (a point of the body within d of the part moves by at most
+            # that), so still within it while that stays below the clearance.
+            bound = d - moved if d > clearance_mm else max(d, 0.0) + moved
+            sure = bound >= clearance_mm if d > clearance_mm else bound < clearance_mm
+            ride = len(sure) if sure.all() else int(np.argmin(sure))
+            distance[near[at : at + ride]] = bound[:ride]
+            at += ride
         return CollisionReport(distance, measured, float(clearance_mm))
+
+    def _distance_mm(self, pose: np.ndarray) -> float:
+        """The exact signed distance of the body at `pose` (negative: penetration depth)."""
+        self._box_obj.setTransform(self._transform(pose))
+        d = fcl.distance(self._box_obj, self._part_obj, fcl.DistanceRequest(), fcl.DistanceResult())
+        # A body apart from every triangle may still be inside a closed part.
+        if d <= 0 or (
+            self._closed and self._inside((pose[:3, :3] @ self.body_centre + pose[:3, 3])[None])[0]
+        ):
+            return -self._penetration_mm(pose)
+        return float(d)
 
     # ---- internals --------------------------------------------------------------------------
 
@@ -343,11 +376,17 @@ class CellChecker:
     def body_corners_part(self, poses: np.ndarray) -> np.ndarray:
         return self.meshes[0].body_corners_part(poses)
 
-    def check(self, poses: np.ndarray, clearance_mm: float, exact: bool = False) -> CollisionReport:
+    def check(
+        self,
+        poses: np.ndarray,
+        clearance_mm: float,
+        exact: bool = False,
+        colliding_only: bool = False,
+    ) -> CollisionReport:
         """`CollisionChecker.check` against every obstacle; the table's distance is exact
         (the lowest body corner's height above the plane)."""
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-        reports = [c.check(poses, clearance_mm, exact) for c in self.meshes]
+        reports = [c.check(poses, clearance_mm, exact, colliding_only) for c in self.meshes]
         by_obstacle = {"part": reports[0].distance_mm}
         distance = reports[0].distance_mm.copy()
         measured = reports[0].exact.copy()

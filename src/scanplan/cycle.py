@@ -290,3 +290,12 @@ def cycle_time(
         swaths=swaths,
         limits=limits,
     )
+
+
+def view_seconds(traj: Trajectory, spec: ScanSpec, entry_mm: float) -> float:
+    """About what a view's raster adds to a cycle (`traj`, the view alone): its passes and
+    moves blended through every pose, at nominal limits, and a move of `entry_mm` into it
+    from the view before."""
+    flown = cycle_time(traj, spec, blended=np.ones(len(traj), dtype=bool)).total_s
+    entry = trapezoid_time_s(np.array([entry_mm]), spec.travel_speed_mm_s, NOMINAL.accel_mm_s2)
+    return flown + float(entry[0])

@@ -165,9 +165,9 @@ def view_transition(
             straight_move(b, next_pose[:3, 3]),
         ]
     )
-    report = checker.check(moves, clearance_mm)
-    if report.colliding.any():
-        where = moves[np.flatnonzero(report.colliding)[0], :3, 3]
+    colliding = checker.check(moves, clearance_mm, colliding_only=True).colliding
+    if colliding.any():
+        where = moves[np.flatnonzero(colliding)[0], :3, 3]
         raise ValueError(
             f"no collision-free move between views: the sensor body comes within "
             f"{clearance_mm:g} mm of the part at {np.round(where, 1).tolist()} mm"

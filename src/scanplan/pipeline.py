@@ -20,6 +20,7 @@ from scanplan.cell import LOWEST, Cell
 from scanplan.collision import CellObstacles, checker_for
 from scanplan.context import PlanContext
 from scanplan.cover import max_cover
+from scanplan.cycle import view_seconds
 from scanplan.limits import TooLarge
 from scanplan.metrics import coverage_spacing_mm, in_spec_samples
 from scanplan.motion import plan_transition, view_transition
@@ -59,7 +60,13 @@ MISSED_ROUNDS = 4
 # 0.83 at 0.2 % and 40 (`benchmarks/compare_views.py`; the quadrotor's thin arms take a
 # view per 30° of their round, each under 0.2 %).
 MIN_VIEW_GAIN = 0.001
-MAX_VIEWS = 80
+# Below that, a view is still kept if it pays for its time in the cycle (`cycle.view_seconds`,
+# its own passes and moves and a move into it) with at least MIN_VIEW_GAIN_PER_S of the
+# surface per second, and adds at least MIN_VIEW_GAIN_FLOOR: a strip of a thin round wall
+# (the quadrotor's propeller guards, 15 degrees of their round a view) takes a second or two.
+MIN_VIEW_GAIN_PER_S = 2e-4
+MIN_VIEW_GAIN_FLOOR = 3e-4
+MAX_VIEWS = 150
 
 
 def plan_path(
@@ -109,7 +116,9 @@ def plan_path(
                         planned.poses, cell.table.normal, spec.working_distance_mm
                     ),
                 )
-            colliding = checker.check(planned.poses, spec.clearance_mm).colliding
+            colliding = checker.check(
+                planned.poses, spec.clearance_mm, colliding_only=True
+            ).colliding
             dropped += int(colliding.sum())
             for k, run in enumerate(_runs(~colliding)):
                 poses = planned.poses[run]
@@ -137,10 +146,7 @@ def plan_path(
     finally:
         pool.shutdown(cancel_futures=True)
     if not pieces:
-        raise ValueError(
-            f"every scanning pose on part {part.name} brings the sensor body within "
-            f"{spec.clearance_mm:g} mm of the part"
-        )
+        raise ValueError(_all_too_near(part, spec))
     traj = Trajectory.concatenate(pieces, planner=planner.name)
     return Trajectory(
         traj.poses,
@@ -193,12 +199,15 @@ def plan_scan(
     overlap: float = OVERLAP,
     progress: Callable[[int, int], None] | None = None,
     cell: Cell | None = None,
+    look_first: bool = False,
 ) -> tuple[list[Swath], Trajectory]:
     """The base path and the planned trajectory. raster: 'nominal' is the paper's (lateral
     step = line width x (1 − overlap)); 'adaptive' spaces passes by the band of the line that
     stays in spec (SPEC §3b) — it assumes the line rolls with the surface; 'auto' takes
     adaptive for a planner that rolls, else nominal. direction: a rule (`swaths.direction_rule`)
-    or a scan direction in the part's frame."""
+    or a scan direction in the part's frame. look_first: give up before planning, with
+    `plan_path`'s error, when the sensor body at every pass's level poses
+    (`passes_blocked`) is already too near the part or its cell."""
     if raster not in RASTERS:
         raise ValueError(f"unknown raster {raster!r}; use one of {', '.join(RASTERS)}")
     uphill = None if cell is None or cell.table is None else cell.table.normal
@@ -206,7 +215,37 @@ def plan_scan(
         swaths = plan_adaptive_swaths(part, spec, direction, uphill=uphill)
     else:
         swaths = plan_swaths(part, spec.sensor, direction, overlap, uphill=uphill)
+    if look_first and passes_blocked(part, spec, swaths, cell):
+        raise ValueError(_all_too_near(part, spec))
     return swaths, plan_path(part, spec, planner, swaths, progress, cell)
+
+
+# Level poses looked at per pass by `passes_blocked`.
+LOOK_POSES_PER_PASS = 9
+
+
+def passes_blocked(part: Part, spec: ScanSpec, swaths: list[Swath], cell: Cell | None) -> bool:
+    """Whether the sensor body comes within `spec.clearance_mm` of the part or its cell at
+    every one of `LOOK_POSES_PER_PASS` level poses along each pass (at the pass's height,
+    looking straight down): a view of a wall seen past another part of the part, which the
+    planner would plan only for every pose to be dropped (106 of the quadrotor's 345 views
+    planned; 136 of the 138 such views on five shared parts were planned to nothing)."""
+    n = LOOK_POSES_PER_PASS
+    poses = np.concatenate(
+        [
+            sw.poses(np.linspace(0.0, max(sw.length_mm, 0.0), n), np.zeros(n), np.zeros(n))
+            for sw in swaths
+        ]
+    )
+    checker = checker_for(part, spec.sensor, cell)
+    return bool(checker.check(poses, spec.clearance_mm, colliding_only=True).colliding.all())
+
+
+def _all_too_near(part: Part, spec: ScanSpec) -> str:
+    return (
+        f"every scanning pose on part {part.name} brings the sensor body within "
+        f"{spec.clearance_mm:g} mm of the part"
+    )
 
 
 def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
@@ -254,6 +293,8 @@ def choose_views(
     min_gain: float = MIN_VIEW_GAIN,
     max_views: int = MAX_VIEWS,
     points_per_profile: int = VIEW_CHOICE_FAN_POINTS,
+    min_gain_per_s: float = MIN_VIEW_GAIN_PER_S,
+    gain_floor: float = MIN_VIEW_GAIN_FLOOR,
     seed: int = 0,
     seconds: float | None = VIEW_CHOICE_SECONDS,
     scan_level: bool = True,
@@ -264,7 +305,9 @@ def choose_views(
     view first (the paper's raster; on a panel it is all there is; none if nothing to
     inspect faces up), then, while in-spec coverage is below `coverage_target`, the
     candidate view (`candidate_views`) that adds the most, unless it adds less than
-    `min_gain` (`MIN_VIEW_GAIN`); when none does, views
+    `min_gain` (`MIN_VIEW_GAIN`) and either less than `gain_floor` or less than
+    `min_gain_per_s` per second of its time in the cycle (`cycle.view_seconds`); when none
+    does, views
     aimed at what a beam could reach and no chosen view holds (`views.missed_views`) join
     the candidates, `MISSED_ROUNDS` times at most, each also scanned level (`View.level`,
     with `scan_level`: the direction rule left to the raster's 'auto'), none planned twice.
@@ -332,6 +375,19 @@ def choose_views(
     # (the heightfield's choice took 17 s against 11 in one process, which plans 7 of them).
     pending: dict[int, Future[tuple[ViewPlan, np.ndarray]]] = {}
     rounds = 0
+    least = min(min_gain, gain_floor)  # the least gain a view may be kept for
+    # The move into a view: about the part's bounding radius (views are joined around it).
+    entry_mm = 0.5 * float(np.linalg.norm(part.extents))
+    seconds_of: dict[int, float] = {}
+
+    def worth(gain: float, i: int) -> bool:
+        if gain >= min_gain:
+            return True
+        if gain < gain_floor:
+            return False
+        if i not in seconds_of:
+            seconds_of[i] = view_seconds(evaluated[i][0].traj, spec, entry_mm)
+        return gain >= min_gain_per_s * seconds_of[i]
 
     def ask(i: int) -> None:
         pending[i] = pool.submit(replace(candidates[i], index=len(plans)))
@@ -341,7 +397,7 @@ def choose_views(
     with ViewWorkers(part, judge, workers, scheduler) as pool:
         while len(plans) < max_views and not target_reached():
             bounds = [float((m & ~covered).mean()) for m in on_faces]
-            order = [int(i) for i in np.argsort(bounds)[::-1] if bounds[i] >= min_gain]
+            order = [int(i) for i in np.argsort(bounds)[::-1] if bounds[i] >= least]
             best: tuple[float, int] | None = None
             for rank, i in enumerate(order):
                 if best is not None and bounds[i] <= best[0]:
@@ -366,9 +422,9 @@ def choose_views(
                         on_faces[i] = np.zeros_like(on_faces[i])
                         continue
                 gain = float((evaluated[i][1] & ~covered).mean())
-                if best is None or gain > best[0]:
+                if (best is None or gain > best[0]) and worth(gain, i):
                     best = (gain, i)
-            if best is None or best[0] < min_gain:
+            if best is None:
                 # Nothing left among the candidates: aim new ones at what is still missed.
                 if rounds == MISSED_ROUNDS or out_of_time():
                     break
@@ -376,7 +432,7 @@ def choose_views(
                 if reachable is None:
                     reachable = reachable_samples(part, samples, spec.tol_angle_rad)
                 more = missed_views(
-                    part, spec, samples, reachable & ~covered, int(min_gain * len(covered))
+                    part, spec, samples, reachable & ~covered, int(least * len(covered))
                 )
                 # Each also scanned level: a strip under an overhang or down a pocket is seen
                 # only so (the camera beside the laser), but level costs the stepped plate and
@@ -517,6 +573,7 @@ class ViewRaster:
             self.overlap,
             progress,
             self.cell.rotated(view.R),
+            look_first=view.faces is not None,  # a region's view, not the whole top
         )
         # The pass lines ride along to the view's record (`join_views`), for the closed loop.
         return len(swaths), replace(traj, meta=traj.meta | {"swaths": swaths})
