@@ -8,22 +8,25 @@ import json
 
 import numpy as np
 import pytest
+import trimesh
 from typer.testing import CliRunner
 
 import scanplan.pipeline as pipeline_module
 import scanplan.view_workers as view_workers_module
 from helpers import HEMISPHERE, fcl_distance, overhang_part
+from scanplan.cell import Cell
 from scanplan.cli import app
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext
 from scanplan.cycle import view_seconds
 from scanplan.metrics import evaluate
-from scanplan.part import load_part
+from scanplan.part import load_part, part_from_mesh
 from scanplan.pipeline import (
     ViewRaster,
     choose_views,
     default_views,
     order_views,
+    passes_blocked,
     plan_scan,
     plan_views,
 )
@@ -268,3 +271,28 @@ def test_below_the_least_gain_a_view_is_kept_only_if_it_pays_for_its_seconds(hou
     for vp, gain in zip(paid.plans[1:], gains, strict=True):
         assert gain >= floor
         assert gain >= rate * view_seconds(vp.traj, SPEC, entry_mm)
+
+
+def test_passes_whose_level_poses_all_come_too_near_are_given_up_before_planning(housing):
+    """The housing's top passes are clear; under a slab hung where the sensors pass, every
+    level pose comes within the clearance, and a region's view is refused with the
+    planner's own error before any pass is planned."""
+    swaths, _ = plan_scan(housing, SPEC, make_planner("fixed"), raster="nominal")
+    assert not passes_blocked(housing, SPEC, swaths, Cell())
+    top = float(housing.bounds[1][2])
+    slab = trimesh.creation.box((3000.0, 3000.0, 20.0))
+    slab.apply_translation((0.0, 0.0, top + SPEC.working_distance_mm))
+    hung = Cell(fixtures=(part_from_mesh(slab, "slab"),))
+    assert passes_blocked(housing, SPEC, swaths, hung)
+    planned = []
+
+    class Recording:
+        name, roll, limits = "fixed", False, make_planner("fixed").limits
+
+        def plan(self, part, swath, spec):
+            planned.append(swath)
+            raise AssertionError("planned")
+
+    with pytest.raises(ValueError, match="every scanning pose on part"):
+        plan_scan(housing, SPEC, Recording(), raster="nominal", cell=hung, look_first=True)
+    assert planned == []
