@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers import plate_file, run_cli
-from scanplan.cycle import NOMINAL, MotionLimits, cycle_time, trapezoid_time_s
+from scanplan.cycle import NOMINAL, MotionLimits, cycle_time, trapezoid_time_s, view_seconds
 from scanplan.quantities import ScanSpec
 from scanplan.robot import motion_limits
 from scanplan.swaths import Swath
@@ -191,6 +191,18 @@ def test_a_blended_move_is_one_trapezoid() -> None:
     np.testing.assert_allclose(ct.move_s, [100.0 / 250 + 250 / a + 400.0 / 250 + 250 / a])
     with pytest.raises(ValueError, match="blended must be"):
         cycle_time(traj, spec, FAST, blended=blended[:3])
+
+
+def test_a_view_costs_its_blended_raster_and_a_move_into_it() -> None:
+    """What a view adds to a cycle: its passes and moves blended through every pose (two
+    200 mm passes joined by a 500 mm move, each one trapezoid) and a move of `entry_mm`."""
+    traj = two_passes_and_a_move()
+    spec = spec_at(100.0, travel_mm_s=250.0)
+    a = NOMINAL.accel_mm_s2
+    raster = 2 * (200.0 / 100.0 + 100.0 / a) + 500.0 / 250.0 + 250.0 / a
+    assert view_seconds(traj, spec, 0.0) == pytest.approx(raster, rel=1e-9)
+    entry = 1000.0 / 250.0 + 250.0 / a
+    assert view_seconds(traj, spec, 1000.0) == pytest.approx(raster + entry, rel=1e-9)
 
 
 def test_json_and_limits_validation() -> None:
