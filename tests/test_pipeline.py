@@ -255,22 +255,34 @@ def test_views_for_what_is_missed_are_also_scanned_level_and_none_is_planned_twi
 
 def test_below_the_least_gain_a_view_is_kept_only_if_it_pays_for_its_seconds(housing):
     """With no view adding MIN_VIEW_GAIN (1.0 here), a view is kept on its gain per second
-    of its time in the cycle: none at an impossible rate, and at a reachable one only views
-    that pay it and add the floor."""
+    of its time in the cycle: none at an impossible rate; at a rate between those of the
+    views kept without one, only views that pay it and add the floor, and fewer of them."""
     cell = PlanContext(SPEC, views="auto").cell(housing)
     plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
     strict = choose_views(housing, SPEC, plan, min_gain=1.0, min_gain_per_s=1.0, workers=0)
     assert len(strict.plans) == 1 and np.allclose(strict.plans[0].view.axis, UP)
-    rate, floor = 1e-3, 0.01
+    floor = 0.01
+    entry_mm = 0.5 * float(np.linalg.norm(housing.extents))
+
+    def rates(selection):
+        gains = np.diff(selection.coverage)
+        assert np.all(gains >= floor)
+        views = selection.plans[1:]
+        seconds = [view_seconds(vp.traj, SPEC, entry_mm) for vp in views]
+        return gains / np.array(seconds)
+
+    free = choose_views(
+        housing, SPEC, plan, min_gain=1.0, min_gain_per_s=0.0, gain_floor=floor, workers=0
+    )
+    assert len(free.plans) >= 3  # the top and side views
+    free_rates = rates(free)
+    rate = 0.5 * (free_rates.min() + free_rates.max())
+    assert free_rates.min() < rate
     paid = choose_views(
         housing, SPEC, plan, min_gain=1.0, min_gain_per_s=rate, gain_floor=floor, workers=0
     )
-    assert len(paid.plans) >= 3  # the top and side views
-    entry_mm = 0.5 * float(np.linalg.norm(housing.extents))
-    gains = np.diff(paid.coverage)
-    for vp, gain in zip(paid.plans[1:], gains, strict=True):
-        assert gain >= floor
-        assert gain >= rate * view_seconds(vp.traj, SPEC, entry_mm)
+    assert 1 < len(paid.plans) < len(free.plans)
+    assert np.all(rates(paid) >= rate)
 
 
 def test_passes_whose_level_poses_all_come_too_near_are_given_up_before_planning(housing):
