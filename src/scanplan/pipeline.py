@@ -6,6 +6,7 @@ only its own.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -36,10 +37,15 @@ from scanplan.quantities import (
 )
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
-from scanplan.surface import hemisphere_visible_samples, reachable_samples
+from scanplan.surface import (
+    VisibleSurface,
+    hemisphere_visible_samples,
+    oriented_normals,
+    reachable_samples,
+)
 from scanplan.swaths import Swath, plan_swaths, swath_record
 from scanplan.trajectory import Trajectory
-from scanplan.view_workers import ViewJudge, ViewWorkers, view_worker_count
+from scanplan.view_workers import ViewJudge, ViewWorkers, start_worker_server, view_worker_count
 from scanplan.views import (
     PlanView,
     View,
@@ -70,6 +76,10 @@ MIN_VIEW_GAIN = 0.001
 MIN_VIEW_GAIN_PER_S = 5e-5
 MIN_VIEW_GAIN_FLOOR = 2e-4
 MAX_VIEWS = 150
+# The steepest surface a top view holds much of (its passes pitch to walls of at most 60°
+# along them and roll to 85° across): a part with more than 1 - COVERAGE_TARGET of its
+# surface steeper needs more views.
+TOP_VIEW_SLOPE_DEG = 75.0
 
 
 def plan_path(
@@ -288,6 +298,13 @@ class ViewSelection:
     out_of_time: bool = False  # stopped by the time budget, not by gain or target
 
 
+def top_view_may_suffice(part: Part, samples: VisibleSurface, coverage_target: float) -> bool:
+    """False when more than 1 - `coverage_target` of the `samples` lean more than
+    `TOP_VIEW_SLOPE_DEG` from +Z: the top view alone cannot reach the target."""
+    steep = oriented_normals(part)[samples.faces, 2] < math.cos(math.radians(TOP_VIEW_SLOPE_DEG))
+    return bool(steep.sum() <= (1.0 - coverage_target) * len(steep))
+
+
 def choose_views(
     part: Part,
     spec: ScanSpec,
@@ -349,6 +366,11 @@ def choose_views(
     judge = ViewJudge(spec, plan, points_per_profile, seed)
     # The samples the views are judged on (`evaluate` draws the same).
     samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
+    if workers and scheduler is None and not top_view_may_suffice(part, samples, coverage_target):
+        # The workers' server starts now, beside the top view (started after it, its imports
+        # held the quadrotor's and the pocket plate's first candidates 1-2 s back; started
+        # for the door, whose top view is enough, it cost about 0.5 s).
+        start_worker_server()
     try:
         top, covered = judge(part, View.looking_along(UP, 0))
         plans, coverage, chosen = [top], [float(covered.mean())], [covered]
@@ -373,7 +395,7 @@ def choose_views(
     on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
     evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
     # Asked of the workers, not yet taken: with workers, the next candidates the choice
-    # would try (those not planned yet with the largest bounds), one per worker, so the
+    # would try (those not planned yet with the largest bounds), `pool.width` of them, so the
     # workers plan ahead of it. Asking for every candidate at once wasted more than it gained
     # (the heightfield's choice took 17 s against 11 in one process, which plans 7 of them).
     pending: dict[int, Future[tuple[ViewPlan, np.ndarray]]] = {}

@@ -18,6 +18,7 @@ import warnings
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from multiprocessing import forkserver
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,10 @@ from scanplan.views import PlanView, View, ViewPlan, plan_view
 
 # How long to wait for a Dask scheduler to answer.
 CONNECT_SECONDS = 10.0
+# Views kept asked for per worker: one running and one queued behind it, so a worker that
+# finishes starts the next at once instead of idling while the choice reads another's result
+# (half the views take under 50 ms; the round trip through the choice took 20-40 ms).
+TASKS_AHEAD = 2
 
 
 @dataclass(frozen=True)
@@ -62,11 +67,20 @@ def view_worker_count() -> int:
     return cores if cores > 1 else 0
 
 
+def start_worker_server() -> None:
+    """Start the server process the view workers are forked from, if not running yet. It
+    imports this module (1.4 s here, most of it trimesh) on its own core: started before
+    the top view is planned, it is ready when the workers are needed."""
+    multiprocessing.get_context("forkserver").set_forkserver_preload([__name__])
+    forkserver.ensure_running()
+
+
 class ViewWorkers:
     """`submit(view)`: a future of `judge(part, view)`, run on `workers` worker processes
     in the order submitted (0: here, when submitted), or with `scheduler` (tcp://HOST:PORT)
     as Dask tasks on that cluster, the part and judge sent to each of its workers once.
-    `width`: how many views are planned at once. Leaving the `with` block drops the views
+    `width`: how many views to keep asked for: `TASKS_AHEAD` per worker (one when planned
+    here, where asking is planning). Leaving the `with` block drops the views
     not started and waits for those running (here; a cluster's are cancelled)."""
 
     def __init__(
@@ -75,7 +89,7 @@ class ViewWorkers:
         self._part, self._judge = part, judge
         self._pool: ProcessPoolExecutor | None = None
         self._client: Any = None
-        self.width = max(1, workers)
+        self.width = TASKS_AHEAD * workers if workers else 1
         if scheduler is not None:
             self._connect(scheduler)
         elif workers:
@@ -83,11 +97,10 @@ class ViewWorkers:
             # this one (it already runs Embree's and the passes' threads), nor spawned: a
             # spawned worker imports numpy, trimesh and Embree while this process waits to
             # hand it the part (1.3 s a worker here).
-            context = multiprocessing.get_context("forkserver")
-            context.set_forkserver_preload([__name__])
+            start_worker_server()
             self._pool = ProcessPoolExecutor(
                 workers,
-                mp_context=context,
+                mp_context=multiprocessing.get_context("forkserver"),
                 initializer=_start_worker,
                 initargs=(part, judge),
             )
@@ -111,7 +124,7 @@ class ViewWorkers:
         if threads == 0:
             self._client.close()
             raise ValueError(f"--scheduler {scheduler}: the cluster has no worker")
-        self.width = threads
+        self.width = TASKS_AHEAD * threads
         # Sent once to every worker; each task is given the workers' own copy, whose ray
         # engine is built by the first task there and kept.
         self._state = self._client.scatter((self._part, self._judge), broadcast=True)
