@@ -23,15 +23,20 @@ from scanplan.metrics import evaluate
 from scanplan.part import load_part, part_from_mesh
 from scanplan.pipeline import (
     ViewRaster,
+    _eval_spacing,
+    _view_key,
     choose_views,
     default_views,
     order_views,
     passes_blocked,
     plan_scan,
     plan_views,
+    steep_samples,
+    top_view_may_suffice,
 )
 from scanplan.planners import make_planner
-from scanplan.quantities import OVERLAP, UP, ScanSpec
+from scanplan.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
+from scanplan.surface import hemisphere_visible_samples
 from scanplan.trajectory import read_json, read_trajectory, write_json
 
 SPEC = ScanSpec()
@@ -308,3 +313,18 @@ def test_passes_whose_level_poses_all_come_too_near_are_given_up_before_planning
     with pytest.raises(ValueError, match="every scanning pose on part"):
         plan_scan(housing, SPEC, Recording(), raster="nominal", cell=hung, look_first=True)
     assert planned == []
+
+
+def test_views_planned_beside_the_top_view_on_workers_are_those_chosen_in_one_process():
+    """A part whose top view cannot be enough (its walls) has workers plan candidates while
+    the top view is planned here: the same views, in the same order, as one process."""
+    part = overhang_part()
+    samples = hemisphere_visible_samples(part, _eval_spacing(SPEC, VIEW_CHOICE_FAN_POINTS), 0)
+    assert not top_view_may_suffice(steep_samples(part, samples), COVERAGE_TARGET)
+    cell = PlanContext(SPEC, views="auto").cell(part)
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
+    here = choose_views(part, SPEC, plan, workers=0)
+    there = choose_views(part, SPEC, plan, workers=2)
+    assert len(here.plans) >= 2
+    assert [_view_key(v.view) for v in here.plans] == [_view_key(v.view) for v in there.plans]
+    assert here.coverage == there.coverage

@@ -14,7 +14,7 @@ from scanplan.cell import Cell
 from scanplan.collision import checker_for
 from scanplan.metrics import SurfaceState, evaluate
 from scanplan.part import part_from_mesh
-from scanplan.pipeline import plan_scan, plan_views, top_view_may_suffice
+from scanplan.pipeline import plan_scan, plan_views, steep_samples, top_view_may_suffice
 from scanplan.planners import make_planner
 from scanplan.quantities import UP, ScanSpec
 from scanplan.surface import hemisphere_visible_samples
@@ -231,7 +231,7 @@ def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():
 def test_the_top_view_may_suffice_on_a_plate_not_on_a_tall_box():
     def samples_of(box):
         part = part_from_mesh(trimesh.creation.box(box), "box")
-        return part, hemisphere_visible_samples(part, 5.0, 0)
+        return (steep_samples(part, hemisphere_visible_samples(part, 5.0, 0)),)
 
     # A 1 m plate 10 mm thick: its edges are 4 % of what is seen from above.
     assert top_view_may_suffice(*samples_of((1000.0, 1000.0, 10.0)), 0.93)

@@ -10,6 +10,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from functools import partial
 
@@ -45,7 +46,7 @@ from scanplan.surface import (
 )
 from scanplan.swaths import Swath, plan_swaths, swath_record
 from scanplan.trajectory import Trajectory
-from scanplan.view_workers import ViewJudge, ViewWorkers, start_worker_server, view_worker_count
+from scanplan.view_workers import ViewJudge, ViewWorkers, view_worker_count
 from scanplan.views import (
     PlanView,
     View,
@@ -298,10 +299,14 @@ class ViewSelection:
     out_of_time: bool = False  # stopped by the time budget, not by gain or target
 
 
-def top_view_may_suffice(part: Part, samples: VisibleSurface, coverage_target: float) -> bool:
-    """False when more than 1 - `coverage_target` of the `samples` lean more than
-    `TOP_VIEW_SLOPE_DEG` from +Z: the top view alone cannot reach the target."""
-    steep = oriented_normals(part)[samples.faces, 2] < math.cos(math.radians(TOP_VIEW_SLOPE_DEG))
+def steep_samples(part: Part, samples: VisibleSurface) -> np.ndarray:
+    """(k,) bool: the `samples` leaning more than `TOP_VIEW_SLOPE_DEG` from +Z."""
+    return oriented_normals(part)[samples.faces, 2] < math.cos(math.radians(TOP_VIEW_SLOPE_DEG))
+
+
+def top_view_may_suffice(steep: np.ndarray, coverage_target: float) -> bool:
+    """False when more than 1 - `coverage_target` of the samples are `steep`
+    (`steep_samples`): the top view alone cannot reach the target."""
     return bool(steep.sum() <= (1.0 - coverage_target) * len(steep))
 
 
@@ -366,60 +371,76 @@ def choose_views(
     judge = ViewJudge(spec, plan, points_per_profile, seed)
     # The samples the views are judged on (`evaluate` draws the same).
     samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
-    if workers and scheduler is None and not top_view_may_suffice(part, samples, coverage_target):
-        # The workers' server starts now, beside the top view (started after it, its imports
-        # held the quadrotor's and the pocket plate's first candidates 1-2 s back; started
-        # for the door, whose top view is enough, it cost about 0.5 s).
-        start_worker_server()
-    try:
-        top, covered = judge(part, View.looking_along(UP, 0))
-        plans, coverage, chosen = [top], [float(covered.mean())], [covered]
-    except TooLarge:  # the user's numbers, not the view's fault
-        raise
-    except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
-        covered = np.zeros(len(samples.points), bool)
-        plans, coverage, chosen = [], [0.0], []
-    reachable: np.ndarray | None = None
 
-    def target_reached() -> bool:
-        # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
-        # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
-        # under the ceiling then stopped it at 6 views (0.61) where 16 hold 0.77.
-        return coverage[-1] >= coverage_target
+    def candidates_and_faces() -> tuple[list[View], list[np.ndarray]]:
+        views = candidate_views(part, spec)
+        # The samples on each candidate's faces: the bound on its gain.
+        return views, [np.isin(samples.faces, np.asarray(v.faces)) for v in views]
 
-    if target_reached():
-        return ViewSelection(plans, coverage, 0, chosen)
-    candidates = candidate_views(part, spec)
-    tried = {_view_key(v) for v in candidates}
-    # The samples on each candidate's faces: the bound on its gain.
-    on_faces = [np.isin(samples.faces, np.asarray(v.faces)) for v in candidates]
-    evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
     # Asked of the workers, not yet taken: with workers, the next candidates the choice
     # would try (those not planned yet with the largest bounds), `pool.width` of them, so the
     # workers plan ahead of it. Asking for every candidate at once wasted more than it gained
     # (the heightfield's choice took 17 s against 11 in one process, which plans 7 of them).
     pending: dict[int, Future[tuple[ViewPlan, np.ndarray]]] = {}
-    rounds = 0
-    least = min(min_gain, gain_floor)  # the least gain a view may be kept for
-    # The move into a view: about the part's bounding radius (views are joined around it).
-    entry_mm = 0.5 * float(np.linalg.norm(part.extents))
-    seconds_of: dict[int, float] = {}
-
-    def worth(gain: float, i: int) -> bool:
-        if gain >= min_gain:
-            return True
-        if gain < gain_floor:
-            return False
-        if i not in seconds_of:
-            seconds_of[i] = view_seconds(evaluated[i][0].traj, spec, entry_mm)
-        return gain >= min_gain_per_s * seconds_of[i]
 
     def ask(i: int) -> None:
+        assert pool is not None
         pending[i] = pool.submit(replace(candidates[i], index=len(plans)))
 
-    # Started only now: a part whose top view is enough (the door) needs no worker, and
-    # starting them anyway took the demo from 55 s to 60 beside its second process.
-    with ViewWorkers(part, judge, workers, scheduler) as pool:
+    plans: list[ViewPlan] = []
+    pool: ViewWorkers | None = None
+    with ExitStack() as stack:
+        steep = steep_samples(part, samples)
+        if workers and scheduler is None and not top_view_may_suffice(steep, coverage_target):
+            # The top view cannot be enough: the workers start now and plan, beside it, the
+            # candidates with most steep surface on their faces (started after it, they held
+            # the quadrotor's and the pocket plate's first candidates 1-2 s back; started
+            # for the door, whose top view is enough, they cost about 0.5 s).
+            candidates, on_faces = candidates_and_faces()
+            pool = stack.enter_context(ViewWorkers(part, judge, workers))
+            guess = [int((m & steep).sum()) for m in on_faces]
+            for i in np.argsort(guess)[::-1][: pool.width]:
+                ask(int(i))
+        try:
+            top, covered = judge(part, View.looking_along(UP, 0))
+            plans, coverage, chosen = [top], [float(covered.mean())], [covered]
+        except TooLarge:  # the user's numbers, not the view's fault
+            raise
+        except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
+            covered = np.zeros(len(samples.points), bool)
+            plans, coverage, chosen = [], [0.0], []
+        reachable: np.ndarray | None = None
+
+        def target_reached() -> bool:
+            # Of the surface, not of the visibility ceiling: the sub-sampled fan can read far
+            # above the full sensor (NIST sheet metal part: 0.79 against 0.61), and a target
+            # under the ceiling then stopped it at 6 views (0.61) where 16 hold 0.77.
+            return coverage[-1] >= coverage_target
+
+        if target_reached():
+            return ViewSelection(plans, coverage, 0, chosen)
+        if pool is None:
+            # Started only now: a part whose top view is enough (the door) needs no worker, and
+            # starting them anyway took the demo from 55 s to 60 beside its second process.
+            candidates, on_faces = candidates_and_faces()
+            pool = stack.enter_context(ViewWorkers(part, judge, workers, scheduler))
+        tried = {_view_key(v) for v in candidates}
+        evaluated: dict[int, tuple[ViewPlan, np.ndarray]] = {}
+        rounds = 0
+        least = min(min_gain, gain_floor)  # the least gain a view may be kept for
+        # The move into a view: about the part's bounding radius (views are joined around it).
+        entry_mm = 0.5 * float(np.linalg.norm(part.extents))
+        seconds_of: dict[int, float] = {}
+
+        def worth(gain: float, i: int) -> bool:
+            if gain >= min_gain:
+                return True
+            if gain < gain_floor:
+                return False
+            if i not in seconds_of:
+                seconds_of[i] = view_seconds(evaluated[i][0].traj, spec, entry_mm)
+            return gain >= min_gain_per_s * seconds_of[i]
+
         while len(plans) < max_views and not target_reached():
             bounds = [float((m & ~covered).mean()) for m in on_faces]
             order = [int(i) for i in np.argsort(bounds)[::-1] if bounds[i] >= least]
