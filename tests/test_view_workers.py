@@ -7,6 +7,8 @@ from __future__ import annotations
 import multiprocessing
 import os
 import pickle
+import signal
+import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -101,3 +103,27 @@ def test_starting_the_workers_after_the_pool_is_gone_is_no_error():
     _warm_up(pool)  # submit() on this pool raises RuntimeError
     with pytest.raises(RuntimeError):
         pool.submit(int)
+
+
+@dataclass(frozen=True)
+class Endless:
+    """A view raster that never returns in a worker process (a view not wanted any more)."""
+
+    caller: int  # the pid of the process that makes it
+
+    def __call__(self, view_part, view):
+        while os.getpid() != self.caller:
+            time.sleep(0.1)
+        raise ValueError("planned here")
+
+
+def test_leaving_the_workers_stops_the_views_still_running():
+    part = overhang_part()
+    judge = ViewJudge(SPEC, Endless(os.getpid()), points_per_profile=64)
+    with ViewWorkers(part, judge, workers=1) as pool:
+        running = pool.submit(View.looking_along(UP, 0))
+        while not running._future.running():
+            time.sleep(0.05)
+        workers = list(pool._pool._processes.values())
+    # Stopped, not waited for (waiting would never end).
+    assert [w.exitcode for w in workers] == [-signal.SIGTERM]

@@ -81,7 +81,7 @@ class ViewWorkers:
     as Dask tasks on that cluster, the part and judge sent to each of its workers once.
     `width`: how many views to keep asked for: `TASKS_AHEAD` per worker (one when planned
     here, where asking is planning). Leaving the `with` block drops the views
-    not started and waits for those running (here; a cluster's are cancelled)."""
+    not started and stops those running (a cluster's are cancelled)."""
 
     def __init__(
         self, part: Part, judge: ViewJudge, workers: int, scheduler: str | None = None
@@ -132,7 +132,14 @@ class ViewWorkers:
     def __exit__(self, *exc_info: object) -> None:
         if self._pool is not None:
             self._warm_up.join()
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            # The views still running are not wanted: their workers are stopped, not waited
+            # for (a heightfield's view planned ahead held its choice up to 2 s at the end).
+            workers = list((self._pool._processes or {}).values())
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            for worker in workers:
+                worker.terminate()
+            for worker in workers:
+                worker.join()
         if self._client is not None:
             self._client.close()
 
