@@ -41,7 +41,6 @@ from scanplan.robot.links import obstacles_for
 from scanplan.surface import (
     VisibleSurface,
     hemisphere_visible_samples,
-    oriented_normals,
     reachable_samples,
 )
 from scanplan.swaths import Swath, plan_swaths, swath_record
@@ -300,8 +299,11 @@ class ViewSelection:
 
 
 def steep_samples(part: Part, samples: VisibleSurface) -> np.ndarray:
-    """(k,) bool: the `samples` leaning more than `TOP_VIEW_SLOPE_DEG` from +Z."""
-    return oriented_normals(part)[samples.faces, 2] < math.cos(math.radians(TOP_VIEW_SLOPE_DEG))
+    """(k,) bool: the `samples` on faces steeper than `TOP_VIEW_SLOPE_DEG` (their normal as
+    far from ±Z: a mesh's winding does not matter here, and turning the normals outwards,
+    `surface.oriented_normals`, cost the door's plan 0.3 s)."""
+    normal_z = part.ray_engine.face_normals[samples.faces, 2]
+    return np.abs(normal_z) < math.cos(math.radians(TOP_VIEW_SLOPE_DEG))
 
 
 def top_view_may_suffice(steep: np.ndarray, coverage_target: float) -> bool:
