@@ -229,13 +229,11 @@ def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():
 
 
 def test_the_top_view_may_suffice_on_a_plate_not_on_a_tall_box():
-    def samples_of(box):
+    def steep_of(box):
         part = part_from_mesh(trimesh.creation.box(box), "box")
-        return (steep_samples(part, hemisphere_visible_samples(part, 5.0, 0)),)
+        return steep_samples(part, hemisphere_visible_samples(part, 5.0, 0))
 
-    # A 1 m plate 10 mm thick: its edges are 4 % of what is seen from above.
-    assert top_view_may_suffice(*samples_of((1000.0, 1000.0, 10.0)), 0.93)
-    # A cube: four walls to one top.
-    assert not top_view_may_suffice(*samples_of((200.0, 200.0, 200.0)), 0.93)
-    # The plate's 4 % of edges are too many for a target of 0.97.
-    assert not top_view_may_suffice(*samples_of((1000.0, 1000.0, 10.0)), 0.97)
+    plate = steep_of((1000.0, 1000.0, 10.0))  # a 1 m plate 10 mm thick: 4 % edges
+    assert top_view_may_suffice(plate, 0.93)
+    assert not top_view_may_suffice(plate, 0.97)  # too many edges for that target
+    assert not top_view_may_suffice(steep_of((200.0, 200.0, 200.0)), 0.93)  # four walls, a top

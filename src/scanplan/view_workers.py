@@ -68,9 +68,8 @@ def view_worker_count() -> int:
 
 
 def start_worker_server() -> None:
-    """Start the server process the view workers are forked from, if not running yet. It
-    imports this module (1.4 s here, most of it trimesh) on its own core: started before
-    the top view is planned, it is ready when the workers are needed."""
+    """Start the server process the view workers are forked from, if not running yet (it
+    imports this module once: 1.4 s here, most of it trimesh)."""
     multiprocessing.get_context("forkserver").set_forkserver_preload([__name__])
     forkserver.ensure_running()
 
@@ -133,7 +132,8 @@ class ViewWorkers:
         if self._pool is not None:
             self._warm_up.join()
             # The views still running are not wanted: their workers are stopped, not waited
-            # for (a heightfield's view planned ahead held its choice up to 2 s at the end).
+            # for (a heightfield's view planned ahead held its choice 2-4 s at the end). The
+            # executor cannot stop a running task before Python 3.14: its processes are.
             workers = list((self._pool._processes or {}).values())
             self._pool.shutdown(wait=False, cancel_futures=True)
             for worker in workers:
