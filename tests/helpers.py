@@ -5,8 +5,11 @@ the export suites' snake trajectory. Fixtures (built once per session) live in c
 from __future__ import annotations
 
 import math
+import os
 import pickle
+import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import fcl
@@ -329,3 +332,20 @@ def loopback_cluster(threads: int = 1):
         host="127.0.0.1",
         dashboard_address=":0",
     )
+
+
+@dataclass(frozen=True)
+class Endless:
+    """A view raster that never returns in a worker process (a view not wanted any more);
+    it creates the file `started` when it begins. Here, not in a test module: a worker
+    process imports it by this module's name."""
+
+    caller: int  # the pid of the process that makes it
+    started: str
+
+    def __call__(self, view_part, view):
+        if os.getpid() == self.caller:
+            raise ValueError("planned here")
+        open(self.started, "w").close()
+        while True:
+            time.sleep(0.1)
