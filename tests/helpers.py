@@ -5,6 +5,7 @@ the export suites' snake trajectory. Fixtures (built once per session) live in c
 from __future__ import annotations
 
 import math
+import multiprocessing
 import os
 import pickle
 import time
@@ -26,7 +27,7 @@ from scanplan.context import PlanContext
 from scanplan.export import ExportOptions, parse_pose_arg
 from scanplan.metrics import Metrics, evaluate
 from scanplan.part import Part, part_from_mesh
-from scanplan.pipeline import plan_path
+from scanplan.pipeline import ViewRaster, plan_path
 from scanplan.planners import make_planner
 from scanplan.quantities import ScanSpec
 from scanplan.sensor import SensorSpec
@@ -349,3 +350,16 @@ class Endless:
         open(self.started, "w").close()
         while True:
             time.sleep(0.1)
+
+
+@dataclass(frozen=True)
+class DiesInAWorker:
+    """A view raster whose worker process dies on its first view (killed, out of memory).
+    Here, not in a test module: a worker process imports it by this module's name."""
+
+    raster: ViewRaster
+
+    def __call__(self, view_part, view):
+        if multiprocessing.parent_process() is not None:
+            os._exit(1)
+        return self.raster(view_part, view)

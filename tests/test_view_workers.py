@@ -4,17 +4,15 @@ its ray engine."""
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import pickle
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
-from helpers import Endless, overhang_part
+from helpers import DiesInAWorker, Endless, overhang_part
 from scanplan.cell import Cell
 from scanplan.pipeline import ViewRaster
 from scanplan.planners import make_planner
@@ -65,18 +63,6 @@ def test_a_view_that_sees_nothing_raises_where_it_is_taken():
             failed = pool.submit(blind)
             with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
                 failed.result()
-
-
-@dataclass(frozen=True)
-class DiesInAWorker:
-    """A view raster whose worker process dies on its first view (killed, out of memory)."""
-
-    raster: ViewRaster
-
-    def __call__(self, view_part, view):
-        if multiprocessing.parent_process() is not None:
-            os._exit(1)
-        return self.raster(view_part, view)
 
 
 def test_a_view_whose_worker_dies_is_planned_here_and_the_rest_too():
