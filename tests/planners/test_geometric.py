@@ -4,6 +4,7 @@ roll, the geometric and feedback planners put a cross slope in spec."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from scanplan.planners.feedback import FeedbackPlanner
 from scanplan.planners.fixed import FixedPlanner
 from scanplan.planners.geometric import GeometricPlanner
 from scanplan.quantities import ScanSpec, StepLimits
+from scanplan.shaping import CentredLookahead
 from scanplan.sensor import SensorSpec
 from scanplan.swaths import plan_swaths
 
@@ -81,17 +83,36 @@ def test_geometric_respects_the_step_limits_and_anticipates_a_step(stepped_plate
     assert m.backward_steps == 0
 
 
-def test_planner_takes_its_cost_as_a_strategy():
+def test_planner_takes_its_cost_as_a_strategy(door):
+    calls = []
+
+    def cost(d, alpha, ds, spec):
+        calls.append(len(d))
+        return -len(calls)  # the last candidate costed wins
+
+    swath = plan_swaths(door, SENSOR)[0]
+    planner = GeometricPlanner(cost=cost, refinements=0)
+    traj = planner.plan(door, swath, SPEC)
+    assert len(calls) == 3  # one per look-ahead candidate: over a curved door they all differ
+    last = replace(planner, lookaheads=planner.lookaheads[-1:]).plan(door, swath, SPEC)
+    np.testing.assert_array_equal(traj.poses, last.poses)
+
+
+def test_identical_stations_are_measured_and_costed_once(door):
     calls = []
 
     def cost(d, alpha, ds, spec):
         calls.append(len(d))
         return 0.0
 
-    part = part_from_mesh(box(300.0, 100.0), "plate")
-    (swath,) = plan_swaths(part, SENSOR)
-    GeometricPlanner(cost=cost, refinements=0).plan(part, swath, SPEC)
-    assert len(calls) == 3  # one per look-ahead candidate
+    swath = plan_swaths(door, SENSOR)[0]
+    one = GeometricPlanner(cost=cost, lookaheads=(CentredLookahead(15.0),), refinements=2)
+    one.plan(door, swath, SPEC)
+    alone = len(calls)
+    assert alone == 3  # each refinement moves the stations over a curved door
+    # A second, identical look-ahead gives the same stations at every step: nothing new.
+    replace(one, lookaheads=(CentredLookahead(15.0), CentredLookahead(15.0))).plan(door, swath, SPEC)
+    assert len(calls) == 2 * alone
 
 
 def test_pass_that_sees_nothing_is_a_clear_error():
