@@ -10,9 +10,11 @@ import math
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from scanplan.part import Part
 from scanplan.quantities import UP
@@ -127,6 +129,12 @@ class VisibleSurface:
     points: np.ndarray
     area_mm2: float
     faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """A k-d tree of the points, built once: choosing views judges every candidate on
+        the same samples (5.5 ms a candidate on the quadrotor's 19 000)."""
+        return cKDTree(self.points)
 
 
 def area_samples(

@@ -11,7 +11,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from scanplan.cloud import PointCloud
 from scanplan.metrics.summary import CoverageMap, SurfaceState
@@ -184,7 +183,7 @@ class Coverage:
     `in_spec_radius` on the sample's side (`SAME_SIDE_COS` between the point's normal and
     the sample's outward normal, `normals` (k, 3)). The gap to the next profile is only
     known once the next profile is measured, so the last profile of each chunk waits for
-    the next chunk. plain=False: the in-spec set alone. tree: the samples' cKDTree, if built.
+    the next chunk. plain=False: the in-spec set alone.
     """
 
     def __init__(
@@ -196,7 +195,6 @@ class Coverage:
         in_spec_radius: float,
         normals: np.ndarray,
         plain: bool = True,
-        tree: cKDTree | None = None,
     ) -> None:
         self.surface, self.spec = surface, scan_spec
         self.normals = normals
@@ -209,7 +207,7 @@ class Coverage:
         self.in_spec = np.zeros(k, bool)
         self.tree = None
         if k:
-            self.tree = cKDTree(surface.points) if tree is None else tree
+            self.tree = surface.tree
             # Enough neighbours that every sample within the radius of a point is returned.
             per_mm2 = k / max(surface.area_mm2, 1e-9)
             expected = per_mm2 * math.pi * in_spec_radius**2

@@ -13,7 +13,6 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from scanplan.collision import checker_for
 from scanplan.context import PlanContext, recorded
@@ -113,20 +112,17 @@ def coverage_of(
     spec: SensorSpec,
     normals: np.ndarray,
     plain: bool = True,
-    tree: cKDTree | None = None,
 ) -> Coverage:
     """The coverage accumulator for a scan by the evaluated fan `spec` (perhaps sub-sampled);
-    normals: (k, 3) the samples' outward normals (`surface.oriented_normals`); plain, tree:
-    as `Coverage`'s."""
+    normals: (k, 3) the samples' outward normals (`surface.oriented_normals`); plain: as
+    `Coverage`'s."""
     lateral_spacing = spec.line_width_mm / max(spec.points_per_profile - 1, 1)
     # Decimate the points used for coverage to ~1/3 of the sample spacing: same answer, faster.
     col_stride = max(1, int(coverage_spacing_mm(spec) / 3 / lateral_spacing))
     # Wide enough that every sample between two measured lines has a point within reach.
     cover_radius = max(1.0, lateral_spacing * col_stride)
     in_spec_radius = in_spec_radius_mm(scan_spec, lateral_spacing * col_stride)
-    return Coverage(
-        surface, scan_spec, col_stride, cover_radius, in_spec_radius, normals, plain, tree
-    )
+    return Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius, normals, plain)
 
 
 def _out_of_reach(part: Part) -> ValueError:
@@ -162,7 +158,6 @@ def in_spec_samples(
     if not len(surface.points):
         return np.zeros(0, bool)
     normals = oriented_normals(part)[surface.faces]
-    tree = cKDTree(surface.points)
     # A pass starts wherever the pass index changes: the in-spec test looks no further.
     swath = traj.swath[scan_idx]
     starts = np.flatnonzero(np.r_[True, swath[1:] != swath[:-1]])
@@ -171,7 +166,7 @@ def in_spec_samples(
 
     def one_pass(k: int) -> tuple[np.ndarray, bool]:
         lo, hi = bounds[k]
-        coverage = coverage_of(surface, scan_spec, spec, normals, plain=False, tree=tree)
+        coverage = coverage_of(surface, scan_spec, spec, normals, plain=False)
         profiler = LineProfilometer(part, spec, seed=int(seeds[k]), threads=1)
         seen = False
         for at, scan in profiler.measure_in_chunks(poses[lo:hi]):
