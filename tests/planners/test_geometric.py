@@ -18,8 +18,8 @@ from scanplan.planners.feedback import FeedbackPlanner
 from scanplan.planners.fixed import FixedPlanner
 from scanplan.planners.geometric import GeometricPlanner
 from scanplan.quantities import ScanSpec, StepLimits
-from scanplan.shaping import CentredLookahead
 from scanplan.sensor import SensorSpec
+from scanplan.shaping import CentredLookahead
 from scanplan.swaths import plan_swaths
 
 SENSOR = SensorSpec()
@@ -111,7 +111,8 @@ def test_identical_stations_are_measured_and_costed_once(door):
     alone = len(calls)
     assert alone == 3  # each refinement moves the stations over a curved door
     # A second, identical look-ahead gives the same stations at every step: nothing new.
-    replace(one, lookaheads=(CentredLookahead(15.0), CentredLookahead(15.0))).plan(door, swath, SPEC)
+    twice = replace(one, lookaheads=(CentredLookahead(15.0), CentredLookahead(15.0)))
+    twice.plan(door, swath, SPEC)
     assert len(calls) == 2 * alone
 
 
