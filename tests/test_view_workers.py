@@ -4,6 +4,7 @@ its ray engine."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import pickle
 import time
@@ -12,7 +13,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
-from helpers import DiesInAWorker, Endless, overhang_part
+from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part
 from scanplan.cell import Cell
 from scanplan.pipeline import ViewRaster
 from scanplan.planners import make_planner
@@ -63,6 +64,27 @@ def test_a_view_that_sees_nothing_raises_where_it_is_taken():
             failed = pool.submit(blind)
             with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
                 failed.result()
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
+)
+def test_a_view_that_sees_nothing_on_dask_raises_here_and_is_no_error_in_the_worker_log():
+    from dask.distributed import Client
+
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    below = np.flatnonzero(part.mesh.face_normals[:, 2] < -0.99)
+    with loopback_cluster() as cluster, Client(cluster) as client:
+        with ViewWorkers(part, judge, 0, cluster.scheduler_address) as pool:
+            failed = pool.submit(View.looking_along(UP, 1, below))
+            with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
+                failed.result()
+            top, _ = pool.submit(View.looking_along(UP, 0)).result()
+        assert len(top.traj.poses)
+        logs = [line for worker in client.get_worker_logs().values() for _, line in worker]
+    assert logs and not [line for line in logs if "Compute Failed" in line]
 
 
 def test_a_view_whose_worker_dies_is_planned_here_and_the_rest_too():

@@ -145,7 +145,7 @@ class ViewWorkers:
 
     def submit(self, view: View) -> Any:
         if self._client is not None:
-            return self._client.submit(_judge_with, self._state, view, pure=False)
+            return _Raising(self._client.submit(_judge_quietly, self._state, view, pure=False))
         if self._pool is not None:
             try:
                 return _OrHere(self._pool.submit(_judge_in_worker, view), self, view)
@@ -190,6 +190,22 @@ class _OrHere:
             return self._workers.instead(self._view)
 
 
+class _Raising:
+    """A Dask future of `_judge_quietly`, whose returned ValueError `result()` raises."""
+
+    def __init__(self, future: Any) -> None:
+        self._future = future
+
+    def done(self) -> bool:
+        return bool(self._future.done())
+
+    def result(self) -> tuple[ViewPlan, np.ndarray]:
+        out = self._future.result()
+        if isinstance(out, ValueError):
+            raise out
+        return out
+
+
 def _warm_up(pool: ProcessPoolExecutor) -> None:
     """Start the pool's workers with a task that does nothing."""
     try:
@@ -218,3 +234,15 @@ def _judge_in_worker(view: View) -> tuple[ViewPlan, np.ndarray]:
 def _judge_with(state: tuple[Part, ViewJudge], view: View) -> tuple[ViewPlan, np.ndarray]:
     part, judge = state
     return judge(part, view)
+
+
+def _judge_quietly(
+    state: tuple[Part, ViewJudge], view: View
+) -> tuple[ViewPlan, np.ndarray] | ValueError:
+    """`_judge_with`, a view's ValueError (it sees nothing, every pose too near) returned, not
+    raised: it is an answer, and a Dask worker logs each task that raises as an error with
+    its traceback (85 of them for the pocket plate's choice)."""
+    try:
+        return _judge_with(state, view)
+    except ValueError as exc:
+        return exc
