@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import trimesh
 
-from scanplan.bands import plan_adaptive_swaths
+from scanplan import bands
+from scanplan.bands import plan_adaptive_swaths, row_quantiles, top_surface
 from scanplan.metrics import evaluate
 from scanplan.part import part_from_mesh
 from scanplan.pipeline import plan_path
@@ -45,3 +47,38 @@ def test_horizontal_cylinder_adaptive_passes_with_roll_cover_its_upper_half():
     assert m.in_spec_coverage >= 0.9
     nominal = plan_path(part, SPEC, GeometricPlanner(), plan_swaths(part, SPEC.sensor, "x"))
     assert evaluate(part, SPEC, nominal, points_per_profile=256).in_spec_coverage < 0.4
+
+
+def test_row_quantiles_are_numpys_to_the_last_bit():
+    rng = np.random.default_rng(2)
+    values = rng.normal(0.0, 50.0, (300, 40))
+    keep = rng.random((300, 40)) < rng.uniform(0.02, 1.0, (300, 1))
+    keep[:3] = False  # rows with nothing kept
+    for q in (0.0, 0.15, 0.5, 0.85, 1.0):
+        got = row_quantiles(values, keep, q)
+        want = [
+            np.quantile(v[k], q) if k.any() else np.nan for v, k in zip(values, keep, strict=True)
+        ]
+        np.testing.assert_array_equal(got, want)
+
+
+def test_bands_of_many_centres_are_each_centres_band(monkeypatch):
+    """The pass centres of a raster predicted in batches (here of a few centres, so that one
+    call makes several) are the bands each centre alone gets, and they differ from one
+    another (the cylinder's curvature narrows the band away from its crest)."""
+    part = half_cylinder_part()
+    surface = top_surface(part, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    centres = np.arange(-140.0, 141.0, 10.0)
+    monkeypatch.setattr(bands, "BAND_BATCH_CELLS", 4 * surface.hit.size)
+    many = bands.in_spec_bands(surface, centres, SPEC)
+    for centre, band in zip(centres, many, strict=True):
+        alone = bands.in_spec_band(surface, float(centre), SPEC)
+        assert (band.centre_mm, band.lo_mm, band.hi_mm) == (
+            alone.centre_mm,
+            alone.lo_mm,
+            alone.hi_mm,
+        )
+        np.testing.assert_array_equal(band.row_lo_mm, alone.row_lo_mm)
+        np.testing.assert_array_equal(band.row_hi_mm, alone.row_hi_mm)
+    widths = [b.hi_mm - b.lo_mm for b in many]
+    assert max(widths) > 2 * min(widths)
