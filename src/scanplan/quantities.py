@@ -137,6 +137,18 @@ class ScanSpec:
         return replace(self, sensor=sensor)
 
 
+def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a · b over the last axis of (..., 3) arrays (broadcast against each other), added as
+    `np.sum(a * b, axis=-1)` adds it, to the last bit: numpy's reduction over an axis of
+    three costs several times the arithmetic on the three components."""
+    return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]
+
+
+def norm_rows(a: np.ndarray) -> np.ndarray:
+    """|a| over the last axis of (..., 3), as `np.linalg.norm(a, axis=-1)` to the last bit."""
+    return np.sqrt(dot_rows(a, a))
+
+
 def mean_distance(z_sensor: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """D: mean z_s of the valid points. (..., N) -> (...); NaN where no point is valid."""
     count = valid.sum(axis=-1)
@@ -147,7 +159,7 @@ def mean_distance(z_sensor: np.ndarray, valid: np.ndarray) -> np.ndarray:
 def mean_normal(normals_part: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Unit mean of the valid points' normals. (..., N, 3) -> (..., 3); NaN if none valid."""
     total = np.where(valid[..., None], normals_part, 0.0).sum(axis=-2)
-    norm = np.linalg.norm(total, axis=-1, keepdims=True)
+    norm = norm_rows(total)[..., None]
     return np.where(norm > 0, total / np.where(norm > 0, norm, 1.0), np.nan)
 
 
@@ -186,9 +198,9 @@ def profile_angles(
     `beam_angle` at the cost of one."""
     n = mean_normal(normals_part, valid)
     x_s, y_s, z_s = poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2]
-    facing = -np.sum(n * z_s, axis=-1)
-    alpha = np.arctan2(np.sum(n * y_s, axis=-1), facing)
-    beta = np.arctan2(-np.sum(n * x_s, axis=-1), facing)
+    facing = -dot_rows(n, z_s)
+    alpha = np.arctan2(dot_rows(n, y_s), facing)
+    beta = np.arctan2(-dot_rows(n, x_s), facing)
     return alpha, beta, np.arccos(np.clip(facing, -1.0, 1.0))
 
 
@@ -196,7 +208,7 @@ def point_orientation_error(normals_part: np.ndarray, poses: np.ndarray) -> np.n
     """alpha_i = acos(-z_s . n_i) per point, radians; includes what pitch cannot correct.
     (..., N, 3), (..., 4, 4) -> (..., N)."""
     z_s = poses[..., None, :3, 2]
-    return np.arccos(np.clip(-np.sum(normals_part * z_s, axis=-1), -1.0, 1.0))
+    return np.arccos(np.clip(-dot_rows(normals_part, z_s), -1.0, 1.0))
 
 
 def in_spec(
@@ -222,11 +234,12 @@ def advance(
     NaN where no column is valid in both.
     """
     both = valid_prev & valid_next
-    d = np.where(both[..., None], points_next - points_prev, 0.0)
+    d = points_next - points_prev
     u = np.asarray(scan_direction, dtype=np.float64)
     if u.ndim > 1:
         u = u[..., None, :]
-    signed = np.sign(np.sum(d * u, axis=-1)) * np.linalg.norm(d, axis=-1)
+    with np.errstate(invalid="ignore"):  # the columns not valid in both are NaN here
+        signed = np.where(both, np.sign(dot_rows(d, u)) * norm_rows(d), 0.0)
     count = both.sum(axis=-1)
     return np.where(count > 0, signed.sum(axis=-1) / np.maximum(count, 1), np.nan)
 

@@ -19,8 +19,10 @@ from scanplan.quantities import (
     ScanSpec,
     advance,
     beam_angle,
+    dot_rows,
     in_spec,
     mean_distance,
+    norm_rows,
     signed_alpha,
 )
 from scanplan.reward import reward_terms
@@ -44,12 +46,10 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
     points = scan.points_part[:, cols]
     normals = scan.normals_part[:, cols]
     ray = points - scan.poses[:, None, :3, 3]
-    rho = np.linalg.norm(ray, axis=-1)
+    rho = norm_rows(ray)
     y_s = scan.poses[:, None, :3, 1]
-    n_plane = normals - np.sum(normals * y_s, axis=-1, keepdims=True) * y_s
-    cos_beta = np.abs(np.sum(n_plane * ray, axis=-1)) / np.maximum(
-        np.linalg.norm(n_plane, axis=-1) * rho, 1e-12
-    )
+    n_plane = normals - dot_rows(normals, y_s)[..., None] * y_s
+    cos_beta = np.abs(dot_rows(n_plane, ray)) / np.maximum(norm_rows(n_plane) * rho, 1e-12)
     z = scan.z_sensor[:, cols]
     with np.errstate(divide="ignore", invalid="ignore"):
         return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
