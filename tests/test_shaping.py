@@ -82,11 +82,7 @@ def test_a_batch_of_profiles_is_shaped_as_each_alone():
     )
     rows[1, 30:] += 0.6  # a step
     for shaper, rate in ((RobustLookahead(), 0.0015), (CentredLookahead(), 0.003)):
-        together = (
-            shaper.shape_many(grid, rows, rate)
-            if isinstance(shaper, RobustLookahead)
-            else shaper.shape(grid, rows, rate)
-        )
+        together = shaper.shape(grid, rows, rate)
         alone = np.stack([shaper.shape(grid, row, rate) for row in rows])
         np.testing.assert_array_equal(together, alone)
         assert not np.array_equal(together, rows)  # something was shaped

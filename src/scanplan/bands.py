@@ -167,7 +167,7 @@ def _bands(
             [np.interp(along, along[r], p[r]) for r, p in zip(rs, pitch_c, strict=True)]
         )
         roll = np.stack([np.interp(along, along[r], p[r]) for r, p in zip(rs, roll_c, strict=True)])
-        pitch = RobustLookahead().shape_many(along, pitch, PITCH_LEVER / wd)
+        pitch = RobustLookahead().shape(along, pitch, PITCH_LEVER / wd)
         rate = ROLL_RATE * lim.dphi_max_rad / spec.delta_s_opt_mm
         roll = CentredLookahead().shape(along, roll, rate)
         # −z_s of those poses: from the surface towards the sensor (the normal, if aligned)

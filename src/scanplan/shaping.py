@@ -20,7 +20,8 @@ ROLL_RATE = 0.8
 
 
 class Lookahead(Protocol):
-    """Shape a target profile sampled on `grid_mm` so |slope| <= `max_rate_per_mm`."""
+    """Shape a target profile sampled on `grid_mm` so |slope| <= `max_rate_per_mm`; values
+    (k,), or (b, k) for b profiles on the same grid."""
 
     def shape(
         self, grid_mm: np.ndarray, values: np.ndarray, max_rate_per_mm: float
@@ -86,20 +87,16 @@ class RobustLookahead:
     max_states: int = 4000
 
     def shape(self, grid_mm, values, max_rate_per_mm):
-        return self.shape_many(
-            grid_mm, np.asarray(values, dtype=np.float64)[None], max_rate_per_mm
-        )[0]
-
-    def shape_many(self, grid_mm, values, max_rate_per_mm):
-        """`shape` of each row of `values` (b, k), all on `grid_mm` (k,), in one dynamic
-        programme: the in-spec bands of a raster shape the pitch of 20-100 pass centres at once
-        (a call each was 15 % of a machined part's view choice). Every row gets as many levels
-        as the row that needs most: a level above all of a row's values costs more than the
-        one below it, so no least-cost path of that row takes it."""
-        values = np.asarray(values, dtype=np.float64)
+        """Also of each row of (b, k) values at once, in one dynamic programme (the in-spec
+        bands of a raster shape the pitch of 20-100 pass centres: a call each was 15 % of a
+        machined part's view choice). Every row gets as many levels as the row that needs
+        most: a level above all of a row's values costs more than the one below it, so no
+        least-cost path of that row takes it."""
+        given = np.asarray(values, dtype=np.float64)
+        values = given.reshape(-1, given.shape[-1])
         b, k = values.shape
         if k < 2:
-            return values.copy()
+            return given.copy()
         cell = float(np.mean(np.diff(grid_mm)))
         lo, hi = values.min(axis=1), values.max(axis=1)
         step = np.maximum(max_rate_per_mm * cell, (hi - lo) / self.max_states)
@@ -130,4 +127,4 @@ class RobustLookahead:
                 path[r, i] = j
         path -= 1
         shaped = np.take_along_axis(levels, path, axis=1)
-        return np.where(flat[:, None], values, shaped)
+        return np.where(flat[:, None], values, shaped).reshape(given.shape)
