@@ -72,7 +72,7 @@ def test_bands_of_many_centres_are_each_centres_band(monkeypatch):
     monkeypatch.setattr(bands, "BAND_BATCH_CELLS", 4 * surface.hit.size)
     many = bands.in_spec_bands(surface, centres, SPEC)
     for centre, band in zip(centres, many, strict=True):
-        alone = bands.in_spec_band(surface, float(centre), SPEC)
+        alone = bands.in_spec_bands(surface, np.array([centre]), SPEC)[0]
         assert (band.centre_mm, band.lo_mm, band.hi_mm) == (
             alone.centre_mm,
             alone.lo_mm,

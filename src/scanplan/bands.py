@@ -1,7 +1,7 @@
 """Passes that adapt to the surface (SPEC §3b): the band of the laser line that stays in spec.
 
 A 495 mm line on a curved part is in spec (|z_s − W_d| ≤ tol_d, α_i ≤ tol_α) only on a band
-around where the beam is aligned with the surface. `in_spec_band` predicts that band for a
+around where the beam is aligned with the surface. `in_spec_bands` predicts that band for a
 pass centred at a lateral offset, from the CAD's top surface (vertical rays on a grid), with
 the beam aligned — by pitch and roll — to the surface normal at the band's centre.
 `adaptive_offsets` chooses pass centres greedily until their bands cover the surface (set
@@ -71,21 +71,6 @@ class Band:
     hi_mm: float
     row_lo_mm: np.ndarray
     row_hi_mm: np.ndarray
-
-
-def in_spec_band(
-    surface: TopSurface,
-    centre_mm: float,
-    spec: ScanSpec,
-    margin: float = 0.7,
-    centre_halfwidth_mm: float = 5.0,
-    row_quantile: float = 0.15,
-    limits: StepLimits | None = None,
-) -> Band:
-    """The band around `centre_mm` where the surface would be in spec (`in_spec_bands`)."""
-    return in_spec_bands(
-        surface, np.array([centre_mm]), spec, margin, centre_halfwidth_mm, row_quantile, limits
-    )[0]
 
 
 # Pass centres whose bands `in_spec_bands` predicts in one batch: its (centres, rows,
@@ -296,7 +281,7 @@ def plan_adaptive_swaths(
     uphill: np.ndarray | None = None,
 ) -> list[Swath]:
     """Passes that adapt to the surface (none downhill toward a table, `swaths.swaths_at`):
-    pass centres chosen so that their predicted in-spec bands (`in_spec_band`) cover the
+    pass centres chosen so that their predicted in-spec bands (`in_spec_bands`) cover the
     surface (a greedy set cover, `adaptive_offsets`); the band goes with the swath
     (`Swath.band_mm`) so planners align the line to it. The direction rule is the nominal
     raster's ('auto': less variation across the line): ranking the two directions by

@@ -187,7 +187,8 @@ class CollisionChecker:
         colliding_only=True: only `colliding` is asked for; poses within the clearance ride
         on a measured one too (their distance an upper bound below the clearance, their
         depth unknown: `touching` and the depths are not to be read), and poses after one
-        measured near the clearance are only tested for being within it (`_within`).
+        measured near the clearance are only tested for being within it (`_within`: a pose
+        within reads just under the clearance, one clear reads the clearance).
         """
         if not (np.isfinite(clearance_mm) and clearance_mm >= 0):
             raise ValueError(f"clearance must be a finite number >= 0 mm, got {clearance_mm}")

@@ -117,7 +117,7 @@ def probe_swath(
     hit_h = hit  # the columns the height comes from
     if swath.band_mm is not None:
         # An adaptive pass is aligned to the surface at its centre line (the band was
-        # predicted that way, `bands.in_spec_band`): height and normal from there.
+        # predicted that way, `bands.in_spec_bands`): height and normal from there.
         centre = np.abs(np.linspace(lo, hi, columns)) <= max(3.0, 1.5 * (hi - lo) / columns)
         if (hit & centre[None, :]).any():
             hit_h, facing = hit & centre[None, :], facing & centre[None, :]
