@@ -1,5 +1,5 @@
 """Issue 13's ablation: does the agent learn more than its teacher? Rows (each trained row
-over several seeds, as Dask tasks of `scanplan.learn.sweep`), evaluated on parts never used
+over several seeds, as Dask tasks of `scanplan.rl.learn.sweep`), evaluated on parts never used
 in training (door, drone and the real car door and quadrotor when present):
 
   feedback        the proportional controller as a planner (the BC teacher), no training
@@ -27,8 +27,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from scanplan.learn.config import recipe_config
-from scanplan.learn.sweep import (
+from scanplan.judging.report.training import plot_training_comparison
+from scanplan.rl.learn.config import recipe_config
+from scanplan.rl.learn.sweep import (
     EvalPart,
     SweepTask,
     connect,
@@ -38,7 +39,6 @@ from scanplan.learn.sweep import (
     summarize,
     write_tables,
 )
-from scanplan.report.training import plot_training_comparison
 
 REAL_PARTS = {  # file in ../shared/parts -> units
     "vito_left_car_door.obj": "m",

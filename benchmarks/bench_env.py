@@ -25,9 +25,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=3000)
     args = parser.parse_args()
 
-    from scanplan.env import SwathScanEnv
-    from scanplan.learn.config import TrainConfig
-    from scanplan.learn.vec_env import make_vec_env
+    from scanplan.rl.env import SwathScanEnv
+    from scanplan.rl.learn.config import TrainConfig
+    from scanplan.rl.learn.vec_env import make_vec_env
 
     action = np.array([0.5, 0.0, 0.0], np.float32)
     env = SwathScanEnv(noise=False)

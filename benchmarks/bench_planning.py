@@ -17,12 +17,12 @@ import os
 import statistics
 import time
 
-from scanplan.metrics import evaluate
-from scanplan.part import load_part
-from scanplan.pipeline import plan_views
-from scanplan.planners import make_planner
-from scanplan.profilometer import LineProfilometer
-from scanplan.quantities import ScanSpec
+from scanplan.core.quantities import ScanSpec
+from scanplan.judging import evaluate
+from scanplan.planning.pipeline import plan_views
+from scanplan.rl.planners import make_planner
+from scanplan.sensor.profilometer import LineProfilometer
+from scanplan.world.part import load_part
 
 CONFIGS = {  # label: (planner, roll, raster)
     "geometric-v0": ("geometric", False, "nominal"),

@@ -18,10 +18,10 @@ from collections.abc import Callable
 import numpy as np
 import trimesh
 
-from scanplan.part import part_from_mesh
-from scanplan.profilometer import LineProfilometer, PointStatus
-from scanplan.sensor import SensorSpec
-from scanplan.swaths import Swath
+from scanplan.core.sensor_spec import SensorSpec
+from scanplan.planning.swaths import Swath
+from scanplan.sensor.profilometer import LineProfilometer, PointStatus
+from scanplan.world.part import part_from_mesh
 
 
 def wavy_surface(n: int = 400) -> trimesh.Trimesh:

@@ -26,15 +26,16 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.cloud import simulate_cloud
-from scanplan.context import PlanContext
-from scanplan.metrics import Metrics, evaluate
-from scanplan.part import Part, load_part
-from scanplan.pipeline import plan_views
-from scanplan.planners import Planner, make_planner
-from scanplan.quantities import ScanSpec
-from scanplan.surface import upward_visible_samples
-from scanplan.trajectory import Trajectory
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import Trajectory
+from scanplan.judging import Metrics, evaluate
+from scanplan.planning.pipeline import plan_views
+from scanplan.planning.planners import Planner
+from scanplan.rl.planners import make_planner
+from scanplan.sensor.cloud import simulate_cloud
+from scanplan.world.part import Part, load_part
+from scanplan.world.surface import upward_visible_samples
 
 PLANNERS: dict[str, tuple[str, bool, str]] = {  # label: (planner, roll, raster)
     "fixed": ("fixed", False, "nominal"),

@@ -17,12 +17,12 @@ from pathlib import Path
 
 from kinds import KINDS  # parts of kinds the shared set lacks (benchmarks/)
 
-from scanplan.context import PlanContext
-from scanplan.metrics import evaluate
-from scanplan.part import load_part
-from scanplan.pipeline import plan_scan, plan_views
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import ScanSpec
+from scanplan.judging import evaluate
+from scanplan.planning.pipeline import plan_scan, plan_views
+from scanplan.rl.planners import make_planner
+from scanplan.world.part import load_part
 
 PARTS = {  # file: units (PARTS.md)
     "tum_ardrone_quadrotor_4.stl": "m",

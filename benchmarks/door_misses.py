@@ -19,13 +19,13 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.context import PlanContext
-from scanplan.metrics import SurfaceState, evaluate
-from scanplan.part import load_part
-from scanplan.parts import door
-from scanplan.pipeline import plan_views
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec, StepLimits
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import ScanSpec, StepLimits
+from scanplan.judging import SurfaceState, evaluate
+from scanplan.planning.pipeline import plan_views
+from scanplan.rl.planners import make_planner
+from scanplan.world.part import load_part
+from scanplan.world.parts import door
 
 SLOPES_DEG = (0, 30, 45, 60, 90)
 WALL_BAND_MM = 2.0  # beyond the recess's smoothstep wall, each side

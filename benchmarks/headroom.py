@@ -23,13 +23,13 @@ from itertools import product
 
 import numpy as np
 
-from scanplan.context import recorded
-from scanplan.metrics import evaluate, robustness, run_trial, trial_tasks
-from scanplan.metrics.evaluation import scanning_steps
-from scanplan.part import load_part
-from scanplan.perturb import Perturbation, rotation_matrix
-from scanplan.quantities import UP, ScanSpec
-from scanplan.trajectory import Trajectory, read_trajectory
+from scanplan.core.plan import recorded
+from scanplan.core.quantities import UP, ScanSpec
+from scanplan.core.trajectory import Trajectory, read_trajectory
+from scanplan.judging import evaluate, robustness, run_trial, trial_tasks
+from scanplan.judging.evaluation import scanning_steps
+from scanplan.sensor.perturb import Perturbation, rotation_matrix
+from scanplan.world.part import load_part
 
 HEIGHTS_MM = (-4.0, 0.0, 4.0)
 PITCHES_DEG = (-1.0, 0.0, 1.0)

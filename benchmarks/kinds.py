@@ -8,7 +8,7 @@ mm, resting on z = 0:
   bolt bosses at the flange's corners.
 
 These two are heightfields over a grid (vertical walls, no overhangs), so they are
-watertight by construction (`scanplan.parts.heightfield.heightfield_solid`). One more has
+watertight by construction (`scanplan.world.parts.heightfield.heightfield_solid`). One more has
 overhangs, made of boxes (closed solids that touch, not merged: rays and the body check see
 the same surface):
 
@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from scanplan.part import Part, part_from_mesh
-from scanplan.parts.heightfield import heightfield_solid
+from scanplan.world.part import Part, part_from_mesh
+from scanplan.world.parts.heightfield import heightfield_solid
 
 
 def heightfield() -> Part:

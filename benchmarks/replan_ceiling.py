@@ -13,16 +13,16 @@ import argparse
 import time
 from dataclasses import replace
 
-from scanplan.context import recorded
-from scanplan.metrics import robustness, run_trial, trial_tasks
-from scanplan.metrics.evaluation import scanning_steps
-from scanplan.metrics.robustness import summarize, trial_world
-from scanplan.part import Part, load_part
-from scanplan.perturb import Perturbation
-from scanplan.pipeline import plan_views
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
-from scanplan.trajectory import read_trajectory
+from scanplan.core.plan import recorded
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import read_trajectory
+from scanplan.judging import robustness, run_trial, trial_tasks
+from scanplan.judging.evaluation import scanning_steps
+from scanplan.judging.robustness import summarize, trial_world
+from scanplan.planning.pipeline import plan_views
+from scanplan.rl.planners import make_planner
+from scanplan.sensor.perturb import Perturbation
+from scanplan.world.part import Part, load_part
 
 
 def main() -> None:

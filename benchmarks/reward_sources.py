@@ -28,9 +28,9 @@ def main() -> None:
     args = ap.parse_args()
     import torch
 
-    from scanplan.learn.config import recipe_config
-    from scanplan.learn.vec_env import make_env
-    from scanplan.planners.feedback import FeedbackController
+    from scanplan.planning.planners.feedback import FeedbackController
+    from scanplan.rl.learn.config import recipe_config
+    from scanplan.rl.learn.vec_env import make_env
 
     torch.set_num_threads(1)
     offset = tuple(float(v) for v in args.start_offset.split(","))

@@ -19,16 +19,16 @@ from pathlib import Path
 import numpy as np
 from compare_views import PARTS
 
-from scanplan.context import recorded
-from scanplan.metrics import evaluate
-from scanplan.part import load_part
-from scanplan.pipeline import Arm, plan_views
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
+from scanplan.core.plan import recorded
+from scanplan.core.quantities import ScanSpec
+from scanplan.judging import evaluate
+from scanplan.planning.pipeline import Arm, plan_views
+from scanplan.rl.planners import make_planner
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.base import pose_arg
 from scanplan.robot.links import check_links, obstacles_for
 from scanplan.robot.reach import pass_starts
+from scanplan.world.part import load_part
 
 # The sensor 90 mm out from the flange along its axis: a profilometer on a short bracket.
 TCP = np.eye(4)

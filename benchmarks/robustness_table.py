@@ -21,13 +21,13 @@ import json
 import sys
 import time
 
-from scanplan.context import recorded
-from scanplan.metrics import evaluate, robustness, trial_tasks
-from scanplan.part import load_part
-from scanplan.perturb import Perturbation
-from scanplan.quantities import ScanSpec
-from scanplan.trajectory import read_trajectory
-from scanplan.trials import CLOSED_LOOP_PLANNERS, closed_loop_robustness, closed_loop_tasks
+from scanplan.core.plan import recorded
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import read_trajectory
+from scanplan.jobs.trials import CLOSED_LOOP_PLANNERS, closed_loop_robustness, closed_loop_tasks
+from scanplan.judging import evaluate, robustness, trial_tasks
+from scanplan.sensor.perturb import Perturbation
+from scanplan.world.part import load_part
 
 SPECS = ("place:5mm,2deg", "place:2mm,1deg;warp:1mm@200mm")
 

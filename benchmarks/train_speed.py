@@ -21,7 +21,7 @@ import numpy as np
 
 def bare_env_rate(config, steps: int) -> tuple[float, float]:
     """(steps/s wall, steps/s CPU) of the training vec env alone."""
-    from scanplan.learn.vec_env import make_vec_env
+    from scanplan.rl.learn.vec_env import make_vec_env
 
     vec = make_vec_env(config)
     vec.reset()
@@ -46,9 +46,9 @@ def main() -> None:
     parser.add_argument("--n-envs", type=int, default=16)
     args = parser.parse_args()
 
-    from scanplan.learn.config import recipe_config
-    from scanplan.learn.train import train
-    from scanplan.report.training import read_log
+    from scanplan.judging.report.training import read_log
+    from scanplan.rl.learn.config import recipe_config
+    from scanplan.rl.learn.train import train
 
     with tempfile.TemporaryDirectory() as tmp:
         config = recipe_config(

@@ -15,11 +15,11 @@ import time
 import numpy as np
 from compare_views import _parts  # the shared parts and the kinds, as compare_views loads them
 
-from scanplan.cell import Cell
-from scanplan.pipeline import ViewRaster, choose_views
-from scanplan.planners import make_planner
-from scanplan.quantities import OVERLAP, ScanSpec
-from scanplan.view_workers import view_worker_count
+from scanplan.core.quantities import OVERLAP, ScanSpec
+from scanplan.planning.pipeline import ViewRaster, choose_views
+from scanplan.planning.view_workers import view_worker_count
+from scanplan.rl.planners import make_planner
+from scanplan.world.cell import Cell
 
 
 def main() -> None:

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 from compare_views import PARTS  # the shared parts and their units (benchmarks/)
 
-from scanplan.part import load_part
-from scanplan.quantities import ScanSpec
-from scanplan.surface import (
+from scanplan.core.quantities import ScanSpec
+from scanplan.world.part import load_part
+from scanplan.world.surface import (
     VIEW_AXIS_MAX_TILT_DEG,
     hemisphere_visible_samples,
     oriented_normals,

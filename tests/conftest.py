@@ -16,12 +16,12 @@ import trimesh
 from hypothesis import settings
 
 from helpers import PartPlans, sloped_housing
-from scanplan.part import Part, load_part, part_from_mesh
-from scanplan.pipeline import plan_views
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
-from scanplan.swaths import Swath
-from scanplan.trajectory import Trajectory
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import Trajectory
+from scanplan.planning.pipeline import plan_views
+from scanplan.planning.swaths import Swath
+from scanplan.rl.planners import make_planner
+from scanplan.world.part import Part, load_part, part_from_mesh
 
 settings.register_profile("deterministic", derandomize=True, database=None)
 settings.load_profile("deterministic")

@@ -23,16 +23,16 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from scanplan.cli import app
-from scanplan.context import PlanContext
-from scanplan.export import ExportOptions, parse_pose_arg
-from scanplan.metrics import Metrics, evaluate
-from scanplan.part import Part, part_from_mesh
-from scanplan.pipeline import ViewRaster, plan_path
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
-from scanplan.sensor import SensorSpec
-from scanplan.swaths import Swath, plan_swaths
-from scanplan.trajectory import Trajectory
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.sensor_spec import SensorSpec
+from scanplan.core.trajectory import Trajectory
+from scanplan.judging import Metrics, evaluate
+from scanplan.planning.pipeline import ViewRaster, plan_path
+from scanplan.planning.swaths import Swath, plan_swaths
+from scanplan.rl.planners import make_planner
+from scanplan.robot.export import ExportOptions, parse_pose_arg
+from scanplan.world.part import Part, part_from_mesh
 
 TESTS = Path(__file__).resolve().parent
 ROOT = TESTS.parent
@@ -164,7 +164,7 @@ def run_cli(*args: str) -> Result:
 
 def tiny_config(out, **kw):
     """A learn(256)-sized PPO run: 2 updates of 2 x 64 steps, a small fan, no noise."""
-    from scanplan.learn.config import TrainConfig  # deferred: it loads torch
+    from scanplan.rl.learn.config import TrainConfig  # deferred: it loads torch
 
     base = {
         "output_dir": str(out),

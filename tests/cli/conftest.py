@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from scanplan.swaths import Swath
-from scanplan.trajectory import Trajectory, write_csv
+from scanplan.core.trajectory import Trajectory, write_csv
+from scanplan.planning.swaths import Swath
 
 
 @pytest.fixture()

@@ -24,7 +24,7 @@ from typer.testing import CliRunner
 from helpers import ROOT
 from scanplan.cli import app
 from scanplan.cli.common import progress_bar
-from scanplan.trajectory import CSV_COLUMNS, Trajectory, write_csv
+from scanplan.core.trajectory import CSV_COLUMNS, Trajectory, write_csv
 
 runner = CliRunner()
 SRC = ROOT / "src"
@@ -182,12 +182,12 @@ def test_interrupted_write_leaves_no_file(files, tmp_path, monkeypatch, command)
 
 # ---- progress -----------------------------------------------------------------------------
 def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, monkeypatch):
-    from scanplan.cloud import simulate_cloud
-    from scanplan.part import load_part
-    from scanplan.pipeline import plan_scan
-    from scanplan.planners import make_planner
-    from scanplan.quantities import ScanSpec
-    from scanplan.trajectory import read_csv
+    from scanplan.core.quantities import ScanSpec
+    from scanplan.core.trajectory import read_csv
+    from scanplan.planning.pipeline import plan_scan
+    from scanplan.rl.planners import make_planner
+    from scanplan.sensor.cloud import simulate_cloud
+    from scanplan.world.part import load_part
 
     part, spec = load_part(str(files / "plate.stl")), ScanSpec()
     calls: list[tuple[int, int]] = []
@@ -215,10 +215,10 @@ def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, mon
 
 def test_evaluate_progress_callback_signature(files):
     """metrics.evaluate calls progress(done, total)."""
-    from scanplan.metrics import evaluate
-    from scanplan.part import load_part
-    from scanplan.quantities import ScanSpec
-    from scanplan.trajectory import read_csv
+    from scanplan.core.quantities import ScanSpec
+    from scanplan.core.trajectory import read_csv
+    from scanplan.judging import evaluate
+    from scanplan.world.part import load_part
 
     calls: list[tuple[int, int]] = []
     part, good = load_part(str(files / "plate.stl")), read_csv(files / "good.csv")
@@ -378,10 +378,10 @@ def _stop(*args, **kwargs):
 )
 @given(args=argument_lists())
 def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
-    import scanplan.demo
-    import scanplan.learn.sweep
-    import scanplan.learn.train
-    import scanplan.metrics.detection
+    import scanplan.jobs.demo
+    import scanplan.judging.detection
+    import scanplan.rl.learn.sweep
+    import scanplan.rl.learn.train
     import scanplan.robot.place
 
     out = tmp_path_factory.mktemp("out")
@@ -389,11 +389,11 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
             for a in args]  # fmt: skip
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(out)
-        mp.setattr(scanplan.learn.train, "train", _stop)
-        mp.setattr(scanplan.demo, "run_demo", _stop)
+        mp.setattr(scanplan.rl.learn.train, "train", _stop)
+        mp.setattr(scanplan.jobs.demo, "run_demo", _stop)
         mp.setattr(scanplan.robot.place, "place", _stop)
-        mp.setattr(scanplan.learn.sweep, "connect", _stop)  # no cluster, no training
-        mp.setattr(scanplan.metrics.detection, "defect_tasks", _stop)  # no defect trials
+        mp.setattr(scanplan.rl.learn.sweep, "connect", _stop)  # no cluster, no training
+        mp.setattr(scanplan.judging.detection, "defect_tasks", _stop)  # no defect trials
         result = runner.invoke(app, argv)
     event(f"{args[0]} exit {result.exit_code}")
     assert result.exit_code in (0, 2), (argv, result.output, result.exception)
@@ -488,12 +488,12 @@ def test_cli_hostile_input_is_one_line_exit_2_no_output(hostile, tmp_path, args)
 
 # ---- the net at the top: a bug is one line, a signal cleans up -----------------------------
 def test_an_internal_error_is_one_line_naming_it_a_bug(tmp_path, monkeypatch):
-    import scanplan.pipeline
+    import scanplan.planning.pipeline
 
     def broken(*args, **kwargs):
         raise TypeError("unsupported operand")
 
-    monkeypatch.setattr(scanplan.pipeline, "plan_views", broken)
+    monkeypatch.setattr(scanplan.planning.pipeline, "plan_views", broken)
     out = tmp_path / "t.csv"
     result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])
     assert result.exit_code == 1 and not out.exists()
@@ -510,13 +510,13 @@ def test_sigterm_exits_143_and_leaves_no_output(tmp_path, monkeypatch):
     import os
     import signal
 
-    import scanplan.pipeline
+    import scanplan.planning.pipeline
 
     def killed(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGTERM)
         raise AssertionError("the signal did not interrupt the command")
 
-    monkeypatch.setattr(scanplan.pipeline, "plan_views", killed)
+    monkeypatch.setattr(scanplan.planning.pipeline, "plan_views", killed)
     before = signal.getsignal(signal.SIGTERM)
     out = tmp_path / "t.csv"
     result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])

@@ -43,7 +43,7 @@ def previous_run(tmp_path) -> Path:
 
 def fake_training(monkeypatch, fail: type[BaseException] | None):
     """train's inner loop replaced: writes a log and a checkpoint, then fails or finishes."""
-    import scanplan.learn.train as train_module
+    import scanplan.rl.learn.train as train_module
 
     def train_into(config, ckpt, work, out):
         (work / "checkpoints").mkdir()
@@ -124,7 +124,7 @@ SWEEP_CASES = [
 @pytest.mark.parametrize("args, fragment", SWEEP_CASES, ids=[" ".join(a) for a, _ in SWEEP_CASES])
 def test_sweep_fails_early_and_quietly(tmp_path, monkeypatch, args, fragment):
     pytest.importorskip("dask.distributed")
-    import scanplan.learn.sweep as sweep
+    import scanplan.rl.learn.sweep as sweep
 
     def no_cluster(*a, **kw):
         raise AssertionError("a worker started")
@@ -145,8 +145,8 @@ def cell_files(tmp_path_factory) -> Path:
     import numpy as np
     import trimesh
 
-    from scanplan.swaths import Swath
-    from scanplan.trajectory import Trajectory, write_csv
+    from scanplan.core.trajectory import Trajectory, write_csv
+    from scanplan.planning.swaths import Swath
 
     d = tmp_path_factory.mktemp("limits")
     plate = trimesh.creation.box((600, 600, 10))
@@ -436,7 +436,7 @@ def _json_plan(cell_files, tmp_path, **edits) -> Path:
 
 @pytest.fixture(scope="module")
 def json_plan(cell_files):
-    from scanplan.trajectory import read_csv, write_json
+    from scanplan.core.trajectory import read_csv, write_json
 
     write_json(read_csv(cell_files / "t.csv"), cell_files / "t.json")
     return cell_files / "t.json"
@@ -486,7 +486,7 @@ def test_units_of_a_built_in_part_are_checked_too(tmp_path):
 
 
 def test_a_binary_stl_announcing_too_many_triangles_is_not_read(tmp_path):
-    from scanplan.limits import MAX_TRIANGLES
+    from scanplan.core.limits import MAX_TRIANGLES
 
     stl = tmp_path / "huge.stl"
     count = MAX_TRIANGLES + 1
@@ -502,8 +502,8 @@ def test_a_binary_stl_announcing_too_many_triangles_is_not_read(tmp_path):
 @pytest.mark.parametrize(
     "module, name, fragment",
     [
-        ("scanplan.profilometer", "MAX_RAYS", "rays to cast (21 poses x 4,096 points"),
-        ("scanplan.cloud", "MAX_CLOUD_POINTS", "points the cloud would hold"),
+        ("scanplan.sensor.profilometer", "MAX_RAYS", "rays to cast (21 poses x 4,096 points"),
+        ("scanplan.sensor.cloud", "MAX_CLOUD_POINTS", "points the cloud would hold"),
     ],
 )
 def test_scan_counts_its_rays_and_points_before_measuring(
@@ -524,8 +524,8 @@ def test_a_swallowed_sigterm_still_ends_in_143_and_writes_nothing(
 ):
     import signal
 
-    import scanplan.files as files
-    import scanplan.trajectory as trajectory
+    import scanplan.core.files as files
+    import scanplan.core.trajectory as trajectory
 
     read = trajectory.read_trajectory
 

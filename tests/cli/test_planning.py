@@ -20,9 +20,9 @@ from helpers import (
     straight,
 )
 from scanplan.cli import app
-from scanplan.metrics import SurfaceState
-from scanplan.report.maps import COVERAGE_COLOURS
-from scanplan.trajectory import read_trajectory, write_csv
+from scanplan.core.trajectory import read_trajectory, write_csv
+from scanplan.judging import SurfaceState
+from scanplan.judging.report.maps import COVERAGE_COLOURS
 
 runner = CliRunner()
 
@@ -49,7 +49,7 @@ def test_scan_writes_a_point_cloud_with_error_fields(plate_and_trajectory, tmp_p
 def test_scan_writes_fewer_points_on_request_and_says_how_many_first(
     plate_and_trajectory, tmp_path
 ):
-    from scanplan.cloud import ply_size_bytes
+    from scanplan.sensor.cloud import ply_size_bytes
 
     plate, traj = plate_and_trajectory
     out = tmp_path / "cloud.ply"
@@ -213,7 +213,7 @@ def test_report_directory_has_the_in_spec_map(plate_file, tmp_path):
 
 
 def test_failing_report_leaves_no_directory(plate_file, tmp_path, monkeypatch):
-    import scanplan.report.html
+    import scanplan.judging.report.html
 
     traj = tmp_path / "t.csv"
 
@@ -222,7 +222,7 @@ def test_failing_report_leaves_no_directory(plate_file, tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise ValueError("disk full while writing report.html")
 
-    monkeypatch.setattr(scanplan.report.html, "write_html_report", broken)
+    monkeypatch.setattr(scanplan.judging.report.html, "write_html_report", broken)
     out = tmp_path / "reports" / "rep"
     args = ["evaluate", str(plate_file), str(traj), "--points", "64", "-o", str(out)]
     result = runner.invoke(app, args)

@@ -10,16 +10,16 @@ from typer.testing import CliRunner
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import listing, plate_file, run_cli, snake_trajectory
 from scanplan.cli import app
-from scanplan.export import ExportOptions, parse_program
-from scanplan.export.common import plan_motion
-from scanplan.trajectory import write_csv
+from scanplan.core.trajectory import write_csv
+from scanplan.robot.export import ExportOptions, parse_program
+from scanplan.robot.export.common import plan_motion
 
 TRAJ = snake_trajectory()
 
 
 @pytest.mark.parametrize("fmt", ["urscript", "rapid", "krl", "ros", "csv"])
 def test_export_every_format(plate_and_trajectory, tmp_path, fmt):
-    from scanplan.trajectory import read_csv
+    from scanplan.core.trajectory import read_csv
 
     _, traj_path = plate_and_trajectory
     out = tmp_path / f"prog.{fmt}"
@@ -52,7 +52,7 @@ def test_export_bad_pose_leaves_no_file(plate_and_trajectory, tmp_path):
 def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     from rosbags.rosbag2 import Writer
 
-    from scanplan.export.rosbag import read_rosbag
+    from scanplan.robot.export.rosbag import read_rosbag
 
     traj_path = tmp_path / "t.csv"
     write_csv(TRAJ, traj_path)

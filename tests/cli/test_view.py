@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from helpers import plate_file, run_cli, straight
-from scanplan.context import PlanContext
-from scanplan.export import parse_pose_arg
-from scanplan.quantities import ScanSpec
-from scanplan.report.scene import PROBLEM_COLOUR, check_arm
-from scanplan.trajectory import write_csv
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import write_csv
+from scanplan.judging.report.scene import PROBLEM_COLOUR, check_arm
+from scanplan.robot.export import parse_pose_arg
 
 PART_POSE = "400,0,-300,0,0,0"  # a pass 400 mm above the plate, in reach of a UR5e
 
@@ -43,8 +43,8 @@ def no_simulation(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("view simulated the scan")
 
-    monkeypatch.setattr("scanplan.profilometer.LineProfilometer.measure_many", refuse)
-    monkeypatch.setattr("scanplan.metrics.evaluation.evaluate", refuse)
+    monkeypatch.setattr("scanplan.sensor.profilometer.LineProfilometer.measure_many", refuse)
+    monkeypatch.setattr("scanplan.judging.evaluation.evaluate", refuse)
 
 
 def test_view_draws_part_passes_and_arm_without_simulating(tmp_path, no_simulation):
@@ -66,9 +66,9 @@ def test_view_draws_part_passes_and_arm_without_simulating(tmp_path, no_simulati
 
 
 def test_the_arm_reaches_each_drawn_pose_from_its_base(tmp_path):
-    from scanplan.context import recorded
-    from scanplan.part import load_part
-    from scanplan.trajectory import read_trajectory
+    from scanplan.core.plan import recorded
+    from scanplan.core.trajectory import read_trajectory
+    from scanplan.world.part import load_part
 
     traj = read_trajectory(robot_plan(tmp_path))
     part = load_part(recorded(traj, ScanSpec()).part)

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from scanplan.part import load_part
-from scanplan.pipeline import plan_path
-from scanplan.planners import make_planner
-from scanplan.quantities import ScanSpec
-from scanplan.swaths import plan_swaths
+from scanplan.core.quantities import ScanSpec
+from scanplan.planning.pipeline import plan_path
+from scanplan.planning.swaths import plan_swaths
+from scanplan.rl.planners import make_planner
+from scanplan.world.part import load_part
 
 STRIDE = 25
 PARTS = ("door", "drone")

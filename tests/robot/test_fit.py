@@ -9,14 +9,14 @@ from typer.testing import CliRunner
 
 import scanplan.robot.fit as fit_module
 from scanplan.cli import app
-from scanplan.export import ExportOptions, parse_pose_arg, parse_program
-from scanplan.export.common import plan_motion
+from scanplan.core.trajectory import Trajectory, read_json
+from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.base import pose_arg
+from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
+from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.place import HALF_TURN
-from scanplan.swaths import Swath
-from scanplan.trajectory import Trajectory, read_json
 
 TCP = parse_pose_arg("0,0,90,0,0,0")
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from scanplan.cell import TABLE_MARGIN_MM, Cell
-from scanplan.collision import CellObstacles
-from scanplan.part import part_from_mesh
 from scanplan.robot import ROBOT_NAMES, get_robot
 from scanplan.robot.links import check_links, column_clear, obstacles_for
+from scanplan.world.cell import TABLE_MARGIN_MM, Cell
+from scanplan.world.collision import CellObstacles
+from scanplan.world.part import part_from_mesh
 
 CLEARANCE = 20.0  # the plan clearance the links keep, as the sensor body does
 
@@ -137,8 +137,8 @@ def test_a_turn_about_the_beam_is_checked_for_the_sensor_body() -> None:
     # body into it once turned half a turn, and the cell check says so.
     from scipy.spatial.transform import Rotation
 
+    from scanplan.core.sensor_spec import DEFAULT_SENSOR, PRESETS
     from scanplan.robot.place import HALF_TURN
-    from scanplan.sensor import DEFAULT_SENSOR, PRESETS
 
     part = _box_part((300, 300, 20), (0, 0, 10))
     obstacles = obstacles_for(part, Cell.around(part), PRESETS[DEFAULT_SENSOR], 20.0)

@@ -8,11 +8,11 @@ from typer.testing import CliRunner
 
 from helpers import plate_file
 from scanplan.cli import app
-from scanplan.export import ExportOptions, flange_poses, parse_pose_arg
+from scanplan.core.trajectory import Trajectory, write_csv
+from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
+from scanplan.robot.export import ExportOptions, flange_poses, parse_pose_arg
 from scanplan.robot.place import place
-from scanplan.swaths import Swath
-from scanplan.trajectory import Trajectory, write_csv
 
 TCP = "0,0,90,0,0,0"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from scanplan.cycle import NOMINAL
+from scanplan.core.cycle import NOMINAL
 from scanplan.robot import MOTION_LIMITS, ROBOT_NAMES, get_robot, motion_limits
 
 ARM = """

@@ -19,7 +19,7 @@ from typing import Any, TypeVar
 import typer
 import typer.core
 
-from scanplan import files
+from scanplan.core import files
 
 
 class OneLineErrors(typer.core.TyperGroup):

@@ -31,9 +31,9 @@ from scanplan.cli.planning import (
     judged_context,
     trial_runner,
 )
-from scanplan.files import atomic_write_text
-from scanplan.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, STEP_MM, check_count
-from scanplan.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECT_TYPE
+from scanplan.core.files import atomic_write_text
+from scanplan.core.limits import DEFECT_SIZE_MM, K_SIGMA, MAX_DEFECTS, STEP_MM, check_count
+from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECT_TYPE
 
 TypeOpt = Annotated[str, typer.Option("--type", help="dent, bump, pit or scratch")]
 SizesOpt = Annotated[
@@ -131,12 +131,12 @@ def defects_cmd(
     on the defect-free part are reported beside."""
     # Deferred: the simulator loads trimesh, Embree and scipy; the report, matplotlib.
     from scanplan.cli.training import check_cluster
-    from scanplan.defects import KINDS
-    from scanplan.metrics.detectability import PREDICTED, survey
-    from scanplan.metrics.detection import defect_run, defect_tasks, detector_for
-    from scanplan.metrics.evaluation import surface_samples
-    from scanplan.part import load_part
-    from scanplan.trajectory import read_trajectory
+    from scanplan.core.trajectory import read_trajectory
+    from scanplan.judging.detectability import PREDICTED, survey
+    from scanplan.judging.detection import defect_run, defect_tasks, detector_for
+    from scanplan.judging.evaluation import surface_samples
+    from scanplan.sensor.defects import KINDS
+    from scanplan.world.part import load_part
 
     start = time.perf_counter()
     if kind not in KINDS:
@@ -190,7 +190,7 @@ def defects_cmd(
         "time_s": elapsed,
     }
     if output is not None:
-        from scanplan.report.pod import plot_pod
+        from scanplan.judging.report.pod import plot_pod
 
         output.mkdir(parents=True, exist_ok=True)
         atomic_write_text(output / "pod.json", json.dumps(data, allow_nan=False, indent=1))
@@ -206,7 +206,7 @@ def defects_cmd(
         atomic_write_text(output / "defects.csv", "\n".join(rows) + "\n")
         plot_pod(result, output / "pod.png", f"{the_part.name}: {trajectory.name}")
         if predicted and detectability is not None:
-            from scanplan.report.pod import plot_detectability
+            from scanplan.judging.report.pod import plot_detectability
 
             smallest = detectability.smallest_mm(kind, detector)
             table = np.column_stack([detectability.points_part, smallest])

@@ -21,12 +21,12 @@ from scanplan.cli.options import (
     UnitsOpt,
     scan_spec,
 )
-from scanplan.sensor import DEFAULT_SENSOR, DEMO_POINTS, SensorSpec
+from scanplan.core.sensor_spec import DEFAULT_SENSOR, DEMO_POINTS, SensorSpec
 
 if TYPE_CHECKING:
     from rich.console import Console
 
-    from scanplan.demo import DemoResult
+    from scanplan.jobs.demo import DemoResult
 
 DemoDirOpt = Annotated[Path, typer.Option("-o", "--output", help="output directory")]
 DemoPartOpt = Annotated[str, typer.Option(help="built-in part or mesh file")]
@@ -58,7 +58,7 @@ def demo_cmd(
     # Deferred: the demo loads the whole library (torch, matplotlib, plotly).
     from rich.console import Console
 
-    from scanplan.demo import run_demo
+    from scanplan.jobs.demo import run_demo
 
     console = Console(log_path=False)
     spec = scan_spec(sensor, tolerance)
@@ -88,7 +88,7 @@ def print_summary(console: Console, part: str, result: DemoResult) -> None:
     # Deferred: as in demo_cmd.
     from rich.table import Table
 
-    from scanplan.report.table import table_rows
+    from scanplan.judging.report.table import table_rows
 
     table = Table(title=f"{part}: scan quality by planner")
     table.add_column("metric")

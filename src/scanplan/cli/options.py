@@ -12,9 +12,9 @@ from typing import Annotated, Any
 
 import typer
 
-from scanplan.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, TOLERANCE_MM, Limit
-from scanplan.quantities import ScanSpec
-from scanplan.sensor import SensorSpec
+from scanplan.core.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, TOLERANCE_MM, Limit
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.sensor_spec import SensorSpec
 
 
 def bounded(
@@ -57,14 +57,14 @@ def _num(x: float) -> str:
 
 
 def within(limit: Limit) -> Callable[[Any], Any]:
-    """The `bounded` callback of one of `scanplan.limits`' ranges."""
+    """The `bounded` callback of one of `scanplan.core.limits`' ranges."""
     return bounded(limit.lo, limit.hi, lo_open=limit.lo_open)
 
 
 def pose_option(value: str | None) -> str | None:
     """--tcp / --part-pose: six finite numbers, checked before any work (None: not given)."""
     # Deferred: export loads the writers of every dialect.
-    from scanplan.export import parse_pose_arg
+    from scanplan.robot.export import parse_pose_arg
 
     if value is None:
         return None
@@ -103,7 +103,7 @@ def parse_tolerance(text: str | None) -> dict[str, float]:
 def scan_spec(sensor: str, tolerance: str | None = None) -> ScanSpec:
     """The ScanSpec of the --sensor and --tolerance options."""
     # Deferred: config reads TOML/YAML datasheets.
-    from scanplan.config import load_sensor
+    from scanplan.core.sensor_files import load_sensor
 
     tol = parse_tolerance(tolerance)  # before the sensor file: the cheaper check first
     return ScanSpec(load_sensor(sensor), **tol)
@@ -138,8 +138,8 @@ RoiOpt = Annotated[
         "±x ±y ±z or n:X,Y,Z:DEG), body:I (the I-th connected body); ';' joins terms (AND)",
     ),
 ]
-# Default: scanplan.sensor.DEFAULT_SENSOR (Typer wants an Annotated option's default on the
-# parameter, not here).
+# Default: scanplan.core.sensor_spec.DEFAULT_SENSOR (Typer wants an Annotated option's
+# default on the parameter, not here).
 SensorOpt = Annotated[
     str, typer.Option("--sensor", help="sensor preset name or TOML/YAML datasheet file")
 ]

@@ -14,9 +14,9 @@ from scanplan.cli.options import OutOpt
 def part_cmd(name: Annotated[str, typer.Argument(help="built-in part name")], output: OutOpt):
     """Write a built-in procedural part as a mesh file (STL, PLY, OBJ, ...)."""
     # Deferred: parts load trimesh and Embree.
-    from scanplan.files import atomic_write_bytes
-    from scanplan.part import load_part
-    from scanplan.parts import PART_NAMES
+    from scanplan.core.files import atomic_write_bytes
+    from scanplan.world.part import load_part
+    from scanplan.world.parts import PART_NAMES
 
     if name not in PART_NAMES:
         raise ValueError(f"unknown part {name!r}; built-in parts: {', '.join(PART_NAMES)}")

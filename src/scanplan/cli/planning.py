@@ -41,17 +41,17 @@ from scanplan.cli.options import (
     scan_spec,
 )
 from scanplan.cli.training import check_cluster
-from scanplan.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_SECONDS, ScanSpec
-from scanplan.sensor import DEFAULT_SENSOR, SensorSpec
+from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_SECONDS, ScanSpec
+from scanplan.core.sensor_spec import DEFAULT_SENSOR, SensorSpec
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from scanplan.context import PlanContext
-    from scanplan.cycle import MotionLimits
-    from scanplan.metrics import Metrics
-    from scanplan.pipeline import Arm
-    from scanplan.trajectory import Trajectory
+    from scanplan.core.cycle import MotionLimits
+    from scanplan.core.plan import PlanContext
+    from scanplan.core.trajectory import Trajectory
+    from scanplan.judging import Metrics
+    from scanplan.planning.pipeline import Arm
 
 # ---- scan ---------------------------------------------------------------------------------
 ScanTrajectoryArg = Annotated[Path, typer.Argument(help="trajectory file (CSV or JSON)")]
@@ -95,10 +95,10 @@ def scan_cmd(
     full cloud of a large part runs to GB: its size is printed first, and --points or
     --max-points write fewer."""
     # Deferred: the simulator loads trimesh, Embree and scipy.
-    from scanplan.cloud import ply_size_bytes, simulate_cloud, write_ply
-    from scanplan.config import load_sensor
-    from scanplan.part import load_part
-    from scanplan.trajectory import read_trajectory
+    from scanplan.core.sensor_files import load_sensor
+    from scanplan.core.trajectory import read_trajectory
+    from scanplan.sensor.cloud import ply_size_bytes, simulate_cloud, write_ply
+    from scanplan.world.part import load_part
 
     if output.suffix.lower() != ".ply":
         raise ValueError(f"output {output} must be a .ply file")
@@ -313,12 +313,12 @@ def run_plan_job(
 ) -> list[tuple[str, bool]]:
     """Plan `job`, write its plan, and return what to print: (line, to stderr)."""
     # Deferred: planners and views load trimesh, Embree, FCL and (rl) torch.
-    from scanplan.cell import LOWEST
-    from scanplan.cycle import cycle_time
-    from scanplan.part import load_part
-    from scanplan.pipeline import plan_views
-    from scanplan.planners import make_planner
-    from scanplan.trajectory import write_csv, write_json
+    from scanplan.core.cycle import cycle_time
+    from scanplan.core.plan import LOWEST
+    from scanplan.core.trajectory import write_csv, write_json
+    from scanplan.planning.pipeline import plan_views
+    from scanplan.rl.planners import make_planner
+    from scanplan.world.part import load_part
 
     output = job.output
     spec = scan_spec(job.sensor, job.tolerance)
@@ -362,7 +362,7 @@ def run_plan_job(
 def catalogue_parts(folder: Path) -> list[Path]:
     """The part files (meshes and STEP) directly in `folder`, sorted; each must have its own
     name, as its plan is named after it."""
-    from scanplan.part import MESH_SUFFIXES, STEP_SUFFIXES
+    from scanplan.world.part import MESH_SUFFIXES, STEP_SUFFIXES
 
     parts = sorted(
         p
@@ -456,7 +456,7 @@ def program_targets(traj: Trajectory, spec: ScanSpec) -> tuple[np.ndarray, np.nd
     default tolerances) and which of them it blends through: where the cycle time is timed,
     so plan, evaluate and export agree."""
     # Deferred: export loads the writers of every dialect.
-    from scanplan.export import ExportOptions, plan_motion
+    from scanplan.robot.export import ExportOptions, plan_motion
 
     motion = plan_motion(traj, ExportOptions(scan=spec))
     return motion.source, motion.blend_mm > 0
@@ -466,7 +466,7 @@ def arm_limits(robot: str | None, traj: Trajectory) -> MotionLimits:
     """The motion limits a plan's cycle is timed with: the arm given, else the one the plan
     records, else (and for an arm recorded only by a name no preset has) the nominal arm."""
     # Deferred: the robot package loads the kinematics.
-    from scanplan.cycle import NOMINAL
+    from scanplan.core.cycle import NOMINAL
     from scanplan.robot import motion_limits
 
     name = robot or (traj.meta.get("robot") or {}).get("robot")
@@ -482,8 +482,8 @@ def robot_arm(robot: str | None, tcp: str | None, part_pose: str | None) -> Arm 
     """The arm `plan --robot` makes the plan for (None: no robot); a TCP not given is the
     flange, and the output says so."""
     # Deferred: the pipeline loads the planners; export the writers of every dialect.
-    from scanplan.export import parse_pose_arg
-    from scanplan.pipeline import Arm
+    from scanplan.planning.pipeline import Arm
+    from scanplan.robot.export import parse_pose_arg
 
     if robot is None:
         for option, value in (("--tcp", tcp), ("--part-pose", part_pose)):
@@ -655,10 +655,11 @@ def evaluate_cmd(
     as planned, or with --closed-loop its controller (feedback, rl) acting on the profiles of
     each perturbed part."""
     # Deferred: metrics load trimesh, Embree and FCL; the report, matplotlib and plotly.
-    from scanplan.metrics.detectability import evaluate_detectable
-    from scanplan.part import load_part
-    from scanplan.perturb import Perturbation
-    from scanplan.trajectory import read_trajectory
+    from scanplan.core.trajectory import read_trajectory
+    from scanplan.judging.detectability import evaluate_detectable
+    from scanplan.sensor.perturb import Perturbation
+    from scanplan.world.cell import planned_cell
+    from scanplan.world.part import load_part
 
     model = Perturbation.parse(perturb) if perturb is not None else None
     if model is None and scheduler is not None:
@@ -671,9 +672,9 @@ def evaluate_cmd(
     traj = read_trajectory(trajectory)
     context, note = judged_context(traj, sensor, tolerance, roi, views, table, fixture)
     the_part = load_part(part, units)
-    context.cell(the_part.with_roi(context.roi))  # a bad ROI, table or fixture: fail first
+    planned_cell(context, the_part.with_roi(context.roi))  # a bad ROI, table or fixture: fail first
     if closed_loop:  # a plan the closed loop cannot run: say so before the long part
-        from scanplan.trials import closed_loop_planner, plan_views_of
+        from scanplan.jobs.trials import closed_loop_planner, plan_views_of
 
         closed_loop_planner(context, policy, f"plan {trajectory}")
         plan_views_of(traj, f"plan {trajectory}")
@@ -695,7 +696,7 @@ def evaluate_cmd(
         )
     robust = None
     if model is not None and closed_loop:
-        from scanplan.trials import closed_loop_robustness, closed_loop_tasks
+        from scanplan.jobs.trials import closed_loop_robustness, closed_loop_tasks
 
         loop_tasks = closed_loop_tasks(
             the_part, traj, context, model, trials, seed, points, policy, f"plan {trajectory}"
@@ -703,7 +704,7 @@ def evaluate_cmd(
         with progress_bar("trials", quiet) as progress, trial_runner(scheduler, trials) as run:
             robust = closed_loop_robustness(loop_tasks, counted(run, progress))
     elif model is not None:
-        from scanplan.metrics import robustness, trial_tasks
+        from scanplan.judging import robustness, trial_tasks
 
         tasks = trial_tasks(
             the_part, context.spec, traj, model, trials, seed, points, context=context
@@ -711,7 +712,7 @@ def evaluate_cmd(
         with progress_bar("trials", quiet) as progress, trial_runner(scheduler, trials) as run:
             robust = robustness(tasks, counted(run, progress))
     if output is not None:
-        from scanplan.report import Evaluated, write_report
+        from scanplan.judging.report import Evaluated, write_report
 
         label = traj.planner or trajectory.stem
         write_report(
@@ -726,7 +727,7 @@ def evaluate_cmd(
     if robust is not None:
         data["robustness"] = {"nominal": metrics.in_spec_coverage, **robust.to_json_dict()}
         if output is not None:
-            from scanplan.report.maps import plot_fragility_map
+            from scanplan.judging.report.maps import plot_fragility_map
 
             robust.write_csv(output / "fragility.csv")
             plot_fragility_map(
@@ -794,8 +795,8 @@ def judged_context(
     override (a file without a record: the defaults, and the surface its views imply); and
     one line saying where that differs from the plan ('' if nowhere)."""
     # Deferred: config reads TOML/YAML datasheets; context pulls in the quantities.
-    from scanplan.config import load_sensor
-    from scanplan.context import VIEW_MODES, recorded
+    from scanplan.core.plan import VIEW_MODES, recorded
+    from scanplan.core.sensor_files import load_sensor
 
     if views is not None and views not in VIEW_MODES:
         raise ValueError(f"unknown --views {views!r}; use top or auto")

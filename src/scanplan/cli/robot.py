@@ -24,7 +24,7 @@ from scanplan.cli.options import (
     bounded,
     within,
 )
-from scanplan.limits import (
+from scanplan.core.limits import (
     ANGLE_DEG,
     MAX_SCAN_SPEED_MM_S,
     PROFILE_RATE_HZ,
@@ -33,13 +33,13 @@ from scanplan.limits import (
     STEP_MM,
     TOLERANCE_MM,
 )
-from scanplan.quantities import ScanSpec
+from scanplan.core.quantities import ScanSpec
 
 if TYPE_CHECKING:
-    from scanplan.cell import Cell
-    from scanplan.export import ExportOptions
-    from scanplan.part import Part
-    from scanplan.trajectory import Trajectory
+    from scanplan.core.trajectory import Trajectory
+    from scanplan.robot.export import ExportOptions
+    from scanplan.world.cell import Cell
+    from scanplan.world.part import Part
 
 # ---- export -------------------------------------------------------------------------------
 ROBOT_HELP = (
@@ -154,16 +154,16 @@ def export_cmd(
     part, table or fixtures, or the sensor into them (unless --allow-unreachable). The arm,
     part pose and TCP default to those a plan made with --robot records."""
     # Deferred: the exporters and kinematics load numpy, scipy and yaml.
-    from scanplan.export import (
+    from scanplan.core.files import atomic_write_text
+    from scanplan.core.trajectory import read_trajectory
+    from scanplan.robot.export import (
         DIRECTORY_FORMATS,
         FORMATS,
         ExportOptions,
         export_program,
         export_rosbag,
     )
-    from scanplan.export.common import plan_motion
-    from scanplan.files import atomic_write_text
-    from scanplan.trajectory import read_trajectory
+    from scanplan.robot.export.common import plan_motion
 
     if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
         choices = ", ".join([*FORMATS, *DIRECTORY_FORMATS])
@@ -215,7 +215,7 @@ def export_cmd(
         f"scan speed {options.scan_speed:.1f} mm/s -> {output}"
     )
     # Deferred: as the exporters above.
-    from scanplan.cycle import NOMINAL, cycle_time
+    from scanplan.core.cycle import NOMINAL, cycle_time
     from scanplan.robot import motion_limits
 
     none = robot.lower() == "none"
@@ -239,7 +239,7 @@ def arm_of(
     made for (said in the output unless not `say_recorded`); --robot is required for a plan
     made for none, and a pose not given there is the identity (said)."""
     # Deferred: as in export_cmd.
-    from scanplan.export import parse_pose_arg
+    from scanplan.robot.export import parse_pose_arg
 
     recorded = traj.meta.get("robot") or {}
     if robot is None:
@@ -278,8 +278,9 @@ def planned_cell(
     (its table and fixtures), which the arm's links and the sensor are checked against;
     `needed_for` says why in the error when there is no part."""
     # Deferred: the part loads trimesh (and cascadio for STEP).
-    from scanplan.context import recorded
-    from scanplan.part import load_part
+    from scanplan.core.plan import recorded
+    from scanplan.world.cell import planned_cell
+    from scanplan.world.part import load_part
 
     context = recorded(traj, ScanSpec())
     name = part or context.part
@@ -289,7 +290,7 @@ def planned_cell(
             "plans named their part)"
         )
     the_part = load_part(name, units or context.fixture_units)
-    return the_part, context.cell(the_part)
+    return the_part, planned_cell(context, the_part)
 
 
 def check_flyable(
@@ -306,7 +307,7 @@ def check_flyable(
     and pose (nothing is written), or with `allow` a warning. Returns the joint angles the
     check followed (n, 6), NaN where it found none."""
     # Deferred: as in export_cmd.
-    from scanplan.context import recorded
+    from scanplan.core.plan import recorded
     from scanplan.robot import get_robot
     from scanplan.robot.flyable import check_flyable as check
 
@@ -379,12 +380,12 @@ def place_cmd(
     the fixtures (the arm stands beside the table); print it as --part-pose. Exit 2 if none
     does."""
     # Deferred: the placement search loads the kinematics (numpy, scipy).
-    from scanplan.context import recorded
-    from scanplan.export import parse_pose_arg
+    from scanplan.core.plan import recorded
+    from scanplan.core.trajectory import read_trajectory
     from scanplan.robot import get_robot
+    from scanplan.robot.export import parse_pose_arg
     from scanplan.robot.links import obstacles_for
     from scanplan.robot.place import place
-    from scanplan.trajectory import read_trajectory
 
     heights = parse_height_range(height_range)
     traj = read_trajectory(trajectory)

@@ -30,11 +30,11 @@ from scanplan.cli.options import (
     bounded,
     parse_floats,
 )
-from scanplan.limits import MAX_SEED, MAX_TIMESTEPS
+from scanplan.core.limits import MAX_SEED, MAX_TIMESTEPS
 
 if TYPE_CHECKING:
-    from scanplan.learn.config import TrainConfig
-    from scanplan.learn.sweep import EvalPart, SweepTask
+    from scanplan.rl.learn.config import TrainConfig
+    from scanplan.rl.learn.sweep import EvalPart, SweepTask
 
 
 def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
@@ -42,7 +42,7 @@ def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
     parsed command line: -o, --timesteps and the training group of cli.options) and the
     command's `own` fields."""
     # Deferred: learn loads torch and stable-baselines3.
-    from scanplan.learn.config import recipe_config
+    from scanplan.rl.learn.config import recipe_config
 
     shared = ctx.params
     return recipe_config(
@@ -116,8 +116,8 @@ def train_cmd(
     swing the footprint) the pitch: the shipped --policy paper, whose command is in its
     policy.json."""
     # Deferred: learn loads torch and stable-baselines3.
-    from scanplan.learn.checkpoint import CHECKPOINT_DIR
-    from scanplan.learn.train import train
+    from scanplan.rl.learn.checkpoint import CHECKPOINT_DIR
+    from scanplan.rl.learn.train import train
 
     if resume is not None and not resume.is_dir():
         raise ValueError(f"--resume {resume} is not a directory")
@@ -196,7 +196,7 @@ def run_on_cluster(
 ) -> tuple[Path, Path]:
     """Run the sweep's tasks on Dask and write its tables in `output`: (csv, md)."""
     # Deferred: the sweep loads dask, torch and stable-baselines3.
-    from scanplan.learn.sweep import connect, run_sweep, write_tables
+    from scanplan.rl.learn.sweep import connect, run_sweep, write_tables
 
     def has_runs(directory: Path) -> bool:  # finished runs are reused by a rerun: keep them
         return any((directory / "runs").glob("**/policy.json"))
@@ -272,13 +272,13 @@ def sweep_cmd(
     """Train seeds x a grid of configs as Dask tasks, evaluate each policy on unseen parts,
     and write sweep.csv (per run and part) and sweep.md (mean ± sd over seeds)."""
     # Deferred: the sweep loads dask, torch and stable-baselines3.
-    from scanplan.learn.sweep import CLUSTER_HINT
+    from scanplan.rl.learn.sweep import CLUSTER_HINT
 
     try:
         import dask.distributed  # noqa: F401
     except ImportError:
         raise ValueError(CLUSTER_HINT) from None
-    from scanplan.learn.sweep import EvalPart, SweepTask, grid_tasks
+    from scanplan.rl.learn.sweep import EvalPart, SweepTask, grid_tasks
 
     # Everything is checked before a worker starts: a mistake never costs a training run.
     check_cluster(scheduler, workers)

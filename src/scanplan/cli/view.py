@@ -44,11 +44,11 @@ def view_cmd(
     (or with --robot), the arm at the first, middle and last pose of each pass, with the
     poses it cannot reach or where a link collides marked in red."""
     # Deferred: the page loads plotly, the arm the kinematics and FCL.
-    from scanplan.report.html import write_scene_page
-    from scanplan.report.scene import check_arm, scene_figure
+    from scanplan.core.trajectory import read_trajectory
+    from scanplan.judging.report.html import write_scene_page
+    from scanplan.judging.report.scene import check_arm, scene_figure
     from scanplan.robot import get_robot
     from scanplan.robot.base import pose_arg
-    from scanplan.trajectory import read_trajectory
 
     if str(output) in ("", ".") or output.is_dir():
         raise ValueError(f"-o {str(output)!r} is a directory: give the page's file name")

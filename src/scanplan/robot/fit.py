@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scanplan.collision import CellObstacles
+from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links
 from scanplan.robot.place import (
@@ -24,7 +24,7 @@ from scanplan.robot.place import (
 )
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
-from scanplan.trajectory import Trajectory
+from scanplan.world.collision import CellObstacles
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
 # whole pass did, and so show a flip of its own; a few rounds settle it.

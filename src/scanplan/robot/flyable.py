@@ -9,16 +9,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.cell import Cell
-from scanplan.collision import CellObstacles, checker_for
-from scanplan.context import recorded
-from scanplan.part import Part
-from scanplan.quantities import ScanSpec
+from scanplan.core.plan import recorded
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.sensor_spec import SensorSpec
+from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
-from scanplan.sensor import SensorSpec
-from scanplan.trajectory import Trajectory
+from scanplan.world.cell import Cell
+from scanplan.world.collision import CellObstacles, checker_for
+from scanplan.world.part import Part
 
 # The sensor check asks FCL only about bodies within this of the cell (exact below it).
 _TOUCH_MM = 1e-3

@@ -9,12 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.cell import Cell
-from scanplan.collision import CellObstacles
-from scanplan.part import Part
-from scanplan.quantities import ScanSpec
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.sensor_spec import SensorSpec
 from scanplan.robot.base import Robot, inv_rigid
-from scanplan.sensor import SensorSpec
+from scanplan.world.cell import Cell
+from scanplan.world.collision import CellObstacles
+from scanplan.world.part import Part
 
 # An arm over the table stands on it: its mounting face at most this above the top (a plate).
 ON_TABLE_MM = 50.0

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scanplan.collision import CellObstacles
-from scanplan.limits import MAX_PLACEMENTS, check_count
+from scanplan.core.limits import MAX_PLACEMENTS, check_count
+from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links, column_clear
 from scanplan.robot.presets import get_robot
@@ -33,7 +33,7 @@ from scanplan.robot.reach import (
     limit_margin,
     pass_starts,
 )
-from scanplan.trajectory import Trajectory
+from scanplan.world.collision import CellObstacles
 
 # Margins that count as "clear": 5° from a limit or a wrist/elbow singularity, 20 mm from
 # the shoulder one (the thresholds `check_reach` flags).

@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from scipy.spatial.transform import Rotation
 
-from scanplan.cycle import (
+from scanplan.core.cycle import (
     ACCEL_MM_S2,
     ANGULAR_ACCEL_DEG_S2,
     ANGULAR_SPEED_DEG_S,
@@ -23,7 +23,7 @@ from scanplan.cycle import (
     MotionLimits,
     joint_accels,
 )
-from scanplan.limits import (
+from scanplan.core.limits import (
     JOINT_DEG,
     LENGTH_MM,
     LINK_MM,
@@ -127,7 +127,7 @@ def _motion(
     name: str, speed_mm_s: float, joints_deg_s: tuple[float, ...], source: str
 ) -> MotionLimits:
     """Data-sheet speeds; the accelerations and reorientation limits no data sheet gives are
-    `scanplan.cycle`'s documented choices."""
+    `scanplan.core.cycle`'s documented choices."""
     return MotionLimits(
         name,
         speed_mm_s=speed_mm_s,

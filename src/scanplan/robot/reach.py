@@ -1,7 +1,7 @@
 """Can an arm follow a flange path? Unreachable poses, joint limits, singularities, flips.
 
 Works for any `Robot`; the path is `T_base_flange` (n, 4, 4) in mm, e.g. from
-`scanplan.export.flange_poses`.
+`scanplan.robot.export.flange_poses`.
 """
 
 from __future__ import annotations

@@ -1,0 +1,261 @@
+"""Robustness trials of a closed-loop plan (feedback, rl): on each perturbed part the plan's
+controller drives the plan's passes again, view by view, acting on the profiles of the part
+as built and where it really sits, as it would on a cell streaming profiles to the robot;
+the poses it flew are then judged as an open-loop plan's trials are
+(`metrics.robustness.run_trial`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import UP, ScanSpec
+from scanplan.core.sensor_spec import SensorSpec
+from scanplan.core.trajectory import Trajectory
+from scanplan.judging.evaluation import scanning_steps
+from scanplan.judging.robustness import (
+    PlacedProfilometer,
+    Robustness,
+    TrialMap,
+    TrialTask,
+    run_trial,
+    summarize,
+    trial_tasks,
+    trial_world,
+)
+from scanplan.planning.pipeline import plan_path
+from scanplan.planning.planners import FeedbackPlanner
+from scanplan.planning.swaths import Swath, swath_from_record
+from scanplan.planning.views import View, rotation_to_up
+from scanplan.sensor.perturb import Perturbation
+from scanplan.world.cell import Cell, Table, planned_cell
+from scanplan.world.part import Part
+
+# The planners whose controller acts on measured profiles: the only ones a closed loop re-runs.
+CLOSED_LOOP_PLANNERS = ("feedback", "rl")
+
+
+@dataclass(frozen=True)
+class ViewLines:
+    """One view of a plan as its file records it: `view` (its axis and rotation; no region,
+    the file does not keep it) and `swaths`, its pass lines in the view's frame, numbered
+    as the plan's passes."""
+
+    view: View
+    swaths: tuple[Swath, ...]
+
+
+@dataclass(frozen=True)
+class ClosedLoopTask:
+    """One closed-loop trial, picklable (no ray engine): `judge` the open-loop trial task
+    whose poses the closed loop replaces; `planner` the feedback or rl planner (its
+    `measure_with` set in the worker); `views` the plan's views and pass lines; the cell
+    as planned: `table` (None: held in the air), `table_z_mm`, `fixtures` (vertices, faces,
+    name) each; `spec` the plan's ScanSpec."""
+
+    judge: TrialTask
+    planner: Any
+    views: tuple[ViewLines, ...]
+    table: Table | None
+    table_z_mm: float | None
+    fixtures: tuple[tuple[np.ndarray, np.ndarray, str], ...]
+    spec: ScanSpec
+
+
+def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
+    """(k,) bool: which nominal surface samples the closed loop holds in spec on trial
+    `task.judge.index`. Each view's passes are planned as `pipeline.plan_views` plans them
+    on the CAD turned into the view's frame (where each starts and ends, the table's tilt
+    limit, the poses dropped for the clearance to the nominal part and cell), but every
+    profile the controller acts on is measured on the part as built and placed, turned the
+    same way; the views' poses, back in the part frame, are joined in the plan's order. A
+    view whose flown passes no clear move joins is lost for the trial (a warning says so).
+    The robot's path error is not seen by the controller: it is drawn on the poses flown,
+    as in the open-loop trials."""
+    judge = task.judge
+    world = trial_world(judge)
+    nominal = Part(
+        trimesh.Trimesh(judge.vertices, judge.faces, process=False),
+        name=judge.name,
+        source=judge.name,
+        inspect_faces=judge.inspect_faces,
+    )
+    fixtures = tuple(
+        Part(trimesh.Trimesh(v, f, process=False), name=name, source=name)
+        for v, f, name in task.fixtures
+    )
+    cell = Cell(task.table, fixtures, task.table_z_mm)
+    placed = world.T_part_placed
+    pieces = []
+    for lines in task.views:
+        view = lines.view
+        # The part as built turned as the CAD is (`View.part`: the very mesh at no
+        # perturbation), and its placement error seen from the view's frame.
+        built = view.part(world.part)
+        R = view.R
+        T = placed if np.array_equal(placed, np.eye(4)) else R @ placed @ np.linalg.inv(R)
+
+        def measured(_: Part, sensor: SensorSpec, built=built, T=T) -> PlacedProfilometer:
+            return PlacedProfilometer(built, sensor, T)
+
+        planner = replace(task.planner, measure_with=measured)
+        try:
+            flown = plan_path(
+                view.part(nominal),
+                task.spec,
+                planner,
+                list(lines.swaths),
+                cell=cell if np.array_equal(R, np.eye(4)) else cell.rotated(R),
+            )
+        except ValueError as exc:
+            # The controller left a pass where no clear move (checked on the CAD) reaches
+            # the next: the cell would stop this view; the trial goes on without it, as
+            # `pipeline.join_views` leaves out a view no clear move reaches.
+            warnings.warn(f"trial {judge.index}: view {view.index} lost: {exc}", stacklevel=1)
+            continue
+        pieces.append(view.to_part_frame(flown))
+    if not pieces:
+        return np.zeros(len(judge.surface.points), bool)
+    traj = Trajectory.concatenate(pieces)
+    idx, has_prev = scanning_steps(traj)
+    return run_trial(replace(judge, poses=traj.poses[idx], has_prev=has_prev))
+
+
+def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
+    """The views and pass lines a plan records, in its order, for running it in closed
+    loop; ValueError (one line) for a plan that records none, or was fitted to a robot."""
+    if traj.meta.get("robot"):
+        raise ValueError(
+            f"{where} was fitted to a robot (passes split or turned): the closed loop runs "
+            "the plan as planned on the CAD; evaluate the plan made without --robot"
+        )
+    records = traj.meta.get("views") or []
+    if not records:
+        raise ValueError(f"{where} records no views: plan it again to run it in closed loop")
+    out = []
+    for k, record in enumerate(records):
+        lines = record.get("swaths") if isinstance(record, dict) else None
+        if not lines:
+            raise ValueError(
+                f"{where} does not record its pass lines (made by an older scanplan): plan "
+                "it again to run it in closed loop"
+            )
+        try:
+            axis = np.array(record["axis"], dtype=np.float64).reshape(3)
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{where}: views[{k}] has no axis (3 numbers)") from None
+        if not (np.isfinite(axis).all() and abs(float(np.linalg.norm(axis)) - 1.0) < 1e-6):
+            raise ValueError(f"{where}: views[{k}].axis is not a unit vector")
+        swaths = tuple(
+            swath_from_record(r, f"{where}: views[{k}].swaths[{i}]") for i, r in enumerate(lines)
+        )
+        out.append(ViewLines(View(k, axis, rotation_to_up(axis)), swaths))
+    planned = set(np.unique(traj.swath[traj.scanning]).tolist())
+    if not planned <= {sw.index for v in out for sw in v.swaths}:
+        raise ValueError(f"{where}: its pass lines do not match its passes")
+    return out
+
+
+def plan_swaths_of(traj: Trajectory, where: str) -> list[Swath]:
+    """The pass lines of a plan of one view looking straight down (in the part frame, as a
+    robot-side loop takes them: `online`); ValueError (one line) for any other plan, whose
+    views' lines lie in their own frames (`plan_views_of`)."""
+    views = plan_views_of(traj, where)
+    if len(views) != 1:
+        raise ValueError(
+            f"{where} has {len(views)} views, each's pass lines in its own frame: take them "
+            "with trials.plan_views_of"
+        )
+    view = views[0].view
+    if not np.allclose(view.axis, UP, atol=1e-9):
+        raise ValueError(f"{where}: its view looks along {view.axis.tolist()}, not straight down")
+    return list(views[0].swaths)
+
+
+def closed_loop_planner(context: PlanContext, policy: str | None, where: str) -> Any:
+    """The planner that made a closed-loop plan, as its context records it: feedback with
+    its roll and step limits, rl with `policy` (None: the shipped policy of the plan's kind,
+    v1 if it rolls). ValueError (one line) for any other planner or a policy of the other
+    kind."""
+    if context.planner not in CLOSED_LOOP_PLANNERS:
+        raise ValueError(
+            f"--closed-loop re-runs the controller of a feedback or rl plan; {where} was "
+            f"made by {context.planner or 'an unknown planner'} (an open-loop plan: "
+            "--perturb alone replays it)"
+        )
+    if policy is not None and context.planner != "rl":
+        raise ValueError("--policy is the rl plan's policy: this plan was made by feedback")
+    if context.planner == "feedback":
+        return FeedbackPlanner(roll=context.full_beam_angle, limits=context.limits)
+    # Deferred: the rl planner loads torch, which no other planner needs.
+    from scanplan.rl.planner import RLPlanner
+
+    rl = RLPlanner.from_file(policy if policy is not None else default_policy(context))
+    if rl.roll != context.full_beam_angle:
+        kind = "rolls" if context.full_beam_angle else "does not roll"
+        raise ValueError(f"{where} {kind}; {rl.source} {'does' if rl.roll else 'does not'}")
+    rl.check_sensor(context.spec)
+    return rl
+
+
+def looks_ahead(planner: Any) -> bool:
+    """The planner is an rl policy whose observation probes the CAD ahead of the sensor."""
+    return bool(getattr(planner, "config", {}).get("env", {}).get("lookahead", False))
+
+
+def default_policy(context: PlanContext) -> str:
+    """The shipped policy an rl plan was made with when none is given: v1 if it rolls."""
+    return "v1" if context.full_beam_angle else "default"
+
+
+def closed_loop_tasks(
+    part: Part,
+    traj: Trajectory,
+    context: PlanContext,
+    model: Perturbation,
+    trials: int,
+    seed: int = 0,
+    points_per_profile: int | None = None,
+    policy: str | None = None,
+    where: str = "the plan",
+) -> list[ClosedLoopTask]:
+    """The `trials` tasks of a closed-loop robustness run of `traj` (a feedback or rl plan,
+    every view of it), judged as `metrics.robustness.trial_tasks` judges its replay."""
+    planner = closed_loop_planner(context, policy, where)
+    views = tuple(plan_views_of(traj, where))
+    if looks_ahead(planner) and any(not np.array_equal(v.view.R, np.eye(4)) for v in views):
+        # Its look-ahead probes only the view's region, which the plan file does not keep.
+        raise ValueError(
+            f"{planner.source} looks ahead on each view's region, which {where} does not "
+            "record: only its views looking straight down could run in closed loop"
+        )
+    judges = trial_tasks(
+        part, context.spec, traj, model, trials, seed, points_per_profile, context=context
+    )
+    cell = planned_cell(context, part.with_roi(context.roi))
+    fixtures = tuple(
+        (np.asarray(f.mesh.vertices), np.asarray(f.mesh.faces), f.name) for f in cell.fixtures
+    )
+    return [
+        ClosedLoopTask(j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec)
+        for j in judges
+    ]
+
+
+def closed_loop_robustness(
+    tasks: Sequence[ClosedLoopTask],
+    run: TrialMap = map,  # type: ignore[assignment]
+) -> Robustness:
+    """Run the closed-loop trials with `run` (a map, as `metrics.robustness.robustness`
+    takes) and summarize them."""
+    if not tasks:
+        raise ValueError("no trial to run")
+    results = list(run(run_closed_loop_trial, tasks))  # type: ignore[arg-type]
+    return summarize(tasks[0].judge, results, closed_loop=True)

@@ -1,0 +1,448 @@
+"""The 3-D scene of a plan, drawn without simulating it: the part, its table and fixtures,
+the passes coloured by view, the moves between them, and the arm at a few poses of each pass
+with the poses it cannot fly marked. Plotly traces only; `html` puts them in a page.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from scanplan.core.plan import recorded
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import Trajectory
+from scanplan.robot import check_reach, get_robot
+from scanplan.robot.links import check_links, obstacles_for
+from scanplan.robot.reach import pass_starts
+from scanplan.world.cell import Cell, planned_cell
+from scanplan.world.part import Part
+
+# Enough for a smooth picture, small enough that the page stays a few MB.
+MAX_PART_FACES = 15_000
+MAX_PATH_POINTS = 20_000
+# The arm is drawn at each pass's first, middle and last pose, at most this many poses in
+# all (passes taken evenly when a plan has more): beyond that the arms hide the part.
+MAX_ARM_POSES = 48
+CAPSULE_SIDES = 12
+# One colour per view of a scan of several views (plotly's D3 palette).
+VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+                "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
+ARM_COLOUR = "#6b6b6b"
+PROBLEM_COLOUR = "#e6001a"
+MOVE_COLOUR = "#a0a0a0"
+# The table is drawn as a slab this deep, not its whole block (a metre deep), which would
+# dwarf the part and the arm.
+TABLE_SLAB_MM = 30.0
+# The sensor drawn from the flange to its origin (the TCP) as a capsule of this radius.
+SENSOR_RADIUS_MM = 25.0
+
+
+@dataclass(frozen=True)
+class ArmPoses:
+    """The arm along a plan, checked as `export` checks it, with the poses to draw.
+
+    robot: the arm's name; T_base_part (4, 4) the part in its base frame (mm);
+    unreachable: (n,) no joint solution, or none within the joint limits;
+    colliding: (n,) a link within the clearance of the part, the table or a fixture;
+    shown: (m,) indices of the poses drawn; capsules_part: (m, k, 2, 3) their links'
+    segment ends in the part frame (mm), the last one flange to sensor origin; radii: (k,)
+    mm; summaries: the reach and link checks' one-line summaries.
+    """
+
+    robot: str
+    T_base_part: np.ndarray
+    unreachable: np.ndarray
+    colliding: np.ndarray
+    shown: np.ndarray
+    capsules_part: np.ndarray
+    radii: np.ndarray
+    summaries: tuple[str, ...]
+
+    @property
+    def base_part(self) -> np.ndarray:
+        """(3,) the robot base's origin in the part frame, mm."""
+        return np.linalg.inv(self.T_base_part)[:3, 3]
+
+
+def pass_runs(traj: Trajectory) -> list[np.ndarray]:
+    """The pose indices of each pass: runs of scanning poses of one swath."""
+    starts = np.flatnonzero(pass_starts(traj.swath, traj.scanning))
+    runs = []
+    for s in starts:
+        e = s
+        while e + 1 < len(traj) and traj.scanning[e + 1] and traj.swath[e + 1] == traj.swath[s]:
+            e += 1
+        runs.append(np.arange(s, e + 1))
+    return runs
+
+
+def shown_poses(
+    traj: Trajectory, problems: np.ndarray, max_poses: int = MAX_ARM_POSES
+) -> np.ndarray:
+    """The poses the arm is drawn at: each pass's first, middle and last (passes taken evenly
+    if there are too many), and the first pose of each pass where `problems` (n,) is set."""
+    runs = pass_runs(traj)
+    if len(runs) * 3 > max_poses:
+        runs = [runs[i] for i in np.linspace(0, len(runs) - 1, max(max_poses // 3, 1)).astype(int)]
+    picked = [r[[0, len(r) // 2, -1]] for r in runs]
+    picked += [r[problems[r]][:1] for r in pass_runs(traj)]
+    return np.unique(np.concatenate(picked)) if picked else np.zeros(0, dtype=int)
+
+
+def check_arm(
+    traj: Trajectory,
+    robot: str,
+    T_base_part: np.ndarray,
+    T_flange_sensor: np.ndarray,
+    part: Part,
+    cell: Cell,
+) -> ArmPoses:
+    """The arm `robot` along `traj` (the part at `T_base_part`, the sensor at
+    `T_flange_sensor` on the flange): its reach and link checks and the poses to draw."""
+    arm = get_robot(robot)
+    T_base_part = np.asarray(T_base_part, dtype=np.float64)
+    T_base_flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    reach = check_reach(T_base_flange, arm, swath=traj.swath, scanning=traj.scanning)
+    links = check_links(
+        arm,
+        reach.joints,
+        # The links keep the clearance the plan was made with, as the sensor does.
+        obstacles_for(part, cell, clearance_mm=recorded(traj, ScanSpec()).spec.clearance_mm),
+        T_base_part,
+        pass_starts(traj.swath, traj.scanning),
+    )
+    unreachable = np.zeros(len(traj), dtype=bool)
+    unreachable[np.r_[reach.unreachable, reach.limit_violations].astype(int)] = True
+    colliding = np.asarray(links.colliding, dtype=bool)
+    shown = shown_poses(traj, unreachable | colliding)
+    shown = shown[~np.isnan(reach.joints[shown]).any(axis=1)]  # no joints, no arm to draw
+    ends, radii, _ = arm.link_capsules(reach.joints[shown])
+    T_part_base = np.linalg.inv(T_base_part)
+    ends_part = ends @ T_part_base[:3, :3].T + T_part_base[:3, 3]
+    # The sensor on the flange, flange to sensor origin: the arm visibly reaches its pose.
+    flange_part = (traj.poses[shown] @ np.linalg.inv(T_flange_sensor))[:, :3, 3]
+    tool = np.stack([flange_part, traj.poses[shown, :3, 3]], axis=1)[:, None]
+    ends_part = np.concatenate([ends_part.reshape(len(shown), len(radii), 2, 3), tool], 1)
+    radii = np.r_[radii, SENSOR_RADIUS_MM]
+    return ArmPoses(
+        arm.name,
+        T_base_part,
+        unreachable,
+        colliding,
+        shown,
+        ends_part,
+        np.asarray(radii, dtype=np.float64),
+        (reach.summary(), links.summary()),
+    )
+
+
+def recorded_arm(robot: Mapping[str, Any]) -> tuple[str, np.ndarray, np.ndarray]:
+    """(robot, T_base_part, T_flange_sensor) from a plan's `meta["robot"]` record;
+    ValueError naming the field that is missing or malformed."""
+    try:
+        name = str(robot["robot"])
+        poses = [np.asarray(robot[k], dtype=np.float64) for k in ("T_base_part", "T_flange_sensor")]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"the plan's robot record is incomplete or malformed ({exc})") from None
+    for key, T in zip(("T_base_part", "T_flange_sensor"), poses, strict=True):
+        if T.shape != (4, 4) or not np.isfinite(T).all():
+            raise ValueError(f"the plan's robot record: {key} is not a finite 4 x 4 pose")
+    return name, poses[0], poses[1]
+
+
+def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]:
+    """The cell `traj` was planned in around `part` and, for a plan made for an arm
+    (`meta["robot"]`), that arm along it. ValueError or OSError if a fixture file or the
+    arm's file is gone or the record is malformed."""
+    cell = planned_cell(recorded(traj, ScanSpec()), part)
+    record = traj.meta.get("robot")
+    if not record:
+        return cell, None
+    return cell, check_arm(traj, *recorded_arm(record), part, cell)
+
+
+# ---- traces -------------------------------------------------------------------------------
+
+
+def part_trace(
+    part: Part,
+    name: str = "part",
+    colour: str = "lightgray",
+    opacity: float = 0.45,
+    max_faces: int | None = MAX_PART_FACES,
+):
+    """The part's mesh, decimated to `max_faces` if larger (None: every face)."""
+    import plotly.graph_objects as go
+
+    mesh = part.mesh
+    if max_faces is not None and len(mesh.faces) > max_faces:
+        try:
+            mesh = mesh.simplify_quadric_decimation(face_count=max_faces)
+        except (ImportError, ValueError):  # decimation is cosmetic: fall back to the full mesh
+            mesh = part.mesh
+    v, f = mesh.vertices, mesh.faces
+    return go.Mesh3d(
+        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2],
+        color=colour, opacity=opacity, name=name, hoverinfo="skip", flatshading=True,
+        showlegend=True,
+    )  # fmt: skip
+
+
+def path_trace(
+    pos: np.ndarray,
+    keep: np.ndarray,
+    name: str,
+    colour: str,
+    width: int,
+    max_points: int | None = None,
+    **kwargs: Any,
+):
+    """The poses where `keep` as one line, broken (NaN rows) wherever `keep` is False; each
+    run thinned to about `max_points` in all (its ends kept)."""
+    import plotly.graph_objects as go
+
+    idx = np.flatnonzero(keep)
+    step = 1 if max_points is None else max(1, -(-len(idx) // max_points))
+    breaks = np.flatnonzero(np.diff(idx) > 1)
+    runs = np.split(idx, breaks + 1) if len(idx) else []
+    pieces = []
+    for run in runs:
+        take = run[::step] if run[-1] in run[::step] else np.r_[run[::step], run[-1]]
+        pieces += [pos[take], np.full((1, 3), np.nan)]
+    line = np.concatenate(pieces) if pieces else np.zeros((0, 3))
+    return go.Scatter3d(
+        x=line[:, 0], y=line[:, 1], z=line[:, 2], mode="lines", connectgaps=False,
+        line={"color": colour, "width": width}, name=name, **kwargs,
+    )  # fmt: skip
+
+
+def view_of_pose(traj: Trajectory) -> np.ndarray:
+    """(n,) the index of the view each pose belongs to (all 0 without `meta["views"]`)."""
+    out = np.zeros(len(traj), dtype=int)
+    for k, v in enumerate(traj.meta.get("views") or []):
+        out[(traj.swath >= v["first_swath"]) & (traj.swath <= v["last_swath"])] = k
+    return out
+
+
+def view_label(traj: Trajectory, k: int) -> str:
+    views = traj.meta.get("views") or []
+    if len(views) <= 1:
+        return "passes"
+    return f"view {k} ({', '.join(f'{c:.2f}' for c in views[k]['axis'])})"
+
+
+def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
+    """The passes, one trace per view in its colour (a legend group its arm joins), and the
+    moves between them in grey."""
+    pos = traj.positions_mm
+    view = view_of_pose(traj)
+    n_views = max(len(traj.meta.get("views") or []), 1)
+    traces = [path_trace(pos, ~traj.scanning, "moves", MOVE_COLOUR, 2, max_points)]
+    for k in range(n_views):
+        traces.append(
+            path_trace(
+                pos, traj.scanning & (view == k), view_label(traj, k),
+                VIEW_COLOURS[k % len(VIEW_COLOURS)], 4, max_points, legendgroup=f"view{k}",
+            )
+        )  # fmt: skip
+    return traces
+
+
+def _box_mesh(lo: np.ndarray, hi: np.ndarray, name: str, colour: str, opacity: float):
+    import plotly.graph_objects as go
+
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=bool)
+    v = np.where(corners, hi, lo)
+    # Two triangles per face of the cube, vertices indexed as x*4 + y*2 + z.
+    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])  # fmt: skip
+    return go.Mesh3d(
+        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2], color=colour,
+        opacity=opacity, name=name, hoverinfo="name", flatshading=True, showlegend=True,
+    )  # fmt: skip
+
+
+def cell_traces(part: Part, cell: Cell) -> list:
+    """The table (a slab of its block under the part and fixtures) and the fixtures."""
+    traces = []
+    block = cell.table_block(part)
+    if block is not None:
+        lo, hi = block[0].copy(), block[1]
+        lo[2] = hi[2] - TABLE_SLAB_MM
+        traces.append(_box_mesh(lo, hi, "table", "#c8a165", 0.6))
+    for k, fixture in enumerate(cell.fixtures):
+        traces.append(part_trace(fixture, f"fixture {k}", "#5b6f80", 0.8))
+    return traces
+
+
+def capsule_mesh(ends: np.ndarray, radii: np.ndarray, sides: int = CAPSULE_SIDES):
+    """(vertices (c·(2·sides+2), 3), faces (c·4·sides, 3)) of closed cylinders round the
+    segments `ends` (c, 2, 3) with `radii` (c,): the capsules drawn without their caps'
+    domes (a joint's neighbour covers them)."""
+    a, b = ends[:, 0], ends[:, 1]
+    axis = b - a
+    length = np.linalg.norm(axis, axis=1, keepdims=True)
+    d = np.where(length > 1e-9, axis / np.maximum(length, 1e-9), [0.0, 0.0, 1.0])
+    helper = np.where(np.abs(d[:, [0]]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    u = np.cross(d, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(d, u)
+    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    ring = np.cos(t)[None, :, None] * u[:, None] + np.sin(t)[None, :, None] * w[:, None]
+    ring *= radii[:, None, None]
+    # Per capsule: ring at a, ring at b, then the two cap centres.
+    verts = np.concatenate([a[:, None] + ring, b[:, None] + ring, a[:, None], b[:, None]], axis=1)
+    j = np.arange(sides)
+    k = (j + 1) % sides
+    ca, cb = 2 * sides, 2 * sides + 1
+    local = np.concatenate(
+        [
+            np.stack([j, k, sides + k], axis=1),
+            np.stack([j, sides + k, sides + j], axis=1),
+            np.stack([np.full(sides, ca), k, j], axis=1),
+            np.stack([np.full(sides, cb), sides + j, sides + k], axis=1),
+        ]
+    )
+    per = verts.shape[1]
+    faces = local[None] + (np.arange(len(ends)) * per)[:, None, None]
+    return verts.reshape(-1, 3), faces.reshape(-1, 3)
+
+
+def _arm_mesh(capsules: np.ndarray, radii: np.ndarray, name: str, colour: str, **kwargs: Any):
+    import plotly.graph_objects as go
+
+    v, f = capsule_mesh(capsules.reshape(-1, 2, 3), np.tile(radii, len(capsules)))
+    return go.Mesh3d(
+        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2], color=colour,
+        opacity=1.0, name=name, hoverinfo="name", flatshading=False, showlegend=True,
+        lighting={"ambient": 0.55, "diffuse": 0.7, "specular": 0.2}, **kwargs,
+    )  # fmt: skip
+
+
+def _markers(pos: np.ndarray, name: str, colour: str, symbol: str, size: int, **kwargs: Any):
+    import plotly.graph_objects as go
+
+    return go.Scatter3d(
+        x=pos[:, 0], y=pos[:, 1], z=pos[:, 2], name=name,
+        marker={"color": colour, "symbol": symbol, "size": size}, **{"mode": "markers", **kwargs},
+    )  # fmt: skip
+
+
+def add_arm(fig, traj: Trajectory, arm: ArmPoses) -> None:
+    """Add the arm to `fig`: at each shown pose (a slider steps through them, its first step
+    shows them all; those whose links collide in red), markers on the poses it cannot fly,
+    and its base."""
+    view = view_of_pose(traj)
+    runs = pass_runs(traj)
+    pass_of = np.full(len(traj), -1)
+    for p, run in enumerate(runs):
+        pass_of[run] = p
+    first = len(fig.data)
+    labels = []
+    for j, i in enumerate(arm.shown):
+        run = runs[pass_of[i]] if pass_of[i] >= 0 else np.array([i])
+        where = "first" if i == run[0] else "last" if i == run[-1] else "middle"
+        labels.append(f"pose {i} (view {view[i]}, pass {pass_of[i]}, {where})")
+        bad = bool(arm.colliding[i])
+        fig.add_trace(
+            _arm_mesh(
+                arm.capsules_part[[j]], arm.radii,
+                f"{arm.robot} at {labels[-1]}" + (": links collide" if bad else ""),
+                PROBLEM_COLOUR if bad else ARM_COLOUR, visible=j == 0,
+            )
+        )  # fmt: skip
+    m = len(arm.shown)
+    if m:
+        colour = np.where(arm.colliding[arm.shown], PROBLEM_COLOUR, ARM_COLOUR)
+        fig.add_trace(
+            _arm_mesh(
+                arm.capsules_part, arm.radii, f"{arm.robot} at {m} poses", ARM_COLOUR,
+                visible=False, facecolor=np.repeat(colour, len(arm.radii) * 4 * CAPSULE_SIDES),
+            )
+        )  # fmt: skip
+        steps = [
+            {
+                "label": f"all {m} poses",
+                "method": "restyle",
+                "args": [{"visible": [False] * m + [True]}, list(range(first, first + m + 1))],
+            }
+        ]
+        for j, label in enumerate(labels):
+            visible = [k == j for k in range(m + 1)]
+            steps.append(
+                {"label": label, "method": "restyle",
+                 "args": [{"visible": visible}, list(range(first, first + m + 1))]}
+            )  # fmt: skip
+        fig.update_layout(
+            sliders=[{
+                "active": 1, "steps": steps, "x": 0.05, "len": 0.9, "y": 0, "yanchor": "top",
+                "pad": {"t": 10, "b": 10}, "font": {"color": "rgba(0,0,0,0)"},
+                "currentvalue": {"prefix": f"{arm.robot} at ", "font": {"color": "#222"}},
+            }]
+        )  # fmt: skip
+    pos = traj.positions_mm
+    for mask, what, symbol in (
+        (arm.unreachable, "unreachable or beyond joint limits", "x"),
+        (arm.colliding, "a link collides", "diamond-open"),
+    ):
+        if mask.any():
+            fig.add_trace(
+                _markers(pos[mask], f"{int(mask.sum())} poses: {what}", PROBLEM_COLOUR, symbol,
+                         4, hoverinfo="name")
+            )  # fmt: skip
+    base = arm.base_part
+    # The column from the base up to the first link: where the arm stands.
+    top = arm.capsules_part[0, 0, 0] if m else base
+    fig.add_trace(
+        go_line(np.array([base, top]), f"{arm.robot} base", ARM_COLOUR, 14,
+                mode="lines+markers+text", text=[f"{arm.robot} base", ""],
+                textposition="bottom center",
+                marker={"symbol": "square", "size": 6, "color": "black"})
+    )  # fmt: skip
+
+
+def go_line(points: np.ndarray, name: str, colour: str, width: int, **kwargs: Any):
+    """A polyline through `points` (p, 3)."""
+    import plotly.graph_objects as go
+
+    return go.Scatter3d(
+        x=points[:, 0], y=points[:, 1], z=points[:, 2], name=name,
+        line={"color": colour, "width": width}, **{"mode": "lines", **kwargs},
+    )  # fmt: skip
+
+
+def scene_figure(
+    part: Part,
+    traj: Trajectory,
+    cell: Cell | None = None,
+    arm: ArmPoses | None = None,
+    title: str = "",
+    max_points: int | None = MAX_PATH_POINTS,
+):
+    """The plan's 3-D scene as a plotly Figure."""
+    import plotly.graph_objects as go
+
+    traces = [part_trace(part, colour="#8c99a6", opacity=1.0)]
+    if cell is not None:
+        traces += cell_traces(part, cell)
+    traces += passes_traces(traj, max_points)
+    fig = go.Figure(traces)
+    if arm is not None:
+        add_arm(fig, traj, arm)
+    fig.update_layout(
+        title=title,
+        height=860,
+        margin={"l": 0, "r": 0, "t": 40, "b": 0},
+        scene={
+            "aspectmode": "data",
+            "camera": {"eye": {"x": 1.3, "y": -1.3, "z": 0.9}},
+            "xaxis": {"title": "x (mm)"},
+            "yaxis": {"title": "y (mm)"},
+            "zaxis": {"title": "z (mm)"},
+        },
+        legend={"x": 0, "y": 1},
+    )
+    return fig

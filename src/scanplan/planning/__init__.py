@@ -1,0 +1,1 @@
+"""From a part to a trajectory: views, rasters, the pass step model, planners, the path."""

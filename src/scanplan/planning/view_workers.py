@@ -1,0 +1,248 @@
+"""Candidate views planned and judged on worker processes, one per core (`ViewWorkers`): the
+view choice asks for the next few candidates in the order it would try them, and each worker
+holds the part, its ray engine built once, for the whole choice. Passes share one process's
+GIL (threads gave the view choice nothing); processes do not.
+
+On one core, or in a process that is itself a worker (a catalogue's part, the demo's second
+process), the views are planned in this process, one at a time. With a Dask scheduler
+(`plan --scheduler` for one part), they are Dask tasks on its cluster.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import threading
+import warnings
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from multiprocessing import forkserver
+from typing import Any
+
+import numpy as np
+
+from scanplan.core.plan import PlanContext
+from scanplan.core.quantities import ScanSpec
+from scanplan.judging import in_spec_samples
+from scanplan.planning.views import PlanView, View, ViewPlan, plan_view
+from scanplan.world.part import Part
+
+# How long to wait for a Dask scheduler to answer.
+CONNECT_SECONDS = 10.0
+# Views kept asked for per worker: one running and one queued behind it, so a worker that
+# finishes starts the next at once instead of idling while the choice reads another's result
+# (half the views take under 50 ms; the round trip through the choice took 20-40 ms).
+TASKS_AHEAD = 2
+
+
+@dataclass(frozen=True)
+class ViewJudge:
+    """A view planned by `plan` (on the part turned into its frame: `views.plan_view`) and
+    judged: its in-spec set on the samples of the surface seen from the upper hemisphere
+    (`in_spec_samples` with a fan of `points_per_profile` columns and samples drawn with
+    `seed`). Picklable when `plan` is."""
+
+    spec: ScanSpec
+    plan: PlanView
+    points_per_profile: int
+    seed: int = 0
+
+    def __call__(self, part: Part, view: View) -> tuple[ViewPlan, np.ndarray]:
+        planned = plan_view(part, view, self.plan)
+        context = PlanContext(self.spec, views="auto")
+        held = in_spec_samples(
+            part, self.spec, planned.traj, self.seed, self.points_per_profile, context
+        )
+        return planned, held
+
+
+def view_worker_count() -> int:
+    """Worker processes to plan views on: one per core; none (plan here) on one core or in
+    a process that is itself a worker, whose parent already keeps the cores busy."""
+    if multiprocessing.parent_process() is not None:
+        return 0
+    cores = os.cpu_count() or 1
+    return cores if cores > 1 else 0
+
+
+def start_worker_server() -> None:
+    """Start the server process the view workers are forked from, if not running yet (it
+    imports this module once: 1.4 s here, most of it trimesh)."""
+    multiprocessing.get_context("forkserver").set_forkserver_preload([__name__])
+    forkserver.ensure_running()
+
+
+class ViewWorkers:
+    """`submit(view)`: a future of `judge(part, view)`, run on `workers` worker processes
+    in the order submitted (0: here, when submitted), or with `scheduler` (tcp://HOST:PORT)
+    as Dask tasks on that cluster, the part and judge sent to each of its workers once.
+    `width`: how many views to keep asked for: `TASKS_AHEAD` per worker (one when planned
+    here, where asking is planning). Leaving the `with` block drops the views
+    not started and stops those running (a cluster's are cancelled)."""
+
+    def __init__(
+        self, part: Part, judge: ViewJudge, workers: int, scheduler: str | None = None
+    ) -> None:
+        self._part, self._judge = part, judge
+        self._pool: ProcessPoolExecutor | None = None
+        self._client: Any = None
+        self.width = TASKS_AHEAD * workers if workers else 1
+        if scheduler is not None:
+            self._connect(scheduler)
+        elif workers:
+            # Forked from a fresh server process that has imported this module once, not from
+            # this one (it already runs Embree's and the passes' threads), nor spawned: a
+            # spawned worker imports numpy, trimesh and Embree while this process waits to
+            # hand it the part (1.3 s a worker here).
+            start_worker_server()
+            self._pool = ProcessPoolExecutor(
+                workers,
+                mp_context=multiprocessing.get_context("forkserver"),
+                initializer=_start_worker,
+                initargs=(part, judge),
+            )
+            # The workers start (about a second before the first submit returns) beside the
+            # caller's next work, not in its way.
+            self._warm_up = threading.Thread(target=_warm_up, args=(self._pool,), daemon=True)
+            self._warm_up.start()
+
+    def __enter__(self) -> ViewWorkers:
+        return self
+
+    def _connect(self, scheduler: str) -> None:
+        # Deferred: Dask is an optional extra (the CLI says so before any work).
+        from dask.distributed import Client
+
+        try:
+            self._client = Client(scheduler, timeout=CONNECT_SECONDS)
+        except (OSError, TimeoutError) as exc:  # no scheduler there
+            raise ValueError(f"--scheduler {scheduler}: {exc}".splitlines()[0]) from None
+        threads = sum(self._client.nthreads().values())
+        if threads == 0:
+            self._client.close()
+            raise ValueError(f"--scheduler {scheduler}: the cluster has no worker")
+        self.width = TASKS_AHEAD * threads
+        # Sent once to every worker; each task is given the workers' own copy, whose ray
+        # engine is built by the first task there and kept.
+        self._state = self._client.scatter((self._part, self._judge), broadcast=True)
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self._pool is not None:
+            self._warm_up.join()
+            # The views still running are not wanted: their workers are stopped, not waited
+            # for (a heightfield's view planned ahead held its choice 2-4 s at the end). The
+            # executor cannot stop a running task before Python 3.14: its processes are.
+            workers = list((self._pool._processes or {}).values())
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            for worker in workers:
+                worker.terminate()
+            for worker in workers:
+                worker.join()
+        if self._client is not None:
+            self._client.close()
+
+    def submit(self, view: View) -> Any:
+        if self._client is not None:
+            return _Raising(self._client.submit(_judge_quietly, self._state, view, pure=False))
+        if self._pool is not None:
+            try:
+                return _OrHere(self._pool.submit(_judge_in_worker, view), self, view)
+            except BrokenProcessPool:
+                self._lost_workers()
+        done: Future[tuple[ViewPlan, np.ndarray]] = Future()
+        try:
+            done.set_result(self._judge(self._part, view))
+        except Exception as exc:  # raised by result(), as a worker's would be
+            done.set_exception(exc)
+        return done
+
+    def instead(self, view: View) -> tuple[ViewPlan, np.ndarray]:
+        """`view` planned here: the worker that had it died."""
+        self._lost_workers()
+        return self._judge(self._part, view)
+
+    def _lost_workers(self) -> None:
+        """A worker died (killed, out of memory): the views left are planned here."""
+        if self._pool is not None:
+            warnings.warn(
+                "a view worker stopped; the views left are planned in this process",
+                stacklevel=3,
+            )
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+
+
+class _OrHere:
+    """A worker's future whose result, if the worker died, is planned here instead."""
+
+    def __init__(self, future: Future, workers: ViewWorkers, view: View) -> None:
+        self._future, self._workers, self._view = future, workers, view
+
+    def done(self) -> bool:
+        return self._future.done()
+
+    def result(self) -> tuple[ViewPlan, np.ndarray]:
+        try:
+            return self._future.result()
+        except BrokenProcessPool:
+            return self._workers.instead(self._view)
+
+
+class _Raising:
+    """A Dask future of `_judge_quietly`, whose returned ValueError `result()` raises."""
+
+    def __init__(self, future: Any) -> None:
+        self._future = future
+
+    def done(self) -> bool:
+        return bool(self._future.done())
+
+    def result(self) -> tuple[ViewPlan, np.ndarray]:
+        out = self._future.result()
+        if isinstance(out, ValueError):
+            raise out
+        return out
+
+
+def _warm_up(pool: ProcessPoolExecutor) -> None:
+    """Start the pool's workers with a task that does nothing."""
+    try:
+        pool.submit(int)
+    except (BrokenProcessPool, RuntimeError):
+        # A worker died, or the choice ended, before this thread ran: nothing left to start
+        # (an exception here would only be printed from a stray thread).
+        pass
+
+
+# A worker's part and judge, set once when it starts.
+_WORKER: tuple[Part, ViewJudge] | None = None
+
+
+def _start_worker(part: Part, judge: ViewJudge) -> None:
+    global _WORKER
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _WORKER = (part, judge)
+
+
+def _judge_in_worker(view: View) -> tuple[ViewPlan, np.ndarray]:
+    assert _WORKER is not None
+    return _judge_with(_WORKER, view)
+
+
+def _judge_with(state: tuple[Part, ViewJudge], view: View) -> tuple[ViewPlan, np.ndarray]:
+    part, judge = state
+    return judge(part, view)
+
+
+def _judge_quietly(
+    state: tuple[Part, ViewJudge], view: View
+) -> tuple[ViewPlan, np.ndarray] | ValueError:
+    """`_judge_with`, a view's ValueError (it sees nothing, every pose too near) returned, not
+    raised: it is an answer, and a Dask worker logs each task that raises as an error with
+    its traceback (85 of them for the pocket plate's choice)."""
+    try:
+        return _judge_with(state, view)
+    except ValueError as exc:
+        return exc

@@ -1,0 +1,363 @@
+"""Views and regions, geometry only: the surface to inspect cut into regions by normal
+direction, and a view (a top-view raster of the part rotated so the view's up is +Z) per
+region. `pipeline` chooses among them and joins the chosen.
+
+A view is planned with the top-view machinery unchanged: the part is rotated by the view's
+R (the view's up axis to +Z), restricted to the region's faces as a region of interest, and
+planned as a top view; the poses come back as R⁻¹ @ T.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.transform import Rotation
+
+from scanplan.core.quantities import UP, ScanSpec
+from scanplan.core.trajectory import Trajectory
+from scanplan.world.part import Part
+from scanplan.world.surface import (
+    VIEW_AXIS_MAX_TILT_DEG,
+    VisibleSurface,
+    hemisphere_directions,
+    oriented_normals,
+    towards_up,
+)
+
+# A region (and a view's slab) smaller than this share of the surface gets no view of its
+# own: it still counts in coverage, but a view for it would add nothing measurable.
+MIN_REGION_AREA_FRACTION = 0.005
+
+
+@dataclass(frozen=True)
+class Region:
+    """A connected patch of the surface to inspect whose normals share a direction bin.
+
+    faces: (k,) int face indices; normal: (3,) its area-weighted mean normal (unit);
+    area_mm2: its area.
+    """
+
+    faces: np.ndarray
+    normal: np.ndarray
+    area_mm2: float
+
+
+def segment_regions(
+    part: Part,
+    directions: np.ndarray | None = None,
+    min_area_fraction: float = MIN_REGION_AREA_FRACTION,
+    max_normal_tilt_rad: float = math.pi / 2,
+) -> list[Region]:
+    """The surface to inspect (the part's region of interest, else every face whose normal
+    leans at most `max_normal_tilt_rad` from +Z: the upper hemisphere by default; a wall
+    with a draft leaning a few degrees down is still in reach of a tilted beam) cut into
+    regions: each face goes to the nearest of `directions` by its
+    (oriented) normal, and the connected components of same-direction faces over the mesh's
+    face adjacency are the regions. Regions below `min_area_fraction` of the surface are
+    dropped (they still count in coverage; a view for each would add nothing measurable).
+    Largest first."""
+    dirs = hemisphere_directions() if directions is None else directions
+    normals = oriented_normals(part)
+    mesh = part.mesh
+    area = np.asarray(mesh.area_faces)
+    inspect = part.inspect_mask & (normals[:, 2] > math.cos(max_normal_tilt_rad) - 1e-6)
+    label = np.argmax(normals @ dirs.T, axis=1)
+    adj = np.asarray(mesh.face_adjacency)
+    same = inspect[adj[:, 0]] & inspect[adj[:, 1]] & (label[adj[:, 0]] == label[adj[:, 1]])
+    a, b = adj[same, 0], adj[same, 1]
+    f = len(mesh.faces)
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(f, f))
+    _, comp = connected_components(graph, directed=False)
+    comp = np.where(inspect, comp, -1)
+    total = float(area[inspect].sum())
+    regions = []
+    ids, inverse = np.unique(comp[inspect], return_inverse=True)
+    face_ids = np.flatnonzero(inspect)
+    comp_area = np.bincount(inverse, area[inspect])
+    for k in np.flatnonzero(comp_area >= min_area_fraction * total):
+        faces = face_ids[inverse == k]
+        n = (normals[faces] * area[faces, None]).sum(axis=0)
+        regions.append(Region(faces, n / max(np.linalg.norm(n), 1e-12), float(comp_area[k])))
+    del ids
+    return sorted(regions, key=lambda r: -r.area_mm2)
+
+
+def view_axis(normal: np.ndarray, max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG) -> np.ndarray:
+    """The view's up axis (the sensor looks along −axis): the region's mean normal, tilted
+    back to at most `max_tilt_deg` from +Z (the sensor above the fixture)."""
+    n = np.asarray(normal, dtype=np.float64) / max(float(np.linalg.norm(normal)), 1e-12)
+    tilt = math.acos(float(np.clip(n[2], -1.0, 1.0)))
+    if tilt <= math.radians(max_tilt_deg):
+        return n
+    horizontal = np.array([n[0], n[1], 0.0])
+    h = np.linalg.norm(horizontal)
+    horizontal = horizontal / h if h > 1e-9 else np.array([1.0, 0.0, 0.0])
+    t = math.radians(max_tilt_deg)
+    return math.sin(t) * horizontal + math.cos(t) * UP
+
+
+def rotation_to_up(axis: np.ndarray) -> np.ndarray:
+    """(4, 4) the smallest rotation taking the unit `axis` to +Z (the view's "up" tilts,
+    nothing spins). Not normalized again here: a view read back from a plan file (its
+    recorded unit axis) gets the very rotation it was planned with."""
+    R = np.eye(4)
+    if not np.allclose(axis, UP):
+        rot, _ = Rotation.align_vectors([UP], [np.asarray(axis, dtype=np.float64)])
+        R[:3, :3] = rot.as_matrix()
+    return R
+
+
+@dataclass(frozen=True)
+class View:
+    """One raster of the scan, seen along −axis.
+
+    index: order of the view; axis: (3,) unit, the view's up (part frame); R: (4, 4) the
+    rotation mapping the part frame to the view frame (axis → +Z); faces: (k,) int the
+    faces of its region (None: the whole surface to inspect, the top view); level: scanned
+    level (`level_direction`) rather than by the raster's direction rule.
+    """
+
+    index: int
+    axis: np.ndarray
+    R: np.ndarray
+    faces: np.ndarray | None = None
+    level: bool = False
+
+    @staticmethod
+    def looking_along(
+        axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None, level: bool = False
+    ) -> View:
+        axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+        return View(index, axis, rotation_to_up(axis), faces, level)
+
+    def part(self, part: Part) -> Part:
+        """The part in the view frame (`Part.turned`: its ray engine and collision model
+        reused), restricted to the view's region (and the part's ROI). Face order is kept
+        (no re-validation), so face masks carry over. The top view of
+        the whole surface is the part itself (its ray engine and collision model reused)."""
+        if self.faces is None and np.array_equal(self.R, np.eye(4)):
+            return part
+        mask = part.inspect_mask.copy()
+        if self.faces is not None:
+            region = np.zeros(len(mask), bool)
+            region[self.faces] = True
+            mask &= region
+        return replace(part.turned(self.R), inspect_faces=mask)
+
+    def level_direction(self) -> np.ndarray | None:
+        """The scan direction of a tilted view, in its frame: level in the part frame
+        (across the tilt). The camera sits beside the laser along the scan; scanning level
+        keeps it at the laser's height, so it sees under an overhang and past a rim the beam
+        clears; stepping up the tilt it would look from above or below the beam. None for a
+        view looking straight down."""
+        across = np.cross(UP, self.axis)
+        norm = float(np.linalg.norm(across))
+        if norm < 1e-9:
+            return None
+        return self.R[:3, :3] @ (across / norm)
+
+    def to_part_frame(self, traj: Trajectory) -> Trajectory:
+        """A trajectory planned in the view frame, back in the part frame (R⁻¹ @ T)."""
+        poses = np.linalg.inv(self.R)[None] @ traj.poses
+        return replace(traj, poses=poses)
+
+
+@dataclass(frozen=True)
+class ViewPlan:
+    """A view planned: its trajectory (part frame, swath indices from 0) and passes."""
+
+    view: View
+    traj: Trajectory
+    passes: int
+
+
+# The top-view planner: (the part in a view's frame, that view) -> (passes, trajectory).
+PlanView = Callable[[Part, "View"], tuple[int, Trajectory]]
+
+
+def plan_view(part: Part, view: View, plan: PlanView) -> ViewPlan:
+    """Plan one view with `plan` on the rotated, region-restricted part; the trajectory
+    comes back in the part frame."""
+    passes, traj = plan(view.part(part), view)
+    return ViewPlan(view, view.to_part_frame(traj), passes)
+
+
+def depth_slabs(
+    part: Part, faces: np.ndarray, axis: np.ndarray, max_span_mm: float, gap_mm: float
+) -> list[np.ndarray]:
+    """`faces` cut by depth along `axis` (their centroids'): at gaps wider than `gap_mm`, and
+    a slab deeper than `max_span_mm` into equal slabs, so each fits one raster's depth
+    window (SPEC §3b: a region deeper than the Z range gets passes at the heights it needs;
+    one normal direction may also gather walls of several steps far apart)."""
+    faces = np.asarray(faces)
+    depth = np.asarray(part.mesh.triangles_center)[faces] @ axis
+    order = np.argsort(depth)
+    sorted_depth = depth[order]
+    breaks = np.flatnonzero(np.diff(sorted_depth) > gap_mm) + 1
+    slabs = []
+    for group in np.split(order, breaks):
+        span = float(depth[group].max() - depth[group].min())
+        count = max(1, math.ceil(span / max_span_mm - 1e-9))
+        if count == 1:
+            slabs.append(faces[group])
+            continue
+        edges = np.linspace(depth[group].min(), depth[group].max(), count + 1)[1:-1]
+        which = np.searchsorted(edges, depth[group])
+        slabs.extend(faces[group[which == k]] for k in range(count) if (which == k).any())
+    return slabs
+
+
+def candidate_views(
+    part: Part,
+    spec: ScanSpec,
+    max_candidates: int = 32,
+    merge_deg: float = 10.0,
+    min_area_fraction: float = MIN_REGION_AREA_FRACTION,
+) -> list[View]:
+    """Views for the largest regions (their axes, `view_axis`); regions whose axes lie within
+    `merge_deg` of each other share one view axis, and their faces are cut into depth slabs
+    along it (`depth_slabs`: half the Z range at most, a gap of a tenth of it), one view
+    per slab of at least `min_area_fraction` of the surface. A wall facing sideways gets a
+    view tilted `VIEW_AXIS_MAX_TILT_DEG` from +Z: within 10° of its normal, the sensor
+    still above it; a wall leaning up to the angle tolerance the other way (a draft) too."""
+    axes: list[np.ndarray] = []
+    groups: list[list[np.ndarray]] = []
+    # Faces a beam at most VIEW_AXIS_MAX_TILT_DEG from +Z holds within tolerance.
+    reach = math.radians(VIEW_AXIS_MAX_TILT_DEG) + spec.tol_angle_rad
+    regions = segment_regions(part, min_area_fraction=0.0, max_normal_tilt_rad=reach)
+    total = sum(r.area_mm2 for r in regions)
+    for region in regions:
+        axis = view_axis(region.normal)
+        for i, other in enumerate(axes):
+            if math.degrees(math.acos(float(np.clip(axis @ other, -1, 1)))) <= merge_deg:
+                groups[i].append(region.faces)
+                break
+        else:
+            axes.append(axis)
+            groups.append([region.faces])
+    area = np.asarray(part.mesh.area_faces)
+    z_range = spec.sensor.z_range_mm
+    slabs: list[tuple[float, np.ndarray, np.ndarray]] = []
+    for axis, group in zip(axes, groups, strict=True):
+        for faces in depth_slabs(part, np.concatenate(group), axis, z_range / 2, z_range / 10):
+            slab_area = float(area[faces].sum())
+            if slab_area >= min_area_fraction * total:
+                slabs.append((slab_area, axis, faces))
+    slabs.sort(key=lambda t: -t[0])
+    return [
+        View.looking_along(axis, k + 1, faces)
+        for k, (_, axis, faces) in enumerate(slabs[:max_candidates])
+    ]
+
+
+# Tilts back from a missed cluster's mean normal towards +Z tried for its view's axis: a
+# wall at the bottom of a pocket is seen only by a beam that leaves it steeply enough to
+# clear the pocket's rim, at the cost of part of the angle tolerance.
+MISSED_AXIS_TILTS_DEG = (0.0, 5.0, 10.0)
+# Axes tried per group of missed samples: its mean normal and this many samples' normals;
+# and axes chosen per group, each for what the previous ones do not see.
+MISSED_AXIS_SAMPLES = 8
+MISSED_AXES_PER_GROUP = 3
+
+
+def missed_views(
+    part: Part,
+    spec: ScanSpec,
+    surface: VisibleSurface,
+    missed: np.ndarray,
+    min_samples: int,
+    index: int = 1,
+    seed: int = 0,
+) -> list[View]:
+    """Views aimed at what the views chosen so far miss: the `missed` samples of `surface`
+    grouped by normal direction (`hemisphere_directions` bins). Within a group, axes are
+    chosen one after another, each the one that sees most of the group's samples not yet
+    seen (within the angle tolerance of their normal, unobstructed) among
+    the group's mean normal and a few of its samples' normals (at most
+    `VIEW_AXIS_MAX_TILT_DEG` from +Z, `view_axis`), each also tilted back towards +Z by
+    `MISSED_AXIS_TILTS_DEG`; the samples an axis sees are cut into depth slabs along it (a
+    gap of the distance tolerance: one raster holds one depth). One view per slab of at
+    least `min_samples` samples, its region the faces they lie on."""
+    idx = np.flatnonzero(missed)
+    if len(idx) < min_samples:
+        return []
+    rng = np.random.default_rng(seed)
+    normals = oriented_normals(part)[surface.faces[idx]]
+    points = surface.points[idx]
+    dirs = hemisphere_directions()
+    label = np.argmax(normals @ dirs.T, axis=1)
+    cos_tol = math.cos(spec.tol_angle_rad)
+    views: list[View] = []
+    for b in np.unique(label):
+        members = np.flatnonzero(label == b)
+        for _ in range(MISSED_AXES_PER_GROUP):
+            if len(members) < min_samples:
+                break
+            mean = normals[members].sum(axis=0)
+            mean /= max(float(np.linalg.norm(mean)), 1e-12)
+            picks = rng.choice(members, min(len(members), MISSED_AXIS_SAMPLES), replace=False)
+            bases = np.vstack([mean[None], normals[picks]])
+            bases = np.array([view_axis(n) for n in bases])
+            best: tuple[int, np.ndarray, np.ndarray] | None = None
+            for tilt in MISSED_AXIS_TILTS_DEG:
+                for axis in towards_up(bases, math.radians(tilt)):
+                    sees = _sees(part, points[members], normals[members], axis, cos_tol)
+                    if best is None or int(sees.sum()) > best[0]:
+                        best = (int(sees.sum()), axis, members[sees])
+            assert best is not None
+            count, axis, seen = best
+            if count < min_samples:
+                break
+            members = np.setdiff1d(members, seen)
+            depth = points[seen] @ axis
+            order = np.argsort(depth)
+            breaks = np.flatnonzero(np.diff(depth[order]) > spec.tolerance_mm) + 1
+            for group in np.split(order, breaks):
+                if len(group) >= min_samples:
+                    faces = np.unique(surface.faces[idx[seen[group]]])
+                    views.append(View.looking_along(axis, index + len(views), faces))
+    return views
+
+
+def _sees(
+    part: Part, points: np.ndarray, normals: np.ndarray, axis: np.ndarray, cos_tol: float
+) -> np.ndarray:
+    """(k,) bool: the samples within acos(cos_tol) of facing `axis` whose ray along it
+    escapes the part."""
+    ok = normals @ axis >= cos_tol
+    todo = np.flatnonzero(ok)
+    if len(todo):
+        start = points[todo] + 0.05 * normals[todo]
+        ray = np.broadcast_to(axis, start.shape)
+        ok[todo] = ~part.ray_engine.occluded(start, ray, np.full(len(todo), 1e6))
+    return ok
+
+
+def limit_beam_tilt(
+    poses: np.ndarray, up: np.ndarray, pivot_mm: float, max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG
+) -> np.ndarray:
+    """(n, 4, 4) `poses` whose beam (z_s) leans more than `max_tilt_deg` from straight down
+    (−`up`, the table's normal) turned back to that tilt about the point `pivot_mm` along the
+    beam (the footprint at W_d). A planner aligning the beam with a vertical wall would lay
+    the sensor level with the wall's foot, the table there; at the view's tilt the wall is
+    still within 10° of the beam, inside the angle tolerance."""
+    down = -np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    beam = poses[:, :3, 2]
+    excess = np.arccos(np.clip(beam @ down, -1.0, 1.0)) - math.radians(max_tilt_deg)
+    turn = np.flatnonzero(excess > 1e-9)
+    if len(turn) == 0:
+        return poses
+    out = poses.copy()
+    axis = np.cross(beam[turn], down)
+    norm = np.linalg.norm(axis, axis=1, keepdims=True)
+    axis = np.where(norm > 1e-9, axis / np.maximum(norm, 1e-12), [1.0, 0.0, 0.0])
+    rot = Rotation.from_rotvec(axis * excess[turn, None]).as_matrix()
+    footprint = poses[turn, :3, 3] + pivot_mm * beam[turn]
+    out[turn, :3, :3] = rot @ poses[turn, :3, :3]
+    out[turn, :3, 3] = footprint - pivot_mm * out[turn, :3, 2]
+    return out

@@ -1,0 +1,3 @@
+"""The reinforcement-learning side: the Gymnasium environment, policies, training, and the
+rl planner.
+"""

@@ -1,0 +1,1 @@
+"""The line profilometer simulated: profiles, point clouds, perturbed parts and defects."""

@@ -1,0 +1,650 @@
+"""The one place that talks to FCL: the sensor body (a box in the sensor frame) against the
+part's mesh, the fixtures and the table, for every pose of a trajectory, scanning or not.
+
+`CollisionChecker` builds a mesh's BVH once; `check` answers per pose with a signed
+distance (negative = penetration), after an AABB prefilter that keeps FCL for the poses near
+the mesh. `CellChecker` (`checker_for`) takes the least distance over the part, each fixture
+and the table plane, and says which of them each pose comes nearest.
+"""
+
+from __future__ import annotations
+
+import functools
+import weakref
+from dataclasses import dataclass, field
+from typing import Any
+
+import fcl
+import numpy as np
+
+from scanplan.core.sensor_spec import SensorSpec
+from scanplan.world.cell import Cell
+from scanplan.world.part import Part
+
+# The unit cube's corners, for the body box's 8 corners in the sensor frame.
+_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
+# An inside test casts one ray in a direction no axis-aligned edge of a mesh lies along.
+_INSIDE_RAY = np.array([0.267, 0.534, 0.802]) / np.linalg.norm([0.267, 0.534, 0.802])
+# Rotations taking a capsule's axis (its z) onto x and onto y.
+_TURN_Z_TO_X = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+_TURN_Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+# The most poses after a measured one that may be cleared by it (`CollisionChecker.check`).
+_RIDE = 256
+# Asked only whether poses collide: after a pose measured within _HOVER_MM of the clearance
+# (the next one can ride on it only if its body moves less than that), the next
+# _HOVER_POSES - 1 are tested yes or no (`_within`), then one is measured again. A pass along
+# a pocket's wall hovers there (1 737 of the NIST pocket plate's 2 154 measured poses sat
+# 20-21 mm from it against a clearance of 20).
+_HOVER_MM = 2.0
+_HOVER_POSES = 8
+
+
+@dataclass(frozen=True)
+class CollisionReport:
+    """Sensor body vs part, per pose. (n,) arrays.
+
+    distance_mm: signed distance between the body and the part: > 0 apart, < 0 penetrating
+        (minus the penetration depth, see `CollisionChecker.check`). Exact where `exact`;
+        elsewhere a lower bound that is at least `clearance_mm` (the AABB prefilter or the
+        box grown by the clearance proved the pose clear without measuring it).
+    exact: (n,) bool, whether FCL measured the distance.
+    clearance_mm: the clearance the report was asked for.
+    """
+
+    distance_mm: np.ndarray
+    exact: np.ndarray
+    clearance_mm: float
+    # Per obstacle ("part", "table", "fixtures"), the signed distance to it alone.
+    by_obstacle: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.distance_mm)
+
+    def colliding_at(self, clearance_mm: float) -> np.ndarray:
+        """(n,) bool: closer than `clearance_mm`, or touching (distance <= 0). Only valid for
+        clearances up to the report's own."""
+        if clearance_mm > self.clearance_mm + 1e-12:
+            raise ValueError(
+                f"collision report made at {self.clearance_mm:g} mm cannot judge {clearance_mm:g}"
+            )
+        return (self.distance_mm < clearance_mm) | (self.distance_mm <= 0.0)
+
+    @property
+    def colliding(self) -> np.ndarray:
+        """(n,) bool: closer to the part than the clearance (or touching it)."""
+        return self.colliding_at(self.clearance_mm)
+
+    @property
+    def touching(self) -> np.ndarray:
+        """(n,) bool: touching or penetrating the part (colliding at 0 mm)."""
+        return self.distance_mm <= 0.0
+
+    @property
+    def penetration_mm(self) -> np.ndarray:
+        """(n,) depth of penetration, 0 where apart."""
+        return np.maximum(0.0, -self.distance_mm)
+
+    @property
+    def worst_penetration_mm(self) -> float:
+        return float(self.penetration_mm.max()) if len(self) else 0.0
+
+    def colliding_with(self, obstacle: str) -> np.ndarray:
+        """(n,) bool: closer than the clearance to that obstacle (none there: all False)."""
+        d = self.by_obstacle.get(obstacle)
+        if d is None:
+            return np.zeros(len(self), bool)
+        return (d < self.clearance_mm) | (d <= 0.0)
+
+
+def body_corners(sensor: SensorSpec) -> np.ndarray:
+    """(8, 3) corners of the sensor body in the sensor frame, mm."""
+    lo, hi = sensor.body_bounds_mm
+    return lo + _CORNERS * (hi - lo)
+
+
+class CollisionChecker:
+    """The sensor body of `sensor` against `part`, built once per part (the BVH of its mesh).
+
+    The body is `SensorSpec.body_bounds_mm`, a box in the sensor frame; poses are
+    `T_part_sensor` (n, 4, 4) in mm.
+    """
+
+    def __init__(self, part: Part, sensor: SensorSpec) -> None:
+        # No reference to the Part itself: `checker_for` caches checkers weakly by part.
+        self.part_name = part.name
+        self.sensor = sensor
+        mesh = part.mesh
+        self._ray_engine = part.ray_engine
+        self._face_normals = self._ray_engine.face_normals  # (a turned part: turned, not redone)
+        self.vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        # The BVH is built on the first pose that comes near the part (seconds on a large
+        # mesh; a plan whose poses all keep their distance never needs it). Weakly: see above.
+        self._part_ref = weakref.ref(part)
+        self._faces = np.asarray(mesh.faces)
+        self._part_fcl: fcl.CollisionObject | None = None
+        self.bounds = np.asarray(part.bounds, dtype=np.float64)
+        lo, hi = sensor.body_bounds_mm
+        self.body_lo, self.body_hi = lo, hi
+        self.body_centre = 0.5 * (lo + hi)
+        self.body_half = 0.5 * (hi - lo)
+        self._box_obj = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform())
+        self._point_obj = fcl.CollisionObject(fcl.Sphere(1e-9), fcl.Transform())
+        self._grown: dict[float, fcl.CollisionObject] = {}
+        self._rounded_by: dict[float, list[tuple[fcl.CollisionObject, np.ndarray, np.ndarray]]] = {}
+        # A box inside a closed mesh touches no triangle: FCL calls it apart. Only a closed
+        # mesh has an inside to test; asked on the first body near the part (0.3 s on the
+        # door's mesh, cached on the original's).
+        self._closed_mesh = mesh if part.turned_from is None else part.turned_from[0].mesh
+        self._vertex_tree: Any = None  # a cKDTree of the vertices, built on first need
+
+    @functools.cached_property
+    def _closed(self) -> bool:
+        return bool(self._closed_mesh.is_watertight)
+
+    @property
+    def body_radius_mm(self) -> float:
+        """The farthest the body reaches from the sensor origin (for rotation sampling)."""
+        return float(np.linalg.norm(body_corners(self.sensor), axis=1).max())
+
+    def body_corners_part(self, poses: np.ndarray) -> np.ndarray:
+        """(n, 8, 3) the body's corners in the part frame."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        corners = body_corners(self.sensor)
+        return np.einsum("nij,kj->nki", poses[:, :3, :3], corners) + poses[:, None, :3, 3]
+
+    def aabb_gap_mm(self, poses: np.ndarray) -> np.ndarray:
+        """(n,) distance between the body's part-frame AABB and the part's AABB (0 if they
+        overlap): a lower bound on the body-part distance."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        rot = poses[:, :3, :3]
+        centre = rot @ self.body_centre + poses[:, :3, 3]
+        half = np.abs(rot) @ self.body_half
+        lo, hi = self.bounds
+        gap = np.maximum(lo - (centre + half), (centre - half) - hi)
+        return np.linalg.norm(np.maximum(gap, 0.0), axis=1)
+
+    def check(
+        self,
+        poses: np.ndarray,
+        clearance_mm: float,
+        exact: bool = False,
+        colliding_only: bool = False,
+    ) -> CollisionReport:
+        """Body vs part for every pose (n, 4, 4).
+
+        Stages: poses whose body AABB is at least the clearance from the part's AABB are
+        clear without FCL; the rest collide with the body grown by the clearance (a box that
+        holds every point within the clearance of the body), and those touching it are
+        taken in order: a pose gets an exact `fcl.distance`, and the poses after it whose body
+        corners have moved less than that distance minus the clearance are clear without one
+        (no point of a box moves farther than its farthest corner: their distance is at
+        least the measured one minus that move; a pass's poses 0.5 mm apart mostly ride on
+        one measurement). Penetrating poses get a depth: the deepest a body corner lies
+        inside the part or a part vertex inside the body (a lower bound on the translation
+        that separates them, exact when a face or a corner presses in), else, for an edge
+        crossing an edge, FCL's contact depth. A body wholly inside a closed part counts as
+        penetrating by its corners' depth. exact=True: every pose gets `fcl.distance`.
+        colliding_only=True: only `colliding` is asked for; poses within the clearance ride
+        on a measured one too (their distance an upper bound below the clearance, their
+        depth unknown: `touching` and the depths are not to be read), and poses after one
+        measured near the clearance are only tested for being within it (`_within`: a pose
+        within reads just under the clearance, one clear reads the clearance).
+        """
+        if not (np.isfinite(clearance_mm) and clearance_mm >= 0):
+            raise ValueError(f"clearance must be a finite number >= 0 mm, got {clearance_mm}")
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        n = len(poses)
+        gap = self.aabb_gap_mm(poses)
+        distance = gap.copy()
+        measured = np.zeros(n, bool)
+        near = np.flatnonzero(gap <= clearance_mm) if not exact else np.arange(n)
+        if clearance_mm > 0 and not exact:
+            grown = self._grown_box(clearance_mm)
+            request = fcl.CollisionRequest()
+            keep = []
+            for i in near:
+                grown.setTransform(self._transform(poses[i]))
+                if fcl.collide(grown, self._part_obj, request, fcl.CollisionResult()):
+                    keep.append(i)
+                else:  # apart by more than the clearance, unless wholly inside
+                    distance[i] = max(gap[i], clearance_mm)
+            away = np.setdiff1d(near, keep)
+            if self._closed and len(away):
+                inside = away[
+                    self._inside(poses[away, :3, :3] @ self.body_centre + poses[away, :3, 3])
+                ]
+                for i in inside:
+                    distance[i] = -self._penetration_mm(poses[i])
+                    measured[i] = True
+            near = np.asarray(keep, dtype=np.int64)
+        corners = self.body_corners_part(poses[near]) if len(near) and not exact else None
+        at = 0
+        hovering = 0  # poses since a measured one that sat at the clearance
+        while at < len(near):
+            i = near[at]
+            at += 1
+            if 0 < hovering < _HOVER_POSES:
+                # The one measured last sat too near the clearance for the next to ride on
+                # it: whether each is within, not how far (half a measurement's time).
+                within = self._within(poses[i], clearance_mm)
+                distance[i] = np.nextafter(clearance_mm, 0.0) if within else clearance_mm
+                hovering += 1
+                continue
+            distance[i] = d = self._distance_mm(poses[i])
+            measured[i] = True
+            near_edge = abs(d - clearance_mm) < _HOVER_MM
+            hovering = int(colliding_only and not exact and clearance_mm > 0 and near_edge)
+            if corners is None or (d <= clearance_mm and not colliding_only):
+                continue
+            moved = np.linalg.norm(corners[at : at + _RIDE] - corners[at - 1], axis=2).max(axis=1)
+            # Apart by more than the clearance: at least d - moved. Within it: at most
+            # max(d, 0) + moved (a point of the body within d of the part moves by at most
+            # that), so still within it while that stays below the clearance.
+            bound = d - moved if d > clearance_mm else max(d, 0.0) + moved
+            sure = bound >= clearance_mm if d > clearance_mm else bound < clearance_mm
+            ride = len(sure) if sure.all() else int(np.argmin(sure))
+            distance[near[at : at + ride]] = bound[:ride]
+            at += ride
+        return CollisionReport(distance, measured, float(clearance_mm))
+
+    def _distance_mm(self, pose: np.ndarray) -> float:
+        """The exact signed distance of the body at `pose` (negative: penetration depth)."""
+        self._box_obj.setTransform(self._transform(pose))
+        d = fcl.distance(self._box_obj, self._part_obj, fcl.DistanceRequest(), fcl.DistanceResult())
+        # A body apart from every triangle may still be inside a closed part.
+        if d <= 0 or (
+            self._closed and self._inside((pose[:3, :3] @ self.body_centre + pose[:3, 3])[None])[0]
+        ):
+            return -self._penetration_mm(pose)
+        return float(d)
+
+    def _within(self, pose: np.ndarray, clearance_mm: float) -> bool:
+        """Whether the body at `pose` comes within `clearance_mm` of the part (or lies inside
+        a closed one; exactly at the clearance counts as within), without measuring how
+        far: the body grown by the clearance in every direction (a box with rounded edges
+        and corners) is the union of three slabs (the box grown along one axis) and twelve
+        capsules (its edges grown all round), tested one by one until one touches (half an
+        `fcl.distance`'s time on a machined part whose passes hover just outside the
+        clearance)."""
+        rot, centre = pose[:3, :3], pose[:3, :3] @ self.body_centre + pose[:3, 3]
+        request, part = fcl.CollisionRequest(), self._part_obj
+        for obj, turn, shift in self._rounded(clearance_mm):
+            obj.setTransform(fcl.Transform(rot @ turn, rot @ shift + centre))
+            if fcl.collide(obj, part, request, fcl.CollisionResult()):
+                return True
+        return bool(self._closed and self._inside(centre[None])[0])
+
+    def _rounded(
+        self, clearance_mm: float
+    ) -> list[tuple[fcl.CollisionObject, np.ndarray, np.ndarray]]:
+        """The slabs and capsules of `_within`, each with its rotation and offset from the
+        body box's centre in the sensor frame."""
+        pieces = self._rounded_by.get(clearance_mm)
+        if pieces is None:
+            half, c = self.body_half, clearance_mm
+            pieces = []
+            for k in range(3):  # the slabs
+                size = 2 * half + 2 * c * np.eye(3)[k]
+                pieces.append((fcl.CollisionObject(fcl.Box(*size)), np.eye(3), np.zeros(3)))
+            # A capsule lies along its z: turned onto x, y or z, along each of the box's edges.
+            turns = (_TURN_Z_TO_X, _TURN_Z_TO_Y, np.eye(3))
+            for k in range(3):
+                i, j = [a for a in range(3) if a != k]
+                for si in (-1.0, 1.0):
+                    for sj in (-1.0, 1.0):
+                        shift = np.zeros(3)
+                        shift[i], shift[j] = si * half[i], sj * half[j]
+                        capsule = fcl.Capsule(c, 2 * half[k])
+                        pieces.append((fcl.CollisionObject(capsule), turns[k], shift))
+            self._rounded_by[clearance_mm] = pieces
+        return pieces
+
+    # ---- internals --------------------------------------------------------------------------
+
+    @property
+    def _part_obj(self) -> fcl.CollisionObject:
+        if self._part_fcl is None:
+            part = self._part_ref()
+            if part is not None:  # shared with the arm's checks of the same part
+                self._part_fcl = _mesh_object(part)
+            else:  # the checker outlived its part: its own copy
+                bvh = _bvh(self.vertices, self._faces)
+                self._part_fcl = fcl.CollisionObject(bvh, fcl.Transform())
+        return self._part_fcl
+
+    def _grown_box(self, clearance_mm: float) -> fcl.CollisionObject:
+        obj = self._grown.get(clearance_mm)
+        if obj is None:
+            obj = fcl.CollisionObject(
+                fcl.Box(*(self.body_hi - self.body_lo + 2 * clearance_mm)), fcl.Transform()
+            )
+            self._grown[clearance_mm] = obj
+        return obj
+
+    def _transform(self, pose: np.ndarray) -> fcl.Transform:
+        """The FCL transform of the body box (FCL boxes are centred on their origin)."""
+        rot = pose[:3, :3]
+        return fcl.Transform(rot, rot @ self.body_centre + pose[:3, 3])
+
+    def _inside(self, points: np.ndarray) -> np.ndarray:
+        """(k,) bool: points inside the closed mesh (the first face a ray meets faces away)."""
+        directions = np.tile(_INSIDE_RAY, (len(points), 1))
+        _, face = self._ray_engine.first_hit(points, directions)
+        hit = face >= 0
+        out = np.zeros(len(points), bool)
+        out[hit] = self._face_normals[face[hit]] @ _INSIDE_RAY > 0
+        return out
+
+    def _surface_distance_mm(self, point: np.ndarray) -> float:
+        self._point_obj.setTransform(fcl.Transform(np.eye(3), point))
+        return float(
+            fcl.distance(
+                self._point_obj, self._part_obj, fcl.DistanceRequest(), fcl.DistanceResult()
+            )
+        )
+
+    def _penetration_mm(self, pose: np.ndarray) -> float:
+        depth = 0.0
+        if self._closed:  # body corners inside the part: their depth below its surface
+            corners = self.body_corners_part(pose)[0]
+            for c in corners[self._inside(corners)]:
+                depth = max(depth, self._surface_distance_mm(c))
+        # Part vertices inside the body: their depth below the body's nearest face.
+        if self._vertex_tree is None:
+            from scipy.spatial import cKDTree
+
+            self._vertex_tree = cKDTree(self.vertices)
+        centre = pose[:3, :3] @ self.body_centre + pose[:3, 3]
+        idx = self._vertex_tree.query_ball_point(centre, float(np.linalg.norm(self.body_half)))
+        if idx:
+            local = (self.vertices[idx] - pose[:3, 3]) @ pose[:3, :3]  # into the sensor frame
+            inner = np.minimum(local - self.body_lo, self.body_hi - local).min(axis=1)
+            if (inner > 0).any():
+                depth = max(depth, float(inner.max()))
+        if depth > 0:
+            return depth
+        # Edges crossing edges: no vertex inside either; FCL's contact depth.
+        self._box_obj.setTransform(self._transform(pose))
+        result = fcl.CollisionResult()
+        request = fcl.CollisionRequest(num_max_contacts=16, enable_contact=True)
+        fcl.collide(self._box_obj, self._part_obj, request, result)
+        depths = [c.penetration_depth for c in result.contacts]
+        return float(min(depths)) if depths else 0.0
+
+
+_BVHS: weakref.WeakKeyDictionary[Part, fcl.BVHModel] = weakref.WeakKeyDictionary()
+_MESH_OBJECTS: weakref.WeakKeyDictionary[Part, fcl.CollisionObject] = weakref.WeakKeyDictionary()
+
+
+def _mesh_bvh(part: Part) -> fcl.BVHModel:
+    """The part's mesh as an FCL BVH, in its own coordinates; built once while the part
+    lives (seconds for a large mesh)."""
+    if part not in _BVHS:
+        _BVHS[part] = _bvh(part.mesh.vertices, part.mesh.faces)
+    return _BVHS[part]
+
+
+def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(vertices), len(faces))
+    bvh.addSubModel(np.asarray(vertices, np.float64), np.asarray(faces, np.int32))
+    bvh.endModel()
+    return bvh
+
+
+def _mesh_object(part: Part) -> fcl.CollisionObject:
+    """The part's mesh as an FCL object in part coordinates, shared by the sensor's and the
+    arm's checks, which never move it. A part turned from another (`Part.turned`, a view)
+    is that one's BVH, turned."""
+    if part not in _MESH_OBJECTS:
+        if part.turned_from is not None:
+            base, R = part.turned_from
+            transform = fcl.Transform(np.asarray(R[:3, :3], np.float64), np.zeros(3))
+            _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(base), transform)
+        else:
+            _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(part), fcl.Transform())
+    return _MESH_OBJECTS[part]
+
+
+_CHECKERS: weakref.WeakKeyDictionary[Part, dict[bytes, CollisionChecker]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def mesh_checker(part: Part, sensor: SensorSpec) -> CollisionChecker:
+    """The checker of this mesh and this sensor body, built once while the part lives (the
+    planner and the evaluation of one part share its BVH)."""
+    by_body = _CHECKERS.setdefault(part, {})
+    key = sensor.body_bounds_mm.tobytes()
+    if key not in by_body:
+        by_body[key] = CollisionChecker(part, sensor)
+    return by_body[key]
+
+
+class CellChecker:
+    """The sensor body against the part, each fixture and the table plane: the least signed
+    distance over them, and each one's (`CollisionReport.by_obstacle`)."""
+
+    def __init__(self, part: Part, sensor: SensorSpec, cell: Cell) -> None:
+        self.sensor = sensor
+        self.part_name = part.name
+        self.meshes = [mesh_checker(part, sensor)]
+        self.meshes += [mesh_checker(f, sensor) for f in cell.fixtures]
+        self.table = cell.table
+        # Everything the body must pass above (the transitions' crossing height).
+        self.vertices = np.vstack([c.vertices for c in self.meshes])
+
+    @property
+    def body_radius_mm(self) -> float:
+        return self.meshes[0].body_radius_mm
+
+    def body_corners_part(self, poses: np.ndarray) -> np.ndarray:
+        return self.meshes[0].body_corners_part(poses)
+
+    def check(
+        self,
+        poses: np.ndarray,
+        clearance_mm: float,
+        exact: bool = False,
+        colliding_only: bool = False,
+    ) -> CollisionReport:
+        """`CollisionChecker.check` against every obstacle; the table's distance is exact
+        (the lowest body corner's height above the plane)."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        reports = [c.check(poses, clearance_mm, exact, colliding_only) for c in self.meshes]
+        by_obstacle = {"part": reports[0].distance_mm}
+        distance = reports[0].distance_mm.copy()
+        measured = reports[0].exact.copy()
+        if len(reports) > 1:
+            fixtures = np.min([r.distance_mm for r in reports[1:]], axis=0)
+            by_obstacle["fixtures"] = fixtures
+            closer = fixtures < distance
+            distance = np.where(closer, fixtures, distance)
+            measured = np.where(closer, np.all([r.exact for r in reports[1:]], axis=0), measured)
+        if self.table is not None:
+            table = self.table.height_mm(self.body_corners_part(poses)).min(axis=1)
+            by_obstacle["table"] = table
+            closer = table < distance
+            distance = np.where(closer, table, distance)
+            measured |= closer
+        return CollisionReport(distance, measured, float(clearance_mm), by_obstacle)
+
+
+def checker_for(part: Part, sensor: SensorSpec, cell: Cell | None = None) -> CellChecker:
+    """The checker of this part, its cell (None: nothing around the part) and this sensor
+    body; the meshes' BVHs are built once while their parts live."""
+    return CellChecker(part, sensor, cell or Cell())
+
+
+def _z_to(direction: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotations taking +z onto the unit vectors `direction` (n, 3)."""
+    d = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    v = np.stack([-d[:, 1], d[:, 0], np.zeros(len(d))], axis=1)  # z x d
+    c = d[:, 2]
+    vx = np.zeros((len(d), 3, 3))
+    vx[:, 0, 1], vx[:, 0, 2], vx[:, 1, 0] = -v[:, 2], v[:, 1], v[:, 2]
+    vx[:, 1, 2], vx[:, 2, 0], vx[:, 2, 1] = -v[:, 0], -v[:, 1], v[:, 0]
+    flipped = c < -1 + 1e-9  # d = -z: half a turn about x
+    k = np.where(flipped, 0.0, 1.0 / np.where(flipped, 1.0, 1.0 + c))
+    R = np.eye(3) + vx + (vx @ vx) * k[:, None, None]
+    R[flipped] = np.diag([1.0, -1.0, -1.0])
+    return R
+
+
+def _surface_points(mesh, spacing_mm: float) -> np.ndarray:
+    """(k, 3) points on the mesh, every surface point within 2·`spacing_mm` of one: its
+    vertices, and on each larger triangle a grid along its two edges from an end of its
+    shortest edge, at most `spacing_mm` apart along each (a sliver gets a row of points, not
+    a square grid of its longest edge)."""
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
+    edge = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from vertex k
+    start = edge.argmin(axis=1)  # the shortest edge's first vertex
+    order = (start[:, None] + np.arange(3)) % 3
+    tri = np.take_along_axis(tri, order[:, :, None], axis=1)
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    k1 = np.ceil(np.linalg.norm(e1, axis=1) / spacing_mm).astype(np.int64)
+    k2 = np.ceil(np.linalg.norm(e2, axis=1) / spacing_mm).astype(np.int64)
+    points = [np.asarray(mesh.vertices, dtype=np.float64)]
+    big = (k1 > 1) | (k2 > 1)
+    for a, b in set(zip(k1[big].tolist(), k2[big].tolist(), strict=True)):
+        pick = big & (k1 == a) & (k2 == b)
+        i, j = np.meshgrid(np.arange(a + 1) / a, np.arange(b + 1) / b, indexing="ij")
+        inside = i + j <= 1 + 1e-9
+        u, v = i[inside], j[inside]
+        grid = (
+            tri[pick, None, 0]
+            + u[None, :, None] * e1[pick, None]
+            + v[None, :, None] * e2[pick, None]
+        )
+        points.append(grid.reshape(-1, 3))
+    return np.vstack(points)
+
+
+class _SurfaceProxy:
+    """A mesh's surface as points (`_surface_points`, a k-d tree over them): a quick test
+    that clears capsules far from the mesh before FCL measures the rest. Every surface point
+    lies within `bound_mm` of one, so a capsule whose axis keeps further than its radius plus
+    that from every point cannot touch the mesh; one whose axis comes within its radius of a
+    point surely does."""
+
+    def __init__(self, part: Part) -> None:
+        from scipy.spatial import cKDTree
+
+        extent = float(np.ptp(part.bounds, axis=0).max())
+        # The axes are sampled at `pitch`, the surface at half of it: fine enough to clear
+        # capsules a few mm away, coarse enough to build in well under a second.
+        self.pitch = max(extent / 128.0, 2.0)
+        self.bound_mm = self.pitch / 2
+        self._tree = cKDTree(_surface_points(part.mesh, self.bound_mm / 2))
+
+    def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
+        mesh, and those that surely do (a point of the surface lies inside the capsule).
+        Points every `pitch` along each axis stand for it (the axis is within pitch / 2 of
+        one of them)."""
+        a, b = segments[:, 0], segments[:, 1]
+        length = np.linalg.norm(b - a, axis=1)
+        count = np.ceil(length / self.pitch).astype(int) + 1
+        owner = np.repeat(np.arange(len(segments)), count)
+        start = np.r_[0, np.cumsum(count)[:-1]]
+        t = (np.arange(count.sum()) - np.repeat(start, count)) / np.repeat(
+            np.maximum(count - 1, 1), count
+        )
+        points = a[owner] + t[:, None] * (b - a)[owner]
+        reach = radii + self.bound_mm + 0.5 * self.pitch
+        # An approximate nearest point (at most 1 + eps times as far as the nearest) is
+        # much quicker to find in a dense cloud and keeps both verdicts sound.
+        eps = 1.0
+        d, _ = self._tree.query(
+            points, eps=eps, distance_upper_bound=float((1 + eps) * reach.max())
+        )
+        maybe, surely = np.zeros(len(segments), bool), np.zeros(len(segments), bool)
+        np.logical_or.at(maybe, owner, d <= (1 + eps) * reach[owner])
+        # The axis points lie on the axis, the tree's on the surface.
+        np.logical_or.at(surely, owner, d <= radii[owner])
+        return maybe, surely
+
+
+class CellObstacles:
+    """The part, its fixtures and the table block (`Cell.table_block`) in part coordinates,
+    for capsules that enclose a robot's links: `capsules_hit` says which obstacle, if any,
+    comes within a clearance of each capsule; and, given the sensor, whether its body keeps
+    its clearance at poses other than those planned (`sensor_clear`)."""
+
+    NAMES = ("part", "fixture", "table")
+
+    def __init__(
+        self,
+        part: Part,
+        cell: Cell,
+        clearance_mm: float,
+        sensor: SensorSpec | None = None,
+    ) -> None:
+        # What every link and the sensor body keep from the part, a fixture and the table.
+        self.clearance_mm = float(clearance_mm)
+        # The sensor body, for poses the arm would fly otherwise than planned (turned).
+        self._sensor = None if sensor is None else checker_for(part, sensor, cell)
+        self._objects: list[tuple[int, fcl.CollisionObject, np.ndarray, _SurfaceProxy | None]] = [
+            (0, _mesh_object(part), np.asarray(part.bounds, np.float64), _SurfaceProxy(part))
+        ]
+        for fixture in cell.fixtures:
+            self._objects.append(
+                (
+                    1,
+                    _mesh_object(fixture),
+                    np.asarray(fixture.bounds, np.float64),
+                    _SurfaceProxy(fixture),
+                )
+            )
+        block = cell.table_block(part)
+        if block is not None:
+            lo, hi = block
+            box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(0.5 * (lo + hi)))
+            self._objects.append((2, box, np.array([lo, hi]), None))
+        self.table_block = block
+
+    def sensor_clear(self, poses: np.ndarray) -> np.ndarray:
+        """(n,) bool: the sensor body at poses (n, 4, 4) keeps its clearance from the part,
+        the fixtures and the table (all True when no sensor was given)."""
+        if self._sensor is None:
+            return np.ones(len(poses), bool)
+        return ~self._sensor.check(poses, self.clearance_mm).colliding
+
+    def capsules_hit(
+        self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float, exact: bool = True
+    ) -> np.ndarray:
+        """(n, k) int: for capsules (n, k, 2, 3) (segment ends in part coordinates, mm) of
+        radii (k,) or (n, k), the index into NAMES of an obstacle within `clearance_mm` of
+        the capsule, -1 where none is. An AABB test leaves FCL only the capsules near an
+        obstacle. exact=False: a capsule the pre-test cannot clear counts as hitting the
+        mesh (a verdict up to a few mm too cautious, without FCL: for ranking placements)."""
+        ends = np.asarray(ends, dtype=np.float64)
+        n, k = ends.shape[:2]
+        grown = np.broadcast_to(np.asarray(radii, dtype=np.float64), (n, k)) + clearance_mm
+        hit = np.full((n, k), -1)
+        lo = ends.min(axis=2) - grown[..., None]
+        hi = ends.max(axis=2) + grown[..., None]
+        request = fcl.CollisionRequest()
+        for kind, obstacle, (olo, ohi), proxy in self._objects:
+            near = (lo <= ohi).all(axis=2) & (hi >= olo).all(axis=2) & (hit < 0)
+            rows, links = np.nonzero(near)
+            if proxy is not None and len(rows):
+                maybe, surely = proxy.within(ends[rows, links], grown[rows, links])
+                if not exact:
+                    surely = maybe
+                hit[rows[surely], links[surely]] = kind
+                rows, links = rows[maybe & ~surely], links[maybe & ~surely]
+            if not len(rows):
+                continue
+            seg = ends[rows, links]
+            axis = seg[:, 1] - seg[:, 0]
+            length = np.linalg.norm(axis, axis=1)
+            axis[length < 1e-9] = (0.0, 0.0, 1.0)  # a sphere: any axis will do
+            rot = _z_to(axis)
+            mid = 0.5 * (seg[:, 0] + seg[:, 1])
+            for i, j, R, c, h in zip(rows, links, rot, mid, length, strict=True):
+                shape = fcl.Capsule(float(grown[i, j]), float(max(h, 1e-6)))
+                capsule = fcl.CollisionObject(shape, fcl.Transform(R, c))
+                if fcl.collide(capsule, obstacle, request, fcl.CollisionResult()):
+                    hit[i, j] = kind
+        return hit

@@ -1,0 +1,152 @@
+"""Trajectory files (CSV and JSON): exact round trips, and bad input of any shape in one line
+naming the file, the line and the field."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from helpers import FAST, JSON_VALUES, one_line_or_ok
+from scanplan.core.trajectory import (
+    Trajectory,
+    read_csv,
+    read_json,
+    read_trajectory,
+    write_csv,
+    write_json,
+)
+from scanplan.planning.swaths import Swath
+
+
+def _trajectory() -> Trajectory:
+    sw = Swath(0, np.array([0.0, 5, 400]), np.array([100.0, 5, 400]), np.eye(3)[0], np.eye(3)[1])
+    poses = sw.poses(np.linspace(0, 100, 11), np.linspace(0, 3, 11), np.linspace(-0.2, 0.2, 11))
+    swath = np.r_[np.zeros(6, int), np.ones(5, int)]
+    return Trajectory(poses, swath, np.arange(11) != 5, planner="test")
+
+
+def test_trajectory_csv_and_json_round_trip(tmp_path):
+    traj = _trajectory()
+    write_csv(traj, tmp_path / "t.csv")
+    back = read_csv(tmp_path / "t.csv")
+    assert np.allclose(back.poses, traj.poses, atol=1e-6)
+    assert np.array_equal(back.swath, traj.swath)
+    assert np.array_equal(back.scanning, traj.scanning)
+    header = (tmp_path / "t.csv").read_text().splitlines()[0]
+    assert header == "swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz"
+    write_json(traj, tmp_path / "t.json")
+    assert np.allclose(read_json(tmp_path / "t.json").poses, traj.poses, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("", "empty"),
+        ("a,b,c\n1,2,3\n", "line 1: header"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n", "no poses"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,400,1,0,0\n", "line 2: expected 9"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,x,1,0,0,0\n", "z_mm: not a number"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,nan,1,0,0,0\n", "non-finite"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,1,0,0,4,0,0,0,0\n", "zero length"),
+        ("swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz\n0,3,0,0,4,1,0,0,0\n", "scanning column"),
+    ],
+)
+def test_malformed_trajectory_files(tmp_path, body, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(body)
+    with pytest.raises(ValueError, match=message):
+        read_csv(path)
+
+
+def test_trajectory_json_fields_are_checked(tmp_path):
+    traj = _trajectory()
+    write_json(traj, tmp_path / "t.json")
+    good = json.loads((tmp_path / "t.json").read_text())
+    cases = [
+        ({"planner": 3}, "planner"),
+        ({"plan_time_s": "fast"}, "plan_time_s"),
+        ({"poses": [{**good["poses"][0], "position_mm": [0, 0]}]}, r"poses\[0\].position_mm"),
+        ({"poses": [{**good["poses"][0], "swath": 10**20}]}, r"poses\[0\].swath"),
+        ({"poses": [{**good["poses"][0], "scanning": "yes"}]}, r"poses\[0\].scanning"),
+        ({"poses": [{**good["poses"][0], "quaternion_wxyz": [0, 0, 0, 0]}]}, "zero length"),
+        ({"poses": []}, "poses"),
+    ]
+    for change, message in cases:
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps({**good, **change}))
+        with pytest.raises(ValueError, match=message) as err:
+            read_json(path)
+        assert str(path) in str(err.value) and "\n" not in str(err.value)
+    path.write_text(json.dumps({**good, "plan_time_s": math.nan}))  # Python's json writes NaN
+    with pytest.raises(ValueError, match="plan_time_s"):
+        read_json(path)
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ValueError, match="nested too deeply"):
+        read_json(path)
+
+
+def test_json_writer_never_writes_nan(tmp_path):
+    traj = _trajectory()
+    write_json(Trajectory(traj.poses, traj.swath, traj.scanning, planner="p"), tmp_path / "t.json")
+    text = (tmp_path / "t.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+
+
+def test_trajectory_csv_with_bom_and_swath_overflow(tmp_path):
+    traj = _trajectory()
+    write_csv(traj, tmp_path / "t.csv")
+    text = (tmp_path / "t.csv").read_text()
+    (tmp_path / "bom.csv").write_text("\ufeff" + text)
+    assert len(read_csv(tmp_path / "bom.csv")) == len(traj)
+    lines = text.splitlines()
+    lines[3] = "1e20" + lines[3][lines[3].index(",") :]
+    (tmp_path / "big.csv").write_text("\n".join(lines))
+    with pytest.raises(ValueError, match="line 4, column swath"):
+        read_csv(tmp_path / "big.csv")
+    with pytest.raises(ValueError, match="32-bit"):
+        Trajectory(traj.poses, np.full(len(traj), 1e20), traj.scanning)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+@FAST
+@given(content=st.binary(max_size=600))
+def test_trajectory_files_of_arbitrary_bytes(tmp_path, suffix, content):
+    path = tmp_path / f"t{suffix}"
+    path.write_bytes(content)
+    one_line_or_ok(read_trajectory, path)
+
+
+POSE_KEYS = ["swath", "scanning", "position_mm", "quaternion_wxyz"]
+
+
+def _pose_like() -> st.SearchStrategy[dict]:
+    good = {
+        "swath": 0,
+        "scanning": True,
+        "position_mm": [0, 0, 400],
+        "quaternion_wxyz": [1, 0, 0, 0],
+    }
+    return st.dictionaries(st.sampled_from(POSE_KEYS + ["extra"]), JSON_VALUES, max_size=5).map(
+        lambda d: {**good, **d}
+    )
+
+
+@FAST
+@given(
+    doc=st.one_of(
+        JSON_VALUES,
+        st.fixed_dictionaries(
+            {"poses": st.lists(_pose_like(), max_size=4)},
+            optional={"planner": JSON_VALUES, "plan_time_s": JSON_VALUES},
+        ),
+    )
+)
+def test_trajectory_json_of_arbitrary_values(tmp_path, doc):
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps(doc))
+    one_line_or_ok(read_trajectory, path)

@@ -1,0 +1,140 @@
+"""Views planned on worker processes (view_workers): the same plan and in-spec set as planned
+here, a failing view's error raised where it is taken, and a part pickled for a worker without
+its ray engine."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import pickle
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+import pytest
+
+from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part
+from scanplan.core.quantities import OVERLAP, UP, ScanSpec
+from scanplan.planning.pipeline import ViewRaster
+from scanplan.planning.view_workers import ViewJudge, ViewWorkers, _warm_up
+from scanplan.planning.views import View, view_axis
+from scanplan.rl.planners import make_planner
+from scanplan.world.cell import Cell
+
+SPEC = ScanSpec()
+
+
+def test_a_part_is_pickled_without_its_ray_engine_and_answers_rays_the_same():
+    part = overhang_part()
+    starts = np.array([[0.0, 0.0, 200.0], [0.0, -240.0, 200.0], [0.0, -400.0, 200.0]])
+    down = np.tile([0.0, 0.0, -1.0], (3, 1))
+    hits = part.ray_engine.first_hit(starts, down)
+    copy = pickle.loads(pickle.dumps(part))
+    assert copy._engine is None  # rebuilt where it is used
+    again = copy.ray_engine.first_hit(starts, down)
+    assert [np.array_equal(a, b) for a, b in zip(hits, again, strict=True)] == [True] * len(hits)
+
+
+def test_views_planned_on_a_worker_are_those_planned_here():
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, level=True)
+    views = [View.looking_along(UP, 0), side]
+    here = [judge(part, v) for v in views]
+    with ViewWorkers(part, judge, workers=1) as pool:
+        futures = [pool.submit(v) for v in views]
+        there = [f.result() for f in futures]
+    for (plan_here, set_here), (plan_there, set_there) in zip(here, there, strict=True):
+        assert np.array_equal(plan_here.traj.poses, plan_there.traj.poses)
+        assert plan_here.passes == plan_there.passes
+        assert np.array_equal(set_here, set_there)
+        assert set_here.any()
+
+
+def test_a_view_that_sees_nothing_raises_where_it_is_taken():
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    # A view of the plate's bottom face, turned to look up at it: nothing of it to scan.
+    below = np.flatnonzero(part.mesh.face_normals[:, 2] < -0.99)
+    blind = View.looking_along(UP, 1, below)
+    for workers in (0, 1):
+        with ViewWorkers(part, judge, workers) as pool:
+            failed = pool.submit(blind)
+            with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
+                failed.result()
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
+)
+def test_a_view_that_sees_nothing_on_dask_raises_here_and_is_no_error_in_the_worker_log():
+    from dask.distributed import Client
+
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    below = np.flatnonzero(part.mesh.face_normals[:, 2] < -0.99)
+    with loopback_cluster() as cluster, Client(cluster) as client:
+        with ViewWorkers(part, judge, 0, cluster.scheduler_address) as pool:
+            failed = pool.submit(View.looking_along(UP, 1, below))
+            with pytest.raises(ValueError, match="no surface|no valid point|no swath"):
+                failed.result()
+            top, _ = pool.submit(View.looking_along(UP, 0)).result()
+        assert len(top.traj.poses)
+        logs = [line for worker in client.get_worker_logs().values() for _, line in worker]
+    assert logs and not [line for line in logs if "Compute Failed" in line]
+
+
+def test_a_view_whose_worker_dies_is_planned_here_and_the_rest_too():
+    part = overhang_part()
+    raster = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, DiesInAWorker(raster), points_per_profile=64)
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, level=True)
+    here = judge(part, side)
+    with ViewWorkers(part, judge, workers=1) as pool:
+        lost = pool.submit(side)
+        with pytest.warns(UserWarning, match="view worker stopped"):
+            planned, in_spec = lost.result()
+        later = pool.submit(side).result()  # no worker left: planned here
+    assert np.array_equal(planned.traj.poses, here[0].traj.poses)
+    assert np.array_equal(in_spec, here[1]) and np.array_equal(later[1], here[1])
+
+
+def test_starting_the_workers_after_the_pool_is_gone_is_no_error():
+    """The warm-up runs on its own thread: a pool that broke or was shut down before that
+    thread ran leaves it nothing to start, not an exception printed from a stray thread."""
+    pool = ProcessPoolExecutor(1)
+    pool.shutdown()
+    _warm_up(pool)  # submit() on this pool raises RuntimeError
+    with pytest.raises(RuntimeError):
+        pool.submit(int)
+
+
+def test_leaving_the_workers_stops_the_views_still_running(tmp_path):
+    part = overhang_part()
+    started = tmp_path / "started"
+    judge = ViewJudge(SPEC, Endless(os.getpid(), str(started)), points_per_profile=64)
+    with ViewWorkers(part, judge, workers=1) as pool:
+        pool.submit(View.looking_along(UP, 0))
+        deadline = time.monotonic() + 30.0
+        while not started.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert started.exists()  # the view runs in the worker
+        pids = [w.pid for w in pool._pool._processes.values()]
+    # Stopped, not waited for (waiting would never end). Their exit codes are not to be
+    # trusted (read from the server that forked them, they may come back 255): the
+    # processes themselves must be gone, reaped by that server.
+    deadline = time.monotonic() + 10.0
+    while any(_running(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert pids and not any(_running(pid) for pid in pids)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True

@@ -1,0 +1,65 @@
+"""The surface to inspect (surface.py): what the upper hemisphere sees beyond a top-down
+raster, and the share of it any beam within tolerance reaches (the visibility ceiling)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from helpers import sloped_housing
+from scanplan.world.part import part_from_mesh
+from scanplan.world.surface import (
+    hemisphere_visible_samples,
+    reachable_samples,
+    upward_visible_samples,
+)
+
+
+def test_hemisphere_surface_adds_what_only_a_tilted_view_sees(housing):
+    # 60° walls are within the top view's 80° slope limit: both surfaces hold them.
+    part = housing
+    up, hemi = upward_visible_samples(part, 2.0), hemisphere_visible_samples(part, 2.0)
+    assert hemi.area_mm2 == pytest.approx(up.area_mm2, rel=0.01)
+    # 85° walls: only the hemisphere's tilted directions see them.
+    steep = sloped_housing(slope_deg=85.0)
+    up, hemi = upward_visible_samples(steep, 2.0), hemisphere_visible_samples(steep, 2.0)
+    walls = 2 * (600 + 400) * 150 / math.sin(math.radians(85.0))
+    assert hemi.area_mm2 == pytest.approx(up.area_mm2 + walls, rel=0.03)
+
+
+def _shelf_over_plate():
+    """A 400 x 400 plate (top at z = 0) under a 200 x 200 shelf 60 mm above it: the plate
+    under the shelf is seen only at a slant, from beyond the angle tolerance."""
+    plate = trimesh.creation.box((400.0, 400.0, 10.0))
+    plate.apply_translation((0, 0, -5.0))
+    shelf = trimesh.creation.box((200.0, 200.0, 10.0))
+    shelf.apply_translation((0, 0, 65.0))
+    return part_from_mesh(trimesh.util.concatenate([plate, shelf]), "shelf")
+
+
+def test_a_flat_plate_is_all_within_reach(plate):
+    tol = math.radians(15.0)
+    for surface in (upward_visible_samples(plate, 3.0), hemisphere_visible_samples(plate, 3.0)):
+        # Its top from above, its walls by the cone's beam 75° from vertical (within 80°).
+        assert reachable_samples(plate, surface, tol).mean() > 0.999
+
+
+def test_an_overhang_lowers_the_ceiling():
+    part = _shelf_over_plate()
+    tol = math.radians(15.0)
+    surface = hemisphere_visible_samples(part, 3.0)
+    reach = reachable_samples(part, surface, tol)
+    under = (np.abs(surface.points[:, :2]) < 100.0 - 60.0 * math.tan(tol) - 2.0).all(axis=1) & (
+        surface.points[:, 2] < 1.0
+    )
+    assert under.any() and not reach[under].any()  # 15° from vertical ends on the shelf
+    far = (np.abs(surface.points[:, :2]) > 100.0 + 70.0 * math.tan(tol) + 2.0).any(axis=1)
+    assert reach[far].all()
+    assert 0.5 < reach.mean() < 0.95
+    # Its walls (vertical) only within 80° of vertical: a 70° limit leaves them out.
+    wall = np.abs(part.ray_engine.face_normals[surface.faces, 2]) < 0.1
+    assert reach[wall].mean() > 0.99
+    assert not reachable_samples(part, surface, tol, max_tilt_deg=70.0)[wall].any()
