@@ -28,6 +28,7 @@ from scanplan.robot import check_reach, get_robot
 from scanplan.robot.base import pose_arg
 from scanplan.robot.links import check_links, obstacles_for
 from scanplan.robot.reach import pass_starts
+from scanplan.world.cell import planned_cell
 from scanplan.world.part import load_part
 
 # The sensor 90 mm out from the flange along its axis: a profilometer on a short bracket.
@@ -77,7 +78,7 @@ def main() -> None:
             links = check_links(
                 get_robot(robot),
                 report.joints,
-                obstacles_for(part, context.cell(part), clearance_mm=spec.clearance_mm),
+                obstacles_for(part, planned_cell(context, part), clearance_mm=spec.clearance_mm),
                 T_base_part,
                 pass_starts(traj.swath, traj.scanning),
             )

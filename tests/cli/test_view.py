@@ -68,13 +68,14 @@ def test_view_draws_part_passes_and_arm_without_simulating(tmp_path, no_simulati
 def test_the_arm_reaches_each_drawn_pose_from_its_base(tmp_path):
     from scanplan.core.plan import recorded
     from scanplan.core.trajectory import read_trajectory
+    from scanplan.world.cell import planned_cell
     from scanplan.world.part import load_part
 
     traj = read_trajectory(robot_plan(tmp_path))
     part = load_part(recorded(traj, ScanSpec()).part)
     T_base_part = parse_pose_arg(PART_POSE)
     arm = check_arm(
-        traj, "ur5e", T_base_part, np.eye(4), part, recorded(traj, ScanSpec()).cell(part)
+        traj, "ur5e", T_base_part, np.eye(4), part, planned_cell(recorded(traj, ScanSpec()), part)
     )
     assert list(arm.shown) == [0, 20, 40]  # one pass: its first, middle and last pose
     # The chain stands on the base, its wrist ends at the flange, which (TCP identity) is the

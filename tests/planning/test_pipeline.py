@@ -321,7 +321,7 @@ def test_views_planned_beside_the_top_view_on_workers_are_those_chosen_in_one_pr
     part = overhang_part()
     samples = hemisphere_visible_samples(part, _eval_spacing(SPEC, VIEW_CHOICE_FAN_POINTS), 0)
     assert not top_view_may_suffice(steep_samples(part, samples), COVERAGE_TARGET)
-    cell = PlanContext(SPEC, views="auto").cell(part)
+    cell = planned_cell(PlanContext(SPEC, views="auto"), part)
     plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
     here = choose_views(part, SPEC, plan, workers=0)
     there = choose_views(part, SPEC, plan, workers=2)
