@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics, evaluate

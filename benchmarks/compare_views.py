@@ -17,7 +17,7 @@ from pathlib import Path
 
 from kinds import KINDS  # parts of kinds the shared set lacks (benchmarks/)
 
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging import evaluate
 from scanplan.planning.pipeline import plan_scan, plan_views

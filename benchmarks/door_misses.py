@@ -19,7 +19,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec, StepLimits
 from scanplan.judging import SurfaceState, evaluate
 from scanplan.planning.pipeline import plan_views

@@ -23,9 +23,10 @@ from itertools import product
 
 import numpy as np
 
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
+from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import UP, ScanSpec
-from scanplan.core.trajectory import Trajectory, read_trajectory
+from scanplan.core.trajectory import Trajectory
 from scanplan.judging import evaluate, robustness, run_trial, trial_tasks
 from scanplan.judging.evaluation import scanning_steps
 from scanplan.sensor.perturb import Perturbation, rotation_matrix

@@ -13,9 +13,9 @@ import argparse
 import time
 from dataclasses import replace
 
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
+from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import read_trajectory
 from scanplan.judging import robustness, run_trial, trial_tasks
 from scanplan.judging.evaluation import scanning_steps
 from scanplan.judging.robustness import summarize, trial_world

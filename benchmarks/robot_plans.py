@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from compare_views import PARTS
 
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging import evaluate
 from scanplan.planning.pipeline import Arm, plan_views

@@ -21,9 +21,9 @@ import json
 import sys
 import time
 
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
+from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import read_trajectory
 from scanplan.jobs.trials import CLOSED_LOOP_PLANNERS, closed_loop_robustness, closed_loop_tasks
 from scanplan.judging import evaluate, robustness, trial_tasks
 from scanplan.sensor.perturb import Perturbation

@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from scanplan.cli import app
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory

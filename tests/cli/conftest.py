@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from scanplan.core.trajectory import Trajectory, write_csv
+from scanplan.core.plan_file import write_csv
+from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 
 

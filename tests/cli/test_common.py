@@ -24,7 +24,8 @@ from typer.testing import CliRunner
 from helpers import ROOT
 from scanplan.cli import app
 from scanplan.cli.common import progress_bar
-from scanplan.core.trajectory import CSV_COLUMNS, Trajectory, write_csv
+from scanplan.core.plan_file import CSV_COLUMNS, write_csv
+from scanplan.core.trajectory import Trajectory
 
 runner = CliRunner()
 SRC = ROOT / "src"
@@ -182,8 +183,8 @@ def test_interrupted_write_leaves_no_file(files, tmp_path, monkeypatch, command)
 
 # ---- progress -----------------------------------------------------------------------------
 def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, monkeypatch):
+    from scanplan.core.plan_file import read_csv
     from scanplan.core.quantities import ScanSpec
-    from scanplan.core.trajectory import read_csv
     from scanplan.planning.pipeline import plan_scan
     from scanplan.rl.planners import make_planner
     from scanplan.sensor.cloud import simulate_cloud
@@ -215,8 +216,8 @@ def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, mon
 
 def test_evaluate_progress_callback_signature(files):
     """metrics.evaluate calls progress(done, total)."""
+    from scanplan.core.plan_file import read_csv
     from scanplan.core.quantities import ScanSpec
-    from scanplan.core.trajectory import read_csv
     from scanplan.judging import evaluate
     from scanplan.world.part import load_part
 

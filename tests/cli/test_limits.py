@@ -145,7 +145,8 @@ def cell_files(tmp_path_factory) -> Path:
     import numpy as np
     import trimesh
 
-    from scanplan.core.trajectory import Trajectory, write_csv
+    from scanplan.core.plan_file import write_csv
+    from scanplan.core.trajectory import Trajectory
     from scanplan.planning.swaths import Swath
 
     d = tmp_path_factory.mktemp("limits")
@@ -436,7 +437,7 @@ def _json_plan(cell_files, tmp_path, **edits) -> Path:
 
 @pytest.fixture(scope="module")
 def json_plan(cell_files):
-    from scanplan.core.trajectory import read_csv, write_json
+    from scanplan.core.plan_file import read_csv, write_json
 
     write_json(read_csv(cell_files / "t.csv"), cell_files / "t.json")
     return cell_files / "t.json"
@@ -525,15 +526,15 @@ def test_a_swallowed_sigterm_still_ends_in_143_and_writes_nothing(
     import signal
 
     import scanplan.core.files as files
-    import scanplan.core.trajectory as trajectory
+    import scanplan.core.plan_file as plan_file
 
-    read = trajectory.read_trajectory
+    read = plan_file.read_trajectory
 
     def read_then_swallow(path):  # as trimesh does around an optional import
         files.stopped_by = signal.SIGTERM
         return read(path)
 
-    monkeypatch.setattr(trajectory, "read_trajectory", read_then_swallow)
+    monkeypatch.setattr(plan_file, "read_trajectory", read_then_swallow)
     out = tmp_path / "out" / "p.script"
     args = ["export", str(cell_files / "t.csv"), "-o", str(out), "--robot", "none"]
     result = runner.invoke(app, args)

@@ -20,7 +20,7 @@ from helpers import (
     straight,
 )
 from scanplan.cli import app
-from scanplan.core.trajectory import read_trajectory, write_csv
+from scanplan.core.plan_file import read_trajectory, write_csv
 from scanplan.judging import SurfaceState
 from scanplan.judging.report.maps import COVERAGE_COLOURS
 

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import listing, plate_file, run_cli, snake_trajectory
 from scanplan.cli import app
-from scanplan.core.trajectory import write_csv
+from scanplan.core.plan_file import write_csv
 from scanplan.robot.export import ExportOptions, parse_program
 from scanplan.robot.export.common import plan_motion
 
@@ -19,7 +19,7 @@ TRAJ = snake_trajectory()
 
 @pytest.mark.parametrize("fmt", ["urscript", "rapid", "krl", "ros", "csv"])
 def test_export_every_format(plate_and_trajectory, tmp_path, fmt):
-    from scanplan.core.trajectory import read_csv
+    from scanplan.core.plan_file import read_csv
 
     _, traj_path = plate_and_trajectory
     out = tmp_path / f"prog.{fmt}"

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from helpers import plate_file, run_cli, straight
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
+from scanplan.core.plan_file import write_csv
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import write_csv
 from scanplan.judging.report.scene import PROBLEM_COLOUR, check_arm
 from scanplan.robot.export import parse_pose_arg
 
@@ -66,8 +66,8 @@ def test_view_draws_part_passes_and_arm_without_simulating(tmp_path, no_simulati
 
 
 def test_the_arm_reaches_each_drawn_pose_from_its_base(tmp_path):
-    from scanplan.core.plan import recorded
-    from scanplan.core.trajectory import read_trajectory
+    from scanplan.core.context import recorded
+    from scanplan.core.plan_file import read_trajectory
     from scanplan.world.cell import planned_cell
     from scanplan.world.part import load_part
 

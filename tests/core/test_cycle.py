@@ -12,8 +12,9 @@ from scipy.spatial.transform import Rotation
 
 from helpers import plate_file, run_cli
 from scanplan.core.cycle import NOMINAL, MotionLimits, cycle_time, trapezoid_time_s, view_seconds
+from scanplan.core.plan_file import write_csv
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory, write_csv
+from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import motion_limits
 

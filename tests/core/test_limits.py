@@ -235,7 +235,7 @@ def test_a_robot_file_field_inside_its_range_loads(field, data):
 @QUICK
 @given(x=outside(limits.POSITION_MM))
 def test_a_trajectory_position_outside_names_the_line_and_column(tmp_path_factory, x):
-    from scanplan.core.trajectory import read_csv
+    from scanplan.core.plan_file import read_csv
 
     path = Path(tmp_path_factory.mktemp("t")) / "t.csv"
     row = "0,1,{},0,400,0,0.707106781,0.707106781,0\n"

@@ -12,14 +12,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from helpers import FAST, JSON_VALUES, one_line_or_ok
-from scanplan.core.trajectory import (
-    Trajectory,
-    read_csv,
-    read_json,
-    read_trajectory,
-    write_csv,
-    write_json,
-)
+from scanplan.core.plan_file import read_csv, read_json, read_trajectory, write_csv, write_json
+from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 
 

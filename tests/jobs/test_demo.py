@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 
 import scanplan.jobs.demo
 from scanplan.cli import app
+from scanplan.core.plan_file import read_csv, read_json
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import read_csv, read_json
 from scanplan.jobs.demo import _SecondProcess
 from scanplan.robot.export import ExportOptions, parse_program
 from scanplan.robot.export.common import plan_motion

@@ -17,9 +17,9 @@ import pytest
 import trimesh
 
 import scanplan.planning.pipeline as pipeline
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
+from scanplan.core.plan_file import read_csv, read_json, write_csv, write_json
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import read_csv, read_json, write_csv, write_json
 from scanplan.jobs.trials import (
     closed_loop_robustness,
     closed_loop_tasks,
@@ -146,7 +146,7 @@ def test_seeded_runs_repeat_and_workers_give_the_serial_numbers(bumpy, feedback_
 def test_a_loopback_dask_cluster_gives_the_local_numbers(bumpy, feedback_plan):
     from dask.distributed import LocalCluster
 
-    from scanplan.cli.planning import trial_runner  # what evaluate --scheduler runs
+    from scanplan.core.run import task_runner as trial_runner  # what evaluate --scheduler runs
 
     text = "place:5mm,2deg;path:0.2mm"
     with (

@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from helpers import straight
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging.detectability import DetectabilitySurvey, survey
 from scanplan.judging.detection import (
@@ -122,7 +122,7 @@ def test_pod_fit_degenerate_data_are_stated_not_nan():
 def test_trials_on_a_loopback_dask_cluster_repeat_the_serial_run():
     from dask.distributed import LocalCluster
 
-    from scanplan.cli.planning import trial_runner  # what defects --scheduler runs
+    from scanplan.core.run import task_runner as trial_runner  # what defects --scheduler runs
 
     part = part_from_mesh(_plate(160.0), "plate")
     traj = straight(np.arange(300.0, 340.0, 0.5))

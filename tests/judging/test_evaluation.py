@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from helpers import HEMISPHERE, sloped_housing, straight
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import SurfaceState, evaluate, in_spec_samples

@@ -63,7 +63,7 @@ def test_trials_in_worker_processes_give_the_serial_numbers(plate):
 def test_a_loopback_dask_cluster_gives_the_local_numbers(plate):
     from dask.distributed import LocalCluster
 
-    from scanplan.cli.planning import trial_runner  # what evaluate --scheduler runs
+    from scanplan.core.run import task_runner as trial_runner  # what evaluate --scheduler runs
 
     text = "place:10mm,1deg;path:0.2mm"
     with (

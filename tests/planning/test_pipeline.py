@@ -15,10 +15,10 @@ import scanplan.planning.pipeline as pipeline_module
 import scanplan.planning.view_workers as view_workers_module
 from helpers import HEMISPHERE, fcl_distance, overhang_part
 from scanplan.cli import app
+from scanplan.core.context import PlanContext
 from scanplan.core.cycle import view_seconds
-from scanplan.core.plan import PlanContext
+from scanplan.core.plan_file import read_json, read_trajectory, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
-from scanplan.core.trajectory import read_json, read_trajectory, write_json
 from scanplan.judging import evaluate
 from scanplan.planning.pipeline import (
     ViewRaster,

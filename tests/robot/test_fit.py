@@ -9,7 +9,8 @@ from typer.testing import CliRunner
 
 import scanplan.robot.fit as fit_module
 from scanplan.cli import app
-from scanplan.core.trajectory import Trajectory, read_json
+from scanplan.core.plan_file import read_json
+from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.base import pose_arg

@@ -8,7 +8,8 @@ from typer.testing import CliRunner
 
 from helpers import plate_file
 from scanplan.cli import app
-from scanplan.core.trajectory import Trajectory, write_csv
+from scanplan.core.plan_file import write_csv
+from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.export import ExportOptions, flange_poses, parse_pose_arg

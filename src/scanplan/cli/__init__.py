@@ -1,4 +1,4 @@
-"""The `scanplan` command line (SPEC §8): parses, calls the library, prints. One module per
+"""The `scanplan` command line: parses, calls the jobs, prints. One module per
 command group, shared options in `options`; every user mistake ends as one line on stderr and
 exit code 2, with no partial output file (`common`; the library's writers are atomic).
 """
@@ -12,8 +12,9 @@ import typer
 from scanplan.cli.common import OneLineErrors
 from scanplan.cli.defects import defects_cmd
 from scanplan.cli.demo import demo_cmd
+from scanplan.cli.evaluate import evaluate_cmd, scan_cmd
 from scanplan.cli.parts import part_cmd
-from scanplan.cli.planning import evaluate_cmd, plan_cmd, scan_cmd
+from scanplan.cli.plan import plan_cmd
 from scanplan.cli.robot import export_cmd, place_cmd
 from scanplan.cli.training import sweep_cmd, train_cmd
 from scanplan.cli.view import view_cmd

@@ -5,16 +5,13 @@ table from which an arm reaches all of it.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
-import numpy as np
 import typer
 
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.options import (
-    IDENTITY_POSE,
     PartPoseOpt,
     PlannedPartOpt,
     PlannedUnitsOpt,
@@ -33,13 +30,6 @@ from scanplan.core.limits import (
     STEP_MM,
     TOLERANCE_MM,
 )
-from scanplan.core.quantities import ScanSpec
-
-if TYPE_CHECKING:
-    from scanplan.core.trajectory import Trajectory
-    from scanplan.robot.export import ExportOptions
-    from scanplan.world.cell import Cell
-    from scanplan.world.part import Part
 
 # ---- export -------------------------------------------------------------------------------
 ROBOT_HELP = (
@@ -50,27 +40,40 @@ ProgramOutOpt = Annotated[
     Path, typer.Option("-o", "--output", help="output file (a directory for rosbag2)")
 ]
 FormatOpt = Annotated[
-    str, typer.Option("--format", help="urscript, rapid, krl, ros, rosbag2 or csv")
+    str | None,
+    typer.Option(
+        "--format",
+        help="urscript, rapid, krl, ros, rosbag2 or csv; default: the language of the arm's "
+        "controller (UR: urscript, KUKA: krl, ABB: rapid), else the output's extension, else "
+        "csv for no arm. A language the arm does not run, or an extension of another, is "
+        "refused",
+        show_default=False,
+    ),
 ]
 ProfileRateOpt = Annotated[
-    float,
+    float | None,
     typer.Option(
         help=f"sensor profile rate, Hz, {PROFILE_RATE_HZ.lo:g} to {PROFILE_RATE_HZ.hi:g}; scan "
-        f"speed = rate x spacing, at most {MAX_SCAN_SPEED_MM_S:g} mm/s",
+        f"speed = rate x spacing, at most {MAX_SCAN_SPEED_MM_S:g} mm/s; default: the plan's",
+        show_default=False,
         callback=within(PROFILE_RATE_HZ),
     ),
 ]
 SpacingOpt = Annotated[
-    float,
+    float | None,
     typer.Option(
-        help=f"profile spacing on the part, mm, {STEP_MM.lo:g} to {STEP_MM.hi:g}",
+        help=f"profile spacing on the part, mm, {STEP_MM.lo:g} to {STEP_MM.hi:g}; default: the "
+        "plan's",
+        show_default=False,
         callback=within(STEP_MM),
     ),
 ]
 TravelSpeedOpt = Annotated[
-    float,
+    float | None,
     typer.Option(
-        help=f"speed between passes, mm/s, {SPEED_MM_S.lo:g} to {SPEED_MM_S.hi:g}",
+        help=f"speed between passes, mm/s, {SPEED_MM_S.lo:g} to {SPEED_MM_S.hi:g}; default: the "
+        "plan's",
+        show_default=False,
         callback=within(SPEED_MM_S),
     ),
 ]
@@ -133,12 +136,12 @@ def export_cmd(
     trajectory: TrajectoryArg,
     output: ProgramOutOpt,
     robot: ReachRobotOpt = None,
-    fmt: FormatOpt = "urscript",
+    fmt: FormatOpt = None,
     tcp: TcpOpt = None,
     part_pose: PartPoseOpt = None,
-    profile_rate: ProfileRateOpt = ScanSpec.profile_rate_hz,
-    spacing: SpacingOpt = ScanSpec.delta_s_opt_mm,
-    travel_speed: TravelSpeedOpt = ScanSpec.travel_speed_mm_s,
+    profile_rate: ProfileRateOpt = None,
+    spacing: SpacingOpt = None,
+    travel_speed: TravelSpeedOpt = None,
     chord_tol: ChordTolOpt = None,
     angle_tol: AngleTolOpt = None,
     scan_output: ScanOutputOpt = None,
@@ -152,185 +155,24 @@ def export_cmd(
     the arm is shown to fly it: nothing is written if a pose is unreachable, beyond the
     joint limits, flips configuration within a pass, puts an arm link within reach of the
     part, table or fixtures, or the sensor into them (unless --allow-unreachable). The arm,
-    part pose and TCP default to those a plan made with --robot records."""
-    # Deferred: the exporters and kinematics load numpy, scipy and yaml.
-    from scanplan.core.files import atomic_write_text
-    from scanplan.core.trajectory import read_trajectory
-    from scanplan.robot.export import (
-        DIRECTORY_FORMATS,
-        FORMATS,
-        ExportOptions,
-        export_program,
-        export_rosbag,
-    )
-    from scanplan.robot.export.common import plan_motion
+    part pose and TCP default to those a plan made with --robot records; the sensor,
+    spacing and speeds to the plan's; the language to the arm's controller."""
+    # Deferred: the exporters and kinematics load scipy, yaml and FCL, which --help need not.
+    from scanplan.core.plan import read_plan
+    from scanplan.jobs.export import ProgramRequest, export_plan
 
-    if fmt not in FORMATS and fmt not in DIRECTORY_FORMATS:
-        choices = ", ".join([*FORMATS, *DIRECTORY_FORMATS])
-        raise ValueError(f"unknown format {fmt!r}; use one of {choices}")
-    if fmt in FORMATS and (str(output) in ("", ".") or output.is_dir()):
-        raise ValueError(f"-o {str(output)!r} is a directory: give the program's file name")
-    # KUKA wants the .src file named after its DEF.
-    name = output.stem if output.stem.isidentifier() and len(output.stem) <= 24 else ""
     if output.exists() and output.resolve() == trajectory.resolve():
         raise ValueError(f"-o {output} is the plan being exported: give the program another name")
-    if profile_rate * spacing > MAX_SCAN_SPEED_MM_S:  # each in range, their product not
-        raise ValueError(
-            f"--profile-rate {profile_rate:g} x --spacing {spacing:g}: a scan speed of "
-            f"{profile_rate * spacing:g} mm/s, more than the {MAX_SCAN_SPEED_MM_S:g} allowed"
-        )
-    traj = read_trajectory(trajectory)
-    robot, T_base_part, T_flange_sensor = arm_of(traj, robot, part_pose, tcp)
-    options = ExportOptions(
-        part_pose=T_base_part,
-        tcp=T_flange_sensor,
-        scan=ScanSpec(
-            delta_s_opt_mm=spacing, profile_rate_hz=profile_rate, travel_speed_mm_s=travel_speed
-        ),
-        program_name=name if name and fmt == "krl" else "scanplan_path",
-        chord_tol_mm=chord_tol,
-        angle_tol_deg=angle_tol,
-        scan_output=scan_output,
-    )
-    if ros_frame is not None:
-        options = replace(options, ros_frame_id=ros_frame)
-    motion = plan_motion(traj, options)  # refuse an unexportable plan before the reach check
-    if robot.lower() == "none":
-        typer.echo("--robot none: no reach check; the program is not known to be flyable")
-    else:
-        from scanplan.robot import get_robot  # deferred: as the exporters above
+    plan = read_plan(trajectory)
+    request = ProgramRequest(
+        output, fmt, robot, tcp, part_pose, profile_rate, spacing, travel_speed, chord_tol,
+        angle_tol, scan_output, ros_frame, allow_unreachable, part, units,
+    )  # fmt: skip
 
-        get_robot(robot)  # a bad arm is named before a missing part
-        cell = planned_cell(traj, part, units)
-        joints = check_flyable(traj, options, robot, quiet, allow_unreachable, cell)
-        # Each pass entered by a joint move, in the configuration the arm's terms name.
-        options = replace(options, joints_rad=joints, arm=get_robot(robot))
-    text = export_program(traj, fmt, options) if fmt in FORMATS else None
-    if text is not None:
-        atomic_write_text(output, text)
-    else:
-        export_rosbag(traj, output, options)
-    typer.echo(
-        f"{fmt}: {len(motion.poses)} targets from {motion.n_planned} planned poses, "
-        f"scan speed {options.scan_speed:.1f} mm/s -> {output}"
-    )
-    # Deferred: as the exporters above.
-    from scanplan.core.cycle import NOMINAL, cycle_time
-    from scanplan.robot import motion_limits
+    def say(text: str) -> None:
+        typer.echo(text, err=text.startswith("warning:"))
 
-    none = robot.lower() == "none"
-    limits = NOMINAL if none else motion_limits(robot)
-    # Planned again with the joints: a joint move into a pass starts from an exact stop.
-    motion = plan_motion(traj, options)
-    cycle = cycle_time(
-        traj, options.scan, limits, options.joints_rad, motion.source, motion.blend_mm > 0
-    )
-    typer.echo(cycle.line() + (", --robot none: timed on a nominal arm" if none else ""))
-
-
-def arm_of(
-    traj: Trajectory,
-    robot: str | None,
-    part_pose: str | None,
-    tcp: str | None,
-    say_recorded: bool = True,
-) -> tuple[str, np.ndarray, np.ndarray]:
-    """(robot, T_base_part, T_flange_sensor) from the options, else from the arm the plan was
-    made for (said in the output unless not `say_recorded`); --robot is required for a plan
-    made for none, and a pose not given there is the identity (said)."""
-    # Deferred: as in export_cmd.
-    from scanplan.robot.export import parse_pose_arg
-
-    recorded = traj.meta.get("robot") or {}
-    if robot is None:
-        if not recorded:
-            raise ValueError(
-                "--robot is required: the arm to check the program on (ur3e, ur5e, ur10e, "
-                "kr6-r900, irb2400, lrmate200id or a TOML file), or none to skip the check"
-            )
-        robot = str(recorded["robot"])
-        if say_recorded:
-            typer.echo(f"--robot {robot} (the plan's)")
-    poses = []
-    for option, value, key, arg, meaning in (
-        ("--part-pose", part_pose, "T_base_part", "part_pose", "the part frame is the base"),
-        ("--tcp", tcp, "T_flange_sensor", "tcp", "the sensor origin is the flange"),
-    ):
-        if value is not None:
-            poses.append(parse_pose_arg(value))
-        elif key in recorded and robot == recorded.get("robot"):
-            if say_recorded:
-                typer.echo(f"{option} {recorded.get(arg, '')} (the plan's)")
-            poses.append(np.asarray(recorded[key], dtype=np.float64))
-        else:
-            typer.echo(f"{option} not given: {IDENTITY_POSE} ({meaning})")
-            poses.append(parse_pose_arg(IDENTITY_POSE))
-    return robot, poses[0], poses[1]
-
-
-def planned_cell(
-    traj: Trajectory,
-    part: str | None,
-    units: str | None,
-    needed_for: str = "the arm's links are checked against the part",
-) -> tuple[Part, Cell]:
-    """The part (--part, else the one the plan records) and the cell the plan was made in
-    (its table and fixtures), which the arm's links and the sensor are checked against;
-    `needed_for` says why in the error when there is no part."""
-    # Deferred: the part loads trimesh (and cascadio for STEP).
-    from scanplan.core.plan import recorded
-    from scanplan.world.cell import planned_cell
-    from scanplan.world.part import load_part
-
-    context = recorded(traj, ScanSpec())
-    name = part or context.part
-    if not name:
-        raise ValueError(
-            f"--part is required: {needed_for}, and this plan records none (planned before "
-            "plans named their part)"
-        )
-    the_part = load_part(name, units or context.fixture_units)
-    return the_part, planned_cell(context, the_part)
-
-
-def check_flyable(
-    traj: Trajectory,
-    options: ExportOptions,
-    robot: str,
-    quiet: bool,
-    allow: bool,
-    cell: tuple[Part, Cell],
-) -> np.ndarray:
-    """Whether `robot` flies every flange pose: reach, joint limits, configuration flips,
-    and the arm's links and the sensor body against the part and its `cell`. Prints the
-    summaries; if the arm cannot fly the plan, a ValueError naming the first offending pass
-    and pose (nothing is written), or with `allow` a warning. Returns the joint angles the
-    check followed (n, 6), NaN where it found none."""
-    # Deferred: as in export_cmd.
-    from scanplan.core.plan import recorded
-    from scanplan.robot import get_robot
-    from scanplan.robot.flyable import check_flyable as check
-
-    part, the_cell = cell
-    sensor = recorded(traj, ScanSpec()).spec.sensor
-    with progress_bar("reach and collision check", quiet):
-        result = check(
-            traj, get_robot(robot), options.part_pose, options.tcp, part, the_cell, sensor
-        )
-    report = result.reach
-    if result.flyable:
-        warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
-        typer.echo(("warning: " if warn else "") + report.summary(), err=warn)
-        typer.echo(result.links.summary())
-        return report.joints
-    where = result.first_problem(traj.swath)
-    if not allow:
-        raise ValueError(
-            f"{report.model} cannot fly this plan: {where} — place the part "
-            "(scanplan place) or give --allow-unreachable"
-        )
-    typer.echo(f"warning: {where}", err=True)
-    return report.joints
+    export_plan(plan, request, say, lambda label: progress_bar(label, quiet))
 
 
 # ---- place --------------------------------------------------------------------------------
@@ -379,40 +221,20 @@ def place_cmd(
     pose with no configuration flip in a pass, its links clear of the part, the table and
     the fixtures (the arm stands beside the table); print it as --part-pose. Exit 2 if none
     does."""
-    # Deferred: the placement search loads the kinematics (numpy, scipy).
-    from scanplan.core.plan import recorded
-    from scanplan.core.trajectory import read_trajectory
-    from scanplan.robot import get_robot
-    from scanplan.robot.export import parse_pose_arg
-    from scanplan.robot.links import obstacles_for
-    from scanplan.robot.place import place
+    # Deferred: the placement search loads the kinematics and FCL, which --help need not.
+    from scanplan.core.plan import read_plan
+    from scanplan.jobs.place import place_plan, placement_lines
 
     heights = parse_height_range(height_range)
-    traj = read_trajectory(trajectory)
-    arm = get_robot(robot)  # a bad arm is named before a missing part
-    spec = recorded(traj, ScanSpec()).spec
-    obstacles = obstacles_for(*planned_cell(traj, part, units), spec.sensor, spec.clearance_mm)
-    with progress_bar("searching a placement", quiet):
-        result = place(
-            traj,
-            arm,
-            parse_pose_arg(tcp or IDENTITY_POSE),
-            heights,
-            yaw_step,
-            obstacles=obstacles,
-        )
-    m = result.report.worst_margins()
-    typer.echo(f"--part-pose {result.pose_arg()}")
-    typer.echo(result.report.summary())
-    if result.links is not None:
-        typer.echo(result.links.summary())
-    if tcp is None:
-        typer.echo(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
-    typer.echo(
-        f"worst margins: joint limit {m['limit_deg']:.1f} deg, wrist {m['wrist_deg']:.1f} deg, "
-        f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm "
-        f"({result.evaluated} placements in {result.seconds:.1f} s)"
-    )
+    plan = read_plan(trajectory)
+    notes: list[str] = []
+    result = place_plan(
+        plan, robot, tcp, heights, yaw_step, part, units, notes.append,
+        lambda label: progress_bar(label, quiet),
+    )  # fmt: skip
+    lines = placement_lines(result)
+    for line in lines[:-1] + notes + lines[-1:]:
+        typer.echo(line)
     if not result.flyable:
         typer.echo(
             "error: no placement flies every pose with the links clear "

@@ -1,270 +1,180 @@
-"""What a plan was made under, carried by its file: the sensor, the scan's parameters, the
-step limits, the planner, the views, the region of interest and the surface to inspect. A
-plan evaluated from its CSV or its JSON is judged the same way, as it was planned.
+"""The plan record: a trajectory and everything it was made under (the part, sensor and
+ScanSpec in its context, the views, the arm), typed and read once. Every job takes a `Plan`,
+so a count, a tool or a cycle time means the same thing in every command.
 """
 
 from __future__ import annotations
 
-import math
+import os
 from dataclasses import dataclass, field, replace
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Any
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from scanplan.core.quantities import ScanSpec, StepLimits
-from scanplan.core.sensor_files import sensor_datasheet, sensor_from_datasheet
-from scanplan.core.trajectory import Trajectory
+from scanplan.core.context import PlanContext, recorded
+from scanplan.core.plan_file import read_trajectory
+from scanplan.core.quantities import ScanSpec
+from scanplan.core.trajectory import Trajectory, pass_bounds
 
-FORMAT = "scanplan-plan/1"
-# The table through the part's lowest point (`--table`'s default).
-LOWEST = "lowest"
-VIEW_MODES = ("top", "auto")
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Matrix4 = Annotated[
+    list[Annotated[list[Finite], Field(min_length=4, max_length=4)]],
+    Field(min_length=4, max_length=4),
+]
 
 
 @dataclass(frozen=True)
-class PlanContext:
-    """A plan's context. roi: the `--roi` text (None: the part's own surface to inspect);
-    full_beam_angle: the orientation reward charges the whole angle between the beam and
-    the mean normal (a planner that rolls, env v1) rather than the pitch error (env v0)."""
+class ViewRecord:
+    """One view of a plan: where the sensor looks along (`axis`, unit, part frame), its
+    block of pass indices `first_swath..last_swath`, the passes planned in it, and (where
+    recorded) its pass lines, which a closed loop steers along."""
 
-    spec: ScanSpec = field(default_factory=ScanSpec)
-    limits: StepLimits = field(default_factory=StepLimits)
-    planner: str = ""
-    views: str = "top"
-    roi: str | None = None
-    full_beam_angle: bool = False
-    # The cell, as `cell.Cell.around` takes it: the `--table` text and the fixture files.
-    table: str = LOWEST
-    fixtures: tuple[str, ...] = ()
-    fixture_units: str = "mm"  # the --units of the part's and the fixtures' files
-    # The part planned: a built-in name or the file as given ('' where not recorded), so
-    # that `export` checks the arm's links against it.
-    part: str = ""
-
-    def __post_init__(self) -> None:
-        if self.views not in VIEW_MODES:
-            raise ValueError(f"unknown --views {self.views!r}; use top or auto")
-
-    @property
-    def surface(self) -> str:
-        """The surface to inspect: `top` what a sensor looking straight down can see,
-        `hemisphere` what it can see from the upper hemisphere, `roi` the region of interest
-        (seen from the views allowed)."""
-        if self.roi:
-            return "roi"
-        return "hemisphere" if self.views == "auto" else "top"
-
-    @property
-    def visible(self) -> str:
-        """Where the surface is seen from: 'top' or 'hemisphere' (an ROI: its views')."""
-        return "hemisphere" if self.views == "auto" else "top"
-
-    def to_json_dict(self) -> dict[str, Any]:
-        spec, lim = self.spec, self.limits
-        return {
-            "format": FORMAT,
-            "planner": self.planner,
-            "views": self.views,
-            "surface": self.surface,
-            "roi": self.roi,
-            "reward": "full beam angle (v1)" if self.full_beam_angle else "pitch (v0)",
-            "table": self.table,
-            "fixtures": list(self.fixtures),
-            "fixture_units": self.fixture_units,
-            "part": self.part,
-            **scan_spec_record(spec),
-            "step_limits": {
-                "dy_max_mm": lim.dy_max_mm,
-                "dz_max_mm": lim.dz_max_mm,
-                "dtheta_max_deg": math.degrees(lim.dtheta_max_rad),
-                "dphi_max_deg": math.degrees(lim.dphi_max_rad),
-            },
-        }
+    index: int
+    axis: tuple[float, float, float]
+    first_swath: int
+    last_swath: int
+    passes: int
+    record: dict[str, Any] = field(default_factory=dict)  # as the file holds it
 
     @classmethod
-    def from_json_dict(cls, data: object, where: str) -> PlanContext:
-        """The context a plan file records; ValueError naming `where` and the field."""
-        model = _validated(_ContextJson, data, f"{where}: context")
-        spec = _scan_spec(model.sensor, model.scan_spec, f"{where}: context")
-        lim = model.step_limits
-        try:
-            limits = StepLimits(
-                lim.dy_max_mm,
-                lim.dz_max_mm,
-                math.radians(lim.dtheta_max_deg),
-                math.radians(lim.dphi_max_deg),
-            )
-            return cls(
-                spec,
-                limits,
-                model.planner,
-                model.views,
-                model.roi,
-                model.reward.startswith("full"),
-                model.table,
-                tuple(model.fixtures),
-                model.fixture_units,
-                model.part,
-            )
-        except ValueError as exc:
-            raise ValueError(f"{where}: context: {exc}") from None
+    def of(cls, data: dict[str, Any]) -> ViewRecord:
+        """From a record the file reader has validated (`plan_file`)."""
+        first, last = int(data["first_swath"]), int(data["last_swath"])
+        axis = tuple(float(c) for c in data["axis"])
+        return cls(
+            int(data["index"]),
+            (axis[0], axis[1], axis[2]),
+            first,
+            last,
+            int(data.get("passes", last - first + 1)),
+            dict(data),
+        )
 
-    def differences(self, other: PlanContext) -> list[str]:
-        """What `other` (a command's options) changes from this plan's context, in words."""
-        out = []
-        if sensor_datasheet(other.spec.sensor) != sensor_datasheet(self.spec.sensor):
-            out.append(f"sensor {other.spec.sensor.name} (planned: {self.spec.sensor.name})")
-        a, b = self.spec, other.spec
-        if (a.tolerance_mm, a.tol_angle_rad) != (b.tolerance_mm, b.tol_angle_rad):
-            out.append(
-                f"tolerance {b.tolerance_mm:g} mm, {math.degrees(b.tol_angle_rad):g}° "
-                f"(planned: {a.tolerance_mm:g} mm, {math.degrees(a.tol_angle_rad):g}°)"
+    def holds(self, swath: np.ndarray) -> np.ndarray:
+        """(n,) bool: the poses of passes `swath` that belong to this view."""
+        return (swath >= self.first_swath) & (swath <= self.last_swath)
+
+
+class _ArmJson(BaseModel):
+    """What a plan file must hold of its arm; the rest (what fitting gave up) is free."""
+
+    model_config = ConfigDict(extra="allow", strict=True)
+    robot: str = Field(min_length=1)
+    T_base_part: Matrix4
+    T_flange_sensor: Matrix4
+
+
+@dataclass(frozen=True)
+class ArmRecord:
+    """The arm a plan was made for: its name (a preset or a file), the part's pose in its
+    base frame, the sensor on its flange (mm), and what fitting the plan to it cost
+    (`record`, as the file holds it: poses given up, in-spec coverage with and without)."""
+
+    robot: str
+    T_base_part: np.ndarray
+    T_flange_sensor: np.ndarray
+    record: dict[str, Any]
+
+    @classmethod
+    def of(cls, data: object, where: str) -> ArmRecord:
+        """From a file's `robot` record; ValueError naming `where` and the field."""
+        try:
+            model = _ArmJson.model_validate(data)
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            loc = ".".join(str(p) for p in err["loc"])
+            raise ValueError(f"{where}: robot{'.' + loc if loc else ''}: {err['msg']}") from None
+        return cls(
+            model.robot,
+            np.asarray(model.T_base_part, dtype=np.float64),
+            np.asarray(model.T_flange_sensor, dtype=np.float64),
+            dict(data),  # type: ignore[call-overload]
+        )
+
+    @property
+    def flyable(self) -> bool:
+        """Whether fitting left a plan the arm flies (the plan's own verdict)."""
+        return bool(self.record.get("flyable", self.record.get("reachable", True)))
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A trajectory and what it was made under. `where`: the file (or job) it came from,
+    for messages; `assumed`: what was taken for a record an older file lacks, in words."""
+
+    traj: Trajectory
+    context: PlanContext
+    views: tuple[ViewRecord, ...] = ()
+    arm: ArmRecord | None = None
+    where: str = "plan"
+    assumed: tuple[str, ...] = ()
+
+    @classmethod
+    def of(cls, traj: Trajectory, where: str = "plan") -> Plan:
+        """The plan `traj` records in its `meta` (as read from a file, or as planned)."""
+        assumed: list[str] = []
+        if traj.meta.get("context") is None:
+            context = recorded(traj, ScanSpec())
+            assumed.append(
+                f"{where} records no context (an older or foreign file): assumed the default "
+                f"sensor and tolerances and the {context.surface} surface"
             )
-        if other.roi != self.roi:
-            out.append(f"region of interest {other.roi or 'none'} (planned: {self.roi or 'none'})")
-        if other.surface != self.surface:
-            out.append(f"surface {other.surface} (planned: {self.surface})")
-        if (other.table, other.fixtures) != (self.table, self.fixtures):
-            out.append(
-                f"table {other.table}, fixtures {list(other.fixtures)} (planned: table "
-                f"{self.table}, fixtures {list(self.fixtures)})"
-            )
+        else:
+            context = PlanContext.from_json_dict(traj.meta["context"], where)
+        views = tuple(ViewRecord.of(v) for v in traj.meta.get("views") or ())
+        arm = None
+        if (data := traj.meta.get("robot")) is not None:
+            arm = ArmRecord.of(data, where)
+        return cls(traj, context, views, arm, where, tuple(assumed))
+
+    @property
+    def spec(self) -> ScanSpec:
+        return self.context.spec
+
+    @property
+    def planner(self) -> str:
+        return self.traj.planner or self.context.planner
+
+    def view_of_pose(self) -> np.ndarray:
+        """(n,) the view each pose belongs to (0 for a plan without view records)."""
+        out = np.zeros(len(self.traj), dtype=int)
+        for k, view in enumerate(self.views):
+            out[view.holds(self.traj.swath)] = k
         return out
 
-    def with_options(
-        self,
-        spec: ScanSpec | None = None,
-        roi: str | None = None,
-        views: str | None = None,
-        table: str | None = None,
-        fixtures: tuple[str, ...] | None = None,
-    ) -> PlanContext:
-        """This context with what a command's options override (None: as planned)."""
-        return replace(
-            self,
-            spec=self.spec if spec is None else spec,
-            roi=self.roi if roi is None else (roi or None),
-            views=self.views if views is None else views,
-            table=self.table if table is None else table,
-            fixtures=self.fixtures if fixtures is None else fixtures,
+    def views_flown(self) -> list[int]:
+        """The indices (into `views`) of the views with a scanning pose: the views a
+        program flies; [0] for a plan without view records."""
+        if not self.views:
+            return [0] if self.traj.scanning.any() else []
+        scanning = self.traj.scanning
+        return [k for k, v in enumerate(self.views) if (v.holds(self.traj.swath) & scanning).any()]
+
+    def passes_flown(self) -> int:
+        """The passes as flown: runs of scanning poses (a pass cut where a pose was dropped
+        counts as two, as the arm reconfigures between them)."""
+        start, _ = pass_bounds(self.traj.scanning, self.traj.swath)
+        return int(start.sum())
+
+    def counts(self) -> str:
+        """'3 views, 12 passes, 4 015 profiles': the one way every output counts a plan."""
+        n_views, n_passes = len(self.views_flown()), self.passes_flown()
+        return (
+            f"{n_views} view{'s' * (n_views != 1)}, {n_passes} pass{'es' * (n_passes != 1)}, "
+            f"{int(self.traj.scanning.sum())} profiles"
         )
 
+    @property
+    def cycle_time_s(self) -> float | None:
+        """The cycle time `plan` printed and recorded (None: a file without it)."""
+        value = self.traj.meta.get("cycle_time_s")
+        return None if value is None else float(value)
 
-def scan_spec_record(spec: ScanSpec) -> dict[str, Any]:
-    """The ScanSpec as a file records it: the sensor's datasheet and the scan's parameters
-    (read back by `scan_spec_from_record`)."""
-    return {
-        "sensor": sensor_datasheet(spec.sensor),
-        "scan_spec": {
-            "delta_s_opt_mm": spec.delta_s_opt_mm,
-            "alpha_max_deg": math.degrees(spec.alpha_max_rad),
-            "weights": [spec.w_d, spec.w_alpha, spec.w_delta_s],
-            "tolerance_mm": spec.tolerance_mm,
-            "tolerance_deg": math.degrees(spec.tol_angle_rad),
-            "profile_rate_hz": spec.profile_rate_hz,
-            "travel_speed_mm_s": spec.travel_speed_mm_s,
-            "clearance_mm": spec.clearance_mm,
-        },
-    }
+    def with_traj(self, traj: Trajectory) -> Plan:
+        return replace(self, traj=traj)
 
 
-def scan_spec_from_record(data: object, where: str) -> ScanSpec:
-    """The ScanSpec a file records (`scan_spec_record`); ValueError naming where and what."""
-    model = _validated(_SpecRecordJson, data, where)
-    return _scan_spec(model.sensor, model.scan_spec, where)
-
-
-def _validated(schema: type[_Json], data: object, where: str) -> _Json:
-    """`data` checked against `schema`; ValueError naming where and the first bad field."""
-    try:
-        return schema.model_validate(data)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"])
-        raise ValueError(f"{where}{'.' + loc if loc else ''}: {err['msg']}") from None
-
-
-def _scan_spec(sensor_data: dict[str, Any], s: _ScanSpecJson, where: str) -> ScanSpec:
-    sensor = sensor_from_datasheet(sensor_data, f"{where}: sensor")
-    try:
-        return ScanSpec(
-            sensor=sensor,
-            delta_s_opt_mm=s.delta_s_opt_mm,
-            alpha_max_rad=math.radians(s.alpha_max_deg),
-            w_d=s.weights[0],
-            w_alpha=s.weights[1],
-            w_delta_s=s.weights[2],
-            tol_distance_mm=s.tolerance_mm,
-            tol_angle_rad=math.radians(s.tolerance_deg),
-            profile_rate_hz=s.profile_rate_hz,
-            travel_speed_mm_s=s.travel_speed_mm_s,
-            clearance_mm=s.clearance_mm,
-        )
-    except ValueError as exc:
-        raise ValueError(f"{where}: scan_spec: {exc}") from None
-
-
-_STRICT = ConfigDict(extra="forbid", strict=True)
-_Json = TypeVar("_Json", bound=BaseModel)
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-
-
-class _ScanSpecJson(BaseModel):
-    model_config = _STRICT
-    delta_s_opt_mm: Positive
-    alpha_max_deg: Positive
-    weights: Annotated[list[Finite], Field(min_length=3, max_length=3)]
-    tolerance_mm: Positive
-    tolerance_deg: Positive
-    profile_rate_hz: Positive
-    travel_speed_mm_s: Positive
-    clearance_mm: Annotated[float, Field(ge=0, allow_inf_nan=False)]
-
-
-class _LimitsJson(BaseModel):
-    model_config = _STRICT
-    dy_max_mm: Positive
-    dz_max_mm: Positive
-    dtheta_max_deg: Positive
-    dphi_max_deg: Positive
-
-
-class _SpecRecordJson(BaseModel):
-    model_config = _STRICT
-    sensor: dict[str, Any]
-    scan_spec: _ScanSpecJson
-
-
-class _ContextJson(BaseModel):
-    model_config = _STRICT
-    format: Literal["scanplan-plan/1"]
-    planner: str
-    views: Literal["top", "auto"]
-    surface: Literal["top", "hemisphere", "roi"]
-    roi: str | None
-    reward: str
-    table: str = LOWEST
-    fixtures: list[str] = []
-    fixture_units: Literal["mm", "m", "in"] = "mm"
-    part: str = ""
-    sensor: dict[str, Any]
-    scan_spec: _ScanSpecJson
-    step_limits: _LimitsJson
-
-
-def judged_alike(contexts: list[PlanContext]) -> list[PlanContext]:
-    """Several plans of one part judged on one surface: the widest any of them inspects (what
-    the upper hemisphere sees, if any was planned with views), each keeping its own reward."""
-    views = "auto" if any(c.views == "auto" for c in contexts) else "top"
-    return [replace(c, views=views) for c in contexts]
-
-
-def recorded(traj: Trajectory, spec: ScanSpec) -> PlanContext:
-    """The context a trajectory records (`meta["context"]`); for one without (a file from
-    elsewhere), `spec` and the surface its views imply: hemisphere for several views."""
-    data = traj.meta.get("context")
-    if data is not None:
-        return PlanContext.from_json_dict(data, f"plan of {traj.planner or 'unknown planner'}")
-    views = "auto" if len(traj.meta.get("views") or ()) > 1 else "top"
-    return PlanContext(spec, planner=traj.planner, views=views)
+def read_plan(path: str | os.PathLike) -> Plan:
+    """The plan a CSV or JSON file holds; ValueError (one line) naming the file and field."""
+    return Plan.of(read_trajectory(path), f"plan {os.fspath(path)}")

@@ -20,9 +20,10 @@ from scanplan.core.sensor_spec import SensorSpec
 # stopped a sin·cos heightfield at 0.88 of the surface; the door's top view (0.94) still
 # holds 0.93 alone.
 COVERAGE_TARGET = 0.93
-# Seconds the view choice may take before it keeps the views chosen by then (a user waits
-# for the plan; each view of a large casting costs seconds). `--view-seconds` sets it.
-VIEW_CHOICE_SECONDS = 40.0
+# Candidate views the view choice may plan (its budget, counted in work so that a busy and a
+# quiet machine choose the same views); past it the views chosen by then are kept.
+# `--view-candidates` sets it; `--view-seconds` adds a wall-clock limit only when asked.
+VIEW_CHOICE_CANDIDATES = 400
 # A defect call (`metrics.detection`): points beyond this many σ of the sensor noise from the
 # nominal surface, clustered, at least this many points.
 DEFECT_K_SIGMA = 4.0

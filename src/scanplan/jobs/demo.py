@@ -23,10 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from scanplan.core.plan import PlanContext, judged_alike, recorded
+from scanplan.core.context import PlanContext, judged_alike, recorded
+from scanplan.core.files import dumps_json
+from scanplan.core.plan_file import to_csv_text, to_json_dict
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import DEMO_POINTS
-from scanplan.core.trajectory import Trajectory, dumps_json, to_csv_text, to_json_dict
+from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics
 from scanplan.judging.detectability import evaluate_detectable
 from scanplan.judging.report import Evaluated, write_report

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory

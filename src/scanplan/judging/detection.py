@@ -24,7 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from scanplan.core.plan import PlanContext, recorded
+from scanplan.core.context import PlanContext, recorded
 from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory

@@ -14,8 +14,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from scanplan.core.context import PlanContext, recorded
 from scanplan.core.cycle import NOMINAL, MotionLimits, cycle_time
-from scanplan.core.plan import PlanContext, recorded
 from scanplan.core.quantities import ScanSpec, point_orientation_error
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory

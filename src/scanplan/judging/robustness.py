@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from scanplan.core.plan import PlanContext, recorded
+from scanplan.core.context import PlanContext, recorded
 from scanplan.core.quantities import ScanSpec, point_orientation_error
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory

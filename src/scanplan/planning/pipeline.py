@@ -17,16 +17,16 @@ from functools import partial
 import networkx as nx
 import numpy as np
 
+from scanplan.core.context import LOWEST, PlanContext
 from scanplan.core.cover import max_cover
 from scanplan.core.cycle import view_seconds
 from scanplan.core.limits import TooLarge
-from scanplan.core.plan import LOWEST, PlanContext
 from scanplan.core.quantities import (
     COVERAGE_TARGET,
     OVERLAP,
     UP,
+    VIEW_CHOICE_CANDIDATES,
     VIEW_CHOICE_FAN_POINTS,
-    VIEW_CHOICE_SECONDS,
     ScanSpec,
 )
 from scanplan.core.trajectory import Trajectory
@@ -49,7 +49,7 @@ from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.collision import CellObstacles, checker_for
-from scanplan.world.part import Part
+from scanplan.world.part import Part, geometry_digest
 from scanplan.world.surface import (
     VisibleSurface,
     hemisphere_visible_samples,
@@ -285,6 +285,26 @@ def order_views(plans: list[ViewPlan]) -> list[ViewPlan]:
 
 
 @dataclass(frozen=True)
+class ViewBudget:
+    """How much the view choice may do: `candidates` views planned (work, the same on any
+    machine), and a wall-clock limit in `seconds` only where the user asks for one."""
+
+    candidates: int = VIEW_CHOICE_CANDIDATES
+    seconds: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.candidates < 1:
+            raise ValueError(f"--view-candidates must be at least 1, got {self.candidates}")
+        if self.seconds is not None and not (math.isfinite(self.seconds) and self.seconds > 0):
+            raise ValueError(f"--view-seconds must be a number of seconds > 0, got {self.seconds}")
+
+    def said(self) -> str:
+        """How the plan's note names the budget that stopped the choice."""
+        limit = f"{self.candidates} candidate views"
+        return limit + (f" or {self.seconds:g} s" if self.seconds is not None else "")
+
+
+@dataclass(frozen=True)
 class ViewSelection:
     """The views chosen and their estimated in-spec coverage after each (`coverage`);
     `in_spec` the (k,) in-spec sets on the view choice's samples of every view planned,
@@ -323,7 +343,7 @@ def choose_views(
     min_gain_per_s: float = MIN_VIEW_GAIN_PER_S,
     gain_floor: float = MIN_VIEW_GAIN_FLOOR,
     seed: int = 0,
-    seconds: float | None = VIEW_CHOICE_SECONDS,
+    budget: ViewBudget | None = None,
     scan_level: bool = True,
     workers: int = 0,
     scheduler: str | None = None,
@@ -355,18 +375,24 @@ def choose_views(
     same samples (the search radius grows with the evaluated column pitch; density is judged on
     the real sensor's columns). Candidates are tried largest possible gain first (their
     region's area not yet in spec) and skipped once that bound is below the best gain found
-    (lazy greedy: a view's gain only shrinks as others are chosen). After `seconds` (None:
-    no limit) no further candidate is planned: the views chosen by then are kept
-    (`out_of_time`). With `workers` (`view_workers.view_worker_count`), candidates are planned
-    on that many processes, each the next one the choice would try: the same views, sooner;
-    with `scheduler`, as Dask tasks on that cluster."""
+    (lazy greedy: a view's gain only shrinks as others are chosen). Once the `budget`'s
+    candidates are planned (or, only if it sets one, its seconds are past) no further
+    candidate is planned: the views chosen by then are kept (`out_of_time`). With `workers`
+    (`view_workers.view_worker_count`), candidates are planned on that many processes, each
+    the next one the choice would try: the same views, sooner; with `scheduler`, as Dask
+    tasks on that cluster."""
 
-    deadline = None if seconds is None else time.perf_counter() + seconds
+    budget = ViewBudget() if budget is None else budget
+    deadline = None if budget.seconds is None else time.perf_counter() + budget.seconds
     timed_out = False
+    taken = 0  # candidates whose plan the choice has taken: the work it counts
 
     def out_of_time() -> bool:
         # Asked only where another candidate would be planned: True means one was not.
+        # Counted in candidates taken, not asked of the workers (how far they plan ahead
+        # depends on the cores), so the same views on any machine and any load.
         nonlocal timed_out
+        timed_out = timed_out or taken >= budget.candidates
         timed_out = timed_out or (deadline is not None and time.perf_counter() > deadline)
         return timed_out
 
@@ -468,6 +494,7 @@ def choose_views(
                     for j in ahead:
                         if j not in pending and not out_of_time():
                             ask(j)
+                    taken += 1
                     try:
                         evaluated[i] = pending.pop(i).result()
                     except TooLarge:  # the user's numbers, not the view's fault
@@ -655,7 +682,7 @@ def plan_views(
     fixtures: Sequence[str] = (),
     fixture_units: str = "mm",
     arm: Arm | None = None,
-    view_seconds: float | None = VIEW_CHOICE_SECONDS,
+    budget: ViewBudget | None = None,
     scheduler: str | None = None,
 ) -> tuple[list[ViewPlan], Trajectory]:
     """Plan a scan of `part` (restricted to the region of interest `roi`, the `--roi` text),
@@ -686,6 +713,7 @@ def plan_views(
         tuple(str(f) for f in fixtures),
         fixture_units,
         part.source,
+        geometry_digest(part),
     )
     if not 0.0 < coverage_target <= 1.0:
         raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
@@ -703,7 +731,7 @@ def plan_views(
             spec,
             plan,
             coverage_target,
-            seconds=view_seconds,
+            budget=budget,
             scan_level=direction == "auto",
             workers=view_worker_count(),
             scheduler=scheduler,
@@ -712,7 +740,8 @@ def plan_views(
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
     if views != "top" and selection.out_of_time:
-        traj = replace(traj, meta=traj.meta | {"view_choice_out_of_time": view_seconds})
+        budget = ViewBudget() if budget is None else budget
+        traj = replace(traj, meta=traj.meta | {"view_choice_out_of_budget": budget.said()})
     if views != "top" and selection.exact_coverage is not None:
         # The view choice's own estimate (its fan, its samples) of the greedy choice, and
         # of the exact cover by as many views among those it planned.

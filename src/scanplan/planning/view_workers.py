@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from scanplan.core.plan import PlanContext
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging import in_spec_samples
 from scanplan.planning.views import PlanView, View, ViewPlan, plan_view

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictStr, ValidationError, f
 from pydantic import model_validator as _model_validator
 from torch import nn
 
+from scanplan.core.context import scan_spec_from_record
 from scanplan.core.limits import (
     ANGLE_RAD,
     LENGTH_MM,
@@ -25,7 +26,6 @@ from scanplan.core.limits import (
     check_count,
     in_range,
 )
-from scanplan.core.plan import scan_spec_from_record
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.planning.dynamics import DEFAULT_PITCH_PIVOT, check_pitch_pivot

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.core.plan import LOWEST, PlanContext
+from scanplan.core.context import LOWEST, PlanContext
 from scanplan.core.quantities import UP
 from scanplan.world.part import Part, load_part
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import io
 import math
 import os
@@ -388,6 +389,15 @@ def load_part(spec: str | Path, units: str = "mm") -> Part:
         )
     mesh = validate_mesh(load_mesh_file(path, units), str(path))
     return Part(mesh, name=path.stem, source=str(path))
+
+
+def geometry_digest(part: Part) -> str:
+    """A short hash of the part's mesh as loaded (vertices in mm to 1e-4, faces): the same
+    file in other units, or another file, is another part."""
+    mesh = part.mesh
+    h = hashlib.sha256(np.round(np.asarray(mesh.vertices, dtype=np.float64), 4).tobytes())
+    h.update(np.asarray(mesh.faces, dtype=np.int64).tobytes())
+    return h.hexdigest()[:16]
 
 
 def part_from_mesh(mesh: trimesh.Trimesh, name: str = "part") -> Part:

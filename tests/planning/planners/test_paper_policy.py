@@ -10,8 +10,8 @@ import numpy as np
 from typer.testing import CliRunner
 
 from scanplan.cli import app
+from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import read_trajectory
 from scanplan.judging import evaluate
 from scanplan.rl.env import random_part
 from scanplan.rl.planner import SHIPPED_POLICIES

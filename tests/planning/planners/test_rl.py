@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from helpers import plate_swath
 from scanplan.cli import app
-from scanplan.core.plan import scan_spec_record
+from scanplan.core.context import scan_spec_record
 from scanplan.core.quantities import ScanSpec, advance, mean_distance, signed_alpha
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import evaluate

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from scanplan.core.plan import recorded
+from scanplan.core.context import recorded
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot import check_reach, get_robot

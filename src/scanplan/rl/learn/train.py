@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from scanplan.core.context import scan_spec_record
 from scanplan.core.files import atomic_directory
-from scanplan.core.plan import scan_spec_record
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging.report.training import (
     CURVES,

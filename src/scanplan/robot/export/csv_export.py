@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from scanplan.core.trajectory import CSV_COLUMNS
+from scanplan.core.plan_file import CSV_COLUMNS
 from scanplan.robot.export.common import (
     ExportOptions,
     Motion,

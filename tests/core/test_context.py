@@ -12,9 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 from scanplan.cli import app
-from scanplan.core.plan import PlanContext, judged_alike, recorded
+from scanplan.core.context import PlanContext, judged_alike, recorded
+from scanplan.core.plan_file import read_trajectory, write_csv, write_json
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory, read_trajectory, write_csv, write_json
+from scanplan.core.trajectory import Trajectory
 from scanplan.judging import evaluate
 
 runner = CliRunner()

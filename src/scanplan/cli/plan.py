@@ -1,0 +1,205 @@
+"""`scanplan plan`: a trajectory over a part (or over each part of a catalogue), written with
+what it was planned under, for the other commands to read.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from scanplan.cli.common import progress_bar, user_errors
+from scanplan.cli.options import (
+    FixtureOpt,
+    OutOpt,
+    PartPoseOpt,
+    QuietOpt,
+    RoiOpt,
+    SensorOpt,
+    TableOpt,
+    TcpOpt,
+    ToleranceOpt,
+    UnitsOpt,
+    bounded,
+    scan_spec,
+)
+from scanplan.cli.training import check_cluster
+from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES
+from scanplan.core.run import CLUSTER_HINT
+from scanplan.core.sensor_spec import DEFAULT_SENSOR
+
+# ---- plan ---------------------------------------------------------------------------------
+PlannerOpt = Annotated[str, typer.Option(help="fixed, feedback, geometric or rl")]
+PolicyOpt = Annotated[
+    Path | None,
+    typer.Option(
+        help="trained policy (directory or policy.json) for --planner rl, or a shipped one: "
+        "default, v1 (rolls), paper (pure PPO from scratch)"
+    ),
+]
+DirectionOpt = Annotated[
+    str,
+    typer.Option(
+        help="scan direction: x, y, long (the footprint's long side) or auto "
+        "(the long side unless scanning across leaves clearly less cross-line error)"
+    ),
+]
+OverlapOpt = Annotated[
+    float,
+    typer.Option(
+        help="overlap of adjacent passes of the nominal raster, [0, 1)",
+        callback=bounded(0, 1, hi_open=True),
+    ),
+]
+RasterOpt = Annotated[
+    str,
+    typer.Option(
+        help="nominal (the paper's: line width x (1 - overlap)), adaptive (passes spaced "
+        "by the band of the line that stays in spec) or auto (adaptive if the planner rolls)"
+    ),
+]
+RollOpt = Annotated[
+    bool,
+    typer.Option(
+        "--roll/--no-roll",
+        help="geometric/feedback: roll the line with the surface (--no-roll: the paper's "
+        "pitch-only model); rl follows its policy",
+    ),
+]
+PlanViewsOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="top (the paper's single top-down raster) or auto (views chosen greedily, "
+        "each a raster of the part seen along its own axis, toward --coverage-target); "
+        "default: auto if the planner rolls, else top",
+        show_default=False,
+    ),
+]
+PlanRobotOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--robot",
+        help="plan for this arm (ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
+        "file): every pose reachable, no configuration flip within a pass",
+        show_default=False,
+    ),
+]
+CoverageTargetOpt = Annotated[
+    float,
+    typer.Option(
+        help="--views auto: in-spec coverage (of the surface to inspect) to stop adding views at"
+    ),
+]
+
+
+ViewCandidatesOpt = Annotated[
+    int,
+    typer.Option(
+        "--view-candidates",
+        help="--views auto: candidate views the choice may plan; past them the views chosen "
+        "so far are kept (plan says so). Counted in work, so a busy and a quiet machine plan "
+        "the same views",
+        callback=bounded(1, 100_000),
+    ),
+]
+ViewSecondsOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--view-seconds",
+        help="--views auto: also stop choosing views after this many seconds (off by default: "
+        "the plan then depends on the machine's load; the plan says when it stopped)",
+        callback=bounded(0, None, lo_open=True),
+        show_default=False,
+    ),
+]
+PlanSchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="plan on the Dask scheduler tcp://HOST:8786 (default: every core here): a "
+        "catalogue's parts (a folder or a .txt list), or one part's candidate views "
+        "(--views auto)",
+        show_default=False,
+    ),
+]
+
+
+@user_errors
+def plan_cmd(
+    part: Annotated[
+        str,
+        typer.Argument(
+            help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB), STEP file, or a folder "
+            "of them or a .txt list of them, one per line (each planned with the same options, "
+            "-o then the folder for the plans)"
+        ),
+    ],
+    output: OutOpt,
+    planner: PlannerOpt = "geometric",
+    sensor: SensorOpt = DEFAULT_SENSOR,
+    policy: PolicyOpt = None,
+    direction: DirectionOpt = "auto",
+    overlap: OverlapOpt = OVERLAP,
+    raster: RasterOpt = "auto",
+    roll: RollOpt = True,
+    units: UnitsOpt = "mm",
+    tolerance: ToleranceOpt = None,
+    quiet: QuietOpt = False,
+    roi: RoiOpt = None,
+    views: PlanViewsOpt = None,
+    coverage_target: CoverageTargetOpt = COVERAGE_TARGET,
+    table: TableOpt = None,
+    fixture: FixtureOpt = None,
+    robot: PlanRobotOpt = None,
+    tcp: TcpOpt = None,
+    part_pose: PartPoseOpt = None,
+    scheduler: PlanSchedulerOpt = None,
+    view_candidates: ViewCandidatesOpt = VIEW_CHOICE_CANDIDATES,
+    view_seconds: ViewSecondsOpt = None,
+):
+    """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
+    under (part, sensor, tolerances, views, region of interest, table and fixtures, arm) for
+    the other commands to read. With --robot, a plan that arm can fly (placed by the tool
+    unless --part-pose is given), and what that cost. A folder of parts, or a .txt file
+    listing them (one path a line, relative to the list; # comments), is a catalogue: each
+    part planned on its own core (or Dask worker) into -o/NAME.json, one line per part."""
+    # Deferred: the planners load trimesh, Embree and FCL (seconds), which --help need not.
+    from scanplan.jobs.catalogue import catalogue_jobs, is_catalogue, plan_catalogue
+    from scanplan.jobs.plan import PlanJob, run_plan_job
+
+    job = PlanJob(
+        part, output, planner, scan_spec(sensor, tolerance), policy, direction, overlap,
+        raster, roll, units, roi, views, coverage_target, table, tuple(fixture or ()), robot,
+        tcp, part_pose, view_candidates, view_seconds,
+    )  # fmt: skip
+    job.budget()  # a bad budget is named before any work
+    if is_catalogue(part):
+        check_cluster(scheduler, None)
+        jobs = catalogue_jobs(job)
+        with progress_bar(f"planning {len(jobs)} parts", quiet) as progress:
+            results = plan_catalogue(jobs, scheduler, progress)
+        failed = 0
+        for name, lines, error in results:
+            if error is not None:
+                failed += 1
+                typer.echo(f"{name}: error: {error}", err=True)
+            for text, to_stderr in lines:
+                typer.echo(f"{name}: {text}", err=to_stderr)
+        if failed:
+            typer.echo(f"error: {failed} of {len(jobs)} parts not planned", err=True)
+            raise typer.Exit(1)
+        return
+    if scheduler is not None:
+        check_cluster(scheduler, None)
+        if importlib.util.find_spec("distributed") is None:
+            raise ValueError(CLUSTER_HINT)
+        job = replace(job, scheduler=scheduler)
+    if output.suffix.lower() not in (".csv", ".json"):
+        raise ValueError(f"output {output} must be a .csv or .json file")
+    with progress_bar(f"planning ({planner})", quiet) as progress:
+        lines = run_plan_job(job, progress)
+    for text, to_stderr in lines:
+        typer.echo(text, err=to_stderr)

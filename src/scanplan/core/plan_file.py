@@ -1,0 +1,342 @@
+"""A plan's files: the trajectory as CSV (columns `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`)
+or JSON, with what it was made under riding along (top-level keys of the JSON, `# key: <JSON>`
+comment lines under the CSV's header, which CSV tools skip). Every malformation is a
+ValueError naming the file, line and field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from scanplan.core.files import atomic_write_text, dumps_json
+from scanplan.core.limits import MAX_POSES, MAX_VIEWS, POSITION_MM, check_count, in_range
+from scanplan.core.trajectory import INT32, Trajectory, poses_from_xyz_quat
+
+CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
+# The records of `Trajectory.meta` a plan file carries (JSON-able values).
+FILE_RECORDS = ("context", "views", "robot", "cycle_time_s")
+CSV_COMMENT = "#"
+
+
+def to_csv_text(traj: Trajectory) -> str:
+    q = traj.quaternions_wxyz
+    p = traj.positions_mm
+    # The records right under the header: CSV tools that know comments skip them
+    # (pandas `comment="#"`, numpy `genfromtxt(names=True)`), and the header stays line 1.
+    lines = [",".join(CSV_COLUMNS)]
+    lines += [
+        f"{CSV_COMMENT} {key}: {dumps_json(traj.meta[key])}"
+        for key in FILE_RECORDS
+        if traj.meta.get(key)
+    ]
+    for i in range(len(traj)):
+        lines.append(
+            f"{traj.swath[i]},{int(traj.scanning[i])},"
+            + ",".join(f"{v:.6f}" for v in p[i])
+            + ","
+            + ",".join(f"{v:.9f}" for v in q[i])
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_csv(traj: Trajectory, path: str | os.PathLike) -> None:
+    atomic_write_text(path, to_csv_text(traj))
+
+
+MAX_TRAJECTORY_FILE_BYTES = 1024**3
+
+
+def _read_text(path: Path) -> str:
+    """The file's text (UTF-8, a byte-order mark allowed), or ValueError naming it."""
+    if path.is_dir():
+        raise ValueError(f"trajectory file {path} is a directory")
+    if not path.is_file():
+        raise ValueError(f"trajectory file {path} does not exist")
+    size = path.stat().st_size
+    if size > MAX_TRAJECTORY_FILE_BYTES:
+        raise ValueError(
+            f"trajectory file {path} is {size / 1024**3:.1f} GiB: more than "
+            f"{MAX_TRAJECTORY_FILE_BYTES / 1024**3:.0f} GiB, not a trajectory"
+        )
+    try:
+        return path.read_bytes().decode("utf-8-sig")
+    except OSError as exc:
+        raise ValueError(f"trajectory file {path} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"trajectory file {path} is not UTF-8 text (byte {exc.start})") from None
+
+
+def read_csv(path: str | os.PathLike) -> Trajectory:
+    """Read a trajectory CSV; every malformation raises ValueError naming the file, line and
+    column."""
+    path = Path(path)
+    text = _read_text(path)
+    lines = text.splitlines()
+    numbers = [i for i, r in enumerate(lines, start=1) if r.strip()]
+    meta = _csv_records(path, lines, numbers)
+    numbers = [i for i in numbers if not lines[i - 1].lstrip().startswith(CSV_COMMENT)]
+    if not numbers:
+        raise ValueError(f"trajectory file {path} is empty")
+    first = numbers[0]
+    header = [h.strip() for h in lines[first - 1].split(",")]
+    if tuple(header[: len(CSV_COLUMNS)]) == CSV_COLUMNS and "speed_mm_s" in header:
+        raise ValueError(
+            f"trajectory file {path} is a robot program exported as CSV (targets in the robot's "
+            "base frame, with speeds and blends), not a plan: give the plan it was exported from"
+        )
+    if tuple(header) != CSV_COLUMNS:
+        missing = [c for c in CSV_COLUMNS if c not in header]
+        extra = [c for c in header if c not in CSV_COLUMNS]
+        detail = (f"missing {', '.join(missing)}; " if missing else "") + (
+            f"unknown {', '.join(repr(c[:20]) for c in extra)}; " if extra else ""
+        )
+        raise ValueError(
+            f"trajectory file {path} line {first}: header must be {','.join(CSV_COLUMNS)} "
+            f"({detail or 'wrong order; '}got {lines[first - 1][:60]!r})"
+        )
+    numbers = numbers[1:]
+    if not numbers:
+        raise ValueError(f"trajectory file {path} has a header but no poses")
+    check_count(len(numbers), MAX_POSES, f"trajectory file {path}: poses")
+    cells = [lines[i - 1].split(",") for i in numbers]
+    counts = np.array([len(c) for c in cells])
+    wrong = np.flatnonzero(counts != len(CSV_COLUMNS))
+    if len(wrong):
+        raise ValueError(
+            f"trajectory file {path} line {numbers[wrong[0]]}: expected {len(CSV_COLUMNS)} "
+            f"values, got {counts[wrong[0]]}"
+        )
+    try:
+        values = np.array(cells, dtype=np.float64)
+    except ValueError:
+        values = _locate_bad_number(path, cells, numbers)
+    line = np.asarray(numbers)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise ValueError(
+            f"trajectory file {path} line {line[row]}, column {CSV_COLUMNS[col]}: non-finite value"
+        )
+    far = ~((values[:, 2:5] >= POSITION_MM.lo) & (values[:, 2:5] <= POSITION_MM.hi))
+    if far.any():
+        row, col = np.argwhere(far)[0]
+        POSITION_MM.check(
+            values[row, 2 + col],
+            f"trajectory file {path} line {line[row]}, column {CSV_COLUMNS[2 + col]}:",
+        )
+    swath = values[:, 0]
+    bad_swath = (swath != np.round(swath)) | (np.abs(swath) > INT32.max)
+    if bad_swath.any():
+        row = np.flatnonzero(bad_swath)[0]
+        raise ValueError(
+            f"trajectory file {path} line {line[row]}, column swath: must be an integer "
+            f"that fits 32 bits, got {swath[row]:g}"
+        )
+    bad_flag = ~np.isin(values[:, 1], (0.0, 1.0))
+    if bad_flag.any():
+        row = np.flatnonzero(bad_flag)[0]
+        raise ValueError(
+            f"trajectory file {path} line {line[row]}: scanning column must be 0 or 1, "
+            f"got {cells[row][1].strip()[:20]!r}"
+        )
+    zero_q = np.linalg.norm(values[:, 5:], axis=1) < 1e-9
+    if zero_q.any():
+        raise ValueError(
+            f"trajectory file {path} line {line[np.flatnonzero(zero_q)[0]]}: "
+            "quaternion of zero length"
+        )
+    poses = poses_from_xyz_quat(values[:, 2:5], values[:, 5:9])
+    planner = str(meta.get("context", {}).get("planner", "")) if meta.get("context") else ""
+    return Trajectory(
+        poses=poses,
+        swath=swath.astype(np.int64),
+        scanning=values[:, 1] > 0.5,
+        planner=planner,
+        meta=meta,
+    )
+
+
+def _csv_records(path: Path, lines: list[str], numbers: list[int]) -> dict[str, Any]:
+    """The `# key: <JSON>` comment lines (FILE_RECORDS; other comments are free)."""
+    meta: dict[str, Any] = {}
+    for i in numbers:
+        line = lines[i - 1].lstrip()
+        if not line.startswith(CSV_COMMENT):
+            continue
+        key, sep, value = line[len(CSV_COMMENT) :].partition(":")
+        if not sep or key.strip() not in FILE_RECORDS:
+            continue
+        try:
+            meta[key.strip()] = json.loads(value)
+        except (ValueError, RecursionError):
+            raise ValueError(
+                f"trajectory file {path} line {i}: the {key.strip()} record is not valid JSON"
+            ) from None
+    if "views" in meta:
+        meta["views"] = _validated_views(path, meta["views"])
+    for key in ("context", "robot"):
+        if key in meta and not isinstance(meta[key], dict):
+            raise ValueError(f"trajectory file {path}: the {key} record must be a JSON object")
+    cycle = meta.get("cycle_time_s")
+    if cycle is not None and not (
+        isinstance(cycle, (int, float)) and not isinstance(cycle, bool) and 0 <= cycle < 1e9
+    ):
+        raise ValueError(f"trajectory file {path}: cycle_time_s must be seconds >= 0")
+    return meta
+
+
+def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -> np.ndarray:
+    """Only on the error path: find the first cell that is not a number, to name it."""
+    for row, line in zip(cells, numbers, strict=True):
+        for col, cell in enumerate(row):
+            try:
+                float(cell)
+            except ValueError:
+                raise ValueError(
+                    f"trajectory file {path} line {line}, column {CSV_COLUMNS[col]}: "
+                    f"not a number: {cell.strip()[:20]!r}"
+                ) from None
+    raise AssertionError("unreachable: numpy refused a table float() accepts")
+
+
+def to_json_dict(traj: Trajectory) -> dict:
+    positions, quaternions = traj.positions_mm.tolist(), traj.quaternions_wxyz.tolist()
+    return {
+        "units": {"length": "mm", "rotation": "unit quaternion, scalar first (w, x, y, z)"},
+        "frame": "part frame; each pose is T_part_sensor (sensor z = laser axis towards the "
+        "part, x = along the laser line, y = scan direction)",
+        "planner": traj.planner,
+        "plan_time_s": traj.plan_time_s,
+        **{key: traj.meta[key] for key in FILE_RECORDS if traj.meta.get(key)},
+        "poses": [
+            {
+                "swath": int(traj.swath[i]),
+                "scanning": bool(traj.scanning[i]),
+                "position_mm": positions[i],
+                "quaternion_wxyz": quaternions[i],
+            }
+            for i in range(len(traj))
+        ],
+    }
+
+
+def write_json(traj: Trajectory, path: str | os.PathLike) -> None:
+    atomic_write_text(path, dumps_json(to_json_dict(traj), indent=1))
+
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _PoseJson(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+    swath: int = Field(ge=int(INT32.min), le=int(INT32.max))
+    scanning: bool
+    position_mm: list[Annotated[float, in_range(POSITION_MM)]] = Field(min_length=3, max_length=3)
+    quaternion_wxyz: list[FiniteFloat] = Field(min_length=4, max_length=4)
+
+
+class _ViewJson(BaseModel):
+    """One view's record (`views.join_views`): its axis and its block of swath indices."""
+
+    model_config = ConfigDict(extra="allow", strict=True)
+    index: int
+    axis: list[FiniteFloat] = Field(min_length=3, max_length=3)
+    first_swath: int
+    last_swath: int
+
+    @model_validator(mode="after")
+    def _unit_axis_and_a_block(self) -> _ViewJson:
+        if not abs(math.hypot(*self.axis) - 1.0) <= 1e-3:
+            raise ValueError(f"axis {self.axis} is not a unit vector")
+        if not 0 <= self.first_swath <= self.last_swath <= INT32.max:
+            raise ValueError(
+                f"swaths {self.first_swath}..{self.last_swath} are not a block of pass indices"
+            )
+        return self
+
+
+class _TrajectoryJson(BaseModel):
+    # Strict: a planner of 3 or a plan time of "fast" is a broken file, not a value to coerce.
+    model_config = ConfigDict(extra="ignore", strict=True)
+    planner: str = ""
+    plan_time_s: float = Field(0.0, ge=0, allow_inf_nan=False)
+    context: dict[str, Any] | None = None
+    robot: dict[str, Any] | None = None
+    views: list[_ViewJson] | None = None
+    cycle_time_s: float | None = Field(None, ge=0, allow_inf_nan=False)
+    poses: list[_PoseJson] = Field(min_length=1)
+
+
+def _pydantic_where(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    where = ""
+    for part in err["loc"]:
+        where += f"[{part}]" if isinstance(part, int) else f".{part}"
+    return f"{where.lstrip('.') or 'file'}: {str(err['msg']).removeprefix('Value error, ')}"
+
+
+def read_json(path: str | os.PathLike) -> Trajectory:
+    """Read a trajectory JSON (as `write_json` writes it); ValueError naming file and field."""
+    path = Path(path)
+    text = _read_text(path)
+    try:
+        data = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"trajectory file {path}: JSON nested too deeply") from None
+    except ValueError as exc:  # JSONDecodeError, and ints too long to convert
+        raise ValueError(f"trajectory file {path} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"trajectory file {path}: expected a JSON object with 'poses'")
+    for key, limit in (("poses", MAX_POSES), ("views", MAX_VIEWS)):
+        if isinstance(data.get(key), list):  # counted before each is validated
+            check_count(len(data[key]), limit, f"trajectory file {path}: {key}")
+    try:
+        model = _TrajectoryJson.model_validate(data)
+    except ValidationError as exc:
+        raise ValueError(f"trajectory file {path}: {_pydantic_where(exc)}") from None
+    xyz = np.array([p.position_mm for p in model.poses], dtype=np.float64)
+    q = np.array([p.quaternion_wxyz for p in model.poses], dtype=np.float64)
+    zero_q = np.linalg.norm(q, axis=1) < 1e-9
+    if zero_q.any():
+        raise ValueError(
+            f"trajectory file {path}: poses[{np.flatnonzero(zero_q)[0]}].quaternion_wxyz: "
+            "quaternion of zero length"
+        )
+    return Trajectory(
+        poses_from_xyz_quat(xyz, q),
+        np.array([p.swath for p in model.poses], dtype=np.int64),
+        np.array([p.scanning for p in model.poses], dtype=bool),
+        plan_time_s=model.plan_time_s,
+        planner=model.planner,
+        meta=(
+            ({"views": [v.model_dump() for v in model.views]} if model.views else {})
+            | ({"context": model.context} if model.context else {})
+            | ({"robot": model.robot} if model.robot else {})
+            | ({"cycle_time_s": model.cycle_time_s} if model.cycle_time_s else {})
+        ),
+    )
+
+
+def _validated_views(path: Path, views: object) -> list[dict]:
+    """A CSV's views record, checked as the JSON's is."""
+    if not isinstance(views, list):
+        raise ValueError(f"trajectory file {path}: the views record must be a JSON list")
+    check_count(len(views), MAX_VIEWS, f"trajectory file {path}: views")
+    try:
+        return [_ViewJson.model_validate(v).model_dump() for v in views]
+    except ValidationError as exc:
+        raise ValueError(f"trajectory file {path}: views: {_pydantic_where(exc)}") from None
+
+
+def read_trajectory(path: str | os.PathLike) -> Trajectory:
+    """CSV or JSON by extension."""
+    if str(path).lower().endswith(".json"):
+        return read_json(path)
+    return read_csv(path)

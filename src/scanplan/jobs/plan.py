@@ -1,0 +1,171 @@
+"""`plan`: a part planned into a plan file (views, passes, the arm if any), and the lines
+that say what it holds and what it cost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from scanplan.core.context import LOWEST
+from scanplan.core.plan import Plan
+from scanplan.core.plan_file import write_csv, write_json
+from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES, ScanSpec
+from scanplan.planning.pipeline import Arm, ViewBudget, plan_views
+from scanplan.rl.planners import make_planner
+from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.program import program_cycle
+from scanplan.world.part import load_part
+
+# The TCP a plan for an arm takes when none is given: the sensor's origin on the flange.
+IDENTITY_POSE = "0,0,0,0,0,0"
+Lines = list[tuple[str, bool]]  # (line, to stderr)
+
+
+@dataclass(frozen=True)
+class PlanJob:
+    """One part's `scanplan plan`, picklable: what a worker process or a Dask task plans."""
+
+    part: str
+    output: Path
+    planner: str
+    spec: ScanSpec
+    policy: Path | None = None
+    direction: str = "auto"
+    overlap: float = OVERLAP
+    raster: str = "auto"
+    roll: bool = True
+    units: str = "mm"
+    roi: str | None = None
+    views: str | None = None
+    coverage_target: float = COVERAGE_TARGET
+    table: str | None = None
+    fixture: tuple[str, ...] = ()
+    robot: str | None = None
+    tcp: str | None = None
+    part_pose: str | None = None
+    view_candidates: int = VIEW_CHOICE_CANDIDATES
+    view_seconds: float | None = None  # a wall-clock limit only where the user asks
+    scheduler: str | None = None  # one part's candidate views on this Dask scheduler
+
+    def budget(self) -> ViewBudget:
+        return ViewBudget(self.view_candidates, self.view_seconds)
+
+
+def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
+    """The arm `plan --robot` makes the plan for (None: no robot), and a note where the TCP
+    is the flange because none was given."""
+    if job.robot is None:
+        for option, value in (("--tcp", job.tcp), ("--part-pose", job.part_pose)):
+            if value is not None:
+                raise ValueError(f"{option} needs --robot: the arm it refers to")
+        return None, []
+    notes: Lines = []
+    if job.tcp is None:
+        notes.append((f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)", False))
+    pose = None if job.part_pose is None else parse_pose_arg(job.part_pose)
+    return Arm(job.robot, parse_pose_arg(job.tcp or IDENTITY_POSE), pose), notes
+
+
+def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = None) -> Lines:
+    """Plan `job`, write its plan, and return what to print."""
+    job.budget()  # a bad budget is named before the part is read
+    the_part = load_part(job.part, job.units)
+    the_planner = make_planner(job.planner, job.policy, job.roll)
+    arm, notes = robot_arm(job)
+    _, traj = plan_views(
+        the_part,
+        job.spec,
+        the_planner,
+        job.views,
+        job.coverage_target,
+        job.raster,
+        job.direction,
+        job.overlap,
+        roi=job.roi,
+        progress=progress,
+        table=job.table or LOWEST,
+        fixtures=job.fixture,
+        fixture_units=job.units,
+        arm=arm,
+        budget=job.budget(),
+        scheduler=job.scheduler,
+    )
+    plan = Plan.of(traj, f"plan {job.output}")
+    cycle = program_cycle(plan)
+    traj = replace(traj, meta=traj.meta | {"cycle_time_s": round(cycle.total_s, 3)})
+    (write_json if job.output.suffix.lower() == ".json" else write_csv)(traj, job.output)
+    return [
+        *notes,
+        (
+            f"{the_planner.name}: {plan.counts()}, {traj.path_length_mm():.0f} mm, "
+            f"planned in {traj.plan_time_s:.2f} s -> {job.output}",
+            False,
+        ),
+        (cycle.line(), False),
+        *plan_notes(plan),
+    ]
+
+
+def plan_notes(plan: Plan) -> Lines:
+    """What the planner left out or overrode, one line each; none when all went to plan."""
+    meta, spec = plan.traj.meta, plan.spec
+    lines: Lines = []
+    if unreachable := meta.get("views_unreachable", 0):
+        lines.append((f"views: {unreachable} left out, no collision-free move reaches them", False))
+    if dropped := meta.get("collisions_dropped", 0):
+        lines.append(
+            (
+                f"collisions: {dropped} scanning poses dropped (sensor body within "
+                f"{spec.clearance_mm:g} mm of the part, the table or a fixture)",
+                False,
+            )
+        )
+    if budget := meta.get("view_choice_out_of_budget"):
+        lines.append(
+            (
+                f"views: the choice stopped at its budget ({budget}) with the views chosen by "
+                "then (--view-candidates gives it more)",
+                False,
+            )
+        )
+    if unreached := meta.get("unreachable_dropped", 0):
+        lines.append(
+            (
+                f"moves: {unreached} scanning poses given up (no move clear of the part and "
+                "the cell reaches the piece of pass they are on)",
+                False,
+            )
+        )
+    if plan.arm is not None:
+        lines += _arm_notes(plan)
+    if overrides := {k: v for k, v in meta.items() if k.endswith("_overrides") and v}:
+        # The rl planner's guards replaced some of the policy's steps: say how many.
+        lines.append(("guard steps: " + ", ".join(f"{k} {v}" for k, v in overrides.items()), False))
+    return lines
+
+
+def _arm_notes(plan: Plan) -> Lines:
+    assert plan.arm is not None
+    arm, record = plan.arm, plan.arm.record
+    by_view = record.get("scanning_poses_given_up", {})
+    given_up = ", ".join(f"view {k}: {v}" for k, v in by_view.items())
+    lines: Lines = [
+        (
+            f"{arm.robot} at --part-pose {record.get('part_pose', '')}: "
+            f"{sum(by_view.values())} scanning poses given up"
+            f"{f' ({given_up})' if given_up else ''}, {record.get('moves_given_up', 0)} move "
+            f"poses, {record.get('passes_split', 0)} passes split at a configuration flip, "
+            f"{record.get('passes_turned', 0)} turned half a turn about the beam (links kept "
+            f"clear of the part, table and fixtures); in-spec coverage "
+            f"{record.get('in_spec_without_robot', 0.0):.3f} without the arm, "
+            f"{record.get('in_spec', 0.0):.3f} with it",
+            False,
+        )
+    ]
+    if not arm.flyable:
+        lines.append(
+            (f"warning: {arm.robot} still cannot fly every pass; export will say where", True)
+        )
+    return lines

@@ -1,0 +1,106 @@
+"""What every job on an existing plan shares: the part it was made for (checked by content,
+never silently another), its cell, and the context it is judged by (the plan's, with what
+the user's options override, said in one line).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+from scanplan.core.context import VIEW_MODES, PlanContext
+from scanplan.core.plan import Plan
+from scanplan.core.sensor_files import load_sensor
+from scanplan.world.cell import Cell, planned_cell
+from scanplan.world.part import Part, geometry_digest, load_part
+
+Say = Callable[[str], None]
+
+
+def _quiet(_: str) -> None:
+    pass
+
+
+def planned_part(
+    plan: Plan,
+    part: str | None,
+    units: str | None,
+    needed_for: str = "the plan is judged on it",
+    other_part: bool = False,
+    say: Say = _quiet,
+) -> Part:
+    """The part `plan` was made for: `part` (else the one the plan records) in `units`
+    (else the plan's). A part that is not the planned one (another file, or the same file
+    in other units) is refused in one line naming both, unless `other_part` (then said)."""
+    context = plan.context
+    name = part or context.part
+    if not name:
+        raise ValueError(
+            f"give the part: {needed_for}, and {plan.where} records none (planned before "
+            "plans named their part)"
+        )
+    recorded_units = context.fixture_units
+    loaded = load_part(name, units or recorded_units)
+    if not context.part_digest or geometry_digest(loaded) == context.part_digest:
+        return loaded
+    planned = f"{context.part or 'unnamed'} in {recorded_units}"
+    given = f"{name} in {units or recorded_units}"
+    same_file = context.part and _same_file(name, context.part)
+    hint = (
+        f"the plan was made with --units {recorded_units}"
+        if same_file and units not in (None, recorded_units)
+        else f"give the plan's part ({planned})"
+    )
+    if other_part:
+        say(f"note: {given} is not the part {plan.where} was made for ({planned})")
+        return loaded
+    raise ValueError(
+        f"part {given} is not the part {plan.where} was made for ({planned}): {hint}, or "
+        "--other-part to use this one anyway"
+    )
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return a == b
+
+
+def plan_cell(plan: Plan, part: Part) -> Cell:
+    """The cell the plan was made in (its table and fixtures) around `part`."""
+    return planned_cell(plan.context, part)
+
+
+def judged_context(
+    plan: Plan,
+    sensor: str | None,
+    tolerance: dict[str, float] | None,
+    roi: str | None,
+    views: str | None,
+    table: str | None = None,
+    fixtures: list[str] | None = None,
+) -> tuple[PlanContext, str]:
+    """The context to judge `plan` by: its own, with what the options override; and one
+    line saying where that differs from the plan (or what an older file made us assume),
+    '' if nowhere."""
+    if views is not None and views not in VIEW_MODES:
+        raise ValueError(f"unknown --views {views!r}; use top or auto")
+    planned = plan.context
+    spec = planned.spec
+    if sensor is not None:
+        spec = replace(spec, sensor=load_sensor(sensor))
+    if tolerance:
+        spec = replace(
+            spec,
+            tol_distance_mm=tolerance["tol_distance_mm"],
+            tol_angle_rad=tolerance["tol_angle_rad"],
+        )
+    judged = planned.with_options(
+        spec, roi, views, table, None if fixtures is None else tuple(fixtures)
+    )
+    if plan.assumed:  # nothing recorded to differ from
+        return judged, "note: " + "; ".join(plan.assumed)
+    changes = planned.differences(judged)
+    return judged, ("note: judged with " + "; ".join(changes)) if changes else ""
