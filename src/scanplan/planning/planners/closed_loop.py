@@ -1,6 +1,6 @@
 """A pass planned by a controller in the loop (the rl and feedback planners): the controller
-picks each action from what the sensor measures, the shared step model (`dynamics`) turns it
-into the next pose, and two guards keep the pass going forward.
+picks each action from what the sensor measures, the shared step model (`step_model`, through
+`dynamics.PassDynamics`) turns it into the next pose, and two guards keep the pass going forward.
 """
 
 from __future__ import annotations
@@ -14,13 +14,8 @@ import numpy as np
 from scanplan.core.quantities import ScanSpec, StepLimits
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.planning.dynamics import (
-    DEFAULT_PITCH_PIVOT,
-    PassDynamics,
-    Step,
-    pass_geometry,
-    step_budget,
-)
+from scanplan.planning.dynamics import PassDynamics, Step, pass_geometry, step_budget
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT
 from scanplan.planning.swaths import Swath, frame_poses
 from scanplan.sensor.profilometer import LineProfilometer, Profile
 from scanplan.world.part import Part
@@ -94,7 +89,7 @@ def drive_passes(
     pose's ray cast is mostly overhead); each pass's poses are those it would have alone.
     measure_with: the sensor the controller measures with (`SensorFactory`); where each pass
     starts and ends is the planned part's (the CAD's), whatever that sensor sees.
-    pitch_pivot: where the controller's pitch steps turn (`dynamics.PITCH_PIVOTS`)."""
+    pitch_pivot: where the controller's pitch steps turn (`step_model.PITCH_PIVOTS`)."""
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
