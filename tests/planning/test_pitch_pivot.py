@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from helpers import plate_swath
-from scanplan.planning.dynamics import apply_step
+from scanplan.planning.step_model import apply_step
 from scanplan.rl.env import SwathScanEnv
 from scanplan.rl.learn.config import recipe_config
 from scanplan.rl.planner import RLPlanner

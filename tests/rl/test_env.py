@@ -16,7 +16,7 @@ from helpers import plate_swath
 from scanplan.core.quantities import advance, mean_distance, signed_alpha
 from scanplan.core.reward import reward_terms
 from scanplan.core.sensor_spec import SensorSpec
-from scanplan.planning.dynamics import limit_action
+from scanplan.planning.step_model import limit_action
 from scanplan.planning.swaths import Swath
 from scanplan.rl.env import ENV_ID, ENV_ID_ROLL, SwathScanEnv
 from scanplan.sensor.profilometer import LineProfilometer

@@ -10,8 +10,8 @@ import trimesh
 
 from scanplan.robot import ROBOT_NAMES, get_robot
 from scanplan.robot.links import check_links, column_clear, obstacles_for
+from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import TABLE_MARGIN_MM, Cell
-from scanplan.world.collision import CellObstacles
 from scanplan.world.part import part_from_mesh
 
 CLEARANCE = 20.0  # the plan clearance the links keep, as the sensor body does

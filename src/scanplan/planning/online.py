@@ -28,8 +28,9 @@ import math
 import numpy as np
 
 from scanplan.core.quantities import UP, ScanSpec, StepLimits
-from scanplan.planning.dynamics import DEFAULT_PITCH_PIVOT, PassDynamics, Step
+from scanplan.planning.dynamics import PassDynamics, Step
 from scanplan.planning.planners.closed_loop import Controller
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT
 from scanplan.planning.swaths import Swath
 from scanplan.sensor.profilometer import PointStatus, Profile
 from scanplan.world.part import Part

@@ -47,8 +47,9 @@ from scanplan.planning.views import (
 )
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
+from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell, planned_cell
-from scanplan.world.collision import CellObstacles, checker_for
+from scanplan.world.collision import checker_for
 from scanplan.world.part import Part, geometry_digest
 from scanplan.world.surface import (
     VisibleSurface,

@@ -19,15 +19,10 @@ from gymnasium import spaces
 
 from scanplan.core.quantities import TRAINING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.core.reward import reward_terms
-from scanplan.planning.dynamics import (
-    DEFAULT_PITCH_PIVOT,
-    PassDynamics,
-    check_pitch_pivot,
-    pass_geometry,
-    step_budget,
-)
+from scanplan.planning.dynamics import PassDynamics, pass_geometry, step_budget
 from scanplan.planning.dynamics import Step as PassStep
 from scanplan.planning.observation import OBS_LIMIT, observation_size, observe
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.planning.swaths import Swath, plan_swaths
 from scanplan.sensor.profilometer import LineProfilometer, Profile
 from scanplan.world.part import Part, load_part, part_from_mesh

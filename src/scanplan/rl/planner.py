@@ -17,9 +17,10 @@ from torch import nn
 
 from scanplan.core.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.core.trajectory import Trajectory
-from scanplan.planning.dynamics import DEFAULT_PITCH_PIVOT, PassDynamics
+from scanplan.planning.dynamics import PassDynamics
 from scanplan.planning.observation import observe
 from scanplan.planning.planners.closed_loop import Controller, Guards, SensorFactory, drive_passes
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT
 from scanplan.planning.swaths import Swath
 from scanplan.rl.policy import load_policy
 from scanplan.world.part import Part

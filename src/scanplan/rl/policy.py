@@ -28,8 +28,8 @@ from scanplan.core.limits import (
 )
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
-from scanplan.planning.dynamics import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.planning.observation import observation_size
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 
 FORMAT: Literal["scanplan-policy/2"] = "scanplan-policy/2"
 POLICY_JSON = "policy.json"
@@ -111,7 +111,7 @@ class EnvOptions(_Model):
     reward_distance_scale_mm: Annotated[float, Field(gt=0, le=1e4, allow_inf_nan=False)] | None = (
         None
     )
-    # Where a pitch step turns (dynamics.PITCH_PIVOTS): planning steps the same way.
+    # Where a pitch step turns (step_model.PITCH_PIVOTS): planning steps the same way.
     pitch_pivot: StrictStr = DEFAULT_PITCH_PIVOT
 
     @field_validator("segment_mm")

@@ -24,7 +24,7 @@ from scanplan.robot.place import (
 )
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
-from scanplan.world.collision import CellObstacles
+from scanplan.world.capsule_collision import CellObstacles
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
 # whole pass did, and so show a flip of its own; a few rounds settle it.

@@ -16,8 +16,9 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
+from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
-from scanplan.world.collision import CellObstacles, checker_for
+from scanplan.world.collision import checker_for
 from scanplan.world.part import Part
 
 # The sensor check asks FCL only about bodies within this of the cell (exact below it).

@@ -12,8 +12,8 @@ import numpy as np
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.robot.base import Robot, inv_rigid
+from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
-from scanplan.world.collision import CellObstacles
 from scanplan.world.part import Part
 
 # An arm over the table stands on it: its mounting face at most this above the top (a plate).

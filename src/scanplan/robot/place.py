@@ -33,7 +33,7 @@ from scanplan.robot.reach import (
     limit_margin,
     pass_starts,
 )
-from scanplan.world.collision import CellObstacles
+from scanplan.world.capsule_collision import CellObstacles
 
 # Margins that count as "clear": 5° from a limit or a wrist/elbow singularity, 20 mm from
 # the shoulder one (the thresholds `check_reach` flags).

@@ -264,27 +264,7 @@ class LineProfilometer:
         lit = in_window & (cos_incidence > self._cos_cutoff)
 
         # Camera line of sight: a lit point must face the camera and see it unobstructed.
-        camera_from_origin = rot[:, :, 1] * self._camera_y  # (m, 3); the camera is on y_s
-        to_camera = [camera_from_origin[:, k, None] - dt[k] for k in range(3)]
-        faces_camera = normal[0] * to_camera[0]
-        faces_camera += normal[1] * to_camera[1]
-        faces_camera += normal[2] * to_camera[2]
-        cand = np.flatnonzero(lit & (faces_camera > 0))
-        pick = _picker(cand, m * n)
-        to_cam = [pick(c) for c in to_camera]
-        dist_camera = np.sqrt(to_cam[0] * to_cam[0] + to_cam[1] * to_cam[1] + to_cam[2] * to_cam[2])
-        eps = self._SURFACE_EPS_MM
-        k_cand = len(cand)
-        start = np.empty((k_cand, 3), dtype=np.float32)
-        unit = np.empty((k_cand, 3), dtype=np.float32)
-        for k in range(3):
-            lifted = pick(normal[k]) * eps
-            lifted += pick(p[k])
-            np.subtract(lifted, engine.offset[k], out=start[:, k], casting="same_kind")
-            np.divide(to_cam[k], dist_camera, out=unit[:, k], casting="same_kind")
-        dist_camera -= eps
-        blocked = engine.occluded_float32(start, unit, dist_camera.astype(np.float32))
-        valid_idx = cand if not blocked.any() else cand[~blocked]
+        valid_idx = self._seen_by_camera(rot, dt, p, normal, lit)
         pick = _picker(valid_idx, m * n)
 
         # Measured depth: true depth + noise, quantized to the Z resolution.
@@ -327,6 +307,43 @@ class LineProfilometer:
         status += lit.view(np.uint8)
         status += np.uint8(PointStatus.NO_HIT)
         status.ravel()[valid_idx] = PointStatus.VALID
+
+    def _seen_by_camera(
+        self,
+        rot: np.ndarray,
+        beam: list[np.ndarray],
+        points: list[np.ndarray],
+        normal: list[np.ndarray],
+        lit: np.ndarray,
+    ) -> np.ndarray:
+        """Flat indices into the (m, n) columns of the lit points that face the camera and see
+        it unobstructed (an occlusion ray from just off the surface).
+
+        rot: (m, 3, 3) the poses' rotations, sensor to part. beam, points, normal: x, y and z
+        components, (m, n) each, in the part frame: the sensor origin to each hit (mm), the
+        hits (mm), and their normals (turned to face the rays)."""
+        engine = self.part.ray_engine
+        camera_from_origin = rot[:, :, 1] * self._camera_y  # (m, 3); the camera is on y_s
+        to_camera = [camera_from_origin[:, k, None] - beam[k] for k in range(3)]
+        faces_camera = normal[0] * to_camera[0]
+        faces_camera += normal[1] * to_camera[1]
+        faces_camera += normal[2] * to_camera[2]
+        cand = np.flatnonzero(lit & (faces_camera > 0))
+        pick = _picker(cand, lit.size)
+        to_cam = [pick(c) for c in to_camera]
+        dist_camera = np.sqrt(to_cam[0] * to_cam[0] + to_cam[1] * to_cam[1] + to_cam[2] * to_cam[2])
+        eps = self._SURFACE_EPS_MM
+        k_cand = len(cand)
+        start = np.empty((k_cand, 3), dtype=np.float32)
+        unit = np.empty((k_cand, 3), dtype=np.float32)
+        for k in range(3):
+            lifted = pick(normal[k]) * eps
+            lifted += pick(points[k])
+            np.subtract(lifted, engine.offset[k], out=start[:, k], casting="same_kind")
+            np.divide(to_cam[k], dist_camera, out=unit[:, k], casting="same_kind")
+        dist_camera -= eps
+        blocked = engine.occluded_float32(start, unit, dist_camera.astype(np.float32))
+        return cand if not blocked.any() else cand[~blocked]
 
 
 def _picker(idx: np.ndarray, size: int) -> Callable[[np.ndarray], np.ndarray]:

@@ -1,10 +1,11 @@
-"""The one place that talks to FCL: the sensor body (a box in the sensor frame) against the
-part's mesh, the fixtures and the table, for every pose of a trajectory, scanning or not.
+"""The sensor body (a box in the sensor frame) against the part's mesh, the fixtures and the
+table, for every pose of a trajectory, scanning or not.
 
 `CollisionChecker` builds a mesh's BVH once; `check` answers per pose with a signed
 distance (negative = penetration), after an AABB prefilter that keeps FCL for the poses near
 the mesh. `CellChecker` (`checker_for`) takes the least distance over the part, each fixture
-and the table plane, and says which of them each pose comes nearest.
+and the table plane, and says which of them each pose comes nearest. The FCL shapes are
+built in `collision_shapes`; a robot's links, as capsules, are tested in `capsule_collision`.
 """
 
 from __future__ import annotations
@@ -19,15 +20,11 @@ import numpy as np
 
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.world.cell import Cell
+from scanplan.world.collision_shapes import body_corners, mesh_object, rounded_box, triangle_bvh
 from scanplan.world.part import Part
 
-# The unit cube's corners, for the body box's 8 corners in the sensor frame.
-_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 # An inside test casts one ray in a direction no axis-aligned edge of a mesh lies along.
 _INSIDE_RAY = np.array([0.267, 0.534, 0.802]) / np.linalg.norm([0.267, 0.534, 0.802])
-# Rotations taking a capsule's axis (its z) onto x and onto y.
-_TURN_Z_TO_X = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
-_TURN_Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 # The most poses after a measured one that may be cleared by it (`CollisionChecker.check`).
 _RIDE = 256
 # Asked only whether poses collide: after a pose measured within _HOVER_MM of the clearance
@@ -94,12 +91,6 @@ class CollisionReport:
         if d is None:
             return np.zeros(len(self), bool)
         return (d < self.clearance_mm) | (d <= 0.0)
-
-
-def body_corners(sensor: SensorSpec) -> np.ndarray:
-    """(8, 3) corners of the sensor body in the sensor frame, mm."""
-    lo, hi = sensor.body_bounds_mm
-    return lo + _CORNERS * (hi - lo)
 
 
 class CollisionChecker:
@@ -277,26 +268,11 @@ class CollisionChecker:
     def _rounded(
         self, clearance_mm: float
     ) -> list[tuple[fcl.CollisionObject, np.ndarray, np.ndarray]]:
-        """The slabs and capsules of `_within`, each with its rotation and offset from the
-        body box's centre in the sensor frame."""
+        """The slabs and capsules of `_within` (`rounded_box`), each with its rotation and
+        offset from the body box's centre in the sensor frame; built once per clearance."""
         pieces = self._rounded_by.get(clearance_mm)
         if pieces is None:
-            half, c = self.body_half, clearance_mm
-            pieces = []
-            for k in range(3):  # the slabs
-                size = 2 * half + 2 * c * np.eye(3)[k]
-                pieces.append((fcl.CollisionObject(fcl.Box(*size)), np.eye(3), np.zeros(3)))
-            # A capsule lies along its z: turned onto x, y or z, along each of the box's edges.
-            turns = (_TURN_Z_TO_X, _TURN_Z_TO_Y, np.eye(3))
-            for k in range(3):
-                i, j = [a for a in range(3) if a != k]
-                for si in (-1.0, 1.0):
-                    for sj in (-1.0, 1.0):
-                        shift = np.zeros(3)
-                        shift[i], shift[j] = si * half[i], sj * half[j]
-                        capsule = fcl.Capsule(c, 2 * half[k])
-                        pieces.append((fcl.CollisionObject(capsule), turns[k], shift))
-            self._rounded_by[clearance_mm] = pieces
+            pieces = self._rounded_by[clearance_mm] = rounded_box(self.body_half, clearance_mm)
         return pieces
 
     # ---- internals --------------------------------------------------------------------------
@@ -306,9 +282,9 @@ class CollisionChecker:
         if self._part_fcl is None:
             part = self._part_ref()
             if part is not None:  # shared with the arm's checks of the same part
-                self._part_fcl = _mesh_object(part)
+                self._part_fcl = mesh_object(part)
             else:  # the checker outlived its part: its own copy
-                bvh = _bvh(self.vertices, self._faces)
+                bvh = triangle_bvh(self.vertices, self._faces)
                 self._part_fcl = fcl.CollisionObject(bvh, fcl.Transform())
         return self._part_fcl
 
@@ -370,40 +346,6 @@ class CollisionChecker:
         fcl.collide(self._box_obj, self._part_obj, request, result)
         depths = [c.penetration_depth for c in result.contacts]
         return float(min(depths)) if depths else 0.0
-
-
-_BVHS: weakref.WeakKeyDictionary[Part, fcl.BVHModel] = weakref.WeakKeyDictionary()
-_MESH_OBJECTS: weakref.WeakKeyDictionary[Part, fcl.CollisionObject] = weakref.WeakKeyDictionary()
-
-
-def _mesh_bvh(part: Part) -> fcl.BVHModel:
-    """The part's mesh as an FCL BVH, in its own coordinates; built once while the part
-    lives (seconds for a large mesh)."""
-    if part not in _BVHS:
-        _BVHS[part] = _bvh(part.mesh.vertices, part.mesh.faces)
-    return _BVHS[part]
-
-
-def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(vertices), len(faces))
-    bvh.addSubModel(np.asarray(vertices, np.float64), np.asarray(faces, np.int32))
-    bvh.endModel()
-    return bvh
-
-
-def _mesh_object(part: Part) -> fcl.CollisionObject:
-    """The part's mesh as an FCL object in part coordinates, shared by the sensor's and the
-    arm's checks, which never move it. A part turned from another (`Part.turned`, a view)
-    is that one's BVH, turned."""
-    if part not in _MESH_OBJECTS:
-        if part.turned_from is not None:
-            base, R = part.turned_from
-            transform = fcl.Transform(np.asarray(R[:3, :3], np.float64), np.zeros(3))
-            _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(base), transform)
-        else:
-            _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(part), fcl.Transform())
-    return _MESH_OBJECTS[part]
 
 
 _CHECKERS: weakref.WeakKeyDictionary[Part, dict[bytes, CollisionChecker]] = (
@@ -474,177 +416,3 @@ def checker_for(part: Part, sensor: SensorSpec, cell: Cell | None = None) -> Cel
     """The checker of this part, its cell (None: nothing around the part) and this sensor
     body; the meshes' BVHs are built once while their parts live."""
     return CellChecker(part, sensor, cell or Cell())
-
-
-def _z_to(direction: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotations taking +z onto the unit vectors `direction` (n, 3)."""
-    d = direction / np.linalg.norm(direction, axis=1, keepdims=True)
-    v = np.stack([-d[:, 1], d[:, 0], np.zeros(len(d))], axis=1)  # z x d
-    c = d[:, 2]
-    vx = np.zeros((len(d), 3, 3))
-    vx[:, 0, 1], vx[:, 0, 2], vx[:, 1, 0] = -v[:, 2], v[:, 1], v[:, 2]
-    vx[:, 1, 2], vx[:, 2, 0], vx[:, 2, 1] = -v[:, 0], -v[:, 1], v[:, 0]
-    flipped = c < -1 + 1e-9  # d = -z: half a turn about x
-    k = np.where(flipped, 0.0, 1.0 / np.where(flipped, 1.0, 1.0 + c))
-    R = np.eye(3) + vx + (vx @ vx) * k[:, None, None]
-    R[flipped] = np.diag([1.0, -1.0, -1.0])
-    return R
-
-
-def _surface_points(mesh, spacing_mm: float) -> np.ndarray:
-    """(k, 3) points on the mesh, every surface point within 2·`spacing_mm` of one: its
-    vertices, and on each larger triangle a grid along its two edges from an end of its
-    shortest edge, at most `spacing_mm` apart along each (a sliver gets a row of points, not
-    a square grid of its longest edge)."""
-    tri = np.asarray(mesh.triangles, dtype=np.float64)
-    edge = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from vertex k
-    start = edge.argmin(axis=1)  # the shortest edge's first vertex
-    order = (start[:, None] + np.arange(3)) % 3
-    tri = np.take_along_axis(tri, order[:, :, None], axis=1)
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    k1 = np.ceil(np.linalg.norm(e1, axis=1) / spacing_mm).astype(np.int64)
-    k2 = np.ceil(np.linalg.norm(e2, axis=1) / spacing_mm).astype(np.int64)
-    points = [np.asarray(mesh.vertices, dtype=np.float64)]
-    big = (k1 > 1) | (k2 > 1)
-    for a, b in set(zip(k1[big].tolist(), k2[big].tolist(), strict=True)):
-        pick = big & (k1 == a) & (k2 == b)
-        i, j = np.meshgrid(np.arange(a + 1) / a, np.arange(b + 1) / b, indexing="ij")
-        inside = i + j <= 1 + 1e-9
-        u, v = i[inside], j[inside]
-        grid = (
-            tri[pick, None, 0]
-            + u[None, :, None] * e1[pick, None]
-            + v[None, :, None] * e2[pick, None]
-        )
-        points.append(grid.reshape(-1, 3))
-    return np.vstack(points)
-
-
-class _SurfaceProxy:
-    """A mesh's surface as points (`_surface_points`, a k-d tree over them): a quick test
-    that clears capsules far from the mesh before FCL measures the rest. Every surface point
-    lies within `bound_mm` of one, so a capsule whose axis keeps further than its radius plus
-    that from every point cannot touch the mesh; one whose axis comes within its radius of a
-    point surely does."""
-
-    def __init__(self, part: Part) -> None:
-        from scipy.spatial import cKDTree
-
-        extent = float(np.ptp(part.bounds, axis=0).max())
-        # The axes are sampled at `pitch`, the surface at half of it: fine enough to clear
-        # capsules a few mm away, coarse enough to build in well under a second.
-        self.pitch = max(extent / 128.0, 2.0)
-        self.bound_mm = self.pitch / 2
-        self._tree = cKDTree(_surface_points(part.mesh, self.bound_mm / 2))
-
-    def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
-        mesh, and those that surely do (a point of the surface lies inside the capsule).
-        Points every `pitch` along each axis stand for it (the axis is within pitch / 2 of
-        one of them)."""
-        a, b = segments[:, 0], segments[:, 1]
-        length = np.linalg.norm(b - a, axis=1)
-        count = np.ceil(length / self.pitch).astype(int) + 1
-        owner = np.repeat(np.arange(len(segments)), count)
-        start = np.r_[0, np.cumsum(count)[:-1]]
-        t = (np.arange(count.sum()) - np.repeat(start, count)) / np.repeat(
-            np.maximum(count - 1, 1), count
-        )
-        points = a[owner] + t[:, None] * (b - a)[owner]
-        reach = radii + self.bound_mm + 0.5 * self.pitch
-        # An approximate nearest point (at most 1 + eps times as far as the nearest) is
-        # much quicker to find in a dense cloud and keeps both verdicts sound.
-        eps = 1.0
-        d, _ = self._tree.query(
-            points, eps=eps, distance_upper_bound=float((1 + eps) * reach.max())
-        )
-        maybe, surely = np.zeros(len(segments), bool), np.zeros(len(segments), bool)
-        np.logical_or.at(maybe, owner, d <= (1 + eps) * reach[owner])
-        # The axis points lie on the axis, the tree's on the surface.
-        np.logical_or.at(surely, owner, d <= radii[owner])
-        return maybe, surely
-
-
-class CellObstacles:
-    """The part, its fixtures and the table block (`Cell.table_block`) in part coordinates,
-    for capsules that enclose a robot's links: `capsules_hit` says which obstacle, if any,
-    comes within a clearance of each capsule; and, given the sensor, whether its body keeps
-    its clearance at poses other than those planned (`sensor_clear`)."""
-
-    NAMES = ("part", "fixture", "table")
-
-    def __init__(
-        self,
-        part: Part,
-        cell: Cell,
-        clearance_mm: float,
-        sensor: SensorSpec | None = None,
-    ) -> None:
-        # What every link and the sensor body keep from the part, a fixture and the table.
-        self.clearance_mm = float(clearance_mm)
-        # The sensor body, for poses the arm would fly otherwise than planned (turned).
-        self._sensor = None if sensor is None else checker_for(part, sensor, cell)
-        self._objects: list[tuple[int, fcl.CollisionObject, np.ndarray, _SurfaceProxy | None]] = [
-            (0, _mesh_object(part), np.asarray(part.bounds, np.float64), _SurfaceProxy(part))
-        ]
-        for fixture in cell.fixtures:
-            self._objects.append(
-                (
-                    1,
-                    _mesh_object(fixture),
-                    np.asarray(fixture.bounds, np.float64),
-                    _SurfaceProxy(fixture),
-                )
-            )
-        block = cell.table_block(part)
-        if block is not None:
-            lo, hi = block
-            box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(0.5 * (lo + hi)))
-            self._objects.append((2, box, np.array([lo, hi]), None))
-        self.table_block = block
-
-    def sensor_clear(self, poses: np.ndarray) -> np.ndarray:
-        """(n,) bool: the sensor body at poses (n, 4, 4) keeps its clearance from the part,
-        the fixtures and the table (all True when no sensor was given)."""
-        if self._sensor is None:
-            return np.ones(len(poses), bool)
-        return ~self._sensor.check(poses, self.clearance_mm).colliding
-
-    def capsules_hit(
-        self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float, exact: bool = True
-    ) -> np.ndarray:
-        """(n, k) int: for capsules (n, k, 2, 3) (segment ends in part coordinates, mm) of
-        radii (k,) or (n, k), the index into NAMES of an obstacle within `clearance_mm` of
-        the capsule, -1 where none is. An AABB test leaves FCL only the capsules near an
-        obstacle. exact=False: a capsule the pre-test cannot clear counts as hitting the
-        mesh (a verdict up to a few mm too cautious, without FCL: for ranking placements)."""
-        ends = np.asarray(ends, dtype=np.float64)
-        n, k = ends.shape[:2]
-        grown = np.broadcast_to(np.asarray(radii, dtype=np.float64), (n, k)) + clearance_mm
-        hit = np.full((n, k), -1)
-        lo = ends.min(axis=2) - grown[..., None]
-        hi = ends.max(axis=2) + grown[..., None]
-        request = fcl.CollisionRequest()
-        for kind, obstacle, (olo, ohi), proxy in self._objects:
-            near = (lo <= ohi).all(axis=2) & (hi >= olo).all(axis=2) & (hit < 0)
-            rows, links = np.nonzero(near)
-            if proxy is not None and len(rows):
-                maybe, surely = proxy.within(ends[rows, links], grown[rows, links])
-                if not exact:
-                    surely = maybe
-                hit[rows[surely], links[surely]] = kind
-                rows, links = rows[maybe & ~surely], links[maybe & ~surely]
-            if not len(rows):
-                continue
-            seg = ends[rows, links]
-            axis = seg[:, 1] - seg[:, 0]
-            length = np.linalg.norm(axis, axis=1)
-            axis[length < 1e-9] = (0.0, 0.0, 1.0)  # a sphere: any axis will do
-            rot = _z_to(axis)
-            mid = 0.5 * (seg[:, 0] + seg[:, 1])
-            for i, j, R, c, h in zip(rows, links, rot, mid, length, strict=True):
-                shape = fcl.Capsule(float(grown[i, j]), float(max(h, 1e-6)))
-                capsule = fcl.CollisionObject(shape, fcl.Transform(R, c))
-                if fcl.collide(capsule, obstacle, request, fcl.CollisionResult()):
-                    hit[i, j] = kind
-        return hit

@@ -13,12 +13,12 @@ import trimesh
 from scanplan.core.quantities import ScanSpec, StepLimits
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import evaluate
-from scanplan.planning.dynamics import steps_between
 from scanplan.planning.pipeline import plan_path
 from scanplan.planning.planners.feedback import FeedbackPlanner
 from scanplan.planning.planners.fixed import FixedPlanner
 from scanplan.planning.planners.geometric import GeometricPlanner
 from scanplan.planning.shaping import CentredLookahead
+from scanplan.planning.step_model import steps_between
 from scanplan.planning.swaths import plan_swaths
 from scanplan.world.part import part_from_mesh
 

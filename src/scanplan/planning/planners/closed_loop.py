@@ -1,6 +1,6 @@
 """A pass planned by a controller in the loop (the rl and feedback planners): the controller
-picks each action from what the sensor measures, the shared step model (`dynamics`) turns it
-into the next pose, and two guards keep the pass going forward.
+picks each action from what the sensor measures, the shared step model (`step_model`, through
+`dynamics.PassDynamics`) turns it into the next pose, and two guards keep the pass going forward.
 """
 
 from __future__ import annotations
@@ -14,13 +14,8 @@ import numpy as np
 from scanplan.core.quantities import ScanSpec, StepLimits
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.planning.dynamics import (
-    DEFAULT_PITCH_PIVOT,
-    PassDynamics,
-    Step,
-    pass_geometry,
-    step_budget,
-)
+from scanplan.planning.dynamics import PassDynamics, Step, pass_geometry, step_budget
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT
 from scanplan.planning.swaths import Swath, frame_poses
 from scanplan.sensor.profilometer import LineProfilometer, Profile
 from scanplan.world.part import Part
@@ -94,7 +89,7 @@ def drive_passes(
     pose's ray cast is mostly overhead); each pass's poses are those it would have alone.
     measure_with: the sensor the controller measures with (`SensorFactory`); where each pass
     starts and ends is the planned part's (the CAD's), whatever that sensor sees.
-    pitch_pivot: where the controller's pitch steps turn (`dynamics.PITCH_PIVOTS`)."""
+    pitch_pivot: where the controller's pitch steps turn (`step_model.PITCH_PIVOTS`)."""
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
@@ -102,18 +97,12 @@ def drive_passes(
     sim = LineProfilometer(part, sensor) if measure_with is None else measure_with(part, sensor)
     ds_opt = spec.delta_s_opt_mm
     hold = ds_opt / limits.dy_max_mm  # the action "advance Δs_opt"
-    runs: list[_Run] = []
-    for swath in swaths:
-        start_time = time.perf_counter()
-        dyn = PassDynamics(part, swath, plan_spec, sim, limits, roll=roll, pitch_pivot=pitch_pivot)
-        geo = pass_geometry(part, swath, plan_spec)
-        _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
-        dyn.start(dyn.aligned_start(geo.s_first_mm))
-        run = _Run(
-            dyn, geo.s_last_mm, step_limit, dyn.state.copy(), [dyn.pose()], [dyn.progress_mm]
+    runs = [
+        _start_run(
+            PassDynamics(part, swath, plan_spec, sim, limits, roll=roll, pitch_pivot=pitch_pivot)
         )
-        run.plan_time_s = time.perf_counter() - start_time
-        runs.append(run)
+        for swath in swaths
+    ]
 
     def measure(batch: list[tuple[_Run, Step]]) -> list[Profile]:
         passes = [run.dyn.swath for run, _ in batch]
@@ -165,20 +154,35 @@ def drive_passes(
             run.progress.append(run.dyn.progress_mm)
             run.plan_time_s += share
             run.done = run.dyn.progress_mm >= run.s_last_mm or run.steps >= run.step_limit
-    out = []
-    for run in runs:
-        poses_arr = np.stack(run.poses)
-        out.append(
-            Trajectory(
-                poses_arr,
-                np.full(len(poses_arr), run.dyn.swath.index),
-                np.ones(len(poses_arr), bool),
-                plan_time_s=run.plan_time_s,
-                planner=name,
-                meta={
-                    "stall_overrides": run.stall_overrides,
-                    "backward_overrides": run.backward_overrides,
-                },
-            )
-        )
-    return out
+    return [_trajectory_of(run, name) for run in runs]
+
+
+def _start_run(dyn: PassDynamics) -> _Run:
+    """A pass ready to drive: the sensor aligned at the first station that sees the part,
+    ending at the last (the planned part's, whatever `dyn`'s sensor sees), with its step
+    budget. Its plan time starts with the alignment's."""
+    start_time = time.perf_counter()
+    part, swath, plan_spec = dyn.part, dyn.swath, dyn.spec
+    geo = pass_geometry(part, swath, plan_spec)
+    _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
+    dyn.start(dyn.aligned_start(geo.s_first_mm))
+    run = _Run(dyn, geo.s_last_mm, step_limit, dyn.state.copy(), [dyn.pose()], [dyn.progress_mm])
+    run.plan_time_s = time.perf_counter() - start_time
+    return run
+
+
+def _trajectory_of(run: _Run, name: str) -> Trajectory:
+    """A driven pass as a trajectory of planner `name`: every pose scans, and its meta counts
+    the guards' overrides."""
+    poses_arr = np.stack(run.poses)
+    return Trajectory(
+        poses_arr,
+        np.full(len(poses_arr), run.dyn.swath.index),
+        np.ones(len(poses_arr), bool),
+        plan_time_s=run.plan_time_s,
+        planner=name,
+        meta={
+            "stall_overrides": run.stall_overrides,
+            "backward_overrides": run.backward_overrides,
+        },
+    )

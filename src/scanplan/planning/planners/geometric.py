@@ -29,7 +29,6 @@ from scanplan.core.quantities import (
 )
 from scanplan.core.reward import reward_terms
 from scanplan.core.trajectory import Trajectory
-from scanplan.planning.dynamics import track, track_rolled
 from scanplan.planning.shaping import (
     PITCH_LEVER,
     ROLL_RATE,
@@ -37,6 +36,7 @@ from scanplan.planning.shaping import (
     Lookahead,
     RobustLookahead,
 )
+from scanplan.planning.step_model import track, track_rolled
 from scanplan.planning.swaths import Swath
 from scanplan.sensor.profilometer import LineProfilometer
 from scanplan.world.part import Part
@@ -318,7 +318,7 @@ class GeometricPlanner:
         self, grid, pitch_t, height_t, arc, roll_t, lookahead: Lookahead, spec: ScanSpec
     ):
         """`_stations` with roll: the sensor W_d from the footprint along the rolled beam;
-        tracked through the step model (`dynamics.track_rolled`). Returns (n, 5) states."""
+        tracked through the step model (`step_model.track_rolled`). Returns (n, 5) states."""
         wd = spec.working_distance_mm
         ds_opt = spec.delta_s_opt_mm
         lim = self.limits

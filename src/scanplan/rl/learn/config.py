@@ -15,7 +15,7 @@ from pydantic import TypeAdapter, ValidationError
 
 from scanplan.core.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, MAX_TIMESTEPS
 from scanplan.core.quantities import TRAINING_FAN_POINTS
-from scanplan.planning.dynamics import DEFAULT_PITCH_PIVOT, check_pitch_pivot
+from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.rl.env import TRAINING_SEGMENT_MM, SwathScanEnv
 from scanplan.rl.policy import EnvOptions, first_error
 

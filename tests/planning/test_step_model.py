@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from scanplan.core.quantities import StepLimits
-from scanplan.planning.dynamics import apply_step, limit_action, progress_mm, track_rolled
+from scanplan.planning.step_model import apply_step, limit_action, progress_mm, track_rolled
 from scanplan.planning.swaths import Swath
 
 WD = 400.0
