@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scanplan.core.context import PlanContext, recorded
 from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory, pass_bounds
+from scanplan.core.trajectory import Trajectory
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Matrix4 = Annotated[
@@ -152,10 +152,10 @@ class Plan:
         return [k for k, v in enumerate(self.views) if (v.holds(self.traj.swath) & scanning).any()]
 
     def passes_flown(self) -> int:
-        """The passes as flown: runs of scanning poses (a pass cut where a pose was dropped
-        counts as two, as the arm reconfigures between them)."""
-        start, _ = pass_bounds(self.traj.scanning, self.traj.swath)
-        return int(start.sum())
+        """The passes flown: the pass indices with a scanning pose, as the cycle time counts
+        them (a pass the arm splits at a flip is two; one cut where poses were dropped is
+        one pass of several runs)."""
+        return len(np.unique(self.traj.swath[self.traj.scanning]))
 
     def counts(self) -> str:
         """'3 views, 12 passes, 4 015 profiles': the one way every output counts a plan."""

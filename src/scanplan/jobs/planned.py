@@ -44,8 +44,8 @@ def planned_part(
     loaded = load_part(name, units or recorded_units)
     if not context.part_digest or geometry_digest(loaded) == context.part_digest:
         return loaded
-    planned = f"{context.part or 'unnamed'} in {recorded_units}"
-    given = f"{name} in {units or recorded_units}"
+    planned = f"{context.part or 'unnamed'} [{recorded_units}]"
+    given = f"{name} [{units or recorded_units}]"
     same_file = context.part and _same_file(name, context.part)
     hint = (
         f"the plan was made with --units {recorded_units}"
