@@ -178,6 +178,60 @@ def _rotation_deg(poses: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
 
 
+def _joint_bounds(
+    joints_rad: np.ndarray | None, n: int, limits: MotionLimits
+) -> tuple[np.ndarray, np.ndarray]:
+    """(n-1,) each segment's lower bound on its time from its joints (0 where unknown) and
+    (n-1,) its rest-to-rest joint move, slowest joint (NaN where unknown); joints_rad as
+    `cycle_time`'s."""
+    joint_cruise = np.zeros(n - 1)
+    joint_trap = np.full(n - 1, np.nan)
+    if joints_rad is None:
+        return joint_cruise, joint_trap
+    q = np.degrees(np.asarray(joints_rad, dtype=np.float64))
+    if q.shape != (n, 6):
+        raise ValueError(f"joints must be ({n}, 6), got {q.shape}")
+    dq = np.abs(np.diff(q, axis=0))
+    known = np.all(np.isfinite(dq), axis=1)
+    dq = np.where(known[:, None], dq, 0.0)
+    speeds = np.asarray(limits.joint_speed_deg_s)
+    joint_cruise = (dq / speeds).max(axis=1)
+    trap = trapezoid_time_s(dq, speeds, np.asarray(limits.joint_accel_deg_s2)).max(axis=1)
+    return joint_cruise, np.where(known, trap, np.nan)
+
+
+def _move_seconds(
+    moving: np.ndarray,
+    through: np.ndarray,
+    length: np.ndarray,
+    turn: np.ndarray,
+    joint_cruise: np.ndarray,
+    segment_s: np.ndarray,
+    travel_v: float,
+    accel: float,
+    limits: MotionLimits,
+) -> np.ndarray:
+    """(m,) seconds of each move, a run of the `moving` (n-1,) segments: a stretch blended
+    through its targets (`through`, (n,)) one trapezoid at the travel speed plus what its
+    rotation or joints need beyond that, a lone segment between two stops its `segment_s`."""
+    move_id = np.cumsum(moving & ~np.r_[False, moving[:-1]]) - 1
+    # Stretches of a move: a new one starts at each segment whose first target is a stop.
+    stretch_id = np.cumsum(moving & ~(through[:-1] & np.r_[False, moving[:-1]])) - 1
+    ids = stretch_id[moving]
+    n_stretch = int(ids.max()) + 1 if ids.size else 0
+    stretch_n = np.bincount(ids, minlength=n_stretch)
+    stretch_len = np.bincount(ids, weights=length[moving], minlength=n_stretch)
+    behind = np.maximum(turn / limits.angular_speed_deg_s, joint_cruise) - length / travel_v
+    stretch_extra = np.bincount(ids, weights=np.maximum(behind, 0.0)[moving], minlength=n_stretch)
+    lone = np.bincount(ids, weights=segment_s[moving], minlength=n_stretch)
+    stretch_s = np.where(
+        stretch_n > 1, trapezoid_time_s(stretch_len, travel_v, accel) + stretch_extra, lone
+    )
+    stretch_move = np.zeros(n_stretch, dtype=np.intp)
+    stretch_move[ids] = move_id[moving]
+    return np.bincount(stretch_move, weights=stretch_s, minlength=len(np.unique(move_id[moving])))
+
+
 def cycle_time(
     traj: Trajectory,
     spec: ScanSpec,
@@ -219,19 +273,7 @@ def cycle_time(
     turn = _rotation_deg(poses)
     # Segment i runs from pose i to pose i+1; it scans if it ends inside a pass.
     in_pass = scanning[1:] & ~start[1:]
-    joint_cruise = np.zeros(n - 1)  # lower bound on a segment's time from its joints
-    joint_trap = np.full(n - 1, np.nan)  # rest-to-rest joint move, slowest joint
-    if joints_rad is not None:
-        q = np.degrees(np.asarray(joints_rad, dtype=np.float64))
-        if q.shape != (n, 6):
-            raise ValueError(f"joints must be ({n}, 6), got {q.shape}")
-        dq = np.abs(np.diff(q, axis=0))
-        known = np.all(np.isfinite(dq), axis=1)
-        dq = np.where(known[:, None], dq, 0.0)
-        speeds = np.asarray(limits.joint_speed_deg_s)
-        joint_cruise = (dq / speeds).max(axis=1)
-        trap = trapezoid_time_s(dq, speeds, np.asarray(limits.joint_accel_deg_s2)).max(axis=1)
-        joint_trap = np.where(known, trap, np.nan)
+    joint_cruise, joint_trap = _joint_bounds(joints_rad, n, limits)
     has_joints = np.isfinite(joint_trap)
 
     # Moves: between exact stops, a lone segment is the slower of its translation and
@@ -250,23 +292,9 @@ def cycle_time(
     segment_s = np.where(
         joint_move, joint_trap, np.where(has_joints, np.fmax(cartesian, joint_trap), cartesian)
     )
-    moving = ~in_pass
-    move_id = np.cumsum(moving & ~np.r_[False, moving[:-1]]) - 1
-    # Stretches of a move: a new one starts at each segment whose first target is a stop.
-    stretch_id = np.cumsum(moving & ~(through[:-1] & np.r_[False, moving[:-1]])) - 1
-    ids = stretch_id[moving]
-    n_stretch = int(ids.max()) + 1 if ids.size else 0
-    stretch_n = np.bincount(ids, minlength=n_stretch)
-    stretch_len = np.bincount(ids, weights=length[moving], minlength=n_stretch)
-    behind = np.maximum(turn / limits.angular_speed_deg_s, joint_cruise) - length / travel_v
-    stretch_extra = np.bincount(ids, weights=np.maximum(behind, 0.0)[moving], minlength=n_stretch)
-    lone = np.bincount(ids, weights=segment_s[moving], minlength=n_stretch)
-    stretch_s = np.where(
-        stretch_n > 1, trapezoid_time_s(stretch_len, travel_v, accel) + stretch_extra, lone
+    move_s = _move_seconds(
+        ~in_pass, through, length, turn, joint_cruise, segment_s, travel_v, accel, limits
     )
-    stretch_move = np.zeros(n_stretch, dtype=np.intp)
-    stretch_move[ids] = move_id[moving]
-    move_s = np.bincount(stretch_move, weights=stretch_s, minlength=len(np.unique(move_id[moving])))
 
     # Passes: one trapezoid over the pass's length, plus whatever a segment's rotation or
     # joints need beyond its share at the scan speed.

@@ -126,6 +126,35 @@ def coverage_of(
     return Coverage(surface, scan_spec, col_stride, cover_radius, in_spec_radius, normals, plain)
 
 
+def _visibility_ceiling(
+    part: Part, surface: VisibleSurface, scan_spec: ScanSpec, seed: int
+) -> float | None:
+    """The share of the surface samples a sensor could see within the angle tolerance; None
+    where there is no sample."""
+    if not len(surface.points):
+        return None
+    # On the very samples in-spec coverage counts, so the two shares compare.
+    reachable = reachable_samples(part, surface, scan_spec.tol_angle_rad, seed=seed)
+    return float(reachable.mean())
+
+
+def _collision_summary(
+    part: Part, sensor: SensorSpec, context: PlanContext, traj: Trajectory, scan_spec: ScanSpec
+) -> dict[str, Any]:
+    """The collision figures of `Metrics`: the sensor at every pose of `traj` against the part
+    and the cell the plan was made in, kept `scan_spec.clearance_mm` clear."""
+    checker = checker_for(part, sensor, planned_cell(context, part))
+    collisions = checker.check(traj.poses, scan_spec.clearance_mm)
+    return {
+        "collisions_count": int(collisions.colliding.sum()),
+        "collisions_touching": int(collisions.touching.sum()),
+        "collisions_table": int(collisions.colliding_with("table").sum()),
+        "collisions_fixtures": int(collisions.colliding_with("fixtures").sum()),
+        "worst_penetration_mm": collisions.worst_penetration_mm,
+        "clearance_mm": collisions.clearance_mm,
+    }
+
+
 def _out_of_reach(part: Part) -> ValueError:
     return ValueError(
         f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
@@ -242,7 +271,6 @@ def evaluate(
     errors = PointErrors(wd, spec.z_range_mm)
     spacing = Spacing(u_dir, has_prev, context.full_beam_angle)
     coverage = coverage_of(surface, scan_spec, spec, oriented_normals(part)[surface.faces])
-    cover_radius, in_spec_radius = coverage.cover_radius, coverage.in_spec_radius
     sample = CloudSample(m * n_cols, max_map_points, seed)
     for observer in observers:
         observer.start(surface, spec, swath)
@@ -259,13 +287,8 @@ def evaluate(
     if errors.n_valid == 0:
         raise _out_of_reach(part)
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
-    ceiling_share = None
-    if ceiling and len(surface.points):
-        # On the very samples in-spec coverage counts, so the two shares compare.
-        reachable = reachable_samples(part, surface, scan_spec.tol_angle_rad, seed=seed)
-        ceiling_share = float(reachable.mean())
-    checker = checker_for(part, sensor, planned_cell(context, part))
-    collisions = checker.check(traj.poses, scan_spec.clearance_mm)
+    ceiling_share = _visibility_ceiling(part, surface, scan_spec, seed) if ceiling else None
+    collided = _collision_summary(part, sensor, context, traj, scan_spec)
     return Metrics(
         part=part.name,
         planner=traj.planner,
@@ -273,24 +296,19 @@ def evaluate(
         profiles=m,
         points_per_profile=n_cols,
         coverage_fraction=coverage_fraction,
-        coverage_radius_mm=cover_radius,
+        coverage_radius_mm=coverage.cover_radius,
         surface=context.surface,
         visible_area_mm2=surface.area_mm2,
         in_spec_coverage=in_spec_fraction,
         visibility_ceiling=ceiling_share,
-        in_spec_radius_mm=in_spec_radius,
+        in_spec_radius_mm=coverage.in_spec_radius,
         in_spec_cell_mm=2.0 * scan_spec.delta_s_opt_mm,
         tolerance_mm=scan_spec.tolerance_mm,
         tolerance_deg=math.degrees(scan_spec.tol_angle_rad),
         eval_time_s=time.perf_counter() - start_time,
         cloud=sample.cloud(),
         coverage_map=coverage_map,
-        collisions_count=int(collisions.colliding.sum()),
-        collisions_touching=int(collisions.touching.sum()),
-        collisions_table=int(collisions.colliding_with("table").sum()),
-        collisions_fixtures=int(collisions.colliding_with("fixtures").sum()),
-        worst_penetration_mm=collisions.worst_penetration_mm,
-        clearance_mm=collisions.clearance_mm,
+        **collided,
         **errors.summary(),
         **spacing.summary(wd, scan_spec),
         **_path_summary(traj, scan_spec, limits, targets, blended),

@@ -230,6 +230,70 @@ def _scores(
     return np.where(clear, out, out - 4.0)
 
 
+def _coarse_grid(
+    reach: float, step: float, lo: float, hi: float, yaw_step_deg: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(P, 4) rows (x, y, z, yaw rad): `step` apart over the disc of radius `reach`, every
+    yaw step, 7 heights from `lo` to `hi` (one where they meet); and those heights."""
+    g = np.arange(-reach, reach + 1e-9, step)
+    gx, gy = np.meshgrid(g, g, indexing="ij")
+    disc = np.hypot(gx, gy) <= reach
+    heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
+    n_yaws = math.ceil(360.0 / yaw_step_deg - 1e-9)
+    check_count(  # before the grid is allocated
+        int(disc.sum()) * len(heights) * n_yaws,
+        MAX_PLACEMENTS,
+        f"candidate placements (yaw step {yaw_step_deg:g} deg)",
+        "give a larger yaw step",
+    )
+    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
+    grid = np.array(
+        [
+            (x, y, z, a)
+            for x, y in zip(gx[disc], gy[disc], strict=True)
+            for z in heights
+            for a in yaws
+        ]
+    )
+    return grid, heights
+
+
+def _pattern_search(
+    robot: Robot,
+    T_part_flange: np.ndarray,
+    starts: np.ndarray,
+    centre: np.ndarray,
+    obstacles: CellObstacles | None,
+    best: np.ndarray,
+    best_scores: np.ndarray,
+    delta: np.ndarray,
+    height_range: tuple[float, float],
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Improve every candidate row of `best` (scored `best_scores`) at once: each round tries
+    a step of `delta` either way along x, y, z and yaw (z kept in `height_range`), keeps the
+    best that scores higher, and halves the steps when none does, until they are under 1 mm
+    or 24 rounds have run. Returns the candidates, their scores and how many were scored."""
+    lo, hi = height_range
+    evaluated = 0
+    moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
+    for _ in range(24):
+        trial = best[:, None] + moves[None] * delta
+        trial[..., 2] = np.clip(trial[..., 2], lo, hi)
+        flat = trial.reshape(-1, 4)
+        s = _scores(robot, T_part_flange, starts, _placements(flat, centre), obstacles)
+        evaluated += len(flat)
+        s = s.reshape(len(best), len(moves))
+        pick = s.argmax(axis=1)
+        improved = s[np.arange(len(best)), pick] > best_scores + 1e-9
+        best = np.where(improved[:, None], trial[np.arange(len(best)), pick], best)
+        best_scores = np.maximum(best_scores, s.max(axis=1))
+        if not improved.any():
+            delta = delta / 2
+            if delta[0] < 1.0:
+                break
+    return best, best_scores, evaluated
+
+
 def place(
     traj: Trajectory,
     robot: str | Path | Robot,
@@ -263,26 +327,7 @@ def place(
     # Coarse: a grid over the disc the arm reaches, every yaw step, a few heights.
     coarse = _subsample(traj, coarse_poses)
     step = reach / 6
-    g = np.arange(-reach, reach + 1e-9, step)
-    gx, gy = np.meshgrid(g, g, indexing="ij")
-    disc = np.hypot(gx, gy) <= reach
-    heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
-    n_yaws = math.ceil(360.0 / yaw_step_deg - 1e-9)
-    check_count(  # before the grid is allocated
-        int(disc.sum()) * len(heights) * n_yaws,
-        MAX_PLACEMENTS,
-        f"candidate placements (yaw step {yaw_step_deg:g} deg)",
-        "give a larger yaw step",
-    )
-    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
-    grid = np.array(
-        [
-            (x, y, z, a)
-            for x, y in zip(gx[disc], gy[disc], strict=True)
-            for z in heights
-            for a in yaws
-        ]
-    )
+    grid, heights = _coarse_grid(reach, step, lo, hi, yaw_step_deg)
     scores = _scores(
         arm, T_part_flange[coarse], _groups(traj, coarse), _placements(grid, centre), obstacles
     )
@@ -301,22 +346,10 @@ def place(
     best = grid[np.unique(seeds)]
     best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre), obstacles)
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
-    moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
-    for _ in range(24):
-        trial = best[:, None] + moves[None] * delta
-        trial[..., 2] = np.clip(trial[..., 2], lo, hi)
-        flat = trial.reshape(-1, 4)
-        s = _scores(arm, T_part_flange[fine], starts, _placements(flat, centre), obstacles)
-        evaluated += len(flat)
-        s = s.reshape(len(best), len(moves))
-        pick = s.argmax(axis=1)
-        improved = s[np.arange(len(best)), pick] > best_scores + 1e-9
-        best = np.where(improved[:, None], trial[np.arange(len(best)), pick], best)
-        best_scores = np.maximum(best_scores, s.max(axis=1))
-        if not improved.any():
-            delta = delta / 2
-            if delta[0] < 1.0:
-                break
+    best, best_scores, searched = _pattern_search(
+        arm, T_part_flange[fine], starts, centre, obstacles, best, best_scores, delta, (lo, hi)
+    )
+    evaluated += searched
 
     # The answer is judged on every pose, following the branch as a controller would; in a
     # cell the arm's links too (on a subsample while ranking): the candidate that keeps

@@ -13,7 +13,8 @@ import trimesh
 
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.judging.report.html import PlannerResult, metrics_table_html, write_html_report
+from scanplan.judging.report.figures import PlannerResult
+from scanplan.judging.report.html import metrics_table_html, write_html_report
 from scanplan.planning.swaths import Swath
 from scanplan.sensor.cloud import simulate_cloud
 from scanplan.world.part import part_from_mesh
@@ -79,7 +80,7 @@ def test_views_get_their_own_colours_and_the_surface_its_in_spec_map(tmp_path, r
     from dataclasses import replace
 
     from scanplan.judging import CoverageMap, SurfaceState
-    from scanplan.judging.report.html import VIEW_COLOURS
+    from scanplan.judging.report.scene import VIEW_COLOURS
 
     part, res = results
     traj = res[1].trajectory
@@ -131,10 +132,10 @@ def _figure_traces(page: str, div_id: str) -> dict[str, dict]:
 
 
 def test_the_page_is_compact_unless_asked_for_every_point(tmp_path, results, monkeypatch):
-    import scanplan.judging.report.html as report_html
+    import scanplan.judging.report.figures as report_figures
 
     part, res = results
-    monkeypatch.setattr(report_html, "MAX_POINTS_PER_PLANNER", 500)
+    monkeypatch.setattr(report_figures, "MAX_POINTS_PER_PLANNER", 500)
     total = len(res[0].cloud.points_part)
     assert total > 500
     for full, expected in ((False, 500), (True, total)):

@@ -17,8 +17,9 @@ from scanplan.robot.export import (
     export_program,
     parse_program,
 )
-from scanplan.robot.export.common import plan_motion, pose_from_xyzabc
+from scanplan.robot.export.common import plan_motion
 from scanplan.robot.export.krl import status_turn
+from scanplan.robot.export.rotations import pose_from_xyzabc
 
 TRAJ = snake_trajectory()
 

@@ -10,8 +10,9 @@ import yaml
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import rot_err, snake_trajectory
 from scanplan.robot.export import ExportOptions, export_program, parse_program_details
-from scanplan.robot.export.common import parse_pose_arg, plan_motion
+from scanplan.robot.export.common import plan_motion
 from scanplan.robot.export.ros import matrix_of
+from scanplan.robot.export.rotations import parse_pose_arg
 
 TRAJ = snake_trajectory()
 

@@ -18,6 +18,7 @@ from scanplan.judging import Metrics
 from scanplan.world.part import Part
 
 if TYPE_CHECKING:
+    from scanplan.judging.report.figures import PlannerResult
     from scanplan.judging.report.scene import ArmPoses
     from scanplan.world.cell import Cell
 
@@ -61,16 +62,8 @@ def write_report(
     relative name — text, bytes, or a Path to copy. full_3d: report.html's 3-D views at full
     resolution (every face, every sampled point) and its pictures at full size; by default
     they are decimated so the page stays a few MB."""
-    # Deferred: matplotlib and plotly load only when a report is written.
-    from scanplan.judging.report.html import PlannerResult, write_html_report
-    from scanplan.judging.report.maps import (
-        COVERAGE_MAP_NAME,
-        metrics_table_markdown,
-        plot_comparison,
-        plot_coverage_comparison,
-        plot_coverage_map,
-        plot_error_maps,
-    )
+    # Deferred: the HTML report draws with plotly and the arm (kinematics, FCL).
+    from scanplan.judging.report.html import write_html_report
 
     if not results:
         raise ValueError("the report needs at least one evaluated trajectory")
@@ -79,79 +72,14 @@ def write_report(
         raise ValueError(f"report: trajectory names must differ, got {names}")
     out_dir = Path(out_dir)
     with atomic_directory(out_dir, is_report) as tmp:
-
-        def has_map(m: Metrics) -> bool:
-            return m.coverage_map is not None and len(m.coverage_map.state) > 0
-
-        maps: list[Path] = []
-        if len(results) == 1:
-            r = results[0]
-            if has_map(r.metrics):
-                maps.append(
-                    plot_coverage_map(r.metrics, tmp / COVERAGE_MAP_NAME, r.name, part.name)
-                )
-            maps += plot_error_maps(r.metrics, tmp, planner=r.name, part=part.name)
-            data: dict = r.metrics.to_json_dict()
-        else:
-            for r in results:
-                if has_map(r.metrics):
-                    plot_coverage_map(
-                        r.metrics, tmp / r.name / COVERAGE_MAP_NAME, r.name, part.name
-                    )
-                plot_error_maps(r.metrics, tmp / r.name, planner=r.name, part=part.name)
-            sources = [(r.name, r.metrics) for r in results]
-            if all(has_map(r.metrics) for r in results):
-                maps.append(
-                    plot_coverage_comparison(sources, tmp / "in_spec_coverage_maps.png", part.name)
-                )
-            for quantity in ("distance", "orientation"):
-                path = tmp / f"{quantity}_error_maps.png"
-                maps.append(plot_comparison(sources, quantity, path, part=part.name))
-            data = {r.name: r.metrics.to_json_dict() for r in results}
-        detectable = [
-            (r.name, *found, (r.metrics.detectable or {}).get("type", "defect"))
-            for r in results
-            if (found := r.metrics.detectable_map) is not None
-        ]
-        if detectable:
-            from scanplan.judging.report.pod import plot_detectability_maps
-
-            maps.append(
-                plot_detectability_maps(
-                    [d[:3] for d in detectable],
-                    "/".join(sorted({d[3] for d in detectable})),
-                    tmp / DETECTABILITY_MAP_NAME,
-                    part.name,
-                )
-            )
-        for name, content in (files or {}).items():
-            target = tmp / name
-            if isinstance(content, Path):
-                target.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(content, target)
-            else:
-                atomic_write_bytes(
-                    target, content.encode("utf-8") if isinstance(content, str) else content
-                )
-        atomic_write_text(tmp / "metrics.json", json.dumps(data, indent=1, allow_nan=False) + "\n")
-        atomic_write_text(
-            tmp / "metrics.md",
-            f"# {title or part.name}\n\n"
-            + metrics_table_markdown([r.metrics for r in results], names),
-        )
+        maps = _plot_maps(tmp, part, results)
+        detectability = _plot_detectability(tmp, part, results)
+        if detectability is not None:
+            maps.append(detectability)
+        _write_files(tmp, files or {})
+        _write_metrics(tmp, part, results, title)
         notes = list(notes)
-        with_cloud = [
-            PlannerResult(
-                r.name,
-                r.trajectory,
-                cloud,
-                r.metrics.to_json_dict(),
-                r.metrics.coverage_map,
-                *_scene(part, r, notes),
-            )
-            for r in results
-            if (cloud := r.metrics.cloud) is not None and len(cloud.points_part)
-        ]
+        with_cloud = _planner_results(part, results, notes)
         if with_cloud:
             write_html_report(
                 tmp / "report.html",
@@ -164,6 +92,116 @@ def write_report(
                 full_3d=full_3d,
             )
     return out_dir / "report.html"
+
+
+def _has_map(m: Metrics) -> bool:
+    """Whether `m` holds an in-spec map to draw."""
+    return m.coverage_map is not None and len(m.coverage_map.state) > 0
+
+
+def _plot_maps(tmp: Path, part: Part, results: Sequence[Evaluated]) -> list[Path]:
+    """Plot the maps into the report directory `tmp`; return those the HTML report shows:
+    one result's own maps, or the side-by-side comparisons of several (each one's own maps
+    in its sub-directory)."""
+    # Deferred: the maps draw with matplotlib.
+    from scanplan.judging.report.maps import (
+        COVERAGE_MAP_NAME,
+        plot_comparison,
+        plot_coverage_comparison,
+        plot_coverage_map,
+        plot_error_maps,
+    )
+
+    maps: list[Path] = []
+    if len(results) == 1:
+        r = results[0]
+        if _has_map(r.metrics):
+            maps.append(plot_coverage_map(r.metrics, tmp / COVERAGE_MAP_NAME, r.name, part.name))
+        maps += plot_error_maps(r.metrics, tmp, planner=r.name, part=part.name)
+        return maps
+    for r in results:
+        if _has_map(r.metrics):
+            plot_coverage_map(r.metrics, tmp / r.name / COVERAGE_MAP_NAME, r.name, part.name)
+        plot_error_maps(r.metrics, tmp / r.name, planner=r.name, part=part.name)
+    sources = [(r.name, r.metrics) for r in results]
+    if all(_has_map(r.metrics) for r in results):
+        maps.append(plot_coverage_comparison(sources, tmp / "in_spec_coverage_maps.png", part.name))
+    for quantity in ("distance", "orientation"):
+        path = tmp / f"{quantity}_error_maps.png"
+        maps.append(plot_comparison(sources, quantity, path, part=part.name))
+    return maps
+
+
+def _plot_detectability(tmp: Path, part: Part, results: Sequence[Evaluated]) -> Path | None:
+    """The detectability maps of the results that measured one, side by side in one
+    picture; None when none did."""
+    detectable = [
+        (r.name, *found, (r.metrics.detectable or {}).get("type", "defect"))
+        for r in results
+        if (found := r.metrics.detectable_map) is not None
+    ]
+    if not detectable:
+        return None
+    # Deferred: as the maps.
+    from scanplan.judging.report.pod import plot_detectability_maps
+
+    return plot_detectability_maps(
+        [d[:3] for d in detectable],
+        "/".join(sorted({d[3] for d in detectable})),
+        tmp / DETECTABILITY_MAP_NAME,
+        part.name,
+    )
+
+
+def _write_files(tmp: Path, files: Mapping[str, str | bytes | Path]) -> None:
+    """The caller's extra outputs by relative name: text, bytes, or a Path to copy."""
+    for name, content in files.items():
+        target = tmp / name
+        if isinstance(content, Path):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(content, target)
+        else:
+            atomic_write_bytes(
+                target, content.encode("utf-8") if isinstance(content, str) else content
+            )
+
+
+def _write_metrics(tmp: Path, part: Part, results: Sequence[Evaluated], title: str | None) -> None:
+    """metrics.json (one result's metrics, or a mapping name -> metrics) and metrics.md."""
+    # Deferred: as the maps.
+    from scanplan.judging.report.maps import metrics_table_markdown
+
+    if len(results) == 1:
+        data: dict = results[0].metrics.to_json_dict()
+    else:
+        data = {r.name: r.metrics.to_json_dict() for r in results}
+    atomic_write_text(tmp / "metrics.json", json.dumps(data, indent=1, allow_nan=False) + "\n")
+    atomic_write_text(
+        tmp / "metrics.md",
+        f"# {title or part.name}\n\n"
+        + metrics_table_markdown([r.metrics for r in results], [r.name for r in results]),
+    )
+
+
+def _planner_results(
+    part: Part, results: Sequence[Evaluated], notes: list[str]
+) -> list[PlannerResult]:
+    """What the HTML report shows of each result with a simulated scan to draw."""
+    # Deferred: as the HTML report (write_report).
+    from scanplan.judging.report.figures import PlannerResult
+
+    return [
+        PlannerResult(
+            r.name,
+            r.trajectory,
+            cloud,
+            r.metrics.to_json_dict(),
+            r.metrics.coverage_map,
+            *_scene(part, r, notes),
+        )
+        for r in results
+        if (cloud := r.metrics.cloud) is not None and len(cloud.points_part)
+    ]
 
 
 def _scene(part: Part, result: Evaluated, notes: list[str]) -> tuple[Cell | None, ArmPoses | None]:

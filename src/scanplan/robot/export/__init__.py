@@ -22,9 +22,9 @@ from scanplan.robot.export.common import (
     Motion,
     Parsed,
     flange_poses,
-    parse_pose_arg,
     plan_motion,
 )
+from scanplan.robot.export.rotations import parse_pose_arg
 
 __all__ = [
     "DIRECTORY_FORMATS",

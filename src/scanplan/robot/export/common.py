@@ -1,4 +1,5 @@
-"""Frame maths, options and the motion plan shared by every robot-program dialect.
+"""Options, the motion plan and the read-back helpers shared by every robot-program dialect
+(the rotation conventions they share: `rotations`).
 
 Every dialect writes the same `Motion`: the poses of the program's TCP in the robot base
 frame, a commanded speed per move and where the path may be blended. The TCP is where the
@@ -13,13 +14,10 @@ five files can never disagree; their parsers undo the standoff they record
 from __future__ import annotations
 
 import re
-import warnings
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory, pass_bounds
@@ -300,55 +298,6 @@ def flange_poses(traj: Trajectory, options: ExportOptions) -> np.ndarray:
     """(n, 4, 4) `T_base_flange` in mm, the input of `scanplan.robot.check_reach`: the same
     whichever TCP the program flies (`T_base_tcp @ inv(tool)` is this)."""
     return options.part_pose @ traj.poses @ np.linalg.inv(options.tcp)
-
-
-# --- rotations ---------------------------------------------------------------------------
-
-
-def euler_zyx_deg(R: np.ndarray) -> np.ndarray:
-    """(…, 3) KUKA A, B, C: intrinsic Z-Y'-X'' Euler angles in degrees."""
-    with warnings.catch_warnings():
-        # At B = ±90° scipy warns and sets C = 0; the angles still reproduce the rotation.
-        warnings.simplefilter("ignore", UserWarning)
-        return Rotation.from_matrix(R).as_euler("ZYX", degrees=True)
-
-
-def pose_from_xyzabc(values: Iterable[float]) -> np.ndarray:
-    """4x4 from x, y, z (mm) and KUKA A, B, C (degrees, intrinsic ZYX)."""
-    v = np.asarray(list(values), dtype=np.float64)
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_euler("ZYX", v[3:6], degrees=True).as_matrix()
-    T[:3, 3] = v[:3]
-    return T
-
-
-def quat_wxyz(R: np.ndarray) -> np.ndarray:
-    """(…, 4) unit quaternions, scalar first, w >= 0 so files are deterministic."""
-    xyzw = Rotation.from_matrix(R).as_quat(canonical=True)
-    return np.concatenate([xyzw[..., 3:], xyzw[..., :3]], axis=-1)
-
-
-def poses_from_parts(xyz_mm: np.ndarray, rot: Rotation) -> np.ndarray:
-    poses = np.tile(np.eye(4), (len(xyz_mm), 1, 1))
-    poses[:, :3, :3] = rot.as_matrix().reshape(-1, 3, 3)
-    poses[:, :3, 3] = xyz_mm
-    return poses
-
-
-def parse_pose_arg(s: str) -> np.ndarray:
-    """ "x,y,z,A,B,C" -> 4x4: x, y, z in mm, then A, B, C in degrees as KUKA writes them
-    (intrinsic ZYX Euler: A about Z, B about the new Y', C about the new X'')."""
-    cells = [c.strip() for c in str(s).split(",")]
-    usage = "expected 6 comma-separated numbers x,y,z (mm),A,B,C (deg, ZYX Euler as KUKA)"
-    if len(cells) != 6:
-        raise ValueError(f"pose {s!r}: {usage}, got {len(cells)} value(s)")
-    try:
-        values = [float(c) for c in cells]
-    except ValueError:
-        raise ValueError(f"pose {s!r}: {usage}; not a number in it") from None
-    if not np.isfinite(values).all():
-        raise ValueError(f"pose {s!r}: values must be finite")
-    return pose_from_xyzabc(values)
 
 
 # --- reading programs back -----------------------------------------------------------------

@@ -16,10 +16,9 @@ from scanplan.robot.export.common import (
     ExportOptions,
     Motion,
     Parsed,
-    poses_from_parts,
-    quat_wxyz,
     sensor_poses,
 )
+from scanplan.robot.export.rotations import poses_from_parts, quat_wxyz
 
 SUFFIX = ".csv"
 COLUMNS = (*CSV_COLUMNS, "speed_mm_s", "blend_mm", "standoff_mm")

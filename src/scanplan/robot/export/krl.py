@@ -14,14 +14,13 @@ from scanplan.robot.export.common import (
     Motion,
     Parsed,
     PassTracker,
-    euler_zyx_deg,
     joint_move_targets,
-    pose_from_xyzabc,
     read_standoff,
     scan_output,
     sensor_poses,
     standoff_note,
 )
+from scanplan.robot.export.rotations import euler_zyx_deg, pose_from_xyzabc
 
 SUFFIX = ".src"
 DEFAULT_SCAN_OUTPUT = "1"  # $OUT[1]

@@ -16,14 +16,13 @@ from scanplan.robot.export.common import (
     PassTracker,
     floats,
     joint_move_targets,
-    poses_from_parts,
-    quat_wxyz,
     read_standoff,
     scan_output,
     sensor_poses,
     standoff_note,
     target_joints,
 )
+from scanplan.robot.export.rotations import poses_from_parts, quat_wxyz
 
 SUFFIX = ".mod"
 DEFAULT_SCAN_OUTPUT = "doScan"

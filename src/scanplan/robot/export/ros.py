@@ -23,11 +23,10 @@ from scanplan.robot.export.common import (
     ExportOptions,
     Motion,
     Parsed,
-    poses_from_parts,
-    quat_wxyz,
     sensor_poses,
     standoff_note,
 )
+from scanplan.robot.export.rotations import poses_from_parts, quat_wxyz
 
 SUFFIX = ".yaml"
 

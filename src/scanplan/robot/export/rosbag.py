@@ -37,7 +37,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from scanplan.core.files import replace_directory
-from scanplan.robot.export.common import ExportOptions, Motion, poses_from_parts, sensor_poses
+from scanplan.robot.export.common import ExportOptions, Motion, sensor_poses
 from scanplan.robot.export.ros import (
     arrival_times,
     base_poses,
@@ -46,6 +46,7 @@ from scanplan.robot.export.ros import (
     split_stamp,
     static_transforms,
 )
+from scanplan.robot.export.rotations import poses_from_parts
 
 PATH_TOPIC = "/scanplan/path"
 POSES_TOPIC = "/scanplan/poses"

@@ -17,12 +17,12 @@ from scanplan.robot.export.common import (
     PassTracker,
     floats,
     joint_move_targets,
-    poses_from_parts,
     read_standoff,
     scan_output,
     sensor_poses,
     standoff_note,
 )
+from scanplan.robot.export.rotations import poses_from_parts
 
 SUFFIX = ".script"
 DEFAULT_SCAN_OUTPUT = "0"  # standard digital output 0
