@@ -16,6 +16,7 @@ import numpy as np
 import trimesh
 
 from scanplan.core.context import PlanContext
+from scanplan.core.plan import Plan
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
@@ -131,7 +132,7 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
 def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
     """The views and pass lines a plan records, in its order, for running it in closed
     loop; ValueError (one line) for a plan that records none, or was fitted to a robot."""
-    if traj.meta.get("robot"):
+    if Plan.of(traj, where).arm is not None:
         raise ValueError(
             f"{where} was fitted to a robot (passes split or turned): the closed loop runs "
             "the plan as planned on the CAD; evaluate the plan made without --robot"

@@ -5,13 +5,13 @@ with the poses it cannot fly marked. Plotly traces only; `html` puts them in a p
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from scanplan.core.context import recorded
+from scanplan.core.plan import Plan
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot import check_reach, get_robot
@@ -139,29 +139,16 @@ def check_arm(
     )
 
 
-def recorded_arm(robot: Mapping[str, Any]) -> tuple[str, np.ndarray, np.ndarray]:
-    """(robot, T_base_part, T_flange_sensor) from a plan's `meta["robot"]` record;
-    ValueError naming the field that is missing or malformed."""
-    try:
-        name = str(robot["robot"])
-        poses = [np.asarray(robot[k], dtype=np.float64) for k in ("T_base_part", "T_flange_sensor")]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"the plan's robot record is incomplete or malformed ({exc})") from None
-    for key, T in zip(("T_base_part", "T_flange_sensor"), poses, strict=True):
-        if T.shape != (4, 4) or not np.isfinite(T).all():
-            raise ValueError(f"the plan's robot record: {key} is not a finite 4 x 4 pose")
-    return name, poses[0], poses[1]
-
-
 def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]:
-    """The cell `traj` was planned in around `part` and, for a plan made for an arm
-    (`meta["robot"]`), that arm along it. ValueError or OSError if a fixture file or the
-    arm's file is gone or the record is malformed."""
-    cell = planned_cell(recorded(traj, ScanSpec()), part)
-    record = traj.meta.get("robot")
-    if not record:
+    """The cell `traj` was planned in around `part` and, for a plan made for an arm, that
+    arm along it. ValueError or OSError if a fixture file or the arm's file is gone or the
+    record is malformed."""
+    plan = Plan.of(traj)
+    cell = planned_cell(plan.context, part)
+    if plan.arm is None:
         return cell, None
-    return cell, check_arm(traj, *recorded_arm(record), part, cell)
+    arm = plan.arm
+    return cell, check_arm(traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell)
 
 
 # ---- traces -------------------------------------------------------------------------------
