@@ -15,7 +15,7 @@ import time
 import fcl
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.world.collision import CollisionChecker

@@ -20,7 +20,8 @@ from kinds import KINDS  # parts of kinds the shared set lacks (benchmarks/)
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import plan_scan, plan_views
+from scanplan.planning.pass_path import plan_scan
+from scanplan.planning.pipeline import plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.world.part import load_part
 

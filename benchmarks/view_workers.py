@@ -16,7 +16,8 @@ import numpy as np
 from compare_views import _parts  # the shared parts and the kinds, as compare_views loads them
 
 from scanplan.core.quantities import OVERLAP, ScanSpec
-from scanplan.planning.pipeline import ViewRaster, choose_views
+from scanplan.planning.pass_path import ViewRaster
+from scanplan.planning.view_choice import choose_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.rl.planners import make_planner
 from scanplan.world.cell import Cell

@@ -28,7 +28,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics, evaluate
-from scanplan.planning.pipeline import ViewRaster, plan_path
+from scanplan.planning.pass_path import ViewRaster, plan_path
 from scanplan.planning.swaths import Swath, plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import ExportOptions, parse_pose_arg

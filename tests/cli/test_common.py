@@ -185,7 +185,7 @@ def test_interrupted_write_leaves_no_file(files, tmp_path, monkeypatch, command)
 def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, monkeypatch):
     from scanplan.core.plan_file import read_csv
     from scanplan.core.quantities import ScanSpec
-    from scanplan.planning.pipeline import plan_scan
+    from scanplan.planning.pass_path import plan_scan
     from scanplan.rl.planners import make_planner
     from scanplan.sensor.cloud import simulate_cloud
     from scanplan.world.part import load_part

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.world.part import load_part

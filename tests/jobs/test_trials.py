@@ -29,6 +29,7 @@ from scanplan.jobs.trials import (
 from scanplan.judging import SurfaceState, evaluate, robustness, trial_tasks
 from scanplan.planning.pipeline import plan_views
 from scanplan.planning.planners import FeedbackPlanner, GeometricPlanner
+from scanplan.planning.view_choice import choose_views
 from scanplan.sensor.perturb import Perturbation
 from scanplan.world.part import part_from_mesh
 from scanplan.world.parts import heightfield_solid
@@ -72,8 +73,9 @@ def two_views(ramp, tmp_path_factory):
     """The ramp's top (its sides left out) planned by feedback with roll and --views auto:
     a top view and one tilted 80° towards +x; read back from its file. Views adding less
     than MIN_VIEW_GAIN are left out (no per-second rule), so there are just these two."""
-    choose = functools.partial(pipeline.choose_views, min_gain_per_s=math.inf)
+    choose = functools.partial(choose_views, min_gain_per_s=math.inf)
     with pytest.MonkeyPatch.context() as patch:
+        # Where `plan_views` looks it up.
         patch.setattr(pipeline, "choose_views", choose)
         _, traj = plan_views(
             ramp, SPEC, FeedbackPlanner(roll=True), "auto", roi="box:-145,-75,5,145,75,60"

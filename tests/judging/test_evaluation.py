@@ -17,7 +17,7 @@ from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import SurfaceState, evaluate, in_spec_samples
-from scanplan.planning.pipeline import plan_scan
+from scanplan.planning.pass_path import plan_scan
 from scanplan.rl.planners import make_planner
 from scanplan.world.part import part_from_mesh
 

@@ -13,7 +13,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.judging import evaluate
 from scanplan.planning import bands
 from scanplan.planning.bands import plan_adaptive_swaths, row_quantiles, top_surface
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners.geometric import GeometricPlanner
 from scanplan.planning.swaths import plan_swaths
 from scanplan.world.part import part_from_mesh

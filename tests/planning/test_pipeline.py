@@ -11,7 +11,9 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
+import scanplan.planning.pass_path as pass_path_module
 import scanplan.planning.pipeline as pipeline_module
+import scanplan.planning.view_joining as view_joining_module
 import scanplan.planning.view_workers as view_workers_module
 from helpers import HEMISPHERE, fcl_distance, overhang_part
 from scanplan.cli import app
@@ -20,19 +22,16 @@ from scanplan.core.cycle import view_seconds
 from scanplan.core.plan_file import read_json, read_trajectory, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import (
-    ViewRaster,
+from scanplan.planning.pass_path import ViewRaster, passes_blocked, plan_scan
+from scanplan.planning.pipeline import default_views, plan_views
+from scanplan.planning.view_choice import (
     _eval_spacing,
     _view_key,
     choose_views,
-    default_views,
-    order_views,
-    passes_blocked,
-    plan_scan,
-    plan_views,
     steep_samples,
     top_view_may_suffice,
 )
+from scanplan.planning.view_joining import order_views
 from scanplan.rl.planners import make_planner
 from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.collision import checker_for
@@ -145,7 +144,7 @@ def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_v
     part = housing
     plans, _ = housing_views
     assert len(plans) >= 3
-    real = pipeline_module.view_transition
+    real = view_joining_module.view_transition
     calls = {"n": 0}
 
     def blocked_once(*args, **kwargs):
@@ -154,8 +153,8 @@ def test_a_view_no_clear_move_reaches_is_left_out_and_counted(housing, housing_v
             raise ValueError("no collision-free move between views")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(pipeline_module, "view_transition", blocked_once)
-    kept, joined = pipeline_module.join_views(part, plans, SPEC)
+    monkeypatch.setattr(view_joining_module, "view_transition", blocked_once)
+    kept, joined = view_joining_module.join_views(part, plans, SPEC)
     assert joined.meta["views_unreachable"] == 1
     assert len(kept) == len(plans) - 1 and [v.view.index for v in kept] == list(range(len(kept)))
     assert [v["index"] for v in joined.meta["views"]] == list(range(len(kept)))
@@ -172,8 +171,8 @@ def test_a_pass_no_clear_move_reaches_is_given_up_and_counted(housing, housing_t
     assert len(swaths) >= 3
     cell = planned_cell(PlanContext(SPEC), housing)  # the table at the lowest point
     planner = make_planner("geometric")
-    whole = pipeline_module.plan_path(housing, SPEC, planner, swaths, cell=cell)
-    real = pipeline_module.plan_transition
+    whole = pass_path_module.plan_path(housing, SPEC, planner, swaths, cell=cell)
+    real = pass_path_module.plan_transition
     calls: list[np.ndarray] = []
 
     def first_blocked(checker, start, end, clearance_mm, up=UP):
@@ -182,8 +181,8 @@ def test_a_pass_no_clear_move_reaches_is_given_up_and_counted(housing, housing_t
             raise ValueError("no collision-free transition")
         return real(checker, start, end, clearance_mm, up=up)
 
-    monkeypatch.setattr(pipeline_module, "plan_transition", first_blocked)
-    traj = pipeline_module.plan_path(housing, SPEC, planner, swaths, cell=cell)
+    monkeypatch.setattr(pass_path_module, "plan_transition", first_blocked)
+    traj = pass_path_module.plan_path(housing, SPEC, planner, swaths, cell=cell)
     assert cell.table is not None
     assert np.allclose(calls[0], UP) and np.allclose(calls[1], cell.table.normal)
     second = swaths[1].index
@@ -243,7 +242,7 @@ def test_views_for_what_is_missed_are_also_scanned_level_and_none_is_planned_twi
     plan_view = view_workers_module.plan_view
 
     def recording(part, view, plan):
-        planned.append(pipeline_module._view_key(view))
+        planned.append(_view_key(view))
         return plan_view(part, view, plan)
 
     # Planned here, one at a time, to see each view planned.

@@ -15,7 +15,7 @@ import pytest
 
 from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part
 from scanplan.core.quantities import OVERLAP, UP, ScanSpec
-from scanplan.planning.pipeline import ViewRaster
+from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.view_workers import ViewJudge, ViewWorkers, _warm_up
 from scanplan.planning.views import View, view_axis
 from scanplan.rl.planners import make_planner

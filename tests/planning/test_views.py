@@ -12,7 +12,9 @@ from scipy.spatial.transform import Rotation
 from helpers import HEMISPHERE, overhang_part
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.judging import SurfaceState, evaluate
-from scanplan.planning.pipeline import plan_scan, plan_views, steep_samples, top_view_may_suffice
+from scanplan.planning.pass_path import plan_scan
+from scanplan.planning.pipeline import plan_views
+from scanplan.planning.view_choice import steep_samples, top_view_may_suffice
 from scanplan.planning.views import (
     VIEW_AXIS_MAX_TILT_DEG,
     View,

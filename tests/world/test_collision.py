@@ -12,7 +12,7 @@ from helpers import fcl_distance
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.world.collision import CollisionChecker

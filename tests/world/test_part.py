@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from helpers import DATA, FAST, one_line_or_ok
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import PRESETS, SensorSpec
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.world.part import load_part
@@ -67,7 +67,7 @@ def test_bad_meshes_fail_clearly(tmp_path):
 
 def test_a_single_triangle_plate_loads_and_plans(tmp_path):
     from scanplan.core.quantities import ScanSpec
-    from scanplan.planning.pipeline import plan_path
+    from scanplan.planning.pass_path import plan_path
     from scanplan.planning.swaths import plan_swaths
     from scanplan.rl.planners import make_planner
 

@@ -13,7 +13,7 @@ from helpers import BLOCK_BOX, plate_with_block
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging import evaluate
 from scanplan.planning.bands import plan_adaptive_swaths
-from scanplan.planning.pipeline import plan_scan
+from scanplan.planning.pass_path import plan_scan
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.world.part import part_from_mesh

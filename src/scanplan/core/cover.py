@@ -1,5 +1,5 @@
 """The exact maximum cover: which k of several sets cover the most samples together, as a
-mixed-integer program solved by HiGHS (`scipy.optimize.milp`). `pipeline.choose_views`
+mixed-integer program solved by HiGHS (`scipy.optimize.milp`). `view_choice.choose_views`
 picks views greedily and records how far that is from this (`benchmarks/compare_views.py`).
 """
 

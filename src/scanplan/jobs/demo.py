@@ -83,7 +83,6 @@ def run_demo(
     directory that replaces `out_dir` atomically: an interrupted demo leaves no half of one."""
     start = time.perf_counter()
     spec = spec or ScanSpec()
-    sensor = spec.sensor
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
     # The rl plan is fitted to the arm and evaluated in a second process, beside the other
@@ -134,20 +133,49 @@ def run_demo(
     # The fitted plan records the arm, part pose and TCP: `scanplan export` takes it as is.
     files[FITTED_FILE] = dumps_json(to_json_dict(fitted), indent=1)
     step(f"{robot_line} ({fit_seconds:.0f} s)")
+    evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
+    report = _write_report(
+        out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d, step
+    )
+    return DemoResult(
+        out_dir,
+        metrics,
+        trajectories,
+        report,
+        out_dir / PROGRAM_FILE,
+        error_m,
+        robot_line,
+        time.perf_counter() - start,
+    )
 
+
+def _write_report(
+    out_dir: Path,
+    part: Part,
+    evaluated: list[Evaluated],
+    spec: ScanSpec,
+    files: dict[str, str | bytes | Path],
+    seed: int,
+    points_per_profile: int | None,
+    full_3d: bool,
+    step: Callable[[str], None],
+) -> Path:
+    """`report.write_report` of the demo's plans, with the shipped policy's training curves
+    and log, and `files` written beside it; its path."""
     # Deferred: the rl planner's module loads torch.
     from scanplan.rl.planner import DEFAULT_POLICY
 
     training_log, curves = _training_files(DEFAULT_POLICY)
-    files.update(curves)
+    files = {**files, **curves}
     if training_log is not None:
         files["training_log.csv"] = training_log
     step("drawing the maps and writing the report")
+    sensor = spec.sensor
     fan = f"{points_per_profile} of {sensor.points_per_profile}" if points_per_profile else "all"
-    report = write_report(
+    return write_report(
         out_dir,
-        part.with_roi(roi),
-        [Evaluated(name, trajectories[name], m) for name, m in metrics.items()],
+        part,
+        evaluated,
         spec,
         pictures=list(curves.values()),
         notes=[
@@ -159,16 +187,6 @@ def run_demo(
         files=files,
         title=f"{part.name}: scan quality by planner",
         full_3d=full_3d,
-    )
-    return DemoResult(
-        out_dir,
-        metrics,
-        trajectories,
-        report,
-        out_dir / PROGRAM_FILE,
-        error_m,
-        robot_line,
-        time.perf_counter() - start,
     )
 
 

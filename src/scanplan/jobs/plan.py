@@ -12,7 +12,8 @@ from scanplan.core.context import LOWEST
 from scanplan.core.plan import Plan
 from scanplan.core.plan_file import write_csv, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES, ScanSpec
-from scanplan.planning.pipeline import Arm, ViewBudget, plan_views
+from scanplan.planning.pipeline import Arm, plan_views
+from scanplan.planning.view_choice import ViewBudget
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.program import program_cycle

@@ -31,7 +31,7 @@ from scanplan.judging.robustness import (
     trial_tasks,
     trial_world,
 )
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners import FeedbackPlanner
 from scanplan.planning.swaths import Swath, swath_from_record
 from scanplan.planning.views import View, rotation_to_up
@@ -118,7 +118,7 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
         except ValueError as exc:
             # The controller left a pass where no clear move (checked on the CAD) reaches
             # the next: the cell would stop this view; the trial goes on without it, as
-            # `pipeline.join_views` leaves out a view no clear move reaches.
+            # `view_joining.join_views` leaves out a view no clear move reaches.
             warnings.warn(f"trial {judge.index}: view {view.index} lost: {exc}", stacklevel=1)
             continue
         pieces.append(view.to_part_frame(flown))

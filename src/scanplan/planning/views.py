@@ -1,6 +1,6 @@
 """Views and regions, geometry only: the surface to inspect cut into regions by normal
 direction, and a view (a top-view raster of the part rotated so the view's up is +Z) per
-region. `pipeline` chooses among them and joins the chosen.
+region. `view_choice` chooses among them and `view_joining` joins the chosen.
 
 A view is planned with the top-view machinery unchanged: the part is rotated by the view's
 R (the view's up axis to +Z), restricted to the region's faces as a region of interest, and

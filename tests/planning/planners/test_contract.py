@@ -1,6 +1,6 @@
 """The contract every planner in `scanplan.rl.planners.PLANNERS` keeps (rl: the shipped
 policy), on analytic parts whose right answers are known. Each planner plans the part with
-`pipeline.plan_scan`; its profiles are measured again with a noiseless fan (D, α and Δs from
+`pass_path.plan_scan`; its profiles are measured again with a noiseless fan (D, α and Δs from
 `scanplan.core.quantities`) and the scan is judged by `metrics.evaluate`:
 
 (a) a flat plate at W_d: every profile's D = W_d, α = 0, Δs = Δs_opt, no backward step, the
@@ -23,7 +23,7 @@ import pytest
 from scanplan.core.quantities import ScanSpec, advance, mean_distance, signed_alpha
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics, evaluate
-from scanplan.planning.pipeline import plan_scan
+from scanplan.planning.pass_path import plan_scan
 from scanplan.rl.planners import PLANNERS, make_planner
 from scanplan.sensor.profilometer import LineProfilometer
 from scanplan.world.part import Part

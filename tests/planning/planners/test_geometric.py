@@ -13,7 +13,7 @@ import trimesh
 from scanplan.core.quantities import ScanSpec, StepLimits
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners.feedback import FeedbackPlanner
 from scanplan.planning.planners.fixed import FixedPlanner
 from scanplan.planning.planners.geometric import GeometricPlanner

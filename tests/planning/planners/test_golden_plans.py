@@ -25,7 +25,7 @@ import pytest
 from data.make_golden_plans import PARTS, PLANNERS, STRIDE
 from helpers import DATA, PartPlans
 from scanplan.core.quantities import ScanSpec
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.rl.planners import make_planner
 from scanplan.world.collision import CollisionChecker
 

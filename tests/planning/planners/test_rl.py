@@ -19,7 +19,7 @@ from scanplan.core.context import scan_spec_record
 from scanplan.core.quantities import ScanSpec, advance, mean_distance, signed_alpha
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners.closed_loop import Guards
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planner import DEFAULT_POLICY, RLPlanner

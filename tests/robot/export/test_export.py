@@ -14,7 +14,7 @@ from helpers import rot_err, snake_trajectory
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import plan_path
+from scanplan.planning.pass_path import plan_path
 from scanplan.planning.swaths import plan_swaths
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import (

@@ -1,7 +1,7 @@
 """Planners: each turns one Swath into the sensor poses of that pass.
 
 A planner is any object with a `name`, whether it rolls the line (`roll`) and
-`plan(part, swath, spec) -> Trajectory`; `pipeline.plan_path` runs one over a whole
+`plan(part, swath, spec) -> Trajectory`; `pass_path.plan_path` runs one over a whole
 Boustrophedon base path.
 """
 

@@ -22,7 +22,7 @@ from typing import Any
 from scanplan.core.limits import MAX_RUNS, check_count
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging import evaluate
-from scanplan.planning.pipeline import plan_scan
+from scanplan.planning.pass_path import plan_scan
 from scanplan.rl.learn.config import TrainConfig, env_options, typed_field
 from scanplan.rl.learn.train import train
 from scanplan.rl.planners import make_planner
