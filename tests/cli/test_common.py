@@ -211,7 +211,12 @@ def test_progress_is_reported_by_the_library_and_quiet_off_a_terminal(files, mon
         assert update is not None
         update(1, 2)
     result = runner.invoke(app, ["evaluate", str(files / "plate.stl"), str(files / "good.csv")])
-    assert result.exit_code == 0 and result.stderr == ""
+    # No bar off a terminal; one line on what a plan file without a context was judged by.
+    assert result.exit_code == 0
+    assert result.stderr.splitlines() == [
+        f"note: plan {files / 'good.csv'} records no context (an older or foreign file): "
+        "assumed the default sensor and tolerances and the top surface"
+    ]
 
 
 def test_evaluate_progress_callback_signature(files):
@@ -489,12 +494,12 @@ def test_cli_hostile_input_is_one_line_exit_2_no_output(hostile, tmp_path, args)
 
 # ---- the net at the top: a bug is one line, a signal cleans up -----------------------------
 def test_an_internal_error_is_one_line_naming_it_a_bug(tmp_path, monkeypatch):
-    import scanplan.planning.pipeline
+    import scanplan.jobs.plan
 
     def broken(*args, **kwargs):
         raise TypeError("unsupported operand")
 
-    monkeypatch.setattr(scanplan.planning.pipeline, "plan_views", broken)
+    monkeypatch.setattr(scanplan.jobs.plan, "plan_views", broken)
     out = tmp_path / "t.csv"
     result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])
     assert result.exit_code == 1 and not out.exists()
@@ -511,13 +516,13 @@ def test_sigterm_exits_143_and_leaves_no_output(tmp_path, monkeypatch):
     import os
     import signal
 
-    import scanplan.planning.pipeline
+    import scanplan.jobs.plan
 
     def killed(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGTERM)
         raise AssertionError("the signal did not interrupt the command")
 
-    monkeypatch.setattr(scanplan.planning.pipeline, "plan_views", killed)
+    monkeypatch.setattr(scanplan.jobs.plan, "plan_views", killed)
     before = signal.getsignal(signal.SIGTERM)
     out = tmp_path / "t.csv"
     result = runner.invoke(app, ["plan", "drone", "-q", "-o", str(out)])

@@ -32,7 +32,7 @@ def test_defects_json_and_files(plate_and_trajectory, tmp_path):
         "--sizes", "0.05:0.5", "--json", "-q", "-o", str(out),
     )  # fmt: skip
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
+    data = json.loads(result.stdout)
     assert data["type"] == "dent" and len(data["defects"]) == 4
     assert data["pod"]["status"] in ("fit", "all_hit", "all_miss", "separated", "flat")
     assert data["false_calls"]["count"] == 0

@@ -526,7 +526,7 @@ def test_a_swallowed_sigterm_still_ends_in_143_and_writes_nothing(
     import signal
 
     import scanplan.core.files as files
-    import scanplan.core.plan_file as plan_file
+    import scanplan.core.plan as plan_file
 
     read = plan_file.read_trajectory
 

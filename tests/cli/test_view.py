@@ -53,7 +53,8 @@ def test_view_draws_part_passes_and_arm_without_simulating(tmp_path, no_simulati
     result = run_cli("view", str(plan), "-o", str(page))
     assert result.exit_code == 0, result.output
     assert re.fullmatch(
-        rf"view: 41 poses, 1 view, arm ur5e at {PART_POSE} \(0 unreachable, 0 link "
+        rf"view: 1 view, 1 pass, 41 profiles, 41 poses, arm ur5e at {PART_POSE} "
+        r"\(0 unreachable, 0 link "
         rf"collisions\) -> {re.escape(str(page))} \(\d+\.\d MB\)\n",
         result.output,
     )

@@ -25,6 +25,7 @@ from scanplan.judging import evaluate
 from scanplan.planning.pass_path import ViewRaster, passes_blocked, plan_scan
 from scanplan.planning.pipeline import default_views, plan_views
 from scanplan.planning.view_choice import (
+    ViewBudget,
     _eval_spacing,
     _view_key,
     choose_views,
@@ -211,27 +212,49 @@ def test_an_roi_of_walls_only_is_planned_by_side_views():
     assert m.backward_steps == 0
 
 
-def test_the_view_choice_keeps_what_it_has_when_its_time_is_up(housing, housing_views):
+def test_the_view_choice_keeps_what_it_has_when_its_budget_is_spent(housing, housing_views):
     plans, _ = housing_views
-    assert len(plans) >= 2
-    kept, traj = plan_views(housing, SPEC, make_planner("geometric"), "auto", view_seconds=1e-6)
-    assert len(kept) == 1 and np.allclose(kept[0].view.axis, UP)  # the top view, planned first
-    assert traj.meta["view_choice_out_of_time"] == 1e-6
-    assert "view_choice_out_of_time" not in housing_views[1].meta
+    assert len(plans) >= 3
+    planner = make_planner("geometric")
+    # One candidate: the top view, and at most the one candidate it could take.
+    kept, traj = plan_views(housing, SPEC, planner, "auto", budget=ViewBudget(candidates=1))
+    assert 1 <= len(kept) <= 2 and np.allclose(kept[0].view.axis, UP)
+    assert traj.meta["view_choice_out_of_budget"] == "1 candidate views"
+    assert "view_choice_out_of_budget" not in housing_views[1].meta
     # A choice that needed no candidate (the door's top view reaches the target) does not
-    # claim the time cut it short, however long the top view took.
+    # claim the budget cut it short; nor does a wall-clock limit it never reached.
     door, door_traj = plan_views(
-        load_part("door"), SPEC, make_planner("geometric"), "auto", view_seconds=1e-6
+        load_part("door"), SPEC, planner, "auto", budget=ViewBudget(1, seconds=1e-6)
     )
-    assert len(door) == 1 and "view_choice_out_of_time" not in door_traj.meta
+    assert len(door) == 1 and "view_choice_out_of_budget" not in door_traj.meta
 
 
-def test_view_seconds_must_be_positive(tmp_path):
-    result = CliRunner().invoke(
-        app, ["plan", "door", "-o", str(tmp_path / "p.json"), "--view-seconds", "0"]
-    )
+def test_a_budget_in_work_chooses_the_same_views_with_or_without_workers(housing):
+    # Workers plan ahead of the choice by as many candidates as they are (a machine's cores,
+    # or how busy it is, decide how far): the budget counts the candidates the choice takes,
+    # so the views are the same however many were asked of the workers.
+    cell = planned_cell(PlanContext(SPEC, views="auto"), housing)
+    raster = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
+    picks = [
+        choose_views(housing, SPEC, raster, budget=ViewBudget(candidates=2), workers=w)
+        for w in (0, 2)
+    ]
+    axes = [[tuple(np.round(vp.view.axis, 9)) for vp in s.plans] for s in picks]
+    assert axes[0] == axes[1] and len(axes[0]) >= 2
+    for a, b in zip(picks[0].plans, picks[1].plans, strict=True):
+        np.testing.assert_array_equal(a.traj.poses, b.traj.poses)
+    assert picks[0].out_of_time and picks[1].out_of_time
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [("--view-seconds", "0", "--view-seconds"), ("--view-candidates", "0", "--view-candidates")],
+)
+def test_the_view_budget_must_be_positive(tmp_path, option, value, message):
+    args = ["plan", "door", "-o", str(tmp_path / "p.json"), option, value]
+    result = CliRunner().invoke(app, args)
     assert result.exit_code == 2
-    assert "--view-seconds must be a number of seconds > 0" in result.output
+    assert message in result.output and result.output.count("\n") == 1
     assert not (tmp_path / "p.json").exists()
 
 

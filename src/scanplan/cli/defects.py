@@ -140,12 +140,12 @@ def defects_cmd(
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
     context, note = judged_context(plan, None, None, None, views)
     say = lambda text: typer.echo(text, err=True)  # noqa: E731
-    if note:
-        say(note)
     the_part = planned_part(plan, part, units, other_part=other_part, say=say)
     outcome = run_defects(plan, the_part, context, study, lambda label: progress_bar(label, quiet))
     if output is not None:
         write_defects(output, outcome, study, f"{the_part.name}: {trajectory.name}")
+    if note:  # after the work: a command that fails says one line, its error
+        say(note)
     if as_json:
         typer.echo(json.dumps(outcome.data, allow_nan=False))
         return

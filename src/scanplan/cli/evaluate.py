@@ -247,6 +247,8 @@ def evaluate_cmd(
     if policy is not None and not closed_loop:
         raise ValueError("--policy is the rl plan's policy for --closed-loop: give --closed-loop")
     check_cluster(scheduler, None)
+    if output is not None and str(output) in ("", "."):
+        raise ValueError(f"-o {str(output)!r}: give the report's folder name")
     plan = read_plan(trajectory)
     context, note = judged_context(
         plan, sensor, parse_tolerance(tolerance), roi, views, table, fixture
@@ -255,8 +257,6 @@ def evaluate_cmd(
     the_part = judged_part(plan, part, units, context, other_part, say)
     run = None if model is None else Trials(model, trials, scheduler, closed_loop, policy)
     check_trials(plan, context, run)
-    if note:
-        say(note)
     with progress_bar("evaluating", quiet) as progress:
         metrics = evaluate_plan(plan, the_part, context, seed, points, progress)
     robust = None
@@ -269,6 +269,8 @@ def evaluate_cmd(
     data = metrics.to_json_dict()
     if robust is not None:
         data["robustness"] = {"nominal": metrics.in_spec_coverage, **robust.to_json_dict()}
+    if note:  # after the work: a command that fails says one line, its error
+        say(note)
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
         return

@@ -127,6 +127,7 @@ def export_plan(plan: Plan, req: ProgramRequest, say: Say, bar: ProgressBar = _n
     """Write the program `req` asks for, once the arm is shown to fly it (nothing is written
     otherwise, unless `allow_unreachable`), and say what was written and its cycle time."""
     output = req.output
+    program_format(req.fmt, output, None)  # an unknown --format is named before the arm
     robot, T_base_part, T_flange_sensor = arm_of(plan, req.robot, req.part_pose, req.tcp, say)
     fmt = program_format(req.fmt, output, robot)
     if fmt in FORMATS and (str(output) in ("", ".") or output.is_dir()):

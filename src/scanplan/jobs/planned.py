@@ -37,7 +37,7 @@ def planned_part(
     name = part or context.part
     if not name:
         raise ValueError(
-            f"give the part: {needed_for}, and {plan.where} records none (planned before "
+            f"--part is required: {needed_for}, and {plan.where} records none (planned before "
             "plans named their part)"
         )
     recorded_units = context.fixture_units

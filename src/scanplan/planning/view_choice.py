@@ -196,6 +196,11 @@ class _Spent:
         self.taken = 0  # candidates whose plan the choice has taken: the work it counts
         self.timed_out = False
 
+    def out_of_work(self) -> bool:
+        """Whether the candidates the budget allows are all taken (said as out of time)."""
+        self.timed_out = self.timed_out or self.taken >= self.budget.candidates
+        return self.timed_out
+
     def out_of_time(self) -> bool:
         # Asked only where another candidate would be planned: True means one was not.
         # Counted in candidates taken, not asked of the workers (how far they plan ahead
@@ -314,6 +319,10 @@ class _Greedy:
             if best is not None and bounds[i] <= best[0]:
                 break
             if i not in self.evaluated:
+                # The budget in work first, whether or not a worker has planned it already:
+                # which have is a matter of timing, so it must not decide what is taken.
+                if self.spent.out_of_work():
+                    break
                 if i not in self.pending:
                     if self.spent.out_of_time():
                         break

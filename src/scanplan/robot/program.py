@@ -70,11 +70,13 @@ def arm_joints(plan: Plan) -> np.ndarray | None:
     if plan.arm is None:
         return None
     arm = plan.arm
+    try:
+        robot = get_robot(arm.robot)
+    except (ValueError, OSError):  # an arm file gone since: timed without its joints
+        return None
     # As `flyable.check_flyable` computes them, so export's joints are these to the bit.
     T_base_flange = arm.T_base_part @ plan.traj.poses @ np.linalg.inv(arm.T_flange_sensor)
-    report = check_reach(
-        T_base_flange, get_robot(arm.robot), swath=plan.traj.swath, scanning=plan.traj.scanning
-    )
+    report = check_reach(T_base_flange, robot, swath=plan.traj.swath, scanning=plan.traj.scanning)
     return report.joints
 
 
