@@ -1,0 +1,55 @@
+"""The README's layout section names every module of the package, and nothing that is gone."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "src/scanplan"
+
+
+def _layout_section() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index("Layout (`src/scanplan/`")
+    return text[start : text.index("`tests/` mirrors the package", start)]
+
+
+def _listed() -> dict[str, set[str]]:
+    """Per top-level package, the module paths its README entry names (`learn/` followed by
+    its files names them under learn/)."""
+    entries = re.split(r"^- ", _layout_section(), flags=re.M)[1:]
+    listed: dict[str, set[str]] = {}
+    for entry in entries:
+        packages = re.findall(r"^`(\w+)/`(?: and `(\w+)/`)?", entry)[0]
+        for package in filter(None, packages):
+            listed.setdefault(package, set())
+        current, sub = packages[0], ""
+        for name in re.findall(r"`([\w/]+(?:\.py)?)`", entry):
+            if name.endswith("/") and name.rstrip("/") in listed:
+                current, sub = name.rstrip("/"), ""
+            elif name.endswith("/"):
+                sub = name
+            elif name.endswith(".py"):
+                listed[current].add(sub + name)
+    return listed
+
+
+def test_the_readme_layout_names_every_module_and_only_those():
+    listed = _listed()
+    actual = {
+        p.name: {
+            str(f.relative_to(p))
+            for f in p.rglob("*.py")
+            if f.name != "__init__.py" and "__pycache__" not in f.parts
+        }
+        for p in PACKAGE.iterdir()
+        if p.is_dir() and (p / "__init__.py").exists()
+    }
+    assert set(listed) == set(actual)
+    for package, modules in actual.items():
+        named = {m.split("/")[-1] for m in listed[package]}
+        missing = sorted(m for m in modules if m.split("/")[-1] not in named)
+        gone = sorted(n for n in named if n not in {m.split("/")[-1] for m in modules})
+        assert not missing, f"{package}/: not in the README's layout: {missing}"
+        assert not gone, f"{package}/: in the README's layout but gone: {gone}"
