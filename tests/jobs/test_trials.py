@@ -176,13 +176,17 @@ def test_open_loop_multi_view_and_robot_plans_are_refused(bumpy, feedback_plan):
     )
     with pytest.raises(ValueError, match="has 2 views"):  # a robot-side loop takes one frame
         plan_swaths_of(two, "plan")
-    old = replace(
-        feedback_plan,
-        meta=feedback_plan.meta | {"views": [{"index": 0, "axis": [0.0, 0.0, 1.0]}]},
-    )
+    # An older plan's view record: its axis and passes, not its pass lines.
+    view = {k: v for k, v in feedback_plan.meta["views"][0].items() if k != "swaths"}
+    old = replace(feedback_plan, meta=feedback_plan.meta | {"views": [view]})
     with pytest.raises(ValueError, match="does not record its pass lines"):
         closed_loop_tasks(bumpy, old, context, model, 1)
-    fitted = replace(feedback_plan, meta=feedback_plan.meta | {"robot": {"robot": "ur5e"}})
+    arm = {
+        "robot": "ur5e",
+        "T_base_part": np.eye(4).tolist(),
+        "T_flange_sensor": np.eye(4).tolist(),
+    }
+    fitted = replace(feedback_plan, meta=feedback_plan.meta | {"robot": arm})
     with pytest.raises(ValueError, match="fitted to a robot"):
         closed_loop_tasks(bumpy, fitted, context, model, 1)
 

@@ -56,6 +56,19 @@ class ViewRecord:
         return (swath >= self.first_swath) & (swath <= self.last_swath)
 
 
+def view_records(traj: Trajectory) -> tuple[ViewRecord, ...]:
+    """The views `traj` records (none for a plan of one raster without a record)."""
+    return tuple(ViewRecord.of(v) for v in traj.meta.get("views") or ())
+
+
+def view_of_pose(traj: Trajectory) -> np.ndarray:
+    """(n,) the index (into `view_records`) of the view each pose belongs to (0 without)."""
+    out = np.zeros(len(traj), dtype=int)
+    for k, view in enumerate(view_records(traj)):
+        out[view.holds(traj.swath)] = k
+    return out
+
+
 class _ArmJson(BaseModel):
     """What a plan file must hold of its arm; the rest (what fitting gave up) is free."""
 
@@ -122,7 +135,7 @@ class Plan:
             )
         else:
             context = PlanContext.from_json_dict(traj.meta["context"], where)
-        views = tuple(ViewRecord.of(v) for v in traj.meta.get("views") or ())
+        views = view_records(traj)
         arm = None
         if (data := traj.meta.get("robot")) is not None:
             arm = ArmRecord.of(data, where)
@@ -138,10 +151,7 @@ class Plan:
 
     def view_of_pose(self) -> np.ndarray:
         """(n,) the view each pose belongs to (0 for a plan without view records)."""
-        out = np.zeros(len(self.traj), dtype=int)
-        for k, view in enumerate(self.views):
-            out[view.holds(self.traj.swath)] = k
-        return out
+        return view_of_pose(self.traj)
 
     def views_flown(self) -> list[int]:
         """The indices (into `views`) of the views with a scanning pose: the views a

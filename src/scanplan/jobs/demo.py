@@ -25,6 +25,7 @@ import numpy as np
 
 from scanplan.core.context import PlanContext, judged_alike, recorded
 from scanplan.core.files import dumps_json
+from scanplan.core.plan import Plan
 from scanplan.core.plan_file import to_csv_text, to_json_dict
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import DEMO_POINTS
@@ -276,8 +277,9 @@ def _robot_program(
     # Built once for the fit and the check: it samples the part's surface for the links.
     obstacles = obstacles_for(part, planned_cell(context, part), spec.sensor, spec.clearance_mm)
     fitted = fit_arm(part, traj, Arm(DEMO_ROBOT, tcp), context, obstacles)
-    record = fitted.meta["robot"]
-    T_base_part = np.asarray(record["T_base_part"], dtype=np.float64)
+    fitted_arm = Plan.of(fitted).arm
+    assert fitted_arm is not None  # fit_arm records the arm
+    record, T_base_part = fitted_arm.record, fitted_arm.T_base_part
     arm = get_robot(DEMO_ROBOT)
     checked = check_flyable(
         fitted, arm, T_base_part, tcp, part, planned_cell(context, part), spec.sensor, obstacles

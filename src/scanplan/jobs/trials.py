@@ -132,28 +132,25 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
 def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
     """The views and pass lines a plan records, in its order, for running it in closed
     loop; ValueError (one line) for a plan that records none, or was fitted to a robot."""
-    if Plan.of(traj, where).arm is not None:
+    plan = Plan.of(traj, where)
+    if plan.arm is not None:
         raise ValueError(
             f"{where} was fitted to a robot (passes split or turned): the closed loop runs "
             "the plan as planned on the CAD; evaluate the plan made without --robot"
         )
-    records = traj.meta.get("views") or []
-    if not records:
+    if not plan.views:
         raise ValueError(f"{where} records no views: plan it again to run it in closed loop")
     out = []
-    for k, record in enumerate(records):
-        lines = record.get("swaths") if isinstance(record, dict) else None
+    for k, view in enumerate(plan.views):
+        lines = view.record.get("swaths")
         if not lines:
             raise ValueError(
                 f"{where} does not record its pass lines (made by an older scanplan): plan "
                 "it again to run it in closed loop"
             )
-        try:
-            axis = np.array(record["axis"], dtype=np.float64).reshape(3)
-        except (KeyError, TypeError, ValueError):
-            raise ValueError(f"{where}: views[{k}] has no axis (3 numbers)") from None
-        if not (np.isfinite(axis).all() and abs(float(np.linalg.norm(axis)) - 1.0) < 1e-6):
-            raise ValueError(f"{where}: views[{k}].axis is not a unit vector")
+        axis = np.array(view.axis, dtype=np.float64)
+        if abs(float(np.linalg.norm(axis)) - 1.0) >= 1e-6:
+            axis = axis / np.linalg.norm(axis)  # a file's axis is unit to 1e-3: to the bit
         swaths = tuple(
             swath_from_record(r, f"{where}: views[{k}].swaths[{i}]") for i, r in enumerate(lines)
         )

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links
@@ -131,10 +132,9 @@ def fit_to_robot(
         swath = _renumbered(traj, keep, swath, cut)
     given_up: dict[int, int] = {}
     lost = ~keep & traj.scanning
-    for view in traj.meta.get("views") or [{"index": 0, "first_swath": 0, "last_swath": 1 << 30}]:
-        in_view = (traj.swath >= view["first_swath"]) & (traj.swath <= view["last_swath"])
-        if (count := int((lost & in_view).sum())) > 0:
-            given_up[int(view["index"])] = count
+    for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
+        if (count := int((lost & view.holds(traj.swath)).sum())) > 0:
+            given_up[view.index] = count
     fitted = _subset(traj, keep, swath)
     if not fitted.scanning.any():
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
@@ -211,11 +211,12 @@ def _renumbered(
 def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:
     """The views' records with their swath blocks in the renumbered passes."""
     out = []
-    for view in traj.meta.get("views") or []:
-        in_view = (traj.swath >= view["first_swath"]) & (traj.swath <= view["last_swath"])
-        kept = in_view & keep
+    for view in view_records(traj):
+        kept = view.holds(traj.swath) & keep
         if not kept.any():
             continue
         first, last = int(swath[kept].min()), int(swath[kept].max())
-        out.append(view | {"first_swath": first, "last_swath": last, "passes": last - first + 1})
+        out.append(
+            view.record | {"first_swath": first, "last_swath": last, "passes": last - first + 1}
+        )
     return out

@@ -9,8 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scanplan.core.context import recorded
-from scanplan.core.quantities import ScanSpec
+from scanplan.core.plan import Plan
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot
@@ -70,7 +69,7 @@ def check_flyable(
     path and every joint move into a pass, and the sensor body, against `part` in `cell`.
     obstacles: `obstacles_for(part, cell)` if the caller has it (a fit just built it);
     None: built here."""
-    clearance = recorded(traj, ScanSpec()).spec.clearance_mm  # the links keep the plan's
+    clearance = Plan.of(traj).spec.clearance_mm  # the links keep the plan's
     flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
     reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scanplan.core.plan import view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import CoverageMap, SurfaceState
 from scanplan.judging.report.maps import COVERAGE_COLOURS
@@ -60,13 +61,13 @@ def planner_figure(
     pos = traj.positions_mm.astype(np.float32)
     max_path = None if full_3d else MAX_PATH_POINTS
     traces = [part_mesh]
-    views = traj.meta.get("views") or []
+    views = view_records(traj)
     if len(views) > 1:
         # Each view's poses in its own colour (a view is a block of swaths), moves in grey.
         traces.append(path_trace(pos, ~traj.scanning, "moves", "gray", 2, max_path))
         for k, v in enumerate(views):
-            in_view = (traj.swath >= v["first_swath"]) & (traj.swath <= v["last_swath"])
-            axis = ", ".join(f"{c:.2f}" for c in v["axis"])
+            in_view = v.holds(traj.swath)
+            axis = ", ".join(f"{c:.2f}" for c in v.axis)
             colour = VIEW_COLOURS[k % len(VIEW_COLOURS)]
             keep = in_view & traj.scanning
             traces.append(path_trace(pos, keep, f"view {k} ({axis})", colour, 4, max_path))

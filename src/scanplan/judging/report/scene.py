@@ -10,9 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from scanplan.core.context import recorded
-from scanplan.core.plan import Plan
-from scanplan.core.quantities import ScanSpec
+from scanplan.core.plan import Plan, view_of_pose, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.links import check_links, obstacles_for
@@ -110,7 +108,7 @@ def check_arm(
         arm,
         reach.joints,
         # The links keep the clearance the plan was made with, as the sensor does.
-        obstacles_for(part, cell, clearance_mm=recorded(traj, ScanSpec()).spec.clearance_mm),
+        obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm),
         T_base_part,
         pass_starts(traj.swath, traj.scanning),
     )
@@ -206,19 +204,11 @@ def path_trace(
     )  # fmt: skip
 
 
-def view_of_pose(traj: Trajectory) -> np.ndarray:
-    """(n,) the index of the view each pose belongs to (all 0 without `meta["views"]`)."""
-    out = np.zeros(len(traj), dtype=int)
-    for k, v in enumerate(traj.meta.get("views") or []):
-        out[(traj.swath >= v["first_swath"]) & (traj.swath <= v["last_swath"])] = k
-    return out
-
-
 def view_label(traj: Trajectory, k: int) -> str:
-    views = traj.meta.get("views") or []
+    views = view_records(traj)
     if len(views) <= 1:
         return "passes"
-    return f"view {k} ({', '.join(f'{c:.2f}' for c in views[k]['axis'])})"
+    return f"view {k} ({', '.join(f'{c:.2f}' for c in views[k].axis)})"
 
 
 def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
@@ -226,7 +216,7 @@ def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
     moves between them in grey."""
     pos = traj.positions_mm
     view = view_of_pose(traj)
-    n_views = max(len(traj.meta.get("views") or []), 1)
+    n_views = max(len(view_records(traj)), 1)
     traces = [path_trace(pos, ~traj.scanning, "moves", MOVE_COLOUR, 2, max_points)]
     for k in range(n_views):
         traces.append(
