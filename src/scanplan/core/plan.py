@@ -135,11 +135,21 @@ class Plan:
             )
         else:
             context = PlanContext.from_json_dict(traj.meta["context"], where)
+            if not context.part_digest:
+                assumed.append(
+                    f"{where} records no digest of its part (planned before plans did): the "
+                    "part given is taken to be the one planned, unchecked"
+                )
         views = view_records(traj)
         arm = None
         if (data := traj.meta.get("robot")) is not None:
             arm = ArmRecord.of(data, where)
         return cls(traj, context, views, arm, where, tuple(assumed))
+
+    @property
+    def records_context(self) -> bool:
+        """Whether the file recorded what the plan was made under (else defaults assumed)."""
+        return self.traj.meta.get("context") is not None
 
     @property
     def spec(self) -> ScanSpec:

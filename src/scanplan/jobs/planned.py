@@ -100,7 +100,8 @@ def judged_context(
     judged = planned.with_options(
         spec, roi, views, table, None if fixtures is None else tuple(fixtures)
     )
-    if plan.assumed:  # nothing recorded to differ from
-        return judged, "note: " + "; ".join(plan.assumed)
-    changes = planned.differences(judged)
-    return judged, ("note: judged with " + "; ".join(changes)) if changes else ""
+    notes = list(plan.assumed)
+    if plan.records_context:  # else nothing recorded to differ from
+        if changes := planned.differences(judged):
+            notes.append("judged with " + "; ".join(changes))
+    return judged, ("note: " + "; ".join(notes)) if notes else ""
