@@ -19,11 +19,11 @@ from scanplan.cli.evaluate import (
     PlanUnitsOpt,
 )
 from scanplan.cli.options import (
-    PartArg,
+    PartAndPlanArg,
     QuietOpt,
     SeedOpt,
-    TrajectoryArg,
     bounded,
+    part_and_plan,
     within,
 )
 from scanplan.cli.training import check_cluster
@@ -99,8 +99,7 @@ def parse_sizes(text: str) -> tuple[float, float]:
 
 @user_errors
 def defects_cmd(
-    part: PartArg,
-    trajectory: TrajectoryArg,
+    paths: PartAndPlanArg,
     kind: TypeOpt = DEFECT_TYPE,
     sizes: SizesOpt = "0.01:0.5",
     trials: DefectTrialsOpt = 16,
@@ -135,6 +134,7 @@ def defects_cmd(
         scheduler, defect_free,
     )  # fmt: skip
     check_cluster(scheduler, None)
+    part, trajectory = part_and_plan(paths)
     plan = read_plan(trajectory)
     if not plan.traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")

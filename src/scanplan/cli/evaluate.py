@@ -16,15 +16,15 @@ from scanplan.cli.options import (
     FixtureOpt,
     Full3dOpt,
     OutOpt,
-    PartArg,
+    PartAndPlanArg,
     QuietOpt,
     RoiOpt,
     SeedOpt,
     TableOpt,
     ToleranceOpt,
-    TrajectoryArg,
     bounded,
     parse_tolerance,
+    part_and_plan,
 )
 from scanplan.cli.training import check_cluster
 from scanplan.core.sensor_spec import SensorSpec
@@ -80,8 +80,7 @@ ScanSensorOpt = Annotated[
 
 @user_errors
 def scan_cmd(
-    part: PartArg,
-    trajectory: TrajectoryArg,
+    paths: PartAndPlanArg,
     output: OutOpt,
     sensor: ScanSensorOpt = None,
     units: PlanUnitsOpt = None,
@@ -104,6 +103,7 @@ def scan_cmd(
 
     if output.suffix.lower() != ".ply":
         raise ValueError(f"output {output} must be a .ply file")
+    part, trajectory = part_and_plan(paths)
     plan = read_plan(trajectory)
     spec = plan.spec.sensor if sensor is None else load_sensor(sensor)
     if no_noise:
@@ -197,8 +197,7 @@ EvaluatePolicyOpt = Annotated[
 
 @user_errors
 def evaluate_cmd(
-    part: PartArg,
-    trajectory: TrajectoryArg,
+    paths: PartAndPlanArg,
     as_json: JsonOpt = False,
     output: ReportDirOpt = None,
     sensor: EvaluateSensorOpt = None,
@@ -249,6 +248,7 @@ def evaluate_cmd(
     check_cluster(scheduler, None)
     if output is not None and str(output) in ("", "."):
         raise ValueError(f"-o {str(output)!r}: give the report's folder name")
+    part, trajectory = part_and_plan(paths)
     plan = read_plan(trajectory)
     context, note = judged_context(
         plan, sensor, parse_tolerance(tolerance), roi, views, table, fixture

@@ -157,6 +157,24 @@ QuietOpt = Annotated[
     bool, typer.Option("--quiet", "-q", help="no progress bar (none either off a terminal)")
 ]
 TrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV or JSON")]
+PartAndPlanArg = Annotated[
+    list[str],
+    typer.Argument(
+        metavar="[PART] PLAN",
+        help="the part (built-in name, mesh or STEP file; default: the one the plan records, "
+        "in its units) and the plan file (CSV or JSON)",
+        show_default=False,
+    ),
+]
+
+
+def part_and_plan(values: list[str]) -> tuple[str | None, Path]:
+    """[PART] PLAN as given: (the part, or None for the plan's own, and the plan file)."""
+    if len(values) not in (1, 2):
+        raise ValueError(f"expected [PART] PLAN, got {len(values)} arguments")
+    return (values[0] if len(values) == 2 else None), Path(values[-1])
+
+
 Full3dOpt = Annotated[
     bool,
     typer.Option(

@@ -73,11 +73,11 @@ def _read_text(path: Path) -> str:
         raise ValueError(f"trajectory file {path} is not UTF-8 text (byte {exc.start})") from None
 
 
-def read_csv(path: str | os.PathLike) -> Trajectory:
-    """Read a trajectory CSV; every malformation raises ValueError naming the file, line and
-    column."""
+def read_csv(path: str | os.PathLike, text: str | None = None) -> Trajectory:
+    """Read a trajectory CSV (`text`: its contents, already read); every malformation raises
+    ValueError naming the file, line and column."""
     path = Path(path)
-    text = _read_text(path)
+    text = _read_text(path) if text is None else text
     lines = text.splitlines()
     numbers = [i for i, r in enumerate(lines, start=1) if r.strip()]
     meta = _csv_records(path, lines, numbers)
@@ -231,6 +231,15 @@ def write_json(traj: Trajectory, path: str | os.PathLike) -> None:
     atomic_write_text(path, dumps_json(to_json_dict(traj), indent=1))
 
 
+def as_read(traj: Trajectory, path: str | os.PathLike) -> Trajectory:
+    """`traj` as a command will read it back from the file `path` (its poses rounded as the
+    CSV or JSON holds them), without touching the disk: what `plan` times its program on, so
+    that it prints the figure `export` and `evaluate` print."""
+    if str(path).lower().endswith(".json"):
+        return read_json(path, dumps_json(to_json_dict(traj)))
+    return read_csv(path, to_csv_text(traj))
+
+
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 
 
@@ -282,10 +291,11 @@ def _pydantic_where(exc: ValidationError) -> str:
     return f"{where.lstrip('.') or 'file'}: {str(err['msg']).removeprefix('Value error, ')}"
 
 
-def read_json(path: str | os.PathLike) -> Trajectory:
-    """Read a trajectory JSON (as `write_json` writes it); ValueError naming file and field."""
+def read_json(path: str | os.PathLike, text: str | None = None) -> Trajectory:
+    """Read a trajectory JSON (as `write_json` writes it; `text`: its contents, already
+    read); ValueError naming file and field."""
     path = Path(path)
-    text = _read_text(path)
+    text = _read_text(path) if text is None else text
     try:
         data = json.loads(text)
     except RecursionError:

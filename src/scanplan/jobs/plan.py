@@ -10,7 +10,7 @@ from pathlib import Path
 
 from scanplan.core.context import LOWEST
 from scanplan.core.plan import Plan
-from scanplan.core.plan_file import write_csv, write_json
+from scanplan.core.plan_file import as_read, write_csv, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES, ScanSpec
 from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.planning.view_choice import ViewBudget
@@ -93,7 +93,8 @@ def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = Non
         budget=job.budget(),
         scheduler=job.scheduler,
     )
-    plan = Plan.of(traj, f"plan {job.output}")
+    # Timed as read back: a program's thinning and blends may turn on the last digit.
+    plan = Plan.of(as_read(traj, job.output), f"plan {job.output}")
     cycle = program_cycle(plan)
     traj = replace(traj, meta=traj.meta | {"cycle_time_s": round(cycle.total_s, 3)})
     (write_json if job.output.suffix.lower() == ".json" else write_csv)(traj, job.output)
