@@ -70,6 +70,8 @@ def planner_figure(
             axis = ", ".join(f"{c:.2f}" for c in v.axis)
             colour = VIEW_COLOURS[k % len(VIEW_COLOURS)]
             keep = in_view & traj.scanning
+            if not keep.any():
+                continue  # a view the arm gave up whole: not flown, not in the legend
             traces.append(path_trace(pos, keep, f"view {k} ({axis})", colour, 4, max_path))
     else:
         every = np.ones(len(pos), bool)

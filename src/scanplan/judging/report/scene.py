@@ -219,6 +219,8 @@ def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
     n_views = max(len(view_records(traj)), 1)
     traces = [path_trace(pos, ~traj.scanning, "moves", MOVE_COLOUR, 2, max_points)]
     for k in range(n_views):
+        if not (traj.scanning & (view == k)).any():
+            continue  # a view the arm gave up whole: not flown, not in the legend
         traces.append(
             path_trace(
                 pos, traj.scanning & (view == k), view_label(traj, k),
