@@ -6,7 +6,7 @@ so a count, a tool or a cycle time means the same thing in every command.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 import numpy as np
@@ -159,10 +159,6 @@ class Plan:
     def planner(self) -> str:
         return self.traj.planner or self.context.planner
 
-    def view_of_pose(self) -> np.ndarray:
-        """(n,) the view each pose belongs to (0 for a plan without view records)."""
-        return view_of_pose(self.traj)
-
     def views_flown(self) -> list[int]:
         """The indices (into `views`) of the views with a scanning pose: the views a
         program flies; [0] for a plan without view records."""
@@ -178,7 +174,7 @@ class Plan:
         return len(np.unique(self.traj.swath[self.traj.scanning]))
 
     def counts(self) -> str:
-        """'3 views, 12 passes, 4 015 profiles': the one way every output counts a plan."""
+        """'3 views, 12 passes, 4015 profiles': the one way every output counts a plan."""
         n_views, n_passes = len(self.views_flown()), self.passes_flown()
         return (
             f"{n_views} view{'s' * (n_views != 1)}, {n_passes} pass{'es' * (n_passes != 1)}, "
@@ -190,9 +186,6 @@ class Plan:
         """The cycle time `plan` printed and recorded (None: a file without it)."""
         value = self.traj.meta.get("cycle_time_s")
         return None if value is None else float(value)
-
-    def with_traj(self, traj: Trajectory) -> Plan:
-        return replace(self, traj=traj)
 
 
 def read_plan(path: str | os.PathLike) -> Plan:

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -21,6 +19,7 @@ from scanplan.core.limits import MAX_DEFECTS, check_count
 from scanplan.core.plan import Plan
 from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECT_TYPE
 from scanplan.core.run import counted, task_runner
+from scanplan.jobs.planned import ProgressBar, no_bar
 from scanplan.judging.detectability import PREDICTED, Detectability, survey
 from scanplan.judging.detection import (
     DefectRun,
@@ -34,13 +33,8 @@ from scanplan.judging.evaluation import surface_samples
 from scanplan.sensor.defects import KINDS
 from scanplan.world.part import Part
 
-ProgressBar = Callable[[str], AbstractContextManager[Callable[[int, int], None] | None]]
 # What a defects folder holds: a folder with it may be replaced by a new run.
 DEFECT_FILES = ("pod.json", "defects.csv", "pod.png")
-
-
-def _no_bar(_: str) -> AbstractContextManager[None]:
-    return nullcontext(None)
 
 
 @dataclass(frozen=True)
@@ -83,7 +77,7 @@ class DefectOutcome:
 
 
 def run_defects(
-    plan: Plan, part: Part, context: PlanContext, study: DefectStudy, bar: ProgressBar = _no_bar
+    plan: Plan, part: Part, context: PlanContext, study: DefectStudy, bar: ProgressBar = no_bar
 ) -> DefectOutcome:
     """Run `study` on `plan` over `part`, judged by `context`."""
     start = time.perf_counter()

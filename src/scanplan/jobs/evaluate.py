@@ -5,7 +5,6 @@ its program flies, and (with a perturbation) how its in-spec coverage holds over
 from __future__ import annotations
 
 from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -13,7 +12,7 @@ from typing import Any
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import Plan
 from scanplan.core.run import counted, task_runner
-from scanplan.jobs.planned import planned_part
+from scanplan.jobs.planned import ProgressBar, Say, no_bar, planned_part, silent
 from scanplan.jobs.trials import (
     closed_loop_planner,
     closed_loop_robustness,
@@ -28,11 +27,6 @@ from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
 
 Progress = Callable[[int, int], None] | None
-ProgressBar = Callable[[str], AbstractContextManager[Progress]]
-
-
-def _no_bar(_: str) -> AbstractContextManager[Progress]:
-    return nullcontext(None)
 
 
 @dataclass(frozen=True)
@@ -54,7 +48,7 @@ def judged_part(
     units: str | None,
     context: PlanContext,
     other_part: bool = False,
-    say: Callable[[str], None] = print,
+    say: Say = silent,
 ) -> Part:
     """The plan's part (checked to be the planned one) with its cell built, so that a bad
     ROI, table or fixture fails before the long part."""
@@ -100,7 +94,7 @@ def run_trials(
     trials: Trials,
     seed: int = 0,
     points: int | None = None,
-    bar: ProgressBar = _no_bar,
+    bar: ProgressBar = no_bar,
 ) -> Robustness:
     """The in-spec coverage of `plan` over seeded perturbed parts."""
     if trials.closed_loop:

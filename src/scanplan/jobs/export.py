@@ -5,8 +5,6 @@ plan's sensor and ScanSpec, its cycle time the one `plan` printed.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -15,7 +13,7 @@ import numpy as np
 from scanplan.core.files import atomic_write_text
 from scanplan.core.limits import MAX_SCAN_SPEED_MM_S
 from scanplan.core.plan import Plan
-from scanplan.jobs.planned import Say, plan_cell, planned_part
+from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part
 from scanplan.robot import get_robot
 from scanplan.robot.export import (
     FORMATS,
@@ -31,11 +29,6 @@ from scanplan.world.part import Part
 
 # The pose an option not given (and not recorded) stands for: the frames coincide.
 IDENTITY_POSE = "0,0,0,0,0,0"
-ProgressBar = Callable[[str], AbstractContextManager[Callable[[int, int], None] | None]]
-
-
-def _no_bar(_: str) -> AbstractContextManager[None]:
-    return nullcontext(None)
 
 
 @dataclass(frozen=True)
@@ -123,7 +116,7 @@ def program_spec_options(plan: Plan, req: ProgramRequest, say: Say) -> ExportOpt
     return ExportOptions(scan=spec)
 
 
-def export_plan(plan: Plan, req: ProgramRequest, say: Say, bar: ProgressBar = _no_bar) -> None:
+def export_plan(plan: Plan, req: ProgramRequest, say: Say, bar: ProgressBar = no_bar) -> None:
     """Write the program `req` asks for, once the arm is shown to fly it (nothing is written
     otherwise, unless `allow_unreachable`), and say what was written and its cycle time."""
     output = req.output
@@ -182,7 +175,7 @@ def flyable_joints(
     allow: bool,
     part: Part,
     say: Say,
-    bar: ProgressBar = _no_bar,
+    bar: ProgressBar = no_bar,
 ) -> np.ndarray:
     """Whether `robot` flies every flange pose: reach, joint limits, configuration flips,
     and the arm's links and the sensor body against the part and its cell. Says the

@@ -2,22 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
-
 from scanplan.core.plan import Plan
-from scanplan.jobs.planned import Say, plan_cell, planned_part
+from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.robot import get_robot
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import Placement, place
 
 IDENTITY_POSE = "0,0,0,0,0,0"
-ProgressBar = Callable[[str], AbstractContextManager[Callable[[int, int], None] | None]]
-
-
-def _no_bar(_: str) -> AbstractContextManager[None]:
-    return nullcontext(None)
 
 
 def place_plan(
@@ -28,8 +20,8 @@ def place_plan(
     yaw_step_deg: float,
     part: str | None = None,
     units: str | None = None,
-    say: Say = print,
-    bar: ProgressBar = _no_bar,
+    say: Say = silent,
+    bar: ProgressBar = no_bar,
 ) -> Placement:
     """Search the part's pose (x, y, z, yaw) from which `robot` with the sensor at `tcp`
     (None: the flange, said) flies every pose of `plan`, its links clear of the part, the

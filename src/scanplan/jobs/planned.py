@@ -6,6 +6,7 @@ the user's options override, said in one line).
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
@@ -16,10 +17,18 @@ from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.part import Part, geometry_digest, load_part
 
 Say = Callable[[str], None]
+# A progress bar by label, as the command line draws one: a context yielding progress(done,
+# total), or None where nothing is drawn.
+ProgressBar = Callable[[str], AbstractContextManager[Callable[[int, int], None] | None]]
 
 
-def _quiet(_: str) -> None:
-    pass
+def no_bar(_: str) -> AbstractContextManager[None]:
+    """A `ProgressBar` that draws nothing."""
+    return nullcontext(None)
+
+
+def silent(_: str) -> None:
+    """A `Say` that says nothing (a job run from a script, not the command line)."""
 
 
 def planned_part(
@@ -28,7 +37,7 @@ def planned_part(
     units: str | None,
     needed_for: str = "the plan is judged on it",
     other_part: bool = False,
-    say: Say = _quiet,
+    say: Say = silent,
 ) -> Part:
     """The part `plan` was made for: `part` (else the one the plan records) in `units`
     (else the plan's). A part that is not the planned one (another file, or the same file

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from scanplan.core.plan import Plan
 from scanplan.jobs.export import arm_of
-from scanplan.jobs.planned import Say, plan_cell, planned_part
+from scanplan.jobs.planned import Say, plan_cell, planned_part, silent
 from scanplan.judging.report.html import write_scene_page
 from scanplan.judging.report.scene import ArmPoses, check_arm, scene_figure
 from scanplan.robot import get_robot
@@ -23,7 +23,7 @@ def view_plan(
     tcp: str | None = None,
     part: str | None = None,
     units: str | None = None,
-    say: Say = print,
+    say: Say = silent,
 ) -> str:
     """Write the plan's page to `output`; the arm drawn is the plan's (or `robot`; 'none':
     no arm). Returns the line that says what the page shows."""
