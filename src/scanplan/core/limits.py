@@ -109,6 +109,12 @@ DEFECT_SIZE_MM = Limit(1e-4, 100.0, "mm")
 K_SIGMA = Limit(0.0, 1000.0, "σ", lo_open=True)
 # The initial mean Δy action of a policy (actions are in [-1, 1]).
 ACTION = Limit(-1.0, 1.0)
+# A perturbation's σ (`--perturb`): a placement, path or as-built error of a metre or a half
+# turn is a part in another place, not an error; zero leaves its term out. The part's scale
+# error: 10 % is a part of another size already (and keeps every draw's scale > 0).
+PERTURB_MM = Limit(0.0, 1000.0, "mm")
+PERTURB_DEG = Limit(0.0, 180.0, "deg")
+PERTURB_SCALE_PERCENT = Limit(0.0, 10.0, "%")
 
 # Counts: what a command may allocate before it starts.
 MAX_PASSES = 10_000  # passes of one view's raster
