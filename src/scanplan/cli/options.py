@@ -12,7 +12,15 @@ from typing import Annotated, Any
 
 import typer
 
-from scanplan.core.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, TOLERANCE_MM, Limit
+from scanplan.core.limits import (
+    ACTION,
+    MAX_BC_SAMPLES,
+    MAX_SEED,
+    POSITION_MM,
+    TCP_MM,
+    TOLERANCE_MM,
+    Limit,
+)
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 
@@ -61,18 +69,23 @@ def within(limit: Limit) -> Callable[[Any], Any]:
     return bounded(limit.lo, limit.hi, lo_open=limit.lo_open)
 
 
-def pose_option(value: str | None) -> str | None:
-    """--tcp / --part-pose: six finite numbers, checked before any work (None: not given)."""
-    # Deferred: export loads the writers of every dialect.
-    from scanplan.robot.export import parse_pose_arg
+def pose_option(tcp: bool) -> Callable[[str | None], str | None]:
+    """The callback of --tcp (`tcp`) or --part-pose: six numbers in their ranges, checked
+    before any work (None: not given); Click names the option in the error."""
 
-    if value is None:
-        return None
-    try:
-        parse_pose_arg(value)
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from None
-    return value
+    def check(value: str | None) -> str | None:
+        # Deferred: export loads the writers of every dialect.
+        from scanplan.robot.export import parse_pose_arg
+
+        if value is None:
+            return None
+        try:
+            parse_pose_arg(value, TCP_MM if tcp else POSITION_MM)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc)) from None
+        return value
+
+    return check
 
 
 def parse_floats(text: str, option: str) -> tuple[float, ...]:
@@ -171,12 +184,15 @@ POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) 
 # A --tcp or --part-pose not given is the identity: said in the output, never silently.
 IDENTITY_POSE = "0,0,0,0,0,0"
 TcpOpt = Annotated[
-    str | None, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option)
+    str | None,
+    typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option(tcp=True)),
 ]
 PartPoseOpt = Annotated[
     str | None,
     typer.Option(
-        "--part-pose", help=f"part in the robot base frame: {POSE_HELP}", callback=pose_option
+        "--part-pose",
+        help=f"part in the robot base frame: {POSE_HELP}",
+        callback=pose_option(tcp=False),
     ),
 ]
 

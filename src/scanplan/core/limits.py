@@ -96,6 +96,11 @@ TURN_SPEED_DEG_S = Limit(1e-3, 1e4, "deg/s")
 TURN_ACCEL_DEG_S2 = Limit(1e-3, 1e6, "deg/s²")
 # A joint's position or limit: a few turns either way at most.
 JOINT_DEG = Limit(-1080.0, 1080.0, "deg")
+# A pose given as x,y,z,A,B,C (--part-pose, --tcp): its Euler angles within a turn either way
+# (KUKA writes them in (-180, 180]); a TCP's offset from the flange a few metres at most (a
+# part's place is a POSITION_MM).
+POSE_ANGLE_DEG = Limit(-360.0, 360.0, "deg")
+TCP_MM = Limit(-5000.0, 5000.0, "mm")
 # In-spec distance tolerance |z_s - W_d|.
 TOLERANCE_MM = Limit(1e-3, 1e3, "mm")
 # Line profilometers run from a few Hz to some tens of kHz.

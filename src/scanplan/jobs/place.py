@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
 
+from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import Say, plan_cell, planned_part
 from scanplan.robot import get_robot
@@ -47,7 +48,7 @@ def place_plan(
         return place(
             plan.traj,
             arm,
-            parse_pose_arg(tcp or IDENTITY_POSE),
+            parse_pose_arg(tcp or IDENTITY_POSE, TCP_MM),
             heights,
             yaw_step_deg,
             obstacles=obstacles,
