@@ -15,11 +15,13 @@ import typer
 from scanplan.core.limits import (
     ACTION,
     MAX_BC_SAMPLES,
+    MAX_FIXTURES,
     MAX_SEED,
     POSITION_MM,
     TCP_MM,
     TOLERANCE_MM,
     Limit,
+    check_count,
 )
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
@@ -86,6 +88,15 @@ def pose_option(tcp: bool) -> Callable[[str | None], str | None]:
         return value
 
     return check
+
+
+def fixture_count(value: list[str] | None) -> list[str] | None:
+    """--fixture, counted before any file is read (thousands crash the ray casts)."""
+    try:
+        check_count(len(value or ()), MAX_FIXTURES, "fixture files", "a cell holds a few clamps")
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+    return value
 
 
 def parse_floats(text: str, option: str) -> tuple[float, ...]:
@@ -277,5 +288,6 @@ FixtureOpt = Annotated[
         metavar="FILE",
         help="a fixture mesh in part coordinates (repeatable): kept clear like the part",
         show_default=False,
+        callback=fixture_count,
     ),
 ]

@@ -129,6 +129,9 @@ MAX_BC_SAMPLES = 10**7  # states behaviour cloning stores (a few hundred MB)
 MAX_SEED = 2**32 - 1  # numpy's and torch's seeds
 MAX_RUNS = 10_000  # runs of one sweep (seeds x grid)
 MAX_DEFECTS = 100_000  # defects of one POD run (trials x per trial)
+# Fixtures of one cell: a cell holds a few clamps, tens at most. Each is a mesh with its own
+# Embree scene and collision model; a thousand live scenes crash the process.
+MAX_FIXTURES = 100
 
 
 class TooLarge(ValueError):
