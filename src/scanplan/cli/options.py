@@ -18,6 +18,7 @@ from scanplan.core.limits import (
     MAX_FIXTURES,
     MAX_SEED,
     POSITION_MM,
+    REWARD_DISTANCE_SCALE_MM,
     TCP_MM,
     TOLERANCE_MM,
     Limit,
@@ -68,7 +69,7 @@ def _num(x: float) -> str:
 
 def within(limit: Limit) -> Callable[[Any], Any]:
     """The `bounded` callback of one of `scanplan.core.limits`' ranges."""
-    return bounded(limit.lo, limit.hi, lo_open=limit.lo_open)
+    return bounded(limit.lo, limit.hi, lo_open=limit.lo_open, hi_open=limit.hi_open)
 
 
 def pose_option(tcp: bool) -> Callable[[str | None], str | None]:
@@ -253,7 +254,9 @@ RewardDistanceScaleOpt = Annotated[
     float | None,
     typer.Option(
         help="R_D's scale in mm, the depth error charged -1 (a deviation from the paper, whose "
-        "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2)"
+        "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2), "
+        f"{_num(REWARD_DISTANCE_SCALE_MM.lo)} to {_num(REWARD_DISTANCE_SCALE_MM.hi)}",
+        callback=within(REWARD_DISTANCE_SCALE_MM),
     ),
 ]
 PitchPivotOpt = Annotated[

@@ -114,6 +114,17 @@ DEFECT_SIZE_MM = Limit(1e-4, 100.0, "mm")
 K_SIGMA = Limit(0.0, 1000.0, "σ", lo_open=True)
 # The initial mean Δy action of a policy (actions are in [-1, 1]).
 ACTION = Limit(-1.0, 1.0)
+# Training (`scanplan train`, a sweep's grid, policy.json): R_D's scale, the depth error it
+# charges -1: under a tenth of a millimetre every depth error a step makes (Δz up to 1 mm)
+# costs -1, a saturated reward that teaches nothing. PPO's numbers as SB3 takes them: a
+# learning rate under 1e-8 never moves the weights; a discount under 0.5 looks less than
+# two steps ahead; a clip range under 1 % never lets the policy change. An initial log std
+# above 2 (σ ≈ 7 on actions in [-1, 1]) clips every action to a bound.
+REWARD_DISTANCE_SCALE_MM = Limit(0.1, 1e4, "mm")
+LEARNING_RATE = Limit(1e-8, 1.0)
+DISCOUNT = Limit(0.5, 1.0)
+CLIP_RANGE = Limit(0.01, 1.0)
+LOG_STD = Limit(-20.0, 2.0)
 # A perturbation's σ (`--perturb`): a placement, path or as-built error of a metre or a half
 # turn is a part in another place, not an error; zero leaves its term out. The part's scale
 # error: 10 % is a part of another size already (and keeps every draw's scale > 0).
