@@ -49,6 +49,27 @@ def test_export_bad_pose_leaves_no_file(plate_and_trajectory, tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("command", "option", "pose", "message"),
+    [
+        ("export", "--tcp", "1e308,0,0,0,0,0", "x 1e+308 is not in [-5000, 5000] mm"),
+        ("export", "--part-pose", "0,0,1e308,0,0,0", "z 1e+308 is not in [-100000, 100000] mm"),
+        ("place", "--tcp", "0,0,6000,0,0,0", "z 6000 is not in [-5000, 5000] mm"),
+        ("view", "--part-pose", "0,0,0,0,1e300,0", "B 1e+300 is not in [-360, 360] deg"),
+        ("plan", "--part-pose", "1e308,0,0,0,0,0", "x 1e+308 is not in [-100000, 100000] mm"),
+    ],
+)
+def test_implausible_poses_name_the_option(tmp_path, command, option, pose, message):
+    # Nothing is read: the option is refused while the command line is parsed.
+    out = tmp_path / "out"
+    source = "plate" if command == "plan" else str(tmp_path / "plan.json")
+    output = [] if command == "place" else ["-o", str(out)]
+    result = run_cli(command, source, *output, "--robot", "ur5e", option, pose)
+    assert result.exit_code == 2 and len(result.stderr.splitlines()) <= 2, result.stderr
+    assert f"{option}: pose {pose!r}: {message}" in result.stderr
+    assert "reach" not in result.stderr and not out.exists()
+
+
 def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     from rosbags.rosbag2 import Writer
 

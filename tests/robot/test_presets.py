@@ -3,6 +3,8 @@ nominal arm's."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from scanplan.core.cycle import NOMINAL
@@ -58,3 +60,19 @@ def test_bad_limits_in_a_toml_arm_are_one_line(tmp_path, extra, field) -> None:
     assert "\n" not in str(info.value) and field in str(info.value)
     with pytest.raises(ValueError, match="unknown robot"):
         motion_limits("kr16")
+
+
+def test_a_robot_file_that_is_not_a_file_is_said_so(tmp_path) -> None:
+    fifo, folder, big = tmp_path / "fifo.toml", tmp_path / "folder.toml", tmp_path / "big.toml"
+    os.mkfifo(fifo)
+    folder.mkdir()
+    big.write_text(ARM + "#" * 1024**2)
+    for read in (get_robot, motion_limits):  # the FIFO refused, not waited on
+        with pytest.raises(ValueError, match=f"^robot file {fifo} is a FIFO .named pipe., not"):
+            read(str(fifo))
+        with pytest.raises(ValueError, match=f"^robot file {folder} is a directory, not a file"):
+            read(str(folder))
+    with pytest.raises(ValueError, match="is larger than 1 MiB: not a robot's parameters"):
+        get_robot(str(big))
+    (tmp_path / "arm.toml").write_text(ARM)
+    assert get_robot(str(tmp_path / "arm.toml")).name == "my-arm"

@@ -24,7 +24,7 @@ def test_parse_reads_every_term_and_round_trips():
         ("", "is empty"),
         ("place:2", "'place:2': expected a length"),
         ("warp:1mm", "'warp:1mm': expected an RMS amplitude and a wavelength"),
-        ("warp:1mm@0mm", "the wavelength must be > 0"),
+        ("warp:1mm@0mm", r"the wavelength 0mm is not in \[0.001, 100000\] mm"),
         ("twist:1deg", "unknown term 'twist'"),
         ("path:1mm;path:2mm", "'path' given twice"),
         ("scale:2", "expected a percentage"),
@@ -34,6 +34,37 @@ def test_bad_specs_are_one_line_errors(text, message):
     with pytest.raises(ValueError, match=message) as err:
         Perturbation.parse(text)
     assert "\n" not in str(err.value)
+
+
+HUGE = "1" * 400  # parses as inf
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (f"place:{HUGE}mm", r"'place:1+\.\.\.': the length a number of 400 digits is not in"),
+        ("place:1001mm", r"the length 1001mm is not in \[0, 1000\] mm"),
+        ("place:2m", r"the length 2m is not in \[0, 1000\] mm"),
+        ("place:2mm,181deg", r"the angle 181deg is not in \[0, 180\] deg"),
+        (f"path:1mm,{HUGE}deg", "the angle a number of 400 digits"),
+        (f"warp:{HUGE}mm@200mm", "the amplitude a number of 400 digits"),
+        (f"warp:1mm@{HUGE}mm", "the wavelength a number of 400 digits"),
+        ("warp:1mm@200m", r"the wavelength 200m is not in \[0.001, 100000\] mm"),
+        ("scale:±20%", r"the scale error 20% is not in \[0, 10\] %"),
+        (f"{HUGE}:1mm", r"unknown term '1{37}\.\.\.'"),
+    ],
+)
+def test_implausible_magnitudes_name_the_term_and_range(text, message):
+    with pytest.raises(ValueError, match=message) as err:
+        Perturbation.parse(text)
+    assert str(err.value).startswith("--perturb")
+    assert "\n" not in str(err.value) and len(str(err.value)) < 200
+
+
+def test_the_ends_of_the_ranges_parse():
+    m = Perturbation.parse("place:1m,180deg;warp:1000mm@0.001mm;scale:10%;path:0mm,0deg")
+    assert (m.place_mm.size, m.place_deg.size, m.warp_mm) == (1000.0, 180.0, 1000.0)
+    assert (m.warp_wavelength_mm, m.scale.size) == (0.001, 0.1)
 
 
 def test_draws_are_seeded_and_zero_terms_change_nothing():

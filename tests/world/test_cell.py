@@ -11,6 +11,7 @@ import trimesh
 from typer.testing import CliRunner
 
 from scanplan.cli import app
+from scanplan.core.limits import TooLarge
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.world.cell import Cell
 from scanplan.world.collision import checker_for
@@ -31,6 +32,16 @@ def at(x: float, y: float, z: float) -> np.ndarray:
     T = np.eye(4)
     T[:3, 3] = x, y, z
     return T
+
+
+def test_fixtures_are_counted_before_any_is_read(block, tmp_path):
+    missing = [str(tmp_path / f"clamp{i}.stl") for i in range(101)]
+    with pytest.raises(TooLarge, match=r"^--fixture: 101 is more than the 100 allowed"):
+        Cell.around(block, fixtures=missing)
+    with pytest.raises(TooLarge, match=r"^plan p.json: context: fixtures: 10,000 is more"):
+        Cell.around(block, fixtures=["clamp.stl"] * 10_000, where="plan p.json: context: fixtures")
+    with pytest.raises(ValueError, match=f"^fixture file {missing[0]} does not exist"):
+        Cell.around(block, fixtures=missing[:100])
 
 
 def test_the_table_option_reads_heights_none_and_refuses_the_rest(block):

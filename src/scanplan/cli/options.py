@@ -12,7 +12,18 @@ from typing import Annotated, Any
 
 import typer
 
-from scanplan.core.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, TOLERANCE_MM, Limit
+from scanplan.core.limits import (
+    ACTION,
+    MAX_BC_SAMPLES,
+    MAX_FIXTURES,
+    MAX_SEED,
+    POSITION_MM,
+    REWARD_DISTANCE_SCALE_MM,
+    TCP_MM,
+    TOLERANCE_MM,
+    Limit,
+    check_count,
+)
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 
@@ -58,18 +69,32 @@ def _num(x: float) -> str:
 
 def within(limit: Limit) -> Callable[[Any], Any]:
     """The `bounded` callback of one of `scanplan.core.limits`' ranges."""
-    return bounded(limit.lo, limit.hi, lo_open=limit.lo_open)
+    return bounded(limit.lo, limit.hi, lo_open=limit.lo_open, hi_open=limit.hi_open)
 
 
-def pose_option(value: str | None) -> str | None:
-    """--tcp / --part-pose: six finite numbers, checked before any work (None: not given)."""
-    # Deferred: export loads the writers of every dialect.
-    from scanplan.robot.export import parse_pose_arg
+def pose_option(tcp: bool) -> Callable[[str | None], str | None]:
+    """The callback of --tcp (`tcp`) or --part-pose: six numbers in their ranges, checked
+    before any work (None: not given); Click names the option in the error."""
 
-    if value is None:
-        return None
+    def check(value: str | None) -> str | None:
+        # Deferred: export loads the writers of every dialect.
+        from scanplan.robot.export import parse_pose_arg
+
+        if value is None:
+            return None
+        try:
+            parse_pose_arg(value, TCP_MM if tcp else POSITION_MM)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc)) from None
+        return value
+
+    return check
+
+
+def fixture_count(value: list[str] | None) -> list[str] | None:
+    """--fixture, counted before any file is read (thousands crash the ray casts)."""
     try:
-        parse_pose_arg(value)
+        check_count(len(value or ()), MAX_FIXTURES, "fixture files", "a cell holds a few clamps")
     except ValueError as exc:
         raise typer.BadParameter(str(exc)) from None
     return value
@@ -189,12 +214,15 @@ POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) 
 # A --tcp or --part-pose not given is the identity: said in the output, never silently.
 IDENTITY_POSE = "0,0,0,0,0,0"
 TcpOpt = Annotated[
-    str | None, typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option)
+    str | None,
+    typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option(tcp=True)),
 ]
 PartPoseOpt = Annotated[
     str | None,
     typer.Option(
-        "--part-pose", help=f"part in the robot base frame: {POSE_HELP}", callback=pose_option
+        "--part-pose",
+        help=f"part in the robot base frame: {POSE_HELP}",
+        callback=pose_option(tcp=False),
     ),
 ]
 
@@ -244,7 +272,9 @@ RewardDistanceScaleOpt = Annotated[
     float | None,
     typer.Option(
         help="R_D's scale in mm, the depth error charged -1 (a deviation from the paper, whose "
-        "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2)"
+        "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2), "
+        f"{_num(REWARD_DISTANCE_SCALE_MM.lo)} to {_num(REWARD_DISTANCE_SCALE_MM.hi)}",
+        callback=within(REWARD_DISTANCE_SCALE_MM),
     ),
 ]
 PitchPivotOpt = Annotated[
@@ -279,5 +309,6 @@ FixtureOpt = Annotated[
         metavar="FILE",
         help="a fixture mesh in part coordinates (repeatable): kept clear like the part",
         show_default=False,
+        callback=fixture_count,
     ),
 ]

@@ -96,6 +96,11 @@ TURN_SPEED_DEG_S = Limit(1e-3, 1e4, "deg/s")
 TURN_ACCEL_DEG_S2 = Limit(1e-3, 1e6, "deg/s²")
 # A joint's position or limit: a few turns either way at most.
 JOINT_DEG = Limit(-1080.0, 1080.0, "deg")
+# A pose given as x,y,z,A,B,C (--part-pose, --tcp): its Euler angles within a turn either way
+# (KUKA writes them in (-180, 180]); a TCP's offset from the flange a few metres at most (a
+# part's place is a POSITION_MM).
+POSE_ANGLE_DEG = Limit(-360.0, 360.0, "deg")
+TCP_MM = Limit(-5000.0, 5000.0, "mm")
 # In-spec distance tolerance |z_s - W_d|.
 TOLERANCE_MM = Limit(1e-3, 1e3, "mm")
 # Line profilometers run from a few Hz to some tens of kHz.
@@ -109,6 +114,23 @@ DEFECT_SIZE_MM = Limit(1e-4, 100.0, "mm")
 K_SIGMA = Limit(0.0, 1000.0, "σ", lo_open=True)
 # The initial mean Δy action of a policy (actions are in [-1, 1]).
 ACTION = Limit(-1.0, 1.0)
+# Training (`scanplan train`, a sweep's grid, policy.json): R_D's scale, the depth error it
+# charges -1: under a tenth of a millimetre every depth error a step makes (Δz up to 1 mm)
+# costs -1, a saturated reward that teaches nothing. PPO's numbers as SB3 takes them: a
+# learning rate under 1e-8 never moves the weights; a discount under 0.5 looks less than
+# two steps ahead; a clip range under 1 % never lets the policy change. An initial log std
+# above 2 (σ ≈ 7 on actions in [-1, 1]) clips every action to a bound.
+REWARD_DISTANCE_SCALE_MM = Limit(0.1, 1e4, "mm")
+LEARNING_RATE = Limit(1e-8, 1.0)
+DISCOUNT = Limit(0.5, 1.0)
+CLIP_RANGE = Limit(0.01, 1.0)
+LOG_STD = Limit(-20.0, 2.0)
+# A perturbation's σ (`--perturb`): a placement, path or as-built error of a metre or a half
+# turn is a part in another place, not an error; zero leaves its term out. The part's scale
+# error: 10 % is a part of another size already (and keeps every draw's scale > 0).
+PERTURB_MM = Limit(0.0, 1000.0, "mm")
+PERTURB_DEG = Limit(0.0, 180.0, "deg")
+PERTURB_SCALE_PERCENT = Limit(0.0, 10.0, "%")
 
 # Counts: what a command may allocate before it starts.
 MAX_PASSES = 10_000  # passes of one view's raster
@@ -118,6 +140,9 @@ MAX_BC_SAMPLES = 10**7  # states behaviour cloning stores (a few hundred MB)
 MAX_SEED = 2**32 - 1  # numpy's and torch's seeds
 MAX_RUNS = 10_000  # runs of one sweep (seeds x grid)
 MAX_DEFECTS = 100_000  # defects of one POD run (trials x per trial)
+# Fixtures of one cell: a cell holds a few clamps, tens at most. Each is a mesh with its own
+# Embree scene and collision model; a thousand live scenes crash the process.
+MAX_FIXTURES = 100
 
 
 class TooLarge(ValueError):

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from scanplan.core.files import atomic_write_text, dumps_json
 from scanplan.core.limits import MAX_POSES, MAX_VIEWS, POSITION_MM, check_count, in_range
+from scanplan.core.paths import open_regular
 from scanplan.core.trajectory import INT32, Trajectory, poses_from_xyz_quat
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
@@ -54,21 +55,23 @@ MAX_TRAJECTORY_FILE_BYTES = 1024**3
 
 
 def _read_text(path: Path) -> str:
-    """The file's text (UTF-8, a byte-order mark allowed), or ValueError naming it."""
-    if path.is_dir():
-        raise ValueError(f"trajectory file {path} is a directory")
-    if not path.is_file():
-        raise ValueError(f"trajectory file {path} does not exist")
-    size = path.stat().st_size
-    if size > MAX_TRAJECTORY_FILE_BYTES:
-        raise ValueError(
-            f"trajectory file {path} is {size / 1024**3:.1f} GiB: more than "
-            f"{MAX_TRAJECTORY_FILE_BYTES / 1024**3:.0f} GiB, not a trajectory"
-        )
+    """The file's text (UTF-8, a byte-order mark allowed), or ValueError naming it and, for
+    a path that is not a regular file, what it is (a directory, a FIFO, a device)."""
+    with open_regular(path, "trajectory file") as f:
+        size = os.fstat(f.fileno()).st_size
+        if size > MAX_TRAJECTORY_FILE_BYTES:
+            raise ValueError(
+                f"trajectory file {path} is {size / 1024**3:.1f} GiB: more than "
+                f"{MAX_TRAJECTORY_FILE_BYTES / 1024**3:.0f} GiB, not a trajectory"
+            )
+        try:
+            data = f.read(MAX_TRAJECTORY_FILE_BYTES)
+        except OSError as exc:
+            raise ValueError(
+                f"trajectory file {path} cannot be read: {exc.strerror or exc}"
+            ) from None
     try:
-        return path.read_bytes().decode("utf-8-sig")
-    except OSError as exc:
-        raise ValueError(f"trajectory file {path} cannot be read: {exc.strerror or exc}") from None
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"trajectory file {path} is not UTF-8 text (byte {exc.start})") from None
 

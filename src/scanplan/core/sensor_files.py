@@ -56,6 +56,7 @@ from scanplan.core.limits import (
     in_range,
 )
 from scanplan.core.noise import NoiseModel
+from scanplan.core.paths import read_regular, regular_file
 from scanplan.core.sensor_spec import PRESETS, SensorSpec
 
 # Strict: "300" or true where a number belongs is a mistake in the file, not a value to coerce.
@@ -180,15 +181,15 @@ def load_sensor(spec: str | Path) -> SensorSpec:
     if text in PRESETS:
         return PRESETS[text]
     path = Path(text)
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):
         raise ValueError(f"sensor {text!r} is neither a file nor a preset ({', '.join(PRESETS)})")
+    regular_file(path, "sensor file")  # a directory, a FIFO, a device: said as such
     suffix = path.suffix.lower()
     if suffix not in (".toml", ".yaml", ".yml"):
         raise ValueError(f"sensor file {path}: use a .toml, .yaml or .yml file")
-    if path.stat().st_size > MAX_SENSOR_FILE_BYTES:
-        raise ValueError(f"sensor file {path} is larger than 1 MiB: not a sensor datasheet")
+    content = read_regular(path, "sensor file", MAX_SENSOR_FILE_BYTES, "not a sensor datasheet")
     try:
-        raw = path.read_bytes().decode("utf-8-sig")
+        raw = content.decode("utf-8-sig")
         data = tomllib.loads(raw) if suffix == ".toml" else yaml.safe_load(raw)
     except RecursionError:
         raise ValueError(f"sensor file {path} cannot be parsed: nested too deeply") from None

@@ -8,12 +8,15 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
+from scanplan.core.paths import read_regular
 from scanplan.core.run import counted, task_runner
 from scanplan.jobs.plan import Lines, PlanJob, run_plan_job
-from scanplan.world.part import MESH_SUFFIXES, STEP_SUFFIXES
+from scanplan.world.mesh_files import MESH_SUFFIXES, STEP_SUFFIXES
 
 # A catalogue listed in a text file rather than gathered in a folder: a .txt is no part file.
 CATALOGUE_LIST_SUFFIX = ".txt"
+# A list of parts, one path a line: tens of thousands of lines at most.
+MAX_PART_LIST_BYTES = 16 * 1024**2
 
 
 def is_catalogue(part: str) -> bool:
@@ -44,11 +47,10 @@ def catalogue_list(listing: Path) -> list[tuple[str, str]]:
     lines and what follows a '#' are skipped. A missing or unreadable part is that part's
     failure, not the list's; the list itself must exist and name parts of distinct plan
     names."""
+    data = read_regular(listing, "part list", MAX_PART_LIST_BYTES, "not a list of parts")
     try:
-        text = listing.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ValueError(f"part list {listing} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise ValueError(f"part list {listing}: cannot read it ({exc})") from None
     entries = [e for line in text.splitlines() if (e := line.split("#", 1)[0].strip())]
     if not entries:

@@ -12,7 +12,7 @@ from typing import Any
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import Plan
 from scanplan.core.run import counted, task_runner
-from scanplan.jobs.planned import ProgressBar, Say, no_bar, planned_part, silent
+from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.jobs.trials import (
     closed_loop_planner,
     closed_loop_robustness,
@@ -23,7 +23,6 @@ from scanplan.judging import Metrics, Robustness, robustness, trial_tasks
 from scanplan.judging.detectability import evaluate_detectable
 from scanplan.robot.program import program_cycle
 from scanplan.sensor.perturb import Perturbation
-from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
 
 Progress = Callable[[int, int], None] | None
@@ -53,7 +52,7 @@ def judged_part(
     """The plan's part (checked to be the planned one) with its cell built, so that a bad
     ROI, table or fixture fails before the long part."""
     the_part = planned_part(plan, part, units, other_part=other_part, say=say)
-    planned_cell(context, the_part.with_roi(context.roi))
+    plan_cell(plan, the_part.with_roi(context.roi), context)
     return the_part
 
 

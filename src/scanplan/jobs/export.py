@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.core.files import atomic_write_text
-from scanplan.core.limits import MAX_SCAN_SPEED_MM_S
+from scanplan.core.limits import MAX_SCAN_SPEED_MM_S, POSITION_MM, TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part
 from scanplan.robot import get_robot
@@ -74,12 +74,12 @@ def arm_of(
         say(f"--robot {robot} (the plan's)")
     same_arm = recorded is not None and robot == recorded.robot
     poses = []
-    for option, value, key, meaning in (
-        ("--part-pose", part_pose, "part_pose", "the part frame is the base"),
-        ("--tcp", tcp, "tcp", "the sensor origin is the flange"),
+    for option, value, key, meaning, position in (
+        ("--part-pose", part_pose, "part_pose", "the part frame is the base", POSITION_MM),
+        ("--tcp", tcp, "tcp", "the sensor origin is the flange", TCP_MM),
     ):
         if value is not None:
-            poses.append(parse_pose_arg(value))
+            poses.append(parse_pose_arg(value, position))
         elif same_arm and recorded is not None:
             say(f"{option} {recorded.record.get(key, '')} (the plan's)")
             poses.append(recorded.T_base_part if key == "part_pose" else recorded.T_flange_sensor)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.robot import get_robot
@@ -39,7 +40,7 @@ def place_plan(
         return place(
             plan.traj,
             arm,
-            parse_pose_arg(tcp or IDENTITY_POSE),
+            parse_pose_arg(tcp or IDENTITY_POSE, TCP_MM),
             heights,
             yaw_step_deg,
             obstacles=obstacles,

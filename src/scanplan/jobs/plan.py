@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from scanplan.core.context import LOWEST
+from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.core.plan_file import as_read, write_csv, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES, ScanSpec
@@ -66,7 +67,7 @@ def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
     if job.tcp is None:
         notes.append((f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)", False))
     pose = None if job.part_pose is None else parse_pose_arg(job.part_pose)
-    return Arm(job.robot, parse_pose_arg(job.tcp or IDENTITY_POSE), pose), notes
+    return Arm(job.robot, parse_pose_arg(job.tcp or IDENTITY_POSE, TCP_MM), pose), notes
 
 
 def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = None) -> Lines:

@@ -77,9 +77,15 @@ def _same_file(a: str, b: str) -> bool:
         return a == b
 
 
-def plan_cell(plan: Plan, part: Part) -> Cell:
-    """The cell the plan was made in (its table and fixtures) around `part`."""
-    return planned_cell(plan.context, part)
+def plan_cell(plan: Plan, part: Part, context: PlanContext | None = None) -> Cell:
+    """The cell the plan was made in (its table and fixtures) around `part`, or that of
+    `context` (the plan's with what options override); a message names the plan file for
+    fixtures it records."""
+    context = plan.context if context is None else context
+    where = "--fixture"
+    if context.fixtures == plan.context.fixtures:
+        where = f"{plan.where}: context: fixtures"
+    return planned_cell(context, part, where)
 
 
 def judged_context(

@@ -22,6 +22,7 @@ from scanplan.core.limits import (
     ANGLE_RAD,
     LENGTH_MM,
     MAX_POLICY_PARAMS,
+    REWARD_DISTANCE_SCALE_MM,
     STEP_MM,
     check_count,
     in_range,
@@ -108,9 +109,9 @@ class EnvOptions(_Model):
     start_offset_mm: Annotated[float, Field(ge=0, lt=1e4, allow_inf_nan=False)] = 0.0
     start_pitch_deg: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.0
     # Training only (R_D's scale, a deviation from the paper's Z_r/2); None = the paper's.
-    reward_distance_scale_mm: Annotated[float, Field(gt=0, le=1e4, allow_inf_nan=False)] | None = (
-        None
-    )
+    reward_distance_scale_mm: (
+        Annotated[float, Field(strict=True), in_range(REWARD_DISTANCE_SCALE_MM)] | None
+    ) = None
     # Where a pitch step turns (step_model.PITCH_PIVOTS): planning steps the same way.
     pitch_pivot: StrictStr = DEFAULT_PITCH_PIVOT
 

@@ -35,6 +35,7 @@ from scanplan.core.limits import (
     Limit,
     in_range,
 )
+from scanplan.core.paths import read_regular, regular_file
 from scanplan.robot.base import Robot
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.ur import UR_MODELS
@@ -272,11 +273,10 @@ def load_robot_file(path: str | Path) -> OPWRobot:
 
 def _robot_file(path: str | Path) -> RobotFile:
     path = Path(path)
+    content = read_regular(path, "robot file", MAX_ROBOT_FILE_BYTES, "not a robot's parameters")
     try:
-        if path.stat().st_size > MAX_ROBOT_FILE_BYTES:
-            raise ValueError(f"robot file {path} is larger than 1 MiB: not a robot's parameters")
-        data = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError) as exc:
+        data = tomllib.loads(content.decode())
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"robot file {path} cannot be parsed: {first}") from None
     try:
@@ -300,8 +300,7 @@ def get_robot(robot: str | Path | Robot) -> Robot:
     if key in OPW_PRESETS:
         return OPW_PRESETS[key]
     if key.endswith(".toml"):
-        if not Path(robot).is_file():
-            raise ValueError(f"robot file {robot} does not exist")
+        regular_file(robot, "robot file")  # a directory, a FIFO, a device: said as such
         return load_robot_file(robot)
     raise ValueError(
         f"unknown robot {str(robot)!r}; choose one of {', '.join(ROBOT_NAMES)} or a .toml file"
@@ -318,8 +317,7 @@ def motion_limits(robot: str | Path | Robot) -> MotionLimits:
     if key in MOTION_LIMITS:
         return MOTION_LIMITS[key]
     if key.endswith(".toml"):
-        if not Path(robot).is_file():
-            raise ValueError(f"robot file {robot} does not exist")
+        regular_file(robot, "robot file")  # a directory, a FIFO, a device: said as such
         return _robot_file(robot).motion_limits(f"robot file {robot} (nominal where not given)")
     raise ValueError(
         f"unknown robot {str(robot)!r}; choose one of {', '.join(ROBOT_NAMES)} or a .toml file"

@@ -20,6 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scanplan.core.limits import (
+    LENGTH_MM,
+    PERTURB_DEG,
+    PERTURB_MM,
+    PERTURB_SCALE_PERCENT,
+    Limit,
+)
+
 # Enough random modes for the field to look irregular, few enough to stay one wavelength smooth.
 WARP_MODES = 8
 
@@ -76,12 +84,12 @@ class Perturbation:
             key, _, value = term.partition(":")
             key, value = key.strip().lower(), value.replace(" ", "")
             if key in seen:
-                raise ValueError(f"--perturb: {key!r} given twice")
+                raise ValueError(f"--perturb: {_shown(key)!r} given twice")
             seen.add(key)
             try:
                 fields.update(_parse_term(key, value))
             except ValueError as exc:
-                raise ValueError(f"--perturb term {term!r}: {exc}") from None
+                raise ValueError(f"--perturb term {_shown(term)!r}: {exc}") from None
         return cls(**fields)  # type: ignore[arg-type]
 
     @property
@@ -121,41 +129,58 @@ class Perturbation:
         return Trial(self, place_t, place_r, directions, phases, scale, path_seed)
 
 
-def _number(match: re.Match[str], units: dict[str, float]) -> Spread:
-    return Spread(float(match.group(2)) * units[match.group(3)], uniform=bool(match.group(1)))
+def _shown(text: str, most: int = 40) -> str:
+    """A user's text as a message quotes it: a 400-digit number cut short."""
+    return text if len(text) <= most else f"{text[: most - 3]}..."
+
+
+def _magnitude(digits: str, unit: str, units: dict[str, float], limit: Limit, what: str) -> float:
+    """`digits` in `unit`, converted by `units`, or a ValueError naming `what` and `limit`
+    (a 400-digit σ parses as inf and would run on a part gone to infinity)."""
+    value = float(digits) * units[unit]
+    if not limit.contains(value):
+        shown = f"{digits}{unit}" if len(digits) <= 20 else f"a number of {len(digits)} digits"
+        raise ValueError(f"{what} {shown} is not in {limit}")
+    return value
+
+
+def _spread(
+    match: re.Match[str], at: int, units: dict[str, float], limit: Limit, what: str
+) -> Spread:
+    """The Spread of groups at, at + 1, at + 2 (±, number, unit) of `match`; none if absent."""
+    sign, digits, unit = match.group(at, at + 1, at + 2)
+    if digits is None:
+        return Spread()
+    return Spread(_magnitude(digits, unit, units, limit, what), uniform=bool(sign))
 
 
 def _parse_term(key: str, value: str) -> dict[str, object]:
-    if key == "place":
+    if key in ("place", "path"):
         m = re.fullmatch(f"{_LENGTH}(?:,{_ANGLE})?", value)
         if not m:
-            raise ValueError("expected a length and optionally an angle, e.g. 2mm,1deg")
-        angle = Spread()
-        if m.group(5):
-            angle = Spread(float(m.group(5)) * _TO_DEG[m.group(6)], uniform=bool(m.group(4)))
-        return {"place_mm": _number(m, _TO_MM), "place_deg": angle}
+            example = "2mm,1deg" if key == "place" else "0.1mm,0.05deg"
+            raise ValueError(f"expected a length and optionally an angle, e.g. {example}")
+        return {
+            f"{key}_mm": _spread(m, 1, _TO_MM, PERTURB_MM, "the length"),
+            f"{key}_deg": _spread(m, 4, _TO_DEG, PERTURB_DEG, "the angle"),
+        }
     if key == "warp":
         m = re.fullmatch(rf"{_LENGTH}@(\d+(?:\.\d*)?|\.\d+)(mm|m)", value)
         if not m or m.group(1):
             raise ValueError("expected an RMS amplitude and a wavelength, e.g. 1mm@200mm")
-        wavelength = float(m.group(4)) * _TO_MM[m.group(5)]
-        if wavelength <= 0.0:
-            raise ValueError("the wavelength must be > 0")
-        return {"warp_mm": _number(m, _TO_MM).size, "warp_wavelength_mm": wavelength}
+        return {
+            "warp_mm": _spread(m, 1, _TO_MM, PERTURB_MM, "the amplitude").size,
+            "warp_wavelength_mm": _magnitude(
+                m.group(4), m.group(5), _TO_MM, LENGTH_MM, "the wavelength"
+            ),
+        }
     if key == "scale":
         m = re.fullmatch(r"(\+-|±)?(\d+(?:\.\d*)?|\.\d+)(%)", value)
         if not m:
             raise ValueError("expected a percentage, e.g. 0.1%")
-        return {"scale": Spread(float(m.group(2)) / 100.0, uniform=bool(m.group(1)))}
-    if key == "path":
-        m = re.fullmatch(f"{_LENGTH}(?:,{_ANGLE})?", value)
-        if not m:
-            raise ValueError("expected a length and optionally an angle, e.g. 0.1mm,0.05deg")
-        angle = Spread()
-        if m.group(5):
-            angle = Spread(float(m.group(5)) * _TO_DEG[m.group(6)], uniform=bool(m.group(4)))
-        return {"path_mm": _number(m, _TO_MM), "path_deg": angle}
-    raise ValueError(f"unknown term {key!r} (place, warp, scale, path)")
+        percent = _spread(m, 1, {"%": 1.0}, PERTURB_SCALE_PERCENT, "the scale error")
+        return {"scale": Spread(percent.size / 100.0, uniform=percent.uniform)}
+    raise ValueError(f"unknown term {_shown(key)!r} (place, warp, scale, path)")
 
 
 def rotation_matrix(rotvec_rad: np.ndarray) -> np.ndarray:

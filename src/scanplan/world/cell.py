@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.core.context import LOWEST, PlanContext
+from scanplan.core.limits import MAX_FIXTURES, check_count
 from scanplan.core.quantities import UP
 from scanplan.world.part import Part, load_part
 
@@ -60,12 +61,15 @@ class Cell:
         table: str | float | None = None,
         fixtures: Sequence[str] = (),
         units: str = "mm",
+        where: str = "--fixture",
     ) -> Cell:
         """The cell of `part`: `table` a height in part coordinates, 'none' (held in the air)
         or 'lowest'/None (resting on a table at its lowest point); `fixtures` mesh files in
-        part coordinates and `units`. Raises ValueError naming the option."""
+        part coordinates and `units`, counted before any is read. Raises ValueError naming
+        the option (`where`: the fixtures' own, --fixture or a plan file's field)."""
+        check_count(len(fixtures), MAX_FIXTURES, where, "a cell holds a few clamps")
         z = _table_height(part, table)
-        loaded = tuple(load_part(f, units) for f in fixtures)
+        loaded = tuple(load_part(f, units, "fixture file") for f in fixtures)
         return cls(None if z is None else Table(np.array(UP), z), loaded, z)
 
     def table_block(self, part: Part) -> tuple[np.ndarray, np.ndarray] | None:
@@ -117,6 +121,7 @@ def _table_height(part: Part, table: str | float | None) -> float | None:
     return z
 
 
-def planned_cell(context: PlanContext, part: Part) -> Cell:
-    """The cell a plan was made in, around `part` (its fixtures read from their files)."""
-    return Cell.around(part, context.table, context.fixtures, context.fixture_units)
+def planned_cell(context: PlanContext, part: Part, where: str = "the plan's fixtures") -> Cell:
+    """The cell a plan was made in, around `part` (its fixtures read from their files);
+    `where` its fixtures come from, for messages."""
+    return Cell.around(part, context.table, context.fixtures, context.fixture_units, where)

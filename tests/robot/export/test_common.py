@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import snake_trajectory
+from scanplan.core.limits import TCP_MM
 from scanplan.robot.export import (
     flange_poses,
     parse_pose_arg,
@@ -52,3 +53,15 @@ def test_parse_pose_arg() -> None:
     for bad in ("1,2,3", "1,2,3,4,5,x", "1,2,3,4,5,nan", ""):
         with pytest.raises(ValueError, match="pose"):
             parse_pose_arg(bad)
+
+
+def test_parse_pose_arg_holds_magnitudes_to_their_ranges() -> None:
+    with pytest.raises(ValueError, match=r"y 1e\+308 is not in \[-100000, 100000\] mm"):
+        parse_pose_arg("0,1e308,0,0,0,0")
+    with pytest.raises(ValueError, match=r"C -400 is not in \[-360, 360\] deg"):
+        parse_pose_arg("0,0,0,0,0,-400")
+    with pytest.raises(ValueError, match=r"x 6000 is not in \[-5000, 5000\] mm"):
+        parse_pose_arg("6000,0,0,0,0,0", TCP_MM)
+    with pytest.raises(ValueError, match=r"pose '1{77}\.\.\.': expected 6"):
+        parse_pose_arg("1" * 400)
+    np.testing.assert_allclose(parse_pose_arg("1e5,0,0,360,0,0")[:3, 3], [1e5, 0, 0])

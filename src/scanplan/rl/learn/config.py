@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import inspect
-import math
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -13,7 +12,17 @@ from typing import Any
 
 from pydantic import TypeAdapter, ValidationError
 
-from scanplan.core.limits import ACTION, MAX_BC_SAMPLES, MAX_SEED, MAX_TIMESTEPS
+from scanplan.core.limits import (
+    ACTION,
+    CLIP_RANGE,
+    DISCOUNT,
+    LEARNING_RATE,
+    LOG_STD,
+    MAX_BC_SAMPLES,
+    MAX_SEED,
+    MAX_TIMESTEPS,
+    REWARD_DISTANCE_SCALE_MM,
+)
 from scanplan.core.quantities import TRAINING_FAN_POINTS
 from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.rl.env import TRAINING_SEGMENT_MM, SwathScanEnv
@@ -27,7 +36,6 @@ MAX_WIDTH = 4096  # units of a hidden layer
 # SwathScanEnv's own pitch bound.
 MAX_START_OFFSET_MM = 1000.0
 MAX_START_PITCH_DEG = 60.0
-MAX_DISTANCE_SCALE_MM = 1e4  # --reward-distance-scale (policy.json's bound)
 
 
 @dataclass
@@ -90,17 +98,15 @@ class TrainConfig:
             raise ValueError(f"training config: seed {self.seed} is not in [0, {MAX_SEED}]")
         if self.n_envs > MAX_ENVS:
             raise ValueError(f"training config: n_envs {self.n_envs} is more than {MAX_ENVS}")
-        if not (math.isfinite(self.gamma) and 0 < self.gamma <= 1):
-            raise ValueError(f"training config: gamma {self.gamma} is not in (0, 1]")
-        if not (math.isfinite(self.clip_range) and 0 < self.clip_range <= 1):
-            raise ValueError(f"training config: clip_range {self.clip_range} is not in (0, 1]")
+        DISCOUNT.check(self.gamma, "training config: gamma")
+        CLIP_RANGE.check(self.clip_range, "training config: clip_range")
         if not (self.net_arch and all(0 < n <= MAX_WIDTH for n in self.net_arch)):
             raise ValueError(
                 f"training config: net_arch {list(self.net_arch)}: layers of 1 to {MAX_WIDTH}"
             )
         stds = self.log_std_init if isinstance(self.log_std_init, tuple) else (self.log_std_init,)
-        if not all(math.isfinite(v) and abs(v) <= 20 for v in stds):
-            raise ValueError(f"training config: log_std_init {self.log_std_init} not in [-20, 20]")
+        for std in stds:
+            LOG_STD.check(std, "training config: log_std_init")
         if self.init_advance is not None:
             ACTION.check(self.init_advance, "training config: init_advance")
         if self.total_timesteps == 0 and self.bc_samples == 0:
@@ -113,10 +119,7 @@ class TrainConfig:
             raise ValueError(
                 f"training config: activation {self.activation!r}, use one of {ACTIVATIONS}"
             )
-        if not (math.isfinite(self.learning_rate) and 0 < self.learning_rate <= 1):
-            raise ValueError(
-                f"training config: learning_rate {self.learning_rate} is not in (0, 1]"
-            )
+        LEARNING_RATE.check(self.learning_rate, "training config: learning_rate")
         if not 0 <= self.bc_samples <= MAX_BC_SAMPLES:
             raise ValueError(
                 f"training config: bc_samples {self.bc_samples} is not in [0, {MAX_BC_SAMPLES}]"
@@ -180,6 +183,8 @@ def recipe_config(
         raise ValueError(
             "--log-std-init takes one value or one per action (Δy,Δz,Δθ[,Δφ with --env v1])"
         )
+    for std in log_std_init:
+        LOG_STD.check(std, "--log-std-init")
     if len(start_offset) != 2:
         raise ValueError("--start-offset takes two values: MM,DEG (depth and pitch)")
     offset_mm, offset_deg = start_offset
@@ -196,13 +201,8 @@ def recipe_config(
         if offset_mm or offset_deg
         else {}
     )
-    if reward_distance_scale is not None and not (
-        math.isfinite(reward_distance_scale) and 0 < reward_distance_scale <= MAX_DISTANCE_SCALE_MM
-    ):
-        raise ValueError(
-            f"--reward-distance-scale {reward_distance_scale:g}: a depth error in "
-            f"(0, {MAX_DISTANCE_SCALE_MM:g}] mm"
-        )
+    if reward_distance_scale is not None:
+        REWARD_DISTANCE_SCALE_MM.check(reward_distance_scale, "--reward-distance-scale")
     # Recorded only when set, as the start offsets.
     scale = (
         {"reward_distance_scale_mm": float(reward_distance_scale)}

@@ -11,6 +11,8 @@ from collections.abc import Iterable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.core.limits import POSE_ANGLE_DEG, POSITION_MM, Limit
+
 
 def euler_zyx_deg(R: np.ndarray) -> np.ndarray:
     """(…, 3) KUKA A, B, C: intrinsic Z-Y'-X'' Euler angles in degrees."""
@@ -43,17 +45,23 @@ def poses_from_parts(xyz_mm: np.ndarray, rot: Rotation) -> np.ndarray:
     return poses
 
 
-def parse_pose_arg(s: str) -> np.ndarray:
+def parse_pose_arg(s: str, position: Limit = POSITION_MM) -> np.ndarray:
     """ "x,y,z,A,B,C" -> 4x4: x, y, z in mm, then A, B, C in degrees as KUKA writes them
-    (intrinsic ZYX Euler: A about Z, B about the new Y', C about the new X'')."""
-    cells = [c.strip() for c in str(s).split(",")]
+    (intrinsic ZYX Euler: A about Z, B about the new Y', C about the new X''). x, y, z are
+    held to `position` (a TCP's to TCP_MM), A, B, C to POSE_ANGLE_DEG: a pose of 1e308 mm
+    is a typing mistake, not a place the arm fails to reach."""
+    text = str(s)
+    shown = repr(text if len(text) <= 80 else f"{text[:77]}...")
+    cells = [c.strip() for c in text.split(",")]
     usage = "expected 6 comma-separated numbers x,y,z (mm),A,B,C (deg, ZYX Euler as KUKA)"
     if len(cells) != 6:
-        raise ValueError(f"pose {s!r}: {usage}, got {len(cells)} value(s)")
+        raise ValueError(f"pose {shown}: {usage}, got {len(cells)} value(s)")
     try:
         values = [float(c) for c in cells]
     except ValueError:
-        raise ValueError(f"pose {s!r}: {usage}; not a number in it") from None
+        raise ValueError(f"pose {shown}: {usage}; not a number in it") from None
     if not np.isfinite(values).all():
-        raise ValueError(f"pose {s!r}: values must be finite")
+        raise ValueError(f"pose {shown}: values must be finite")
+    for name, value in zip("xyzABC", values, strict=True):
+        (position if name in "xyz" else POSE_ANGLE_DEG).check(value, f"pose {shown}: {name}")
     return pose_from_xyzabc(values)
