@@ -261,6 +261,22 @@ def plate_file(directory: Path, x_mm: float = 400.0, y_mm: float = 300.0) -> str
     return str(path)
 
 
+def fixture_files(directory: Path, part: Part, share: float = 0.4) -> tuple[str, str]:
+    """STLs of two fixtures of a plate lying along x (part coordinates): a 10 mm lid 5 mm
+    above its top over the first `share` of its length (wider than the plate across), and
+    a block 100 mm beside it that hides nothing. Returns (lid, beside)."""
+    (x0, y0, _), (x1, y1, z1) = part.bounds
+    length = share * (x1 - x0)
+    lid = trimesh.creation.box((length, y1 - y0 + 40.0, 10.0))
+    lid.apply_translation((x0 + length / 2, (y0 + y1) / 2, z1 + 5.0 + 5.0))
+    beside = trimesh.creation.box((40.0, 40.0, 40.0))
+    beside.apply_translation((x1 + 120.0, (y0 + y1) / 2, z1))
+    paths = (Path(directory) / "lid.stl", Path(directory) / "beside.stl")
+    lid.export(paths[0])
+    beside.export(paths[1])
+    return str(paths[0]), str(paths[1])
+
+
 def snake_trajectory() -> Trajectory:
     """Three snake passes over a bumpy part: pitch varies along each pass, the sensor turns
     180° about its axis between passes, transitions lift clear and are not scanned. While

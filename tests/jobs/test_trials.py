@@ -17,6 +17,7 @@ import pytest
 import trimesh
 
 import scanplan.planning.pipeline as pipeline
+from helpers import fixture_files
 from scanplan.core.context import recorded
 from scanplan.core.plan_file import read_csv, read_json, write_csv, write_json
 from scanplan.core.quantities import ScanSpec
@@ -306,3 +307,19 @@ def test_a_view_the_loop_cannot_join_is_lost_for_the_trial(ramp, two_views, monk
     with pytest.warns(UserWarning, match="trial 0: view 1 lost: no collision-free transition"):
         zero = _closed(ramp, two_views, "place:0mm", trials=1)
     assert list(zero.per_trial) == [alone.in_spec_coverage]
+
+
+def test_trials_in_a_cell_with_a_lid_are_the_nominal_figure_at_zero(bumpy, feedback_plan, tmp_path):
+    """The bump planned by feedback in the cell of a lid over 40 % of it: the controller in
+    the loop and the replay meet the same lid (in the nominal frame) as `evaluate` does, so
+    at zero perturbation both give the nominal figure, which the lid lowers."""
+    lid, _ = fixture_files(tmp_path, bumpy)
+    _, traj = plan_views(bumpy, SPEC, FeedbackPlanner(), "top", fixtures=[lid])
+    write_json(traj, tmp_path / "lid.json")
+    traj = read_json(tmp_path / "lid.json")
+    nominal = evaluate(bumpy, SPEC, traj, points_per_profile=POINTS, ceiling=False)
+    free = evaluate(bumpy, SPEC, feedback_plan, points_per_profile=POINTS, ceiling=False)
+    assert nominal.in_spec_coverage < free.in_spec_coverage - 0.3
+    zero = "place:0mm,0deg;warp:0mm@200mm"
+    assert list(_closed(bumpy, traj, zero, trials=1).per_trial) == [nominal.in_spec_coverage]
+    assert list(_open(bumpy, traj, zero, trials=1).per_trial) == [nominal.in_spec_coverage]

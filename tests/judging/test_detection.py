@@ -6,12 +6,13 @@ and says plainly when the data allow none; the predicted a90 matches the measure
 from __future__ import annotations
 
 import importlib.util
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import trimesh
 
-from helpers import straight
+from helpers import fixture_files, straight
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging.detectability import DetectabilitySurvey, survey
@@ -186,3 +187,23 @@ def test_the_map_is_the_depth_where_each_sample_reaches_its_share():
     assert (found.pod_at("dent", depth * 0.99, detector, rows)[mapped] < 0.9).mean() > 0.99
     a90 = found.predicted_a("dent", detector, 0.9)
     assert np.median(smallest[mapped]) == pytest.approx(a90, rel=0.15)
+
+
+def test_a_defect_under_a_fixture_is_never_seen(tmp_path):
+    """Defects placed on a plate 40 % of which a lid hides: no point lands on those under
+    the lid, and those outside it are found, as many points on each as without it."""
+    part = part_from_mesh(_plate(), "plate")
+    lid, _ = fixture_files(tmp_path, part)  # over x < -40
+    traj = straight(np.arange(120.0, 520.0, 0.5))  # the whole plate under the line
+    lidded = PlanContext(SPEC, fixtures=(lid,))
+    task = defect_tasks(part, SPEC, traj, "dent", (0.2, 0.3), 1, 8, 0, lidded)[0]
+    assert len(task.occluders) == 1
+    out = run_defect_trial(task)
+    x = np.array([d.centre_mm[0] for d in task.defects])
+    reach = np.array([d.radius_mm for d in task.defects])
+    under, clear = x + reach < -40.0, x - reach > -40.0
+    assert under.any() and clear.any()
+    assert (out[under] == 0).all()
+    # Found, and the points landed on each (its flagged points follow the noise drawn).
+    bare = run_defect_trial(replace(task, occluders=()))
+    assert out[clear, 0].all() and np.array_equal(out[clear][:, [0, 2]], bare[clear][:, [0, 2]])

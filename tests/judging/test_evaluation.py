@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from helpers import HEMISPHERE, sloped_housing, straight
+from helpers import HEMISPHERE, fixture_files, sloped_housing, straight
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
@@ -224,3 +224,36 @@ def test_a_point_does_not_hold_in_spec_the_surface_across_an_edge():
     assert (state[~rim] == SurfaceState.IN_SPEC).mean() > 0.95
     assert not (state[rim] == SurfaceState.IN_SPEC).any()
     assert m.in_spec_coverage <= m.visibility_ceiling
+
+
+def test_a_fixture_over_part_of_the_plate_removes_it_from_the_in_spec_figure(plate, tmp_path):
+    """A lid 5 mm above 40 % of the plate: in-spec coverage, plain coverage and the
+    visibility ceiling drop by that share, on the same surface to inspect (the plate's); the
+    in-spec set the view choice and the arm fit use agrees. A block beside the plate that
+    hides nothing changes no figure, bit for bit."""
+    lid, beside = fixture_files(tmp_path, plate)
+    traj = straight(np.arange(20.25, 620.0, 0.5))  # over the whole plate
+
+    def judged(*fixtures: str):
+        context = PlanContext(SPEC, fixtures=fixtures)
+        return evaluate(plate, SPEC, traj, points_per_profile=128, context=context), context
+
+    (bare, _), (lidded, context), (by, _) = judged(), judged(lid), judged(beside)
+    assert bare.in_spec_coverage > 0.97 and bare.visibility_ceiling == 1.0
+    assert lidded.in_spec_coverage == pytest.approx(bare.in_spec_coverage - 0.4, abs=0.02)
+    assert lidded.coverage_fraction == pytest.approx(bare.coverage_fraction - 0.4, abs=0.02)
+    assert lidded.visibility_ceiling == pytest.approx(0.6, abs=0.01)
+    assert lidded.visible_area_mm2 == bare.visible_area_mm2
+    # The lid covers x < -60; a sample is seen from points within the coverage radius.
+    hidden = lidded.coverage_map.points_part[:, 0] < -60.0 - lidded.coverage_radius_mm - 1.0
+    assert (lidded.coverage_map.state[hidden] == SurfaceState.UNSEEN).all()
+    assert not (lidded.cloud.points_part[:, 0] < -61.0).any()  # no point of it or under it
+    held = in_spec_samples(plate, SPEC, traj, 0, 128, context)
+    assert held.mean() == pytest.approx(lidded.in_spec_coverage, abs=0.01)
+    assert not held[hidden].any()
+    timeless = [
+        {k: v for k, v in m.to_json_dict().items() if not k.endswith("time_s")} for m in (bare, by)
+    ]
+    assert timeless[0] == timeless[1]
+    assert np.array_equal(bare.coverage_map.state, by.coverage_map.state)
+    assert np.array_equal(bare.cloud.points_part, by.cloud.points_part, equal_nan=True)

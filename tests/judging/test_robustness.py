@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from helpers import straight
+from helpers import fixture_files, straight
+from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.judging import evaluate, robustness, trial_tasks
+from scanplan.judging.robustness import trial_world
 from scanplan.sensor.perturb import Perturbation
-from scanplan.world.part import part_from_mesh
+from scanplan.world.part import load_part, part_from_mesh
 
 SPEC = ScanSpec(SensorSpec())
 POINTS = 128
@@ -90,3 +92,18 @@ def test_a_warped_part_is_judged_on_the_nominal_samples_it_lies_over():
     nominal = _run(fine, "path:0mm", trials=1).mean
     warped = _run(fine, "warp:2mm@150mm", trials=1).mean
     assert warped == pytest.approx(nominal, abs=0.01)
+
+
+def test_a_displaced_part_moves_among_fixtures_that_stay_where_the_cell_holds_them(plate, tmp_path):
+    lid = fixture_files(tmp_path, plate)[0]
+    context = PlanContext(SPEC, fixtures=(lid,))
+    model = Perturbation.parse("place:20mm,2deg")
+    task = trial_tasks(plate, SPEC, TRAJ, model, 1, 3, POINTS, context=context)[0]
+    world = trial_world(task)
+    assert not np.allclose(world.T_part_placed, np.eye(4), atol=1e-3)
+    # The part is measured in its own frame: there the lid is where the cell holds it, seen
+    # from the part as placed.
+    (seen_from_part,) = world.part.occluders
+    R, t = world.T_part_placed[:3, :3], world.T_part_placed[:3, 3]
+    in_cell = load_part(lid).mesh.vertices
+    assert np.allclose(seen_from_part.vertices @ R.T + t, in_cell, atol=1e-9)

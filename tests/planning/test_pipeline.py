@@ -15,7 +15,7 @@ import scanplan.planning.pass_path as pass_path_module
 import scanplan.planning.pipeline as pipeline_module
 import scanplan.planning.view_joining as view_joining_module
 import scanplan.planning.view_workers as view_workers_module
-from helpers import HEMISPHERE, fcl_distance, overhang_part
+from helpers import HEMISPHERE, fcl_distance, fixture_files, overhang_part
 from scanplan.cli import app
 from scanplan.core.context import PlanContext
 from scanplan.core.cycle import view_seconds
@@ -350,3 +350,26 @@ def test_views_planned_beside_the_top_view_on_workers_are_those_chosen_in_one_pr
     assert len(here.plans) >= 2
     assert [_view_key(v.view) for v in here.plans] == [_view_key(v.view) for v in there.plans]
     assert here.coverage == there.coverage
+
+
+def test_a_lid_over_part_of_the_plate_is_planned_around_and_judged(plate, tmp_path):
+    """A lid 5 mm above 40 % of the plate: the planner's probes find no surface under it, so
+    its pass scans the rest (60 % of the length), and the plan's in-spec coverage is the
+    plain plan's less the hidden share; the views chosen for it hold what a beam can reach.
+    A block beside the plate that hides nothing leaves the plan as it was, pose for pose."""
+    lid, beside = fixture_files(tmp_path, plate)
+    planner = make_planner("geometric")
+    _, bare = plan_views(plate, SPEC, planner, views="top")
+    _, by = plan_views(plate, SPEC, planner, views="top", fixtures=[beside])
+    assert np.array_equal(bare.poses, by.poses) and np.array_equal(bare.scanning, by.scanning)
+    _, lidded = plan_views(plate, SPEC, planner, views="top", fixtures=[lid])
+    scanned = lidded.poses[lidded.scanning, 0, 3]
+    assert scanned.min() > -60.0 - 5.0 and scanned.max() == pytest.approx(300.0, abs=5.0)
+    plain = evaluate(plate, SPEC, bare, points_per_profile=128)
+    judged = evaluate(plate, SPEC, lidded, points_per_profile=128)  # in its recorded cell
+    assert plain.in_spec_coverage > 0.97
+    assert judged.in_spec_coverage == pytest.approx(plain.in_spec_coverage - 0.4, abs=0.02)
+    _, auto = plan_views(plate, SPEC, planner, views="auto", fixtures=[lid])
+    views = evaluate(plate, SPEC, auto, points_per_profile=128)
+    assert views.visibility_ceiling is not None and views.visibility_ceiling < 0.75
+    assert views.in_spec_coverage == pytest.approx(views.visibility_ceiling, abs=0.03)

@@ -96,6 +96,29 @@ def test_step_casts_a_camera_shadow_of_the_predicted_width():
     assert (behind.status[:, SPEC.points_per_profile // 2] == PointStatus.VALID).all()
 
 
+def test_a_fixture_stops_the_laser_and_hides_the_camera_s_view():
+    """A lid over the line: no point, none of the lid's. A bar ahead of the line (camera on
+    +y_s = +x), 60 mm ahead and 100-120 mm up, out of the laser's plane but across the
+    camera's sight line (at x = 60 it is 60·400/231 = 104 mm up): every point shadowed,
+    and with the camera behind, every point valid."""
+    part = part_from_mesh(plate((400.0, 2000.0)))
+    lid = trimesh.creation.box((100.0, 2000.0, 10.0))
+    lid.apply_translation((0, 0, 20.0))
+    bar = trimesh.creation.box((40.0, 2000.0, 20.0))
+    bar.apply_translation((60.0, 0, 110.0))
+    pose = SWATH.pose(0, 0, 0)
+    bare = LineProfilometer(part, QUIET).measure(pose)
+    assert bare.valid.all()
+    lidded = LineProfilometer(part.among([lid]), QUIET).measure(pose)
+    assert (lidded.status == PointStatus.NO_HIT).all() and (lidded.face == -1).all()
+    assert np.isnan(lidded.points_part).all()
+    barred = LineProfilometer(part.among([bar]), QUIET).measure(pose)
+    assert (barred.status == PointStatus.SHADOWED).all()
+    assert np.array_equal(barred.true_z_sensor, bare.true_z_sensor)  # the laser reached it
+    behind = LineProfilometer(part.among([bar]), replace(QUIET, camera_side=-1)).measure(pose)
+    assert behind.valid.all()
+
+
 @pytest.mark.parametrize("z_top", [-150.0, 150.0])
 def test_plate_outside_the_depth_window_returns_nothing(z_top):
     part = part_from_mesh(plate(z_top=z_top))

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from helpers import sloped_housing
+from helpers import fixture_files, sloped_housing
 from scanplan.world.part import part_from_mesh
 from scanplan.world.surface import (
     hemisphere_visible_samples,
+    oriented_normals,
     reachable_samples,
     upward_visible_samples,
 )
@@ -63,3 +64,29 @@ def test_an_overhang_lowers_the_ceiling():
     wall = np.abs(part.ray_engine.face_normals[surface.faces, 2]) < 0.1
     assert reach[wall].mean() > 0.99
     assert not reachable_samples(part, surface, tol, max_tilt_deg=70.0)[wall].any()
+
+
+def test_a_fixture_lowers_the_ceiling_not_the_surface_to_inspect(plate, tmp_path):
+    """A lid 5 mm over 40 % of the plate (x < -60): the surface to inspect is the plate's
+    own (its samples and outward normals as without the lid), the beams that reach it stop
+    at the lid, all but those within 5·tan 15° = 1.3 mm of its open edges."""
+    lid = trimesh.load(fixture_files(tmp_path, plate)[0])
+    lidded = plate.among([lid])
+    tol = math.radians(15.0)
+    for sampler in (upward_visible_samples, hemisphere_visible_samples):
+        alone, among = sampler(plate, 3.0), sampler(lidded, 3.0)
+        assert np.array_equal(alone.points, among.points) and alone.area_mm2 == among.area_mm2
+        x, on_top = among.points[:, 0], among.points[:, 2] > -1e-6
+        reach = reachable_samples(lidded, among, tol)
+        hidden = on_top & (x > -298.0) & (x < -62.0)
+        assert hidden.sum() > 0.35 * on_top.sum() and not reach[hidden].any()
+        assert reach[on_top & (x > -60.0)].all()
+        assert reachable_samples(plate, among, tol).all()
+    # A sheet (not closed) under a lid still faces up: the lid turns no normal.
+    sheet = trimesh.Trimesh([[-200, -150, 0], [200, -150, 0], [200, 150, 0], [-200, 150, 0]],
+                            [[0, 1, 2], [0, 2, 3]])  # fmt: skip
+    alone = part_from_mesh(sheet, "sheet")
+    lid = trimesh.creation.box((500.0, 400.0, 10.0))
+    lid.apply_translation((0, 0, 10.0))
+    assert np.array_equal(oriented_normals(alone.among([lid])), oriented_normals(alone))
+    assert (oriented_normals(alone)[:, 2] > 0.99).all()

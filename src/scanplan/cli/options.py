@@ -307,7 +307,10 @@ FixtureOpt = Annotated[
     typer.Option(
         "--fixture",
         metavar="FILE",
-        help="a fixture mesh in part coordinates (repeatable): kept clear like the part",
+        help=(
+            "a fixture mesh in part coordinates (repeatable): kept clear like the part; it "
+            "hides what it covers from the laser and the camera"
+        ),
         show_default=False,
         callback=fixture_count,
     ),

@@ -31,6 +31,7 @@ from scanplan.judging.detection import (
 )
 from scanplan.judging.evaluation import surface_samples
 from scanplan.sensor.defects import KINDS
+from scanplan.world.cell import part_in_cell
 from scanplan.world.part import Part
 
 # What a defects folder holds: a folder with it may be replaced by a new run.
@@ -99,8 +100,8 @@ def run_defects(
     if study.defect_free:
         with bar("defect-free scan") as progress:
             calls, detectability = survey(
-                inspected, spec.sensor, traj.poses[traj.scanning], detector, surface, study.seed,
-                progress=progress, swath=traj.swath[traj.scanning],
+                part_in_cell(context, inspected), spec.sensor, traj.poses[traj.scanning],
+                detector, surface, study.seed, progress=progress, swath=traj.swath[traj.scanning],
             )  # fmt: skip
     predicted: dict[str, float | None] = {}
     if detectability is not None and study.kind in PREDICTED:

@@ -8,6 +8,7 @@ from pathlib import Path
 from scanplan.core.plan import Plan
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.sensor.cloud import PointCloud, ply_size_bytes, simulate_cloud, write_ply
+from scanplan.world.cell import part_in_cell
 from scanplan.world.part import Part
 
 
@@ -34,9 +35,11 @@ def scan_plan(
     max_points: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> PointCloud:
-    """Simulate the plan's scan of `part` with `sensor` and write the cloud as PLY."""
+    """Simulate the plan's scan of `part` with `sensor` and write the cloud as PLY; the
+    fixtures the plan records hide what they cover (no point of them or behind them)."""
     if not plan.traj.scanning.any():
         raise ValueError(f"{plan.where} has no scanning pose")
+    part = part_in_cell(plan.context, part)
     cloud = simulate_cloud(
         part, sensor, plan.traj, seed=seed, progress=progress, max_points=max_points
     )

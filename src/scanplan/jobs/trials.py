@@ -93,6 +93,7 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
         for v, f, name in task.fixtures
     )
     cell = Cell(task.table, fixtures, task.table_z_mm)
+    nominal = cell.occluding(nominal)  # the CAD the controller probes, among the fixtures
     placed = world.T_part_placed
     pieces = []
     for lines in task.views:

@@ -33,6 +33,7 @@ from scanplan.judging.pod import PodFit, fit_pod
 from scanplan.judging.robustness import TrialMap
 from scanplan.sensor.defects import ASPECT, Defect, inject, place
 from scanplan.sensor.profilometer import LineProfilometer, Scan
+from scanplan.world.cell import part_in_cell
 from scanplan.world.part import Part
 from scanplan.world.surface import VisibleSurface
 
@@ -165,7 +166,8 @@ def nominal_depth(
 class DefectTask:
     """One trial, picklable: the nominal mesh (vertices (v, 3), faces (f, 3), inspect_faces
     (f,) bool or None), the sensor, the plan's scanning poses (m, 4, 4), the defects placed
-    and the call rule; `noise_seed` draws the trial's sensor noise."""
+    and the call rule; `noise_seed` draws the trial's sensor noise; occluders: the fixtures
+    (vertices (v, 3), faces (f, 3) each), which hide what they cover."""
 
     name: str
     vertices: np.ndarray
@@ -176,6 +178,7 @@ class DefectTask:
     defects: tuple[Defect, ...]
     detector: Detector
     noise_seed: int
+    occluders: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
 def run_defect_trial(task: DefectTask) -> np.ndarray:
@@ -190,6 +193,7 @@ def run_defect_trial(task: DefectTask) -> np.ndarray:
     mesh, origin = inject(trimesh.Trimesh(task.vertices, task.faces, process=False), defects)
     inspect = None if task.inspect_faces is None else task.inspect_faces[origin]
     part = Part(mesh, name=task.name, source=task.name, inspect_faces=inspect)
+    part = part.among([trimesh.Trimesh(v, f, process=False) for v, f in task.occluders])
     profiler = LineProfilometer(part, task.sensor, seed=task.noise_seed)
     tri = task.vertices[task.faces]
     plane_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -276,6 +280,8 @@ def defect_tasks(
     sizes = rng.permutation(sizes).reshape(trials, per_trial)
     gap = max(10.0, 4.0 * detector.link_mm)
     mesh = part.mesh
+    fixtures = part_in_cell(context, part).occluders
+    occluders = tuple((np.asarray(m.vertices), np.asarray(m.faces)) for m in fixtures)
     tasks = []
     for i in range(trials):
         trial_rng = np.random.default_rng([seed, i])
@@ -291,6 +297,7 @@ def defect_tasks(
                 defects=tuple(placed),
                 detector=detector,
                 noise_seed=int(trial_rng.integers(2**63)),
+                occluders=occluders,
             )
         )
     return tasks

@@ -22,7 +22,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging.accumulators import CloudSample, Coverage, PointErrors, Spacing
 from scanplan.judging.summary import Metrics, SurfaceState
 from scanplan.sensor.profilometer import LineProfilometer, Scan
-from scanplan.world.cell import planned_cell
+from scanplan.world.cell import Cell, part_in_cell, planned_cell
 from scanplan.world.collision import checker_for
 from scanplan.world.part import Part
 from scanplan.world.surface import (
@@ -129,8 +129,8 @@ def coverage_of(
 def _visibility_ceiling(
     part: Part, surface: VisibleSurface, scan_spec: ScanSpec, seed: int
 ) -> float | None:
-    """The share of the surface samples a sensor could see within the angle tolerance; None
-    where there is no sample."""
+    """The share of the surface samples a sensor could see within the angle tolerance (past
+    the part's fixtures, with `part` in its cell); None where there is no sample."""
     if not len(surface.points):
         return None
     # On the very samples in-spec coverage counts, so the two shares compare.
@@ -139,11 +139,11 @@ def _visibility_ceiling(
 
 
 def _collision_summary(
-    part: Part, sensor: SensorSpec, context: PlanContext, traj: Trajectory, scan_spec: ScanSpec
+    part: Part, sensor: SensorSpec, cell: Cell, traj: Trajectory, scan_spec: ScanSpec
 ) -> dict[str, Any]:
     """The collision figures of `Metrics`: the sensor at every pose of `traj` against the part
     and the cell the plan was made in, kept `scan_spec.clearance_mm` clear."""
-    checker = checker_for(part, sensor, planned_cell(context, part))
+    checker = checker_for(part, sensor, cell)
     collisions = checker.check(traj.poses, scan_spec.clearance_mm)
     return {
         "collisions_count": int(collisions.colliding.sum()),
@@ -156,8 +156,10 @@ def _collision_summary(
 
 
 def _out_of_reach(part: Part) -> ValueError:
+    hidden = " or hidden by its fixtures" if part.occluders else ""
     return ValueError(
         f"no valid point: part {part.name} is outside the sensor's reach along this trajectory"
+        + hidden
     )
 
 
@@ -175,7 +177,8 @@ def in_spec_samples(
     sample's in-spec state depends on one pass's points), on a thread per core, its noise
     drawn from its own child of `seed`: the same set whatever the number of cores, within
     the noise of `evaluate`'s. Raises ValueError, as `evaluate` does, if no scanning pose
-    returns a valid point."""
+    returns a valid point. The part's fixtures (the context's cell, unless `part` is among
+    occluders already: `cell.part_in_cell`) hide it from the sensor."""
     sensor = scan_spec.sensor
     spec = sensor.with_points(points_per_profile) if points_per_profile else sensor
     if not traj.scanning.any():
@@ -187,6 +190,7 @@ def in_spec_samples(
     surface = surface_samples(part, spec, context, seed)
     if not len(surface.points):
         return np.zeros(0, bool)
+    in_cell = part_in_cell(context, part)  # what the sensor meets: the part among its fixtures
     normals = oriented_normals(part)[surface.faces]
     # A pass starts wherever the pass index changes: the in-spec test looks no further.
     swath = traj.swath[scan_idx]
@@ -197,7 +201,7 @@ def in_spec_samples(
     def one_pass(k: int) -> tuple[np.ndarray, bool]:
         lo, hi = bounds[k]
         coverage = coverage_of(surface, scan_spec, spec, normals, plain=False)
-        profiler = LineProfilometer(part, spec, seed=int(seeds[k]), threads=1)
+        profiler = LineProfilometer(in_cell, spec, seed=int(seeds[k]), threads=1)
         seen = False
         for at, scan in profiler.measure_in_chunks(poses[lo:hi]):
             ori = point_orientation_error(scan.normals_part, scan.poses)
@@ -212,7 +216,7 @@ def in_spec_samples(
             held |= pass_held
             seen |= pass_seen
     if not seen:
-        raise _out_of_reach(part)
+        raise _out_of_reach(in_cell)
     return held
 
 
@@ -239,7 +243,8 @@ def evaluate(
     progress(done, total): called after each chunk of scanning poses (a caller's progress bar).
     context: what the plan is judged as (its surface to inspect, region of interest and
     reward); None: as recorded in the trajectory (`context.recorded`). Every statistic is
-    over the part's surface to inspect: points on other faces count as no hit.
+    over the part's surface to inspect: points on other faces count as no hit; the context's
+    fixtures hide it from the sensor and the ceiling's beams, not from that surface.
     limits, targets, blended: the arm's motion limits the cycle time is timed with, the poses
     a program flies between and those it blends through (`cycle.cycle_time`; None: every
     planned pose, each an exact stop).
@@ -267,6 +272,8 @@ def evaluate(
     context = recorded(traj, scan_spec) if context is None else context
     part = part.with_roi(context.roi)
     surface = surface_samples(part, spec, context, seed)
+    cell = planned_cell(context, part)
+    in_cell = cell.occluding(part)  # what the sensor meets: the part among its fixtures
 
     errors = PointErrors(wd, spec.z_range_mm)
     spacing = Spacing(u_dir, has_prev, context.full_beam_angle)
@@ -274,7 +281,7 @@ def evaluate(
     sample = CloudSample(m * n_cols, max_map_points, seed)
     for observer in observers:
         observer.start(surface, spec, swath)
-    profiler = LineProfilometer(part, spec, seed=seed)
+    profiler = LineProfilometer(in_cell, spec, seed=seed)
     for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
         ori = point_orientation_error(scan.normals_part, scan.poses)
         errors.add(scan, ori)
@@ -285,10 +292,10 @@ def evaluate(
             observer.add(lo, scan)
 
     if errors.n_valid == 0:
-        raise _out_of_reach(part)
+        raise _out_of_reach(in_cell)
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
-    ceiling_share = _visibility_ceiling(part, surface, scan_spec, seed) if ceiling else None
-    collided = _collision_summary(part, sensor, context, traj, scan_spec)
+    ceiling_share = _visibility_ceiling(in_cell, surface, scan_spec, seed) if ceiling else None
+    collided = _collision_summary(part, sensor, cell, traj, scan_spec)
     return Metrics(
         part=part.name,
         planner=traj.planner,

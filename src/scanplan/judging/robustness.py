@@ -24,6 +24,7 @@ from scanplan.judging.evaluation import coverage_of, scanning_steps, surface_sam
 from scanplan.judging.summary import SurfaceState
 from scanplan.sensor.perturb import Perturbation, Trial
 from scanplan.sensor.profilometer import LineProfilometer, Scan
+from scanplan.world.cell import part_in_cell
 from scanplan.world.part import Part
 from scanplan.world.surface import VisibleSurface, oriented_normals
 
@@ -37,7 +38,9 @@ class TrialTask:
 
     vertices, normals: (v, 3) the nominal mesh's vertices and unit vertex normals; faces
     (f, 3); inspect_faces (f,) bool or None; poses (m, 4, 4) the scanning poses, has_prev
-    (m,) bool; surface: the nominal samples judged, surface_normals their outward normals."""
+    (m,) bool; surface: the nominal samples judged, surface_normals their outward normals;
+    occluders: the fixtures (vertices (v, 3), faces (f, 3) each), fixed in the nominal frame:
+    the part moves among them, which hide it from the sensor."""
 
     name: str
     vertices: np.ndarray
@@ -54,6 +57,7 @@ class TrialTask:
     seed: int
     index: int
     chunk_poses: int
+    occluders: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -74,7 +78,15 @@ def trial_world(task: TrialTask) -> TrialWorld:
     built = trial.as_built(task.vertices, task.normals, centre)
     mesh = trimesh.Trimesh(built, task.faces, process=False)  # same faces, same order
     part = Part(mesh, name=task.name, source=task.name, inspect_faces=task.inspect_faces)
-    return TrialWorld(trial, part, built, trial.T_part_placed(centre))
+    T_part_placed = trial.T_part_placed(centre)
+    # The fixtures stay where the cell holds them (the nominal frame, where the part lies
+    # at T_part_placed): in the part's own frame, where it is measured, they move back.
+    T_back = np.linalg.inv(T_part_placed)
+    fixtures = [
+        trimesh.Trimesh(v @ T_back[:3, :3].T + T_back[:3, 3], f, process=False)
+        for v, f in task.occluders
+    ]
+    return TrialWorld(trial, part.among(fixtures), built, T_part_placed)
 
 
 class PlacedProfilometer(LineProfilometer):
@@ -242,6 +254,9 @@ def trial_tasks(
     part = part.with_roi(context.roi)
     surface = surface_samples(part, spec, context, seed)
     scan_idx, has_prev = scanning_steps(traj)
+    occluders = tuple(
+        (np.asarray(m.vertices), np.asarray(m.faces)) for m in part_in_cell(context, part).occluders
+    )
     mesh = part.mesh
     surface_normals = oriented_normals(part)[surface.faces]
     return [
@@ -261,6 +276,7 @@ def trial_tasks(
             seed=seed,
             index=i,
             chunk_poses=chunk_poses,
+            occluders=occluders,
         )
         for i in range(trials)
     ]

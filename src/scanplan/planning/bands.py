@@ -45,17 +45,20 @@ def top_surface(
     v: np.ndarray,
     along_step_mm: float = 20.0,
     across_step_mm: float = 4.0,
+    sensor_above_mm: float = math.inf,
 ) -> TopSurface:
     """Vertical rays on a grid over the part's footprint along u and v (one batch). With a
     region of interest, the grid spans its footprint and a ray whose first hit (on the whole
-    part: occlusion stays real) is not one of its faces counts as no surface."""
+    part: occlusion stays real) is not one of its faces counts as no surface. Fixtures up
+    to `sensor_above_mm` above the part's top (the sensor's height) hide what they cover."""
     vertices = part.inspect_vertices
     a, c = vertices @ u, vertices @ v
     along = np.arange(a.min() + along_step_mm / 2, a.max(), along_step_mm)
     if len(along) == 0:
         along = np.array([0.5 * (a.min() + a.max())])
     across = np.arange(c.min(), c.max() + across_step_mm, across_step_mm)
-    probe = probe_grid(part, np.zeros(3), u, v, along, across)
+    sensor = np.array([0.0, 0.0, float(part.bounds[1, 2]) + sensor_above_mm])
+    probe = probe_grid(part, sensor, u, v, along, across)
     points = along[:, None, None] * u + across[None, :, None] * v
     points[..., 2] = np.where(probe.hit, probe.z_mm, 0.0)
     return TopSurface(u, v, along, across, probe.hit, points, probe.normals_up)
@@ -288,7 +291,10 @@ def plan_adaptive_swaths(
     predicted in-spec coverage picked the worse one on two of three real parts
     (benchmarks/compare_planners.py)."""
     u = scan_direction(part, spec.sensor, direction)
-    bands = adaptive_offsets(top_surface(part, u, np.cross(UP, u)), spec)
+    surface = top_surface(part, u, np.cross(UP, u), sensor_above_mm=spec.working_distance_mm)
+    if part.occluders and not surface.hit.any():
+        raise ValueError("the fixtures (--fixture) hide all the surface a top-down raster sees")
+    bands = adaptive_offsets(surface, spec)
     offsets = [b.centre_mm for b in bands]
     rel = [(b.lo_mm - b.centre_mm, b.hi_mm - b.centre_mm) for b in bands]
     return swaths_at(part, spec.sensor, u, offsets, rel, run_in_mm, True, uphill)

@@ -56,10 +56,7 @@ def pass_geometry(
     scan = probe.measure_many(swath.poses(s, 0 * s, 0 * s))
     hits = np.isfinite(scan.true_z_sensor).sum(axis=1)
     if hits.max() == 0:
-        raise ValueError(
-            f"pass {swath.index} sees no surface of part {part.name}: "
-            "the part is outside the sensor's reach"
-        )
+        raise swath.sees_nothing(part)
     seen = np.flatnonzero(hits >= max(1, min_hits * hits.max()))
     return PassGeometry(float(s[seen[0]]), float(s[seen[-1]]))
 

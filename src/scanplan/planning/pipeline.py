@@ -88,6 +88,8 @@ def plan_views(
         raise ValueError(f"--coverage-target must be in (0, 1], got {coverage_target}")
     part = part.with_roi(roi)
     cell = planned_cell(context, part)
+    # Planned among its fixtures: they hide the part from every probe, view and judgement.
+    part = cell.occluding(part)
 
     plan = ViewRaster(spec, planner, raster, direction, overlap, cell)
 

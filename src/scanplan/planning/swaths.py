@@ -83,6 +83,13 @@ class Swath:
         the pass follows the ROI."""
         return probe_grid(part, self.start_mm, self.u, self.v, advances_mm, lateral_mm)
 
+    def sees_nothing(self, part: Part) -> ValueError:
+        """The error of this pass meeting no surface of `part`, saying why it may be."""
+        why = "the part is outside the sensor's reach"
+        if part.occluders:
+            why += " or its fixtures (--fixture) hide it"
+        return ValueError(f"pass {self.index} sees no surface of part {part.name}: {why}")
+
     def to_swath_frame(self, T_part_sensor: np.ndarray) -> tuple[float, float, float]:
         """(s, h, theta) of a pose of this pass; inverse of `pose`."""
         d = T_part_sensor[:3, 3] - self.start_mm

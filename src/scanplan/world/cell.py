@@ -95,6 +95,14 @@ class Cell:
         table = None if self.table is None else self.table.rotated(R)
         return Cell(table, tuple(fixtures), self.table_z_mm)
 
+    def occluding(self, part: Part) -> Part:
+        """`part` as rays meet it in this cell: its fixtures hide it from the laser and the
+        camera (`Part.among`); the table does not (the part rests on it). A part already
+        among occluders was put in its cell by the caller and is returned as it is."""
+        if part.occluders:
+            return part
+        return part.among([f.mesh for f in self.fixtures])
+
 
 def _table_height(part: Part, table: str | float | None) -> float | None:
     lowest = float(part.bounds[0, 2])
@@ -125,3 +133,12 @@ def planned_cell(context: PlanContext, part: Part, where: str = "the plan's fixt
     """The cell a plan was made in, around `part` (its fixtures read from their files);
     `where` its fixtures come from, for messages."""
     return Cell.around(part, context.table, context.fixtures, context.fixture_units, where)
+
+
+def part_in_cell(context: PlanContext, part: Part) -> Part:
+    """`part` as the rays of a plan made under `context` meet it: among the fixtures of its
+    cell (`Cell.occluding`). Their files are read only if there are some and `part` is not
+    among occluders already (the planner's part, judged while planning)."""
+    if not context.fixtures or part.occluders:
+        return part
+    return planned_cell(context, part).occluding(part)

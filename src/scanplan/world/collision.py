@@ -305,7 +305,7 @@ class CollisionChecker:
     def _inside(self, points: np.ndarray) -> np.ndarray:
         """(k,) bool: points inside the closed mesh (the first face a ray meets faces away)."""
         directions = np.tile(_INSIDE_RAY, (len(points), 1))
-        _, face = self._ray_engine.first_hit(points, directions)
+        _, face = self._ray_engine.alone.first_hit(points, directions)  # the part's inside
         hit = face >= 0
         out = np.zeros(len(points), bool)
         out[hit] = self._face_normals[face[hit]] @ _INSIDE_RAY > 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -31,6 +32,7 @@ class Part:
 
     inspect_faces: (f,) bool, the faces of the surface to inspect (a region of interest),
     None = the whole part. Rays always meet the whole mesh: occlusion stays real.
+    occluders: meshes in the part's frame that rays meet too (its cell's fixtures, `among`).
     """
 
     mesh: trimesh.Trimesh
@@ -41,6 +43,7 @@ class Part:
     # (the part, R (4, 4)) when this part is that part turned by R (`turned`): its ray
     # engine and collision model are that part's, turned, not built again.
     turned_from: tuple[Part, np.ndarray] | None = field(default=None, repr=False)
+    occluders: tuple[trimesh.Trimesh, ...] = field(default=(), repr=False)
 
     def turned(self, R: np.ndarray) -> Part:
         """This part turned by the rotation R ((4, 4), about the origin; face order and the
@@ -58,6 +61,7 @@ class Part:
             source=self.source,
             inspect_faces=self.inspect_faces,
             turned_from=(base, turn),
+            occluders=tuple(m.copy().apply_transform(R) for m in self.occluders),
         )
 
     def with_roi(self, roi: RegionOfInterest | str | None) -> Part:
@@ -72,6 +76,18 @@ class Part:
         if not mask.any():
             raise ValueError(f"--roi {roi.text!r} selects no surface of {self.name}")
         return replace(self, _engine=self.ray_engine, inspect_faces=mask)  # one engine for both
+
+    def among(self, occluders: Sequence[trimesh.Trimesh]) -> Part:
+        """This part among other meshes of its frame (its cell's fixtures): its ray engine
+        meets them too, so they hide the part from the laser and the camera, and a hit on
+        them is no point of it (`RayEngine`). No occluder: this part itself."""
+        if not occluders:
+            return self
+        meshes = self.occluders + tuple(occluders)
+        if self.turned_from is not None:  # its engine is another part's: one of its own
+            return replace(self, _engine=None, turned_from=None, occluders=meshes)
+        engine = self.ray_engine.among([(m.vertices, m.faces) for m in meshes])  # scene shared
+        return replace(self, _engine=engine, occluders=meshes)
 
     @property
     def inspect_mask(self) -> np.ndarray:
@@ -102,7 +118,8 @@ class Part:
             base, R = self.turned_from
             self._engine = base.ray_engine.turned(R[:3, :3])
         if self._engine is None:
-            self._engine = RayEngine(self.mesh.vertices, self.mesh.faces)
+            occluders = [(m.vertices, m.faces) for m in self.occluders]
+            self._engine = RayEngine(self.mesh.vertices, self.mesh.faces, occluders)
         return self._engine
 
     @property

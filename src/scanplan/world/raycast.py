@@ -6,6 +6,9 @@ the origin keep their precision.
 
 from __future__ import annotations
 
+import copy
+from collections.abc import Sequence
+
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
@@ -15,13 +18,23 @@ _MISS = -1
 
 
 class RayEngine:
-    """First-hit and occlusion queries against one triangle mesh.
+    """First-hit and occlusion queries against one triangle mesh, among `occluders`.
 
     vertices: (v, 3) float, faces: (f, 3) int. Coordinates are shifted to the mesh centre
     before going to float32, so parts far from the origin keep their precision.
+    occluders: other meshes, (vertices, faces) each, that rays meet but that are not this
+    mesh (the fixtures of a part's cell), in a scene of their own: they block occlusion
+    queries, and a first hit behind one of them reads as a miss (face -1), so no query
+    returns a point of them or one they hide. The mesh's own scene is the same with or
+    without them (the same hits where none is in the way); `alone` queries it only.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        occluders: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+    ) -> None:
         vertices = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
         self.offset = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
@@ -39,6 +52,28 @@ class RayEngine:
         self._mesh = TriangleMesh(
             self._scene, (vertices - self.offset).astype(np.float32), faces.astype(np.int32)
         )
+        # The occluders' scene, and its mesh kept alive beside it (None: no occluder).
+        self._blockers, self._blocker_mesh = _occluder_scene(occluders, self.offset)
+        self._alone: RayEngine | None = None
+
+    @property
+    def alone(self) -> RayEngine:
+        """This engine without its occluders (the same scene of the mesh): which side of a
+        face is outside the part, and what of its surface the part itself hides."""
+        if self._blockers is None:
+            return self
+        if self._alone is None:
+            self._alone = copy.copy(self)
+            self._alone._blockers = None
+        return self._alone
+
+    def among(self, occluders: Sequence[tuple[np.ndarray, np.ndarray]]) -> RayEngine:
+        """This mesh's engine among `occluders` (instead of any it had): its scene shared,
+        only theirs built."""
+        engine = copy.copy(self)
+        engine._blockers, engine._blocker_mesh = _occluder_scene(occluders, self.offset)
+        engine._alone = self.alone
+        return engine
 
     def turned(self, rotation: np.ndarray) -> RayEngine:
         """This engine for the mesh turned by `rotation` ((3, 3), about the origin): the
@@ -80,10 +115,21 @@ class RayEngine:
         C-contiguous float32. Returns Embree's t (n,) float32, undefined (finite) on a miss,
         and face (n,) int32, -1 on a miss."""
         result = self._scene.run(origins, directions, output=1)
-        return result["tfar"], result["primID"]
+        t, face = result["tfar"], result["primID"]
+        if self._blockers is not None:
+            hit = np.flatnonzero(face != _MISS)
+            if len(hit):  # hidden: an occluder lies before (or on) the first hit of the mesh
+                dist = np.ascontiguousarray(t[hit])
+                hidden = self._blockers.run(
+                    origins[hit], directions[hit], dists=dist, query="OCCLUDED"
+                )
+                face[hit[np.asarray(hidden) != _MISS]] = _MISS
+        return t, face
 
     def first_hit_faces(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """The bare Embree first-hit call (face index per ray), the benchmarks' reference."""
+        if self._blockers is not None:
+            return self.first_hit_float32(*self._to_embree(origins, directions))[1]
         return np.asarray(self._scene.run(*self._to_embree(origins, directions)))
 
     def _to_embree(
@@ -109,10 +155,33 @@ class RayEngine:
         C-contiguous float32 origins and directions, (n,) float32 max_distance."""
         if len(origins) == 0:
             return np.zeros(0, dtype=bool)
-        return (
+        blocked = (
             np.asarray(self._scene.run(origins, directions, dists=max_distance, query="OCCLUDED"))
             != _MISS
         )
+        if self._blockers is not None and not blocked.all():
+            free = np.flatnonzero(~blocked)
+            by_occluder = self._blockers.run(
+                origins[free], directions[free], dists=max_distance[free], query="OCCLUDED"
+            )
+            blocked[free] = np.asarray(by_occluder) != _MISS
+        return blocked
+
+
+def _occluder_scene(
+    occluders: Sequence[tuple[np.ndarray, np.ndarray]], offset: np.ndarray
+) -> tuple[rtcore_scene.EmbreeScene | None, TriangleMesh | None]:
+    """One Embree scene of the occluder meshes (vertices minus `offset`, float32) and its
+    mesh, which must outlive it; (None, None) without any."""
+    meshes = [(np.asarray(v, np.float64), np.asarray(f, np.int64)) for v, f in occluders]
+    meshes = [(v, f) for v, f in meshes if len(f)]
+    if not meshes:
+        return None, None
+    starts = np.cumsum([0] + [len(v) for v, _ in meshes[:-1]])
+    vertices = np.vstack([v for v, _ in meshes]) - offset
+    faces = np.vstack([f + start for (_, f), start in zip(meshes, starts, strict=True)])
+    scene = rtcore_scene.EmbreeScene()
+    return scene, TriangleMesh(scene, vertices.astype(np.float32), faces.astype(np.int32))
 
 
 class _TurnedRayEngine(RayEngine):
@@ -125,6 +194,22 @@ class _TurnedRayEngine(RayEngine):
         self.offset = rot @ base.offset
         self.face_normals = base.face_normals @ rot.T
         self.face_normals_by_axis = tuple(np.append(self.face_normals[:, k], 0.0) for k in range(3))
+        self._blockers = base._blockers  # only asked whether there are any: the base answers
+        self._alone = None
+
+    @property
+    def alone(self) -> RayEngine:
+        if self._blockers is None:
+            return self
+        if self._alone is None:
+            alone = self._alone = copy.copy(self)
+            alone._base, alone._blockers = self._base.alone, None
+        return self._alone
+
+    def among(self, occluders: Sequence[tuple[np.ndarray, np.ndarray]]) -> RayEngine:
+        # The occluders turned back into the base frame (row vectors: v R), there added.
+        back = [(np.asarray(v, np.float64) @ self._rotation, f) for v, f in occluders]
+        return self._base.among(back).turned(self._rotation)
 
     def _back(self, vectors: np.ndarray) -> np.ndarray:
         """Row vectors of the turned frame in the base frame (R⁻¹ v = Rᵀ v), float32."""

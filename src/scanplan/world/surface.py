@@ -51,7 +51,8 @@ def hemisphere_directions(rings: tuple[tuple[float, int], ...] | None = None) ->
 def oriented_normals(part: Part) -> np.ndarray:
     """(f, 3) face normals pointing out of the part, towards where a sensor could be. A closed,
     consistently wound mesh's own normals; otherwise (real CAD exports) each face's normal
-    is turned to the side from which a ray escapes the part (if both, upwards)."""
+    is turned to the side from which a ray escapes the part (if both, upwards); the part
+    alone: what holds it (its fixtures) does not turn its faces."""
     if part.turned_from is not None:  # the original's, turned (a view of the part)
         base, R = part.turned_from
         return oriented_normals(base) @ R[:3, :3].T
@@ -66,8 +67,9 @@ def oriented_normals(part: Part) -> np.ndarray:
     centre = np.asarray(mesh.triangles_center)
     far = np.full(len(normals), 1e6)
     eps = 1e-3 * float(np.linalg.norm(part.extents)) + 0.05
-    front = ~part.ray_engine.occluded(centre + eps * normals, normals, far)
-    back = ~part.ray_engine.occluded(centre - eps * normals, -normals, far)
+    alone = part.ray_engine.alone
+    front = ~alone.occluded(centre + eps * normals, normals, far)
+    back = ~alone.occluded(centre - eps * normals, -normals, far)
     flip = (back & ~front) | (back & front & (normals[:, 2] < 0))
     return np.where(flip[:, None], -normals, normals)
 
@@ -94,9 +96,13 @@ def probe_grid(
     lateral_mm: np.ndarray,
 ) -> LineProbe:
     """Vertical rays on a horizontal grid, origin + a·u + l·v (a raster's own frame), from
-    10 mm above the part, in one batch; of a part with a region of interest, a ray whose
-    first hit is not on it counts as no hit."""
+    10 mm above the part (and its fixtures, up to the height of `origin`, the sensor's: what
+    they hide is no surface to follow), in one batch; of a part with a region of interest,
+    a ray whose first hit is not on it counts as no hit."""
     top = float(part.bounds[1, 2]) + 10.0
+    if part.occluders:
+        held_down = max(float(m.bounds[1, 2]) for m in part.occluders) + 10.0
+        top = max(top, min(held_down, float(origin[2])))
     base = (
         origin
         + np.asarray(advances_mm)[:, None, None] * u
@@ -180,7 +186,8 @@ def hemisphere_visible_samples(
     """The surface a sensor can see from the upper hemisphere (`--views auto`): samples of
     the faces to inspect (any slope) kept if, along at least one of `directions` (default
     `hemisphere_directions`, 28 directions up to 75° from +Z), the face is within
-    COVERAGE_MAX_SLOPE_DEG of facing it (either winding) and a ray from it escapes the part.
+    COVERAGE_MAX_SLOPE_DEG of facing it (either winding) and a ray from it escapes the part
+    (the part alone: a surface its fixtures hide is still to inspect, and out of reach).
     With the default directions, drawn once per part (read-only arrays)."""
     if directions is None:
         return _once(
@@ -207,7 +214,7 @@ def _hemisphere_visible(
             continue
         start = points[todo] + np.sign(cos[todo])[:, None] * n[todo] * 0.05
         ray = np.broadcast_to(d, start.shape)
-        visible[todo] = ~part.ray_engine.occluded(start, ray, np.full(len(todo), 1e6))
+        visible[todo] = ~part.ray_engine.alone.occluded(start, ray, np.full(len(todo), 1e6))
     frac = float(visible.mean()) if len(visible) else 0.0
     return VisibleSurface(points[visible], cand_area * frac, faces[visible])
 
@@ -215,8 +222,9 @@ def _hemisphere_visible(
 def upward_visible_samples(part: Part, spacing_mm: float, seed: int = 0) -> VisibleSurface:
     """Sample faces within COVERAGE_MAX_SLOPE_DEG of horizontal (either winding) at about one
     point per spacing² of area; keep the samples from which a vertical ray escapes. Only the
-    part's faces to inspect (its region of interest) are sampled; the whole part occludes.
-    Drawn once per part (read-only arrays)."""
+    part's faces to inspect (its region of interest) are sampled; the whole part occludes,
+    its fixtures do not (what they hide is to inspect, and out of reach). Drawn once per
+    part (read-only arrays)."""
     return _once("top", part, spacing_mm, seed, lambda: _upward_visible(part, spacing_mm, seed))
 
 
@@ -231,7 +239,7 @@ def _upward_visible(part: Part, spacing_mm: float, seed: int) -> VisibleSurface:
     up_normal = normals[faces] * np.sign(normals[faces, 2:3])
     start = points + up_normal * 0.05  # off the face, above float32 error at part scale
     up = np.tile([0.0, 0.0, 1.0], (count, 1))
-    blocked = part.ray_engine.occluded(start, up, np.full(count, 1e6))
+    blocked = part.ray_engine.alone.occluded(start, up, np.full(count, 1e6))
     visible = ~blocked
     return VisibleSurface(points[visible], cand_area * float(visible.mean()), faces[visible])
 
@@ -267,9 +275,10 @@ def reachable_samples(
     of the face's outward normal and at most `max_tilt_deg` from +Z (`beams` directions per
     sample: the normal, the cone's beam nearest +Z, then uniform in the cone, seeded). Their
     share is the visibility ceiling: no plan holds more of the surface in spec, since a point
-    in spec was measured by such a beam. It ignores the depth window, the sensor body and the
-    camera's line of sight; `also(samples, ray starts, beams) -> (k,) bool` adds a test a
-    beam must pass too (a benchmark's camera)."""
+    in spec was measured by such a beam. The part's fixtures (`Part.among`) block beams too.
+    It ignores the depth window, the sensor body and the camera's line of sight;
+    `also(samples, ray starts, beams) -> (k,) bool` adds a test a beam must pass too (a
+    benchmark's camera)."""
     seen = np.zeros(len(surface.points), bool)
     if len(seen) == 0:
         return seen

@@ -61,10 +61,7 @@ class FixedPlanner:
         scan = measure(0.0)
         depth = scan.true_z_sensor[np.isfinite(scan.true_z_sensor)]
         if depth.size == 0:
-            raise ValueError(
-                f"pass {swath.index} sees no surface of part {part.name}: "
-                "the part is outside the sensor's reach"
-            )
+            raise swath.sees_nothing(part)
         h = -(float(depth.mean()) - sensor.working_distance_mm)
         for _ in range(self.height_iterations):
             scan = measure(h)

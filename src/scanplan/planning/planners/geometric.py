@@ -101,10 +101,7 @@ def probe_swath(
     line = swath.probe(part, grid, np.linspace(lo, hi, columns))
     hit, normals = line.hit, line.normals_up
     if not hit.any():
-        raise ValueError(
-            f"pass {swath.index} sees no surface of part {part.name}: "
-            "the part is outside the sensor's reach"
-        )
+        raise swath.sees_nothing(part)
     z = np.where(hit, line.z_mm - swath.start_mm[2], np.nan)
     # Walls steeper than max_pitch_slope return little to a sensor looking down, and the pitch
     # rate limit would spread one wall hit over a metre of pass: they must not tilt it.
