@@ -29,7 +29,7 @@ from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics, evaluate
 from scanplan.planning.pass_path import ViewRaster, plan_path
-from scanplan.planning.swaths import Swath, plan_swaths
+from scanplan.planning.swaths import Swath, plan_swaths, swath_record
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import ExportOptions, parse_pose_arg
 from scanplan.world.part import Part, part_from_mesh
@@ -247,6 +247,40 @@ JSON_VALUES = st.recursive(
     ),
     max_leaves=30,
 )
+
+
+def recorded_trajectory() -> Trajectory:
+    """One pass of 11 poses over the plate with every record a plan file carries: context,
+    one view with its pass line, the arm (a rigid part pose and TCP) and a cycle time."""
+    sw = plate_swath()
+    s = np.linspace(0.0, 100.0, 11)
+    poses = sw.poses(s, 0 * s, 0 * s)
+    part_pose = np.eye(4)
+    part_pose[:3, :3] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
+    part_pose[:3, 3] = [500.0, -200.0, 100.0]
+    meta = {
+        "context": PlanContext(ScanSpec(), planner="feedback", part="plate").to_json_dict(),
+        "views": [
+            {
+                "index": 0,
+                "axis": [0.0, 0.0, 1.0],
+                "first_swath": 0,
+                "last_swath": 0,
+                "passes": 1,
+                "swaths": [swath_record(sw)],
+            }
+        ],
+        "robot": {
+            "robot": "ur10e",
+            "part_pose": "500,-200,100,30,0,0",
+            "T_base_part": part_pose.tolist(),
+            "T_flange_sensor": np.eye(4).tolist(),
+            "flyable": True,
+        },
+        "cycle_time_s": 12.5,
+    }
+    return Trajectory(poses, np.zeros(11, int), np.ones(11, bool), planner="feedback", meta=meta)
+
 
 # ---- robot programs -----------------------------------------------------------------------
 

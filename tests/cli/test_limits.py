@@ -335,7 +335,7 @@ def sensor_toml(directory: Path, top: str = "", noise: str = "", body: str = "")
         ({"top": "fov_deg = 1e-300"}, "fov_deg: 1e-300 is not in [0.1, 170) deg"),
         ({"top": "z_resolution_um = 1e300"}, "z_resolution_um"),
         ({"top": "incidence_cutoff_deg = 1e-300"}, "incidence_cutoff_deg"),
-        ({"body": "x_mm = [-1e308, 1e308]"}, "body.x_mm.0: -1e+308 is not in [-5000, 5000] mm"),
+        ({"body": "x_mm = [-1e308, 1e308]"}, "body.x_mm[0]: -1e+308 is not in [-5000, 5000] mm"),
         ({"body": "z_mm = [0, 1e-300]"}, "less than 1 mm wide"),
     ],
 )

@@ -17,8 +17,9 @@ import pytest
 import trimesh
 
 import scanplan.planning.pipeline as pipeline
-from helpers import fixture_files
+from helpers import fixture_files, recorded_trajectory
 from scanplan.core.context import recorded
+from scanplan.core.limits import TooLarge
 from scanplan.core.plan_file import read_csv, read_json, write_csv, write_json
 from scanplan.core.quantities import ScanSpec
 from scanplan.jobs.trials import (
@@ -323,3 +324,20 @@ def test_trials_in_a_cell_with_a_lid_are_the_nominal_figure_at_zero(bumpy, feedb
     zero = "place:0mm,0deg;warp:0mm@200mm"
     assert list(_closed(bumpy, traj, zero, trials=1).per_trial) == [nominal.in_spec_coverage]
     assert list(_open(bumpy, traj, zero, trials=1).per_trial) == [nominal.in_spec_coverage]
+
+
+def test_a_closed_loop_counts_its_steps_before_any_work():
+    # A 90 m pass (in range) at the finest spacing an option allows: 90 million steps and
+    # three times as many allowed, refused before a trial allocates one; at 0.5 mm it runs.
+    traj = recorded_trajectory()
+    meta = {k: v for k, v in traj.meta.items() if k != "robot"}
+    meta["views"] = [dict(meta["views"][0])]
+    meta["views"][0]["swaths"] = [meta["views"][0]["swaths"][0] | {"end_mm": [89680.0, 0, 400]}]
+    views = plan_views_of(replace(traj, meta=meta), "plan")
+    assert views[0].swaths[0].length_mm == 90_000.0
+    spec = meta["context"]["scan_spec"]
+    meta["context"] = meta["context"] | {"scan_spec": spec | {"delta_s_opt_mm": 0.001}}
+    with pytest.raises(
+        TooLarge, match=r"^plan: closed-loop steps of one trial \(passes of 90000 mm"
+    ):
+        plan_views_of(replace(traj, meta=meta), "plan")

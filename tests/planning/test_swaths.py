@@ -108,10 +108,21 @@ def test_a_pass_line_record_reads_back_exactly_and_bad_ones_are_named():
     for key in ("start_mm", "end_mm", "u", "v"):
         assert np.array_equal(getattr(back, key), getattr(sw, key))
     for bad, message in [
-        ([], "not a pass line"),
-        ({**swath_record(sw), "u": [1.0, 0.0]}, "3 finite numbers"),
-        ({**swath_record(sw), "u": [2.0, 0.0, 0.0]}, "unit vectors"),
-        ({**swath_record(sw), "start_mm": "here"}, "not a pass line"),
+        ([], "plan: expected a JSON object"),
+        ({**swath_record(sw), "u": [1.0, 0.0]}, r"plan.u: List should have at least 3"),
+        ({**swath_record(sw), "u": [2.0, 0.0, 0.0]}, r"plan: u \[2.0, 0.0, 0.0\] is not a unit"),
+        ({**swath_record(sw), "v": [0.8, -0.6, 0.0]}, "plan: v .* is not up x u"),
+        ({**swath_record(sw), "start_mm": "here"}, "plan.start_mm: Input should be a valid list"),
+        ({**swath_record(sw), "end_mm": [1e300, 0, 0]}, r"plan.end_mm\[0\]: 1e\+300 is not in"),
+        # A 10 km pass is out of the part's frame; one of 150 m in it is still too long (a
+        # closed loop steps along all of it): both refused before any work.
+        ({**swath_record(sw), "end_mm": [6e6, 8e6, 400]}, r"plan.end_mm\[0\]: 6000000 is not"),
+        (
+            {**swath_record(sw), "start_mm": [-9e4, -9e4, 400], "end_mm": [0, 3e4, 400]},
+            r"plan: its length 150000 is not in \[0, 100000\] mm",
+        ),
+        ({**swath_record(sw), "band_mm": [2.0, -1.0]}, "plan: band_mm .* runs backwards"),
+        ({**swath_record(sw), "index": -1}, "plan.index: Input should be greater than"),
     ]:
-        with pytest.raises(ValueError, match=f"plan: .*{message}"):
+        with pytest.raises(ValueError, match=f"^{message}"):
             swath_from_record(bad, "plan")

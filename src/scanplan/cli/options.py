@@ -17,6 +17,7 @@ from scanplan.core.limits import (
     MAX_BC_SAMPLES,
     MAX_FIXTURES,
     MAX_SEED,
+    ORIENTATION_ERROR_DEG,
     POSITION_MM,
     REWARD_DISTANCE_SCALE_MM,
     TCP_MM,
@@ -117,10 +118,10 @@ def parse_tolerance(text: str | None) -> dict[str, float]:
         mm, deg = (float(p) for p in parts) if len(parts) == 2 else (math.nan, math.nan)
     except ValueError:
         mm = deg = math.nan
-    if not (TOLERANCE_MM.contains(mm) and math.isfinite(deg) and 0 < deg <= 90):
+    if not (TOLERANCE_MM.contains(mm) and ORIENTATION_ERROR_DEG.contains(deg)):
         raise ValueError(
-            f"--tolerance {text!r}: expected MM,DEG with MM in {TOLERANCE_MM} and "
-            "0 < DEG <= 90, e.g. 12.5,15"
+            f"--tolerance {text!r}: expected MM,DEG with MM in {TOLERANCE_MM} and DEG in "
+            f"{ORIENTATION_ERROR_DEG}, e.g. 12.5,15"
         )
     return {"tol_distance_mm": mm, "tol_angle_rad": math.radians(deg)}
 

@@ -9,11 +9,24 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Annotated, Any, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from scanplan.core.limits import (
+    ANGLE_DEG,
+    CLEARANCE_MM,
+    MAX_SCAN_SPEED_MM_S,
+    ORIENTATION_ERROR_DEG,
+    PROFILE_RATE_HZ,
+    REWARD_WEIGHT,
+    SPEED_MM_S,
+    STEP_MM,
+    TOLERANCE_MM,
+    in_range,
+)
 from scanplan.core.quantities import ScanSpec, StepLimits
 from scanplan.core.sensor_files import sensor_datasheet, sensor_from_datasheet
 from scanplan.core.trajectory import Trajectory
+from scanplan.core.validation import error_line
 
 FORMAT = "scanplan-plan/1"
 # The table through the part's lowest point (`--table`'s default).
@@ -184,9 +197,7 @@ def _validated(schema: type[_Json], data: object, where: str) -> _Json:
     try:
         return schema.model_validate(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"])
-        raise ValueError(f"{where}{'.' + loc if loc else ''}: {err['msg']}") from None
+        raise ValueError(error_line(where, exc)) from None
 
 
 def _scan_spec(sensor_data: dict[str, Any], s: _ScanSpecJson, where: str) -> ScanSpec:
@@ -211,28 +222,44 @@ def _scan_spec(sensor_data: dict[str, Any], s: _ScanSpecJson, where: str) -> Sca
 
 _STRICT = ConfigDict(extra="forbid", strict=True)
 _Json = TypeVar("_Json", bound=BaseModel)
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+# A plan file's numbers in the ranges the same values have as options (`core.limits`).
+Step = Annotated[float, in_range(STEP_MM)]
+StepAngle = Annotated[float, in_range(ANGLE_DEG)]
+OrientationError = Annotated[float, in_range(ORIENTATION_ERROR_DEG)]
+Weight = Annotated[float, in_range(REWARD_WEIGHT)]
 
 
 class _ScanSpecJson(BaseModel):
     model_config = _STRICT
-    delta_s_opt_mm: Positive
-    alpha_max_deg: Positive
-    weights: Annotated[list[Finite], Field(min_length=3, max_length=3)]
-    tolerance_mm: Positive
-    tolerance_deg: Positive
-    profile_rate_hz: Positive
-    travel_speed_mm_s: Positive
-    clearance_mm: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    delta_s_opt_mm: Step
+    alpha_max_deg: OrientationError
+    weights: Annotated[list[Weight], Field(min_length=3, max_length=3)]
+    tolerance_mm: Annotated[float, in_range(TOLERANCE_MM)]
+    tolerance_deg: OrientationError
+    profile_rate_hz: Annotated[float, in_range(PROFILE_RATE_HZ)]
+    travel_speed_mm_s: Annotated[float, in_range(SPEED_MM_S)]
+    clearance_mm: Annotated[float, in_range(CLEARANCE_MM)]
+
+    @model_validator(mode="after")
+    def _a_scan_speed_an_arm_flies(self) -> _ScanSpecJson:
+        speed = self.profile_rate_hz * self.delta_s_opt_mm
+        if speed > MAX_SCAN_SPEED_MM_S:
+            raise ValueError(
+                f"profile_rate_hz {self.profile_rate_hz:g} x delta_s_opt_mm "
+                f"{self.delta_s_opt_mm:g}: a scan speed of {speed:g} mm/s, more than the "
+                f"{MAX_SCAN_SPEED_MM_S:g} allowed"
+            )
+        if sum(self.weights) <= 0:
+            raise ValueError("weights: all 0; the reward needs one > 0")
+        return self
 
 
 class _LimitsJson(BaseModel):
     model_config = _STRICT
-    dy_max_mm: Positive
-    dz_max_mm: Positive
-    dtheta_max_deg: Positive
-    dphi_max_deg: Positive
+    dy_max_mm: Step
+    dz_max_mm: Step
+    dtheta_max_deg: StepAngle
+    dphi_max_deg: StepAngle
 
 
 class _SpecRecordJson(BaseModel):

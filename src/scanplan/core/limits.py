@@ -103,12 +103,23 @@ POSE_ANGLE_DEG = Limit(-360.0, 360.0, "deg")
 TCP_MM = Limit(-5000.0, 5000.0, "mm")
 # In-spec distance tolerance |z_s - W_d|.
 TOLERANCE_MM = Limit(1e-3, 1e3, "mm")
+# An orientation error a point may have (the in-spec angle tolerance, the reward's α_max):
+# past 90° the beam meets the surface from behind.
+ORIENTATION_ERROR_DEG = Limit(1e-3, 90.0, "deg")
+# How far the sensor body stays from the part: no further than the longest working distance.
+CLEARANCE_MM = Limit(0.0, WORKING_DISTANCE_MM.hi, "mm")
+# A reward term's weight (the paper's are 1/3 each; they need not sum to 1).
+REWARD_WEIGHT = Limit(0.0, 1e3)
+# A pass line's length: a part of at most 100 m.
+PASS_LENGTH_MM = Limit(0.0, LENGTH_MM.hi, "mm")
 # Line profilometers run from a few Hz to some tens of kHz.
 PROFILE_RATE_HZ = Limit(1e-1, 1e5, "Hz")
 # A TCP's speed: no arm moves its tool faster than 10 m/s; a scan (rate x spacing) no faster
 # than a few m/s.
 SPEED_MM_S = Limit(1e-3, 1e4, "mm/s")
 MAX_SCAN_SPEED_MM_S = 5_000.0
+# A cycle or a planning time: at most about 30 years.
+DURATION_S = Limit(0.0, 1e9, "s")
 # A defect's size (its depth) and the call threshold in σ of the sensor noise.
 DEFECT_SIZE_MM = Limit(1e-4, 100.0, "mm")
 K_SIGMA = Limit(0.0, 1000.0, "σ", lo_open=True)

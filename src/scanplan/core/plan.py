@@ -10,17 +10,39 @@ from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from scanplan.core.context import PlanContext, recorded
+from scanplan.core.limits import POSITION_MM
 from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
+from scanplan.core.validation import error_line
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _rigid(rows: list[list[float]]) -> list[list[float]]:
+    """A 4x4 rigid transform (mm): a rotation, a translation within `POSITION_MM`, and
+    the row (0, 0, 0, 1)."""
+    T = np.asarray(rows, dtype=np.float64)
+    for c, x in zip("xyz", T[:3, 3], strict=True):
+        POSITION_MM.check(float(x), f"translation {c}")
+    R = T[:3, :3]
+    # Entries past ±1 first: the product of a 1e200 with itself overflows.
+    if not (np.abs(R).max() <= 1.0 + 1e-6 and np.allclose(R.T @ R, np.eye(3), atol=1e-6)):
+        raise ValueError("its 3x3 block is not a rotation")
+    if np.linalg.det(R) < 0:
+        raise ValueError("its 3x3 block is a reflection, not a rotation")
+    if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"its last row is {T[3].tolist()}, not [0, 0, 0, 1]")
+    return rows
+
+
 Matrix4 = Annotated[
     list[Annotated[list[Finite], Field(min_length=4, max_length=4)]],
     Field(min_length=4, max_length=4),
+    AfterValidator(_rigid),
 ]
 
 
@@ -95,9 +117,7 @@ class ArmRecord:
         try:
             model = _ArmJson.model_validate(data)
         except ValidationError as exc:
-            err = exc.errors()[0]
-            loc = ".".join(str(p) for p in err["loc"])
-            raise ValueError(f"{where}: robot{'.' + loc if loc else ''}: {err['msg']}") from None
+            raise ValueError(error_line(f"{where}: robot", exc)) from None
         return cls(
             model.robot,
             np.asarray(model.T_base_part, dtype=np.float64),

@@ -7,22 +7,21 @@ ValueError naming the file, line and field.
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from scanplan.core.files import atomic_write_text, dumps_json
-from scanplan.core.limits import MAX_POSES, MAX_VIEWS, POSITION_MM, check_count, in_range
+from scanplan.core.limits import DURATION_S, MAX_POSES, POSITION_MM, check_count, in_range
 from scanplan.core.paths import open_regular
+from scanplan.core.plan_records import FILE_RECORDS, FiniteFloat, validated_records
 from scanplan.core.trajectory import INT32, Trajectory, poses_from_xyz_quat
+from scanplan.core.validation import field_line
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
-# The records of `Trajectory.meta` a plan file carries (JSON-able values).
-FILE_RECORDS = ("context", "views", "robot", "cycle_time_s")
 CSV_COMMENT = "#"
 
 
@@ -182,17 +181,7 @@ def _csv_records(path: Path, lines: list[str], numbers: list[int]) -> dict[str, 
             raise ValueError(
                 f"trajectory file {path} line {i}: the {key.strip()} record is not valid JSON"
             ) from None
-    if "views" in meta:
-        meta["views"] = _validated_views(path, meta["views"])
-    for key in ("context", "robot"):
-        if key in meta and not isinstance(meta[key], dict):
-            raise ValueError(f"trajectory file {path}: the {key} record must be a JSON object")
-    cycle = meta.get("cycle_time_s")
-    if cycle is not None and not (
-        isinstance(cycle, (int, float)) and not isinstance(cycle, bool) and 0 <= cycle < 1e9
-    ):
-        raise ValueError(f"trajectory file {path}: cycle_time_s must be seconds >= 0")
-    return meta
+    return validated_records(meta, f"trajectory file {path}")
 
 
 def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -> np.ndarray:
@@ -243,9 +232,6 @@ def as_read(traj: Trajectory, path: str | os.PathLike) -> Trajectory:
     return read_csv(path, to_csv_text(traj))
 
 
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-
-
 class _PoseJson(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
     swath: int = Field(ge=int(INT32.min), le=int(INT32.max))
@@ -254,44 +240,12 @@ class _PoseJson(BaseModel):
     quaternion_wxyz: list[FiniteFloat] = Field(min_length=4, max_length=4)
 
 
-class _ViewJson(BaseModel):
-    """One view's record (`views.join_views`): its axis and its block of swath indices."""
-
-    model_config = ConfigDict(extra="allow", strict=True)
-    index: int
-    axis: list[FiniteFloat] = Field(min_length=3, max_length=3)
-    first_swath: int
-    last_swath: int
-
-    @model_validator(mode="after")
-    def _unit_axis_and_a_block(self) -> _ViewJson:
-        if not abs(math.hypot(*self.axis) - 1.0) <= 1e-3:
-            raise ValueError(f"axis {self.axis} is not a unit vector")
-        if not 0 <= self.first_swath <= self.last_swath <= INT32.max:
-            raise ValueError(
-                f"swaths {self.first_swath}..{self.last_swath} are not a block of pass indices"
-            )
-        return self
-
-
 class _TrajectoryJson(BaseModel):
     # Strict: a planner of 3 or a plan time of "fast" is a broken file, not a value to coerce.
     model_config = ConfigDict(extra="ignore", strict=True)
     planner: str = ""
-    plan_time_s: float = Field(0.0, ge=0, allow_inf_nan=False)
-    context: dict[str, Any] | None = None
-    robot: dict[str, Any] | None = None
-    views: list[_ViewJson] | None = None
-    cycle_time_s: float | None = Field(None, ge=0, allow_inf_nan=False)
+    plan_time_s: Annotated[float, in_range(DURATION_S)] = 0.0
     poses: list[_PoseJson] = Field(min_length=1)
-
-
-def _pydantic_where(exc: ValidationError) -> str:
-    err = exc.errors()[0]
-    where = ""
-    for part in err["loc"]:
-        where += f"[{part}]" if isinstance(part, int) else f".{part}"
-    return f"{where.lstrip('.') or 'file'}: {str(err['msg']).removeprefix('Value error, ')}"
 
 
 def read_json(path: str | os.PathLike, text: str | None = None) -> Trajectory:
@@ -307,13 +261,13 @@ def read_json(path: str | os.PathLike, text: str | None = None) -> Trajectory:
         raise ValueError(f"trajectory file {path} is not valid JSON: {exc}") from None
     if not isinstance(data, dict):
         raise ValueError(f"trajectory file {path}: expected a JSON object with 'poses'")
-    for key, limit in (("poses", MAX_POSES), ("views", MAX_VIEWS)):
-        if isinstance(data.get(key), list):  # counted before each is validated
-            check_count(len(data[key]), limit, f"trajectory file {path}: {key}")
+    if isinstance(data.get("poses"), list):  # counted before each is validated
+        check_count(len(data["poses"]), MAX_POSES, f"trajectory file {path}: poses")
+    meta = validated_records(data, f"trajectory file {path}")
     try:
         model = _TrajectoryJson.model_validate(data)
     except ValidationError as exc:
-        raise ValueError(f"trajectory file {path}: {_pydantic_where(exc)}") from None
+        raise ValueError(f"trajectory file {path}: {field_line(exc)}") from None
     xyz = np.array([p.position_mm for p in model.poses], dtype=np.float64)
     q = np.array([p.quaternion_wxyz for p in model.poses], dtype=np.float64)
     zero_q = np.linalg.norm(q, axis=1) < 1e-9
@@ -328,24 +282,8 @@ def read_json(path: str | os.PathLike, text: str | None = None) -> Trajectory:
         np.array([p.scanning for p in model.poses], dtype=bool),
         plan_time_s=model.plan_time_s,
         planner=model.planner,
-        meta=(
-            ({"views": [v.model_dump() for v in model.views]} if model.views else {})
-            | ({"context": model.context} if model.context else {})
-            | ({"robot": model.robot} if model.robot else {})
-            | ({"cycle_time_s": model.cycle_time_s} if model.cycle_time_s else {})
-        ),
+        meta=meta,
     )
-
-
-def _validated_views(path: Path, views: object) -> list[dict]:
-    """A CSV's views record, checked as the JSON's is."""
-    if not isinstance(views, list):
-        raise ValueError(f"trajectory file {path}: the views record must be a JSON list")
-    check_count(len(views), MAX_VIEWS, f"trajectory file {path}: views")
-    try:
-        return [_ViewJson.model_validate(v).model_dump() for v in views]
-    except ValidationError as exc:
-        raise ValueError(f"trajectory file {path}: views: {_pydantic_where(exc)}") from None
 
 
 def read_trajectory(path: str | os.PathLike) -> Trajectory:

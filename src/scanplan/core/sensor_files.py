@@ -58,6 +58,7 @@ from scanplan.core.limits import (
 from scanplan.core.noise import NoiseModel
 from scanplan.core.paths import read_regular, regular_file
 from scanplan.core.sensor_spec import PRESETS, SensorSpec
+from scanplan.core.validation import first_error
 
 # Strict: "300" or true where a number belongs is a mistake in the file, not a value to coerce.
 _STRICT = ConfigDict(extra="forbid", strict=True)
@@ -165,11 +166,9 @@ class SensorFile(BaseModel):
 
 
 def _first_error(what: str, exc: ValidationError) -> str:
-    err = exc.errors()[0]
     # A union (noise: table | bool) names its branch in the location: drop those.
-    parts = [str(p) for p in err["loc"] if p not in ("NoiseFile", "bool", "BodyFile")]
-    where = ".".join(parts) or "file"
-    return f"{what}: {where}: {err['msg'].removeprefix('Value error, ')}"
+    where, message = first_error(exc, ("NoiseFile", "bool", "BodyFile"), record="a table")
+    return f"{what}: {where or 'file'}: {message}"
 
 
 def load_sensor(spec: str | Path) -> SensorSpec:

@@ -21,7 +21,7 @@ class Trajectory:
     scanning: (n,) bool, True where the sensor records profiles.
     plan_time_s: wall time the planner took.
     planner:  name of the planner that made it.
-    meta:     extra records; those named in `plan_file.FILE_RECORDS` go into the files:
+    meta:     extra records; those named in `plan_records.FILE_RECORDS` go into the files:
               `context` (what it was planned under, `context.PlanContext`), `views` (per
               view its `axis` and its block of swath indices `first_swath..last_swath`)
               and `robot` (the arm's record).

@@ -16,6 +16,7 @@ import numpy as np
 import trimesh
 
 from scanplan.core.context import PlanContext
+from scanplan.core.limits import MAX_POSES, check_count
 from scanplan.core.plan import Plan
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
@@ -31,6 +32,7 @@ from scanplan.judging.robustness import (
     trial_tasks,
     trial_world,
 )
+from scanplan.planning.dynamics import step_budget
 from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners import FeedbackPlanner
 from scanplan.planning.swaths import Swath, swath_from_record
@@ -159,6 +161,15 @@ def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
     planned = set(np.unique(traj.swath[traj.scanning]).tolist())
     if not planned <= {sw.index for v in out for sw in v.swaths}:
         raise ValueError(f"{where}: its pass lines do not match its passes")
+    # Counted before any work: the steps a trial may take (each pass's episode limit).
+    steps = sum(step_budget(sw.length_mm, plan.spec)[1] for v in out for sw in v.swaths)
+    check_count(
+        steps,
+        MAX_POSES,
+        f"{where}: closed-loop steps of one trial (passes of "
+        f"{sum(sw.length_mm for v in out for sw in v.swaths):g} mm in steps of "
+        f"{plan.spec.delta_s_opt_mm:g} mm, up to 3 times as many)",
+    )
     return out
 
 

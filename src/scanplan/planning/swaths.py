@@ -16,6 +16,7 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from scanplan.core.limits import MAX_PASSES, check_count
+from scanplan.core.plan_records import checked_swath_record
 from scanplan.core.quantities import OVERLAP, UP
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.world.part import Part
@@ -112,26 +113,14 @@ def swath_record(swath: Swath, index: int | None = None) -> dict:
 
 
 def swath_from_record(record: object, where: str) -> Swath:
-    """The Swath a plan file records (`swath_record`); ValueError naming `where`."""
-    if not isinstance(record, dict):
-        raise ValueError(f"{where}: not a pass line (index, start_mm, end_mm, u, v)")
-    try:
-        vectors = {
-            key: np.array(record[key], dtype=np.float64) for key in ("start_mm", "end_mm", "u", "v")
-        }
-        band = record.get("band_mm")
-        swath = Swath(
-            int(record["index"]),
-            **vectors,
-            band_mm=None if band is None else (float(band[0]), float(band[1])),
-        )
-    except (KeyError, IndexError, TypeError, ValueError):
-        raise ValueError(f"{where}: not a pass line (index, start_mm, end_mm, u, v)") from None
-    if any(a.shape != (3,) or not np.isfinite(a).all() for a in vectors.values()):
-        raise ValueError(f"{where}: a pass line's points and directions are 3 finite numbers")
-    if abs(np.linalg.norm(swath.u) - 1.0) > 1e-6 or abs(np.linalg.norm(swath.v) - 1.0) > 1e-6:
-        raise ValueError(f"{where}: a pass line's u and v must be unit vectors")
-    return swath
+    """The Swath a plan file records (`swath_record`); ValueError naming `where` and the
+    field (a point or a length out of range, a direction not unit) before any work."""
+    data = checked_swath_record(record, where)
+    start, end, u, v = (
+        np.array(data[key], dtype=np.float64) for key in ("start_mm", "end_mm", "u", "v")
+    )
+    band = data.get("band_mm")
+    return Swath(data["index"], start, end, u, v, None if band is None else (band[0], band[1]))
 
 
 def frame_poses(
