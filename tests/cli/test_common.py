@@ -384,8 +384,8 @@ def _stop(*args, **kwargs):
 )
 @given(args=argument_lists())
 def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
+    import scanplan.jobs.defects
     import scanplan.jobs.demo
-    import scanplan.judging.detection
     import scanplan.rl.learn.sweep
     import scanplan.rl.learn.train
     import scanplan.robot.place
@@ -399,7 +399,7 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
         mp.setattr(scanplan.jobs.demo, "run_demo", _stop)
         mp.setattr(scanplan.robot.place, "place", _stop)
         mp.setattr(scanplan.rl.learn.sweep, "connect", _stop)  # no cluster, no training
-        mp.setattr(scanplan.judging.detection, "defect_tasks", _stop)  # no defect trials
+        mp.setattr(scanplan.jobs.defects, "defect_tasks", _stop)  # no trials; the job's own name
         result = runner.invoke(app, argv)
     event(f"{args[0]} exit {result.exit_code}")
     assert result.exit_code in (0, 2), (argv, result.output, result.exception)
