@@ -4,12 +4,17 @@ the export suites' snake trajectory. Fixtures (built once per session) live in c
 
 from __future__ import annotations
 
+import errno
 import math
 import multiprocessing
 import os
 import pickle
+import socket
+import threading
 import time
 import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -383,6 +388,65 @@ def loopback_cluster(threads: int = 1):
         host="127.0.0.1",
         dashboard_address=":0",
     )
+
+
+def full_disk(monkeypatch, fail_at: int = 1) -> list[int]:
+    """Make the `fail_at`-th file the atomic writers (`core.files`) open for writing, and
+    every later one, fail as on a full disk (ENOSPC); returns the writes tried."""
+    real, tried = os.fdopen, []
+
+    class Full:
+        def __init__(self, f):
+            self.f = f
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+        def write(self, data):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def fdopen(fd, mode="r", *args, **kwargs):
+        f = real(fd, mode, *args, **kwargs)
+        if "w" not in mode:
+            return f
+        tried.append(fd)
+        return Full(f) if len(tried) >= fail_at else f
+
+    monkeypatch.setattr(os, "fdopen", fdopen)  # `core.files` writes through it
+    return tried
+
+
+@contextmanager
+def tcp_server(answer: Callable[[socket.socket], None]) -> Iterator[str]:
+    """tcp://127.0.0.1:PORT (a port from the OS) whose every connection gets `answer`: a
+    port that is no Dask scheduler, for the --scheduler tests."""
+    server = socket.create_server(("127.0.0.1", 0))
+    server.settimeout(0.1)  # the loop looks for its stop this often
+    stop = threading.Event()
+    kept: list[socket.socket] = []
+
+    def serve() -> None:
+        while not stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except TimeoutError:
+                continue
+            kept.append(conn)
+            answer(conn)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    finally:
+        stop.set()
+        thread.join()
+        server.close()
+        for conn in kept:
+            conn.close()
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,13 @@
 """`scanplan defects`: bad sizes and types end in one line and exit 2 before any work; a run
-prints valid JSON (the fit's statement, the false calls, the prediction) and writes its files."""
+prints valid JSON (the fit's statement, the false calls, the prediction) and writes its files,
+as a whole folder: a run stopped while writing leaves the previous folder as it was."""
 
 from __future__ import annotations
 
+import errno
 import json
+
+import pytest
 
 from helpers import run_cli
 
@@ -41,3 +45,37 @@ def test_defects_json_and_files(plate_and_trajectory, tmp_path):
     assert data["predicted"]["a90_mm"] is None
     for name in ("pod.json", "pod.png", "defects.csv", "detectability.csv", "detectability.png"):
         assert (out / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "stop, code, said",
+    [
+        (OSError(errno.ENOSPC, "No space left on device"), 2, "No space left on device"),
+        (KeyboardInterrupt(), 130, "interrupted"),
+    ],
+    ids=["full-disk", "ctrl-c"],
+)
+def test_defects_folder_stopped_while_written_keeps_the_previous_one(
+    plate_and_trajectory, tmp_path, monkeypatch, stop, code, said
+):
+    # The folder is written aside and swapped in whole: stopped after pod.json and
+    # defects.csv are written, before the plot, the previous run's folder stays as it was
+    # and no half-written one is left beside it.
+    from scanplan.judging.report import pod
+
+    plate, traj = plate_and_trajectory
+    out = tmp_path / "out"
+    args = ["defects", str(plate), str(traj), "--trials", "1", "--per-trial", "2", "-q"]
+    assert run_cli(*args, "--no-defect-free", "-o", str(out)).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert "pod.png" in before and "detectability.csv" not in before
+
+    def stopped(*a, **kw):
+        raise stop
+
+    monkeypatch.setattr(pod, "plot_pod", stopped)
+    result = run_cli(*args, "--sizes", "0.1:0.2", "-o", str(out))
+    assert result.exit_code == code, result.output
+    assert said in result.stderr and len(result.stderr.splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "plate.stl", "t.csv"]

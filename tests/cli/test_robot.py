@@ -1,7 +1,10 @@
 """`scanplan export` on the command line: every format parsed back, a ROS 2 bag, bad options
-in one line with no output left behind."""
+in one line with no output left behind, a device or FIFO as -o written into or refused."""
 
 from __future__ import annotations
+
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -10,6 +13,7 @@ from typer.testing import CliRunner
 from helpers import EXPORT_OPTIONS as OPTIONS
 from helpers import listing, plate_file, run_cli, snake_trajectory
 from scanplan.cli import app
+from scanplan.core.files import output_kind
 from scanplan.core.plan_file import write_csv
 from scanplan.robot.export import ExportOptions, parse_program
 from scanplan.robot.export.common import plan_motion
@@ -108,7 +112,8 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     assert result.exit_code == 2 and "not a rosbag2 directory" in result.output
     monkeypatch.setattr(Writer, "write", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
     result = runner.invoke(app, [*args[:-1], str(bad), "--robot", "none"])
-    assert result.exit_code == 2 and result.stderr == "error: disk full\n"
+    assert result.exit_code == 2
+    assert result.stderr == f"error: cannot write rosbag2 {bad}: disk full\n"
     assert listing(tmp_path) == ["out_bag", "plate.stl", "t.csv", "taken"]
 
 
@@ -126,3 +131,26 @@ def test_export_never_overwrites_its_plan_and_its_csv_is_not_taken_for_a_plan(tm
     assert result.exit_code == 2
     assert "robot program exported as CSV" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_export_into_a_device_or_fifo_never_replaces_it(plate_and_trajectory, tmp_path):
+    # `-o /dev/stdout`, `-o /dev/null` or a link to one: written into, never swapped for a
+    # regular file (as root that would break the system's /dev/null); a FIFO nobody reads
+    # is refused at once rather than waited on.
+    _, traj_path = plate_and_trajectory
+    args = ["export", str(traj_path), "--format", "csv", "--robot", "none"]
+    link = tmp_path / "null.csv"
+    link.symlink_to("/dev/null")
+    assert output_kind(link) == "character device"  # so the writer opens it, never renames
+    result = run_cli(*args, "-o", str(link))
+    assert result.exit_code == 0, result.output
+    assert os.readlink(link) == "/dev/null" and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    fifo = tmp_path / "pipe.csv"
+    os.mkfifo(fifo)
+    result = run_cli(*args, "-o", str(fifo))
+    assert result.exit_code == 2
+    assert result.stderr.splitlines()[-1] == (
+        f"error: output {fifo} is a FIFO that nobody reads; not writing to it"
+    )
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert listing(tmp_path) == ["null.csv", "pipe.csv", "plate.stl", "t.csv"]

@@ -13,7 +13,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
-from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part
+from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part, tcp_server
 from scanplan.core.quantities import OVERLAP, UP, ScanSpec
 from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.view_workers import ViewJudge, ViewWorkers, _warm_up
@@ -138,3 +138,15 @@ def _running(pid: int) -> bool:
     except ProcessLookupError:
         return False
     return True
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
+)
+def test_a_scheduler_address_that_is_no_scheduler_is_one_line():
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64)
+    with tcp_server(lambda conn: conn.sendall(b"\xff" * 16)) as address:
+        with pytest.raises(ValueError, match=f"^--scheduler {address}: what answers there is not"):
+            ViewWorkers(part, judge, 0, address)

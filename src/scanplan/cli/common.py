@@ -174,8 +174,7 @@ def user_errors(fn: F) -> F:
                 raise Terminated if files.stopped_by == signal.SIGTERM else KeyboardInterrupt
             return result
         except (ValueError, OSError) as exc:
-            message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            typer.echo(f"error: {message}", err=True)
+            typer.echo(f"error: {error_line(exc)}", err=True)
             raise typer.Exit(2) from None
         except KeyboardInterrupt as exc:  # Terminated too, and a writer's check of stopped_by
             raise _stop(isinstance(exc, Terminated) or files.stopped_by == signal.SIGTERM) from None
@@ -195,6 +194,15 @@ def user_errors(fn: F) -> F:
             raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def error_line(exc: Exception) -> str:
+    """A user's mistake, or a file the system refused (a full disk), as one line: an OSError
+    as its reason and file ("out.csv: Permission denied"), not Python's "[Errno 13] ..."."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.strerror:
+        text = exc.strerror if exc.filename is None else f"{exc.filename}: {exc.strerror}"
+    return text.splitlines()[0] if text.strip() else type(exc).__name__
 
 
 def _stop(terminated: bool) -> typer.Exit:

@@ -4,7 +4,6 @@ what it was planned under, for the other commands to read.
 
 from __future__ import annotations
 
-import importlib.util
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -28,7 +27,6 @@ from scanplan.cli.options import (
 )
 from scanplan.cli.training import check_cluster
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES
-from scanplan.core.run import CLUSTER_HINT
 from scanplan.core.sensor_spec import DEFAULT_SENSOR
 
 # ---- plan ---------------------------------------------------------------------------------
@@ -194,8 +192,6 @@ def plan_cmd(
         return
     if scheduler is not None:
         check_cluster(scheduler, None)
-        if importlib.util.find_spec("distributed") is None:
-            raise ValueError(CLUSTER_HINT)
         job = replace(job, scheduler=scheduler)
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")

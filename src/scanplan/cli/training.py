@@ -31,6 +31,7 @@ from scanplan.cli.options import (
     parse_floats,
 )
 from scanplan.core.limits import MAX_SEED, MAX_TIMESTEPS
+from scanplan.core.run import check_scheduler
 
 if TYPE_CHECKING:
     from scanplan.rl.learn.config import TrainConfig
@@ -180,11 +181,12 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def check_cluster(scheduler: str | None, workers: int | None) -> None:
-    """--scheduler and --workers, refused before any work."""
-    if scheduler is not None and not re.fullmatch(r"(tcp|tls|inproc)://[^\s/]+", scheduler):
-        raise ValueError(f"--scheduler {scheduler!r}: expected tcp://HOST:PORT")
+    """--scheduler and --workers, refused before any work: the scheduler must answer as one
+    and have a worker within a stated time (`open_scheduler`), which it says it waits for."""
     if workers is not None and workers < 1:
         raise ValueError(f"--workers: {workers} must be >= 1")
+    if scheduler is not None:
+        check_scheduler(scheduler, waiting=lambda text: typer.echo(text, err=True))
 
 
 def run_on_cluster(
@@ -281,7 +283,6 @@ def sweep_cmd(
     from scanplan.rl.learn.sweep import EvalPart, SweepTask, grid_tasks
 
     # Everything is checked before a worker starts: a mistake never costs a training run.
-    check_cluster(scheduler, workers)
     seed_list = parse_seeds(seeds)
     base = training_config(ctx, progress_bar=False)  # the training group, via ctx.params
     tasks = grid_tasks(label, base, output / "runs", seed_list, parse_grid(grid or []))
@@ -291,6 +292,7 @@ def sweep_cmd(
             raise ValueError(f"--baseline {name!r}: use fixed, feedback or geometric")
     tasks += [SweepTask(name, planner=name, roll=roll) for name in baseline or []]
     parts = [EvalPart.parse(p).check() for p in part or ["door", "drone"]]
+    check_cluster(scheduler, workers)  # last: the scheduler may take seconds to answer
     csv_path, md_path = run_on_cluster(tasks, parts, output, scheduler, workers)
     typer.echo(md_path.read_text(), nl=False)
     typer.echo(f"-> {csv_path}, {md_path}")

@@ -4,6 +4,7 @@ its program flies, and (with a perturbation) how its in-spec coverage holds over
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -127,17 +128,24 @@ def write_evaluation(
     from scanplan.judging.report.maps import plot_fragility_map
 
     name = Path(plan.where.removeprefix("plan ")).name
-    write_report(
-        output,
-        part.with_roi(context.roi),
-        [Evaluated(plan.planner or Path(name).stem, plan.traj, metrics)],
-        context.spec,
-        title=f"{part.name}: {name}",
-        full_3d=full_3d,
-    )
-    if robust is not None:
-        robust.write_csv(output / "fragility.csv")
-        plot_fragility_map(robust, output / "fragility.png", f"{part.name}: {name}")
+    title = f"{part.name}: {name}"
+    # The fragility map is made aside and goes into the report's folder with the rest, so
+    # the folder is swapped in whole or not at all.
+    with tempfile.TemporaryDirectory() as scratch:
+        files: dict[str, str | bytes | Path] = {}
+        if robust is not None:
+            files = {"fragility.csv": Path(scratch, "fragility.csv")}
+            robust.write_csv(files["fragility.csv"])
+            files["fragility.png"] = plot_fragility_map(robust, Path(scratch, "f.png"), title)
+        write_report(
+            output,
+            part.with_roi(context.roi),
+            [Evaluated(plan.planner or Path(name).stem, plan.traj, metrics)],
+            context.spec,
+            files=files,
+            title=title,
+            full_3d=full_3d,
+        )
 
 
 def metrics_line(metrics: Metrics, data: dict[str, Any]) -> str:

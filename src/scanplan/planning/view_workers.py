@@ -17,6 +17,7 @@ import threading
 import warnings
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack
 from dataclasses import dataclass
 from multiprocessing import forkserver
 from typing import Any
@@ -25,12 +26,11 @@ import numpy as np
 
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
+from scanplan.core.run import scheduler_client
 from scanplan.judging import in_spec_samples
 from scanplan.planning.views import PlanView, View, ViewPlan, plan_view
 from scanplan.world.part import Part
 
-# How long to wait for a Dask scheduler to answer.
-CONNECT_SECONDS = 10.0
 # Views kept asked for per worker: one running and one queued behind it, so a worker that
 # finishes starts the next at once instead of idling while the choice reads another's result
 # (half the views take under 50 ms; the round trip through the choice took 20-40 ms).
@@ -112,21 +112,17 @@ class ViewWorkers:
         return self
 
     def _connect(self, scheduler: str) -> None:
-        # Deferred: Dask is an optional extra (the CLI says so before any work).
-        from dask.distributed import Client
-
+        self._cluster = ExitStack()  # closed by __exit__
+        self._client = self._cluster.enter_context(scheduler_client(scheduler))
         try:
-            self._client = Client(scheduler, timeout=CONNECT_SECONDS)
-        except (OSError, TimeoutError) as exc:  # no scheduler there
-            raise ValueError(f"--scheduler {scheduler}: {exc}".splitlines()[0]) from None
-        threads = sum(self._client.nthreads().values())
-        if threads == 0:
-            self._client.close()
-            raise ValueError(f"--scheduler {scheduler}: the cluster has no worker")
-        self.width = TASKS_AHEAD * threads
-        # Sent once to every worker; each task is given the workers' own copy, whose ray
-        # engine is built by the first task there and kept.
-        self._state = self._client.scatter((self._part, self._judge), broadcast=True)
+            threads = sum(self._client.nthreads().values())
+            self.width = TASKS_AHEAD * max(threads, 1)
+            # Sent once to every worker; each task is given the workers' own copy, whose ray
+            # engine is built by the first task there and kept.
+            self._state = self._client.scatter((self._part, self._judge), broadcast=True)
+        except BaseException:
+            self._cluster.close()
+            raise
 
     def __exit__(self, *exc_info: object) -> None:
         if self._pool is not None:
@@ -141,7 +137,7 @@ class ViewWorkers:
             for worker in workers:
                 worker.join()
         if self._client is not None:
-            self._client.close()
+            self._cluster.close()
 
     def submit(self, view: View) -> Any:
         if self._client is not None:

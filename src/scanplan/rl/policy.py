@@ -18,6 +18,7 @@ from pydantic import model_validator as _model_validator
 from torch import nn
 
 from scanplan.core.context import scan_spec_from_record
+from scanplan.core.files import atomic_write_bytes, atomic_write_text
 from scanplan.core.limits import (
     ANGLE_RAD,
     LENGTH_MM,
@@ -343,14 +344,15 @@ def save_policy(
 ) -> Path:
     """Write the actor's weights (`meta.weights`, safetensors) and policy.json into `out_dir`
     after the same checks as loading; returns the JSON path."""
-    from safetensors.torch import save_file
+    from safetensors.torch import save
 
     out = Path(out_dir)
     state = {k: v.detach().cpu().contiguous() for k, v in actor_state.items()}
     if problem := tensor_problem(state, meta.architecture):
         raise ValueError(f"policy {out / meta.weights}: {problem}")
-    out.mkdir(parents=True, exist_ok=True)
-    save_file(state, str(out / meta.weights), metadata={"format": FORMAT})
+    # Serialized here, written whole by `atomic_write_bytes` (safetensors' file writer does
+    # not report a full disk reliably).
+    atomic_write_bytes(out / meta.weights, save(state, metadata={"format": FORMAT}))
     path = out / POLICY_JSON
-    path.write_text(meta.model_dump_json(indent=1) + "\n")
+    atomic_write_text(path, meta.model_dump_json(indent=1) + "\n")
     return path

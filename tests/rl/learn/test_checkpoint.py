@@ -1,14 +1,16 @@
 """Checkpoints (learn.checkpoint): parameters and optimizer restored exactly, a resume takes the
-recorded config, and a checkpoint is never unpickled (library and CLI)."""
+recorded config, a checkpoint is never unpickled (library and CLI), and one that a full disk
+stops is an OSError that leaves no file."""
 
 from __future__ import annotations
 
+import errno
 import json
 
 import pytest
 import torch
 
-from helpers import Exploit, ppo, tiny_config
+from helpers import Exploit, full_disk, listing, ppo, tiny_config
 from scanplan.rl.learn.checkpoint import save_checkpoint
 
 
@@ -135,3 +137,16 @@ def test_checkpoint_with_pickled_tensors_is_refused(tmp_path):
     with pytest.raises(ValueError, match="checkpoint .*ppo_0.safetensors: not a safetensors file"):
         load_checkpoint(path)
     assert not marker.exists()
+
+
+@pytest.mark.parametrize("fail_at", [1, 2], ids=["weights", "json"])
+def test_a_checkpoint_on_a_full_disk_is_an_oserror_and_leaves_nothing(
+    tmp_path, monkeypatch, fail_at
+):
+    model = ppo(0)
+    full_disk(monkeypatch, fail_at=fail_at)
+    with pytest.raises(OSError) as caught:
+        save_checkpoint(model, tiny_config(tmp_path), tmp_path)
+    assert caught.value.errno == errno.ENOSPC
+    assert "cannot write" in str(caught.value) and "No space left on device" in str(caught.value)
+    assert listing(tmp_path / "checkpoints") == []

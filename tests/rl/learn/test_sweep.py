@@ -14,11 +14,13 @@ import torch
 import trimesh
 from safetensors.torch import load_file
 
+from helpers import tcp_server
 from scanplan.rl.learn.config import TrainConfig
 from scanplan.rl.learn.sweep import (
     COLUMNS,
     EvalPart,
     SweepTask,
+    connect,
     grid_tasks,
     markdown_table,
     read_csv,
@@ -191,3 +193,11 @@ def test_sweep_cli_writes_and_prints_the_table(tmp_path, small_plate, monkeypatc
     assert meta["training"]["command"] == shlex.join(["scanplan", *args])
     bad = CliRunner().invoke(app, ["sweep", "-o", str(out), "--baseline", "rl"])
     assert bad.exit_code == 2 and "--baseline 'rl'" in bad.output
+
+
+@needs_dask
+def test_connect_refuses_a_port_that_is_no_scheduler_in_one_line():
+    with tcp_server(lambda conn: conn.close()) as address:
+        with pytest.raises(ValueError, match=f"^--scheduler {address}: what answers there is not"):
+            with connect(address):
+                pass

@@ -3,13 +3,17 @@ bag, nothing left behind by a failed write."""
 
 from __future__ import annotations
 
+import errno
+import sqlite3
+
 import numpy as np
 import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
 from helpers import EXPORT_OPTIONS as OPTIONS
-from helpers import listing, rot_err, snake_trajectory
+from helpers import listing, rot_err, run_cli, snake_trajectory
+from scanplan.core.plan_file import write_csv
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.export import (
     ExportOptions,
@@ -165,3 +169,31 @@ def test_rosbag_failure_mid_write_leaves_nothing(tmp_path, monkeypatch) -> None:
     assert len(calls) == 4
     assert listing(tmp_path) == ["bag"]  # no new bag, no staging directory
     assert len(read_rosbag(bag).poses) == 3  # the old bag is intact
+
+
+@pytest.mark.parametrize(
+    "failure, said",
+    [
+        (sqlite3.OperationalError("database or disk is full"), "database or disk is full"),
+        (OSError(errno.ENOSPC, "No space left on device"), "No space left on device"),
+    ],
+    ids=["sqlite", "oserror"],
+)
+def test_rosbag_on_a_full_disk_is_one_line_exit_2_and_nothing_left(
+    tmp_path, monkeypatch, failure, said
+):
+    from rosbags.rosbag2 import Writer
+
+    def full(self, connection, timestamp, data):
+        raise failure
+
+    monkeypatch.setattr(Writer, "write", full)
+    plan = tmp_path / "plan.csv"
+    write_csv(TRAJ, plan)
+    bag = tmp_path / "bag"
+    result = run_cli("export", str(plan), "-o", str(bag), "--format", "rosbag2", "--robot", "none")
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error")]
+    assert errors == [f"error: cannot write rosbag2 {bag}: {said}"]
+    assert "internal error" not in result.stderr
+    assert listing(tmp_path) == ["plan.csv"]

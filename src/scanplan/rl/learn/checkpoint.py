@@ -8,7 +8,6 @@ checkpoints are refused, since loading one unpickles whatever its `data` holds.
 from __future__ import annotations
 
 import json
-import os
 import re
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any, Literal
 import torch
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
+from scanplan.core.files import atomic_write_bytes, atomic_write_text
 from scanplan.rl.learn.config import TrainConfig
 from scanplan.rl.policy import read_tensors
 
@@ -75,7 +75,7 @@ def save_checkpoint(model: Any, config: TrainConfig, run_dir: str | Path) -> Pat
     """Write `run_dir/checkpoints/ppo_<steps>.safetensors` and `.json` for an SB3 PPO model;
     returns the JSON path. The JSON is written last, so a listed checkpoint is complete."""
     import stable_baselines3
-    from safetensors.torch import save_file
+    from safetensors.torch import save
 
     out = Path(run_dir) / CHECKPOINT_DIR
     out.mkdir(parents=True, exist_ok=True)
@@ -105,13 +105,16 @@ def save_checkpoint(model: Any, config: TrainConfig, run_dir: str | Path) -> Pat
         sb3_version=stable_baselines3.__version__,
         torch_version=torch.__version__,
     )
-    tmp = out / f"{stem}.safetensors.tmp"
-    save_file(tensors, str(tmp), metadata={"format": FORMAT})
-    os.replace(tmp, out / f"{stem}.safetensors")
+    # Serialized here and written by `atomic_write_bytes`: safetensors' own file writer
+    # neither reports a full disk reliably nor removes what it half wrote.
+    weights = out / f"{stem}.safetensors"
+    atomic_write_bytes(weights, save(tensors, metadata={"format": FORMAT}))
     path = out / f"{stem}.json"
-    tmp = out / f"{stem}.json.tmp"
-    tmp.write_text(meta.model_dump_json(indent=1) + "\n")
-    os.replace(tmp, path)
+    try:
+        atomic_write_text(path, meta.model_dump_json(indent=1) + "\n")
+    except BaseException:
+        weights.unlink(missing_ok=True)  # no weights without the JSON that lists them
+        raise
     return path
 
 

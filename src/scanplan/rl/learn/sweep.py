@@ -21,6 +21,7 @@ from typing import Any
 
 from scanplan.core.limits import MAX_RUNS, check_count
 from scanplan.core.quantities import ScanSpec
+from scanplan.core.run import scheduler_client
 from scanplan.judging import evaluate
 from scanplan.planning.pass_path import plan_scan
 from scanplan.rl.learn.config import TrainConfig, env_options, typed_field
@@ -248,7 +249,7 @@ def connect(scheduler: str | None = None, n_workers: int | None = None) -> Itera
     runs torch on one thread); a LocalCluster is closed afterwards."""
     client_class = _client_class()
     if scheduler is not None:
-        with client_class(scheduler) as client:
+        with scheduler_client(scheduler) as client:
             yield client
         return
     from dask.distributed import LocalCluster

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sqlite3
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,7 +37,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from scanplan.core.files import replace_directory
+from scanplan.core.files import cannot_write, replace_directory
 from scanplan.robot.export.common import ExportOptions, Motion, sensor_poses
 from scanplan.robot.export.ros import (
     arrival_times,
@@ -186,9 +187,13 @@ def write_rosbag(motion: Motion, options: ExportOptions, path: str | os.PathLike
                         topic, msgtype, typestore=store, offered_qos_profiles=qos
                     )
                     writer.write(conn, 0, store.serialize_cdr(msg, msgtype))
+            replace_directory(bag, target)
         except WriterError as exc:
             raise ValueError(f"cannot write rosbag2 {target}: {exc}") from None
-        replace_directory(bag, target)
+        except sqlite3.Error as exc:  # a full disk is "database or disk is full" here
+            raise OSError(f"cannot write rosbag2 {target}: {exc}") from None
+        except OSError as exc:
+            raise cannot_write(f"rosbag2 {target}", exc) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
