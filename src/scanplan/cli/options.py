@@ -212,8 +212,6 @@ Full3dOpt = Annotated[
 
 # ---- poses (export, place) ----------------------------------------------------------------
 POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
-# A --tcp or --part-pose not given is the identity: said in the output, never silently.
-IDENTITY_POSE = "0,0,0,0,0,0"
 TcpOpt = Annotated[
     str | None,
     typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option(tcp=True)),

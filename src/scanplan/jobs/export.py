@@ -23,12 +23,10 @@ from scanplan.robot.export import (
     parse_pose_arg,
     plan_motion,
 )
+from scanplan.robot.export.rotations import IDENTITY_POSE
 from scanplan.robot.flyable import check_flyable
 from scanplan.robot.program import program_cycle, program_format
 from scanplan.world.part import Part
-
-# The pose an option not given (and not recorded) stands for: the frames coincide.
-IDENTITY_POSE = "0,0,0,0,0,0"
 
 
 @dataclass(frozen=True)

@@ -7,10 +7,9 @@ from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.robot import get_robot
 from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.export.rotations import IDENTITY_POSE
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import Placement, place
-
-IDENTITY_POSE = "0,0,0,0,0,0"
 
 
 def place_plan(

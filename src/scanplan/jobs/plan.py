@@ -17,11 +17,10 @@ from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.planning.view_choice import ViewBudget
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.export.rotations import IDENTITY_POSE
 from scanplan.robot.program import program_cycle
 from scanplan.world.part import load_part
 
-# The TCP a plan for an arm takes when none is given: the sensor's origin on the flange.
-IDENTITY_POSE = "0,0,0,0,0,0"
 Lines = list[tuple[str, bool]]  # (line, to stderr)
 
 

@@ -45,6 +45,11 @@ def poses_from_parts(xyz_mm: np.ndarray, rot: Rotation) -> np.ndarray:
     return poses
 
 
+# A --tcp or --part-pose not given is the identity (the frames coincide): said in the output
+# wherever it is taken, never silently.
+IDENTITY_POSE = "0,0,0,0,0,0"
+
+
 def parse_pose_arg(s: str, position: Limit = POSITION_MM) -> np.ndarray:
     """ "x,y,z,A,B,C" -> 4x4: x, y, z in mm, then A, B, C in degrees as KUKA writes them
     (intrinsic ZYX Euler: A about Z, B about the new Y', C about the new X''). x, y, z are
