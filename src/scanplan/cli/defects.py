@@ -28,7 +28,14 @@ from scanplan.cli.options import (
 )
 from scanplan.cli.training import check_cluster
 from scanplan.core.limits import DEFECT_SIZE_MM, K_SIGMA, STEP_MM
-from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECT_TYPE
+from scanplan.core.quantities import (
+    DEFECT_K_SIGMA,
+    DEFECT_MIN_POINTS,
+    DEFECT_SIZES_MM,
+    DEFECT_TRIALS,
+    DEFECT_TYPE,
+    DEFECTS_PER_TRIAL,
+)
 
 TypeOpt = Annotated[str, typer.Option("--type", help="dent, bump, pit or scratch")]
 SizesOpt = Annotated[
@@ -82,6 +89,10 @@ DirOpt = Annotated[
 ]
 
 
+# --sizes as typed: the default study's depths.
+DEFAULT_SIZES = "{:g}:{:g}".format(*DEFECT_SIZES_MM)
+
+
 def parse_sizes(text: str) -> tuple[float, float]:
     """'0.1:1.0' -> (0.1, 1.0) mm, each within `DEFECT_SIZE_MM`, LO <= HI."""
     lo_text, sep, hi_text = text.partition(":")
@@ -101,9 +112,9 @@ def parse_sizes(text: str) -> tuple[float, float]:
 def defects_cmd(
     paths: PartAndPlanArg,
     kind: TypeOpt = DEFECT_TYPE,
-    sizes: SizesOpt = "0.01:0.5",
-    trials: DefectTrialsOpt = 16,
-    per_trial: PerTrialOpt = 8,
+    sizes: SizesOpt = DEFAULT_SIZES,
+    trials: DefectTrialsOpt = DEFECT_TRIALS,
+    per_trial: PerTrialOpt = DEFECTS_PER_TRIAL,
     seed: SeedOpt = 0,
     k_sigma: KSigmaOpt = DEFECT_K_SIGMA,
     min_points: MinPointsOpt = DEFECT_MIN_POINTS,

@@ -27,6 +27,7 @@ from scanplan.cli.options import (
     part_and_plan,
 )
 from scanplan.cli.training import check_cluster
+from scanplan.core.quantities import PERTURB_TRIALS
 from scanplan.core.sensor_spec import SensorSpec
 
 PlanUnitsOpt = Annotated[
@@ -212,7 +213,7 @@ def evaluate_cmd(
     fixture: FixtureOpt = None,
     full_3d: Full3dOpt = False,
     perturb: PerturbOpt = None,
-    trials: TrialsOpt = 16,
+    trials: TrialsOpt = PERTURB_TRIALS,
     scheduler: EvaluateSchedulerOpt = None,
     closed_loop: ClosedLoopOpt = False,
     policy: EvaluatePolicyOpt = None,

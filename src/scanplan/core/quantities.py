@@ -30,6 +30,13 @@ DEFECT_K_SIGMA = 4.0
 DEFECT_MIN_POINTS = 3
 # The defect `scanplan defects` injects and `scanplan evaluate` predicts unless told otherwise.
 DEFECT_TYPE = "dent"
+# A defect study's default: depths (mm) spread evenly in log between these, so many defective
+# parts of so many defects each.
+DEFECT_SIZES_MM = (0.01, 0.5)
+DEFECT_TRIALS = 16
+DEFECTS_PER_TRIAL = 8
+# Perturbed trials of `evaluate --perturb` (and the robustness tables) unless told otherwise.
+PERTURB_TRIALS = 16
 # The part frame's up: the top view looks along −UP.
 UP = np.array([0.0, 0.0, 1.0])
 UP.flags.writeable = False

@@ -17,7 +17,14 @@ from scanplan.core.context import PlanContext
 from scanplan.core.files import atomic_directory, atomic_write_text
 from scanplan.core.limits import MAX_DEFECTS, check_count
 from scanplan.core.plan import Plan
-from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECT_TYPE
+from scanplan.core.quantities import (
+    DEFECT_K_SIGMA,
+    DEFECT_MIN_POINTS,
+    DEFECT_SIZES_MM,
+    DEFECT_TRIALS,
+    DEFECT_TYPE,
+    DEFECTS_PER_TRIAL,
+)
 from scanplan.core.run import counted, task_runner
 from scanplan.jobs.planned import ProgressBar, no_bar
 from scanplan.judging.detectability import PREDICTED, Detectability, survey
@@ -46,9 +53,9 @@ class DefectStudy:
     (None: the plan's rule)."""
 
     kind: str = DEFECT_TYPE
-    sizes_mm: tuple[float, float] = (0.01, 0.5)
-    trials: int = 16
-    per_trial: int = 8
+    sizes_mm: tuple[float, float] = DEFECT_SIZES_MM
+    trials: int = DEFECT_TRIALS
+    per_trial: int = DEFECTS_PER_TRIAL
     seed: int = 0
     k_sigma: float = DEFECT_K_SIGMA
     min_points: int = DEFECT_MIN_POINTS

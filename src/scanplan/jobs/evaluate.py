@@ -12,6 +12,7 @@ from typing import Any
 
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import Plan
+from scanplan.core.quantities import PERTURB_TRIALS
 from scanplan.core.run import counted, task_runner
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.jobs.trials import (
@@ -36,7 +37,7 @@ class Trials:
     `policy` for an rl plan) or the plan is replayed."""
 
     model: Perturbation
-    count: int = 16
+    count: int = PERTURB_TRIALS
     scheduler: str | None = None
     closed_loop: bool = False
     policy: str | None = None

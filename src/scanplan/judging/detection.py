@@ -25,7 +25,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from scanplan.core.context import PlanContext, recorded
-from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, ScanSpec
+from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECTS_PER_TRIAL, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.evaluation import surface_samples
@@ -248,7 +248,7 @@ def defect_tasks(
     kind: str,
     sizes_mm: tuple[float, float],
     trials: int,
-    per_trial: int = 8,
+    per_trial: int = DEFECTS_PER_TRIAL,
     seed: int = 0,
     context: PlanContext | None = None,
     detector: Detector | None = None,
