@@ -17,7 +17,7 @@ import pytest
 import trimesh
 
 import scanplan.planning.pipeline as pipeline
-from helpers import fixture_files, recorded_trajectory
+from helpers import fixture_files, loopback_cluster, recorded_trajectory
 from scanplan.core.context import recorded
 from scanplan.core.limits import TooLarge
 from scanplan.core.plan_file import read_csv, read_json, write_csv, write_json
@@ -148,19 +148,11 @@ def test_seeded_runs_repeat_and_workers_give_the_serial_numbers(bumpy, feedback_
     importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
 )
 def test_a_loopback_dask_cluster_gives_the_local_numbers(bumpy, feedback_plan):
-    from dask.distributed import LocalCluster
-
     from scanplan.core.run import task_runner as trial_runner  # what evaluate --scheduler runs
 
     text = "place:5mm,2deg;path:0.2mm"
     with (
-        LocalCluster(
-            n_workers=1,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=":0",
-        ) as cluster,
+        loopback_cluster() as cluster,
         trial_runner(cluster.scheduler_address, 1) as run,
     ):
         on_dask = _closed(bumpy, feedback_plan, text, trials=1, run=run)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from helpers import fixture_files, straight
+from helpers import fixture_files, loopback_cluster, straight
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.judging.detectability import DetectabilitySurvey, survey
@@ -121,8 +121,6 @@ def test_pod_fit_degenerate_data_are_stated_not_nan():
     importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
 )
 def test_trials_on_a_loopback_dask_cluster_repeat_the_serial_run():
-    from dask.distributed import LocalCluster
-
     from scanplan.core.run import task_runner as trial_runner  # what defects --scheduler runs
 
     part = part_from_mesh(_plate(160.0), "plate")
@@ -134,13 +132,7 @@ def test_trials_on_a_loopback_dask_cluster_repeat_the_serial_run():
     tasks = defect_tasks(part, SPEC, traj, "pit", (0.05, 0.5), 2, 3, 1, context, None, surface)
     serial = defect_run(tasks)
     with (
-        LocalCluster(
-            n_workers=1,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=":0",
-        ) as cluster,
+        loopback_cluster() as cluster,
         trial_runner(cluster.scheduler_address, 2) as run,
     ):
         on_dask = defect_run(tasks, run)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from helpers import fixture_files, straight
+from helpers import fixture_files, loopback_cluster, straight
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
@@ -63,19 +63,11 @@ def test_trials_in_worker_processes_give_the_serial_numbers(plate):
     importlib.util.find_spec("distributed") is None, reason="dask distributed not installed"
 )
 def test_a_loopback_dask_cluster_gives_the_local_numbers(plate):
-    from dask.distributed import LocalCluster
-
     from scanplan.core.run import task_runner as trial_runner  # what evaluate --scheduler runs
 
     text = "place:10mm,1deg;path:0.2mm"
     with (
-        LocalCluster(
-            n_workers=1,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=":0",
-        ) as cluster,
+        loopback_cluster() as cluster,
         trial_runner(cluster.scheduler_address, 2) as run,
     ):
         on_dask = _run(plate, text, run=run)
