@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -71,6 +71,14 @@ class Trajectory:
     def scan_poses(self) -> np.ndarray:
         """(m, 4, 4) the poses where the sensor records."""
         return self.poses[self.scanning]
+
+    def subset(self, keep: np.ndarray, swath: np.ndarray | None = None) -> Trajectory:
+        """The poses where `keep` (n,) is True, with the pass indices `swath` (n,) if given
+        (renumbered ones), else their own; times and records unchanged."""
+        swath = self.swath if swath is None else swath
+        return replace(
+            self, poses=self.poses[keep], swath=swath[keep], scanning=self.scanning[keep]
+        )
 
     def path_length_mm(self, scanning_only: bool = False) -> float:
         p = self.positions_mm[self.scanning] if scanning_only else self.positions_mm

@@ -13,6 +13,7 @@ from functools import partial
 import numpy as np
 
 from scanplan.core.context import LOWEST, PlanContext
+from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import in_spec_samples
@@ -22,8 +23,9 @@ from scanplan.planning.view_choice import ViewBudget, choose_views
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
-from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.fit import PlacedArm, fit_to_robot
 from scanplan.robot.links import obstacles_for
+from scanplan.robot.place import place
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part, geometry_digest
@@ -94,10 +96,13 @@ def plan_views(
     plan = ViewRaster(spec, planner, raster, direction, overlap, cell)
 
     start = time.perf_counter()
+    obstacles = None if arm is None else obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
+    free: Trajectory | None = None
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
-        selection = choose_views(
+        choose = partial(
+            choose_views,
             part,
             spec,
             plan,
@@ -107,6 +112,16 @@ def plan_views(
             workers=view_worker_count(),
             scheduler=scheduler,
         )
+        placed = None
+        if arm is not None:
+            # Views chosen for the arm: placed where it flies most of the views chosen
+            # without it, then each candidate judged by what the arm flies of it there.
+            if arm.T_base_part is None:
+                _, free = join_views(part, order_views(choose().plans), spec, cell)
+                placement = place(free, arm.robot, arm.tcp, obstacles=obstacles)
+                arm = replace(arm, T_base_part=placement.T_base_part)
+            placed = PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
+        selection = choose(arm=placed)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
@@ -123,7 +138,7 @@ def plan_views(
         }
         traj = replace(traj, meta=traj.meta | {"view_choice": choice})
     if arm is not None:
-        traj = fit_arm(part, traj, arm, context)
+        traj = fit_arm(part, traj, arm, context, obstacles, free)
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
 
 
@@ -143,17 +158,43 @@ def fit_arm(
     arm: Arm,
     context: PlanContext,
     obstacles: CellObstacles | None = None,
+    free: Trajectory | None = None,
 ) -> Trajectory:
     """`traj` made flyable by the arm (`robot.fit.fit_to_robot`), with `meta["robot"]`: what
     it gave up, per view, and the in-spec coverage of the surface to inspect before and after
-    (evaluated with the view choice's fan). obstacles: the part's cell as the links see it
-    (`obstacles_for`; None: built here), for a caller that checks the fitted plan again."""
+    (evaluated with the view choice's fan), and of the plan made without the arm (`free`),
+    if one was. obstacles: the part's cell as the links see it (`obstacles_for`; None:
+    built here), for a caller that checks the fitted plan again."""
     if obstacles is None:
         spec = context.spec
         obstacles = obstacles_for(part, planned_cell(context, part), spec.sensor, spec.clearance_mm)
     fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
     record = fit.record(arm.tcp)
-    for key, plan in (("in_spec_without_robot", traj), ("in_spec", fit.traj)):
-        held = in_spec_samples(part, context.spec, plan, 0, VIEW_CHOICE_FAN_POINTS, context)
-        record[key] = float(held.mean()) if len(held) else 0.0
+    # Judged view by view (a sample's in-spec state depends on one pass): the union is the
+    # plan's figure, and what a view held that nothing flown holds is what the arm cost.
+    planned, flown = _held_by_view(part, traj, context), _held_by_view(part, fit.traj, context)
+    held = np.logical_or.reduce([*flown.values()]) if flown else np.zeros(0, bool)
+    record["in_spec"] = float(held.mean()) if len(held) else 0.0
+    before = np.logical_or.reduce([*planned.values()])
+    record["in_spec_without_robot"] = float(before.mean()) if len(before) else 0.0
+    record["in_spec_lost_by_view"] = {
+        str(k): round(float((v & ~held).mean()), 4)
+        for k, v in planned.items()
+        if len(held) and (v & ~held).mean() >= 5e-4
+    }
+    if free is not None:
+        held = in_spec_samples(part, context.spec, free, 0, VIEW_CHOICE_FAN_POINTS, context)
+        record["in_spec_free_plan"] = float(held.mean()) if len(held) else 0.0
     return replace(fit.traj, meta=fit.traj.meta | {"robot": record})
+
+
+def _held_by_view(part: Part, traj: Trajectory, context: PlanContext) -> dict[int, np.ndarray]:
+    """Each view's in-spec set on the view choice's samples (`in_spec_samples`)."""
+    out = {}
+    for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
+        mine = view.holds(traj.swath)
+        if (mine & traj.scanning).any():
+            out[view.index] = in_spec_samples(
+                part, context.spec, traj.subset(mine), 0, VIEW_CHOICE_FAN_POINTS, context
+            )
+    return out

@@ -26,6 +26,7 @@ from scanplan.core.quantities import (
 from scanplan.judging import coverage_spacing_mm
 from scanplan.planning.view_workers import ViewJudge, ViewWorkers
 from scanplan.planning.views import PlanView, View, ViewPlan, candidate_views, missed_views
+from scanplan.robot.fit import PlacedArm
 from scanplan.world.part import Part
 from scanplan.world.surface import VisibleSurface, hemisphere_visible_samples, reachable_samples
 
@@ -117,6 +118,7 @@ def choose_views(
     scan_level: bool = True,
     workers: int = 0,
     scheduler: str | None = None,
+    arm: PlacedArm | None = None,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -150,10 +152,11 @@ def choose_views(
     candidate is planned: the views chosen by then are kept (`out_of_time`). With `workers`
     (`view_workers.view_worker_count`), candidates are planned on that many processes, each
     the next one the choice would try: the same views, sooner; with `scheduler`, as Dask
-    tasks on that cluster."""
+    tasks on that cluster. With a placed `arm`, each view is judged by what that arm flies
+    of it (`fit.PlacedArm.flown`), so the cover is of what the arm can scan."""
 
     spent = _Spent(ViewBudget() if budget is None else budget)
-    judge = ViewJudge(spec, plan, points_per_profile, seed)
+    judge = ViewJudge(spec, plan, points_per_profile, seed, arm)
     with ExitStack() as stack:
         # The top view is planned on a thread of its own from the start, beside the samples
         # the views are judged on (`evaluate` draws the same) and the workers' start: a

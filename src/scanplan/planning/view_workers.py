@@ -29,6 +29,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.core.run import scheduler_client
 from scanplan.judging import in_spec_samples
 from scanplan.planning.views import PlanView, View, ViewPlan, plan_view
+from scanplan.robot.fit import PlacedArm
 from scanplan.world.part import Part
 
 # Views kept asked for per worker: one running and one queued behind it, so a worker that
@@ -48,13 +49,14 @@ class ViewJudge:
     plan: PlanView
     points_per_profile: int
     seed: int = 0
+    arm: PlacedArm | None = None
 
     def __call__(self, part: Part, view: View) -> tuple[ViewPlan, np.ndarray]:
         planned = plan_view(part, view, self.plan)
         context = PlanContext(self.spec, views="auto")
-        held = in_spec_samples(
-            part, self.spec, planned.traj, self.seed, self.points_per_profile, context
-        )
+        # With an arm, what it flies of the view: the choice then picks views it can fly.
+        flown = planned.traj if self.arm is None else self.arm.flown(part, planned.traj)
+        held = in_spec_samples(part, self.spec, flown, self.seed, self.points_per_profile, context)
         return planned, held
 
 

@@ -6,15 +6,16 @@ happens only between passes, as a joint move. It says what it gave up.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
-from scanplan.robot.links import LinkReport, check_links
+from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.place import (
     HALF_TURN,
     Placement,
@@ -24,8 +25,22 @@ from scanplan.robot.place import (
     turned_passes,
 )
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import ReachReport, check_reach, pass_starts
+from scanplan.robot.reach import ReachReport, check_reach, pass_starts, same_pass
 from scanplan.world.capsule_collision import CellObstacles
+from scanplan.world.cell import planned_cell
+from scanplan.world.part import Part
+
+# Why a pose is given up: out of the arm's reach, beyond its joint limits, an arm link
+# within the clearance of the part, a fixture or the table (in `CellObstacles.NAMES`'
+# order), or on the joint move into its pass.
+CAUSES = (
+    "reach",
+    "joint limits",
+    "link in the part",
+    "link in a fixture",
+    "link in the table",
+    "joint move into a pass",
+)
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
 # whole pass did, and so show a flip of its own; a few rounds settle it.
@@ -41,9 +56,10 @@ class RobotFit:
     pose in the arm's base frame (the placement found, or the one given). report: the
     reach check of `traj` there. given_up: scanning poses given up, per view index;
     moves_given_up: transition poses given up (the arm makes those moves as joint moves);
-    splits: passes cut at a configuration flip. links: the arm's links along what is kept
-    (None: fitted without a cell). turned: passes flown with the sensor turned half a turn
-    about its beam.
+    splits: passes cut at a configuration flip or a joint swinging inside a pass.
+    given_up_by_cause: per view index, the scanning poses given up by cause (`CAUSES`).
+    links: the arm's links along what is kept (None: fitted without a cell). turned: passes
+    flown with the sensor turned half a turn about its beam.
     """
 
     traj: Trajectory
@@ -55,6 +71,7 @@ class RobotFit:
     placement: Placement | None
     links: LinkReport | None = None
     turned: int = 0
+    given_up_by_cause: dict[int, dict[str, int]] = field(default_factory=dict)
 
     @property
     def flyable(self) -> bool:
@@ -69,6 +86,7 @@ class RobotFit:
             "T_base_part": self.T_base_part.tolist(),
             "T_flange_sensor": np.asarray(tcp).tolist(),
             "scanning_poses_given_up": {str(k): v for k, v in self.given_up.items()},
+            "given_up_by_cause": {str(k): v for k, v in self.given_up_by_cause.items()},
             "moves_given_up": self.moves_given_up,
             "passes_split": self.splits,
             "passes_turned": self.turned,
@@ -102,10 +120,11 @@ def fit_to_robot(
     inv_tcp = np.linalg.inv(tcp)
     traj, turned = _turned(traj, arm, T_base_part, inv_tcp, obstacles)
     keep = np.ones(len(traj), bool)
+    cause = np.full(len(traj), -1)  # why each pose given up was: an index into CAUSES
     swath = traj.swath.copy()
     splits = 0
     for _ in range(MAX_ROUNDS):
-        current = _subset(traj, keep, swath)
+        current = traj.subset(keep, swath)
         report = check_reach(
             T_base_part @ current.poses @ inv_tcp,
             arm,
@@ -113,29 +132,41 @@ def fit_to_robot(
             scanning=current.scanning,
         )
         index = np.flatnonzero(keep)
-        bad = np.union1d(report.unreachable, report.limit_violations)
-        if report.reachable:
-            if obstacles is None:
-                break
+        why = np.full(len(index), -1)
+        why[report.limit_violations] = CAUSES.index("joint limits")
+        why[report.unreachable] = CAUSES.index("reach")
+        # A joint turning fast inside a pass (a base swing about a singularity) is a joint
+        # move: the pass is split there, as at a flip, and the arm moves between the pieces.
+        in_pass = same_pass(len(current), current.swath, current.scanning)
+        swings = report.joint_jumps[in_pass[report.joint_jumps - 1]]
+        if report.reachable and obstacles is not None:
             starts = pass_starts(current.swath, current.scanning)
             in_cell = check_links(arm, report.joints, obstacles, T_base_part, starts)
-            if in_cell.clear:
-                break
-            bad = np.flatnonzero(in_cell.colliding)
             for i in in_cell.moves:  # the whole pass the arm cannot be brought into
-                bad = np.union1d(bad, np.flatnonzero(current.swath == current.swath[i]))
+                why[current.swath == current.swath[i]] = CAUSES.index("joint move into a pass")
+            hit = in_cell.colliding
+            why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
+        if report.reachable and not len(swings) and (why < 0).all():
+            break
+        bad = np.flatnonzero(why >= 0)
         keep[index[bad]] = False
+        cause[index[bad]] = why[bad]
         # A pass goes on after a gap or a flip as a new pass: the arm reconfigures between.
         cut = np.zeros(len(traj), bool)
         cut[index[report.config_flips]] = True
-        splits += int(len(report.config_flips))
+        cut[index[swings]] = True
+        splits += int(len(np.union1d(report.config_flips, swings)))
         swath = _renumbered(traj, keep, swath, cut)
     given_up: dict[int, int] = {}
+    by_cause: dict[int, dict[str, int]] = {}
     lost = ~keep & traj.scanning
     for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
-        if (count := int((lost & view.holds(traj.swath)).sum())) > 0:
+        in_view = lost & view.holds(traj.swath)
+        if (count := int(in_view.sum())) > 0:
             given_up[view.index] = count
-    fitted = _subset(traj, keep, swath)
+            causes = np.bincount(cause[in_view], minlength=len(CAUSES))
+            by_cause[view.index] = {CAUSES[k]: int(c) for k, c in enumerate(causes) if c}
+    fitted = traj.subset(keep, swath)
     if not fitted.scanning.any():
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
@@ -157,6 +188,7 @@ def fit_to_robot(
         placement,
         links,
         turned,
+        by_cause,
     )
 
 
@@ -185,10 +217,6 @@ def _turned(
     turn = np.isin(traj.swath, better)
     poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
     return replace(traj, poses=poses), len(better)
-
-
-def _subset(traj: Trajectory, keep: np.ndarray, swath: np.ndarray) -> Trajectory:
-    return replace(traj, poses=traj.poses[keep], swath=swath[keep], scanning=traj.scanning[keep])
 
 
 def _renumbered(
@@ -220,3 +248,49 @@ def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:
             view.record | {"first_swath": first, "last_swath": last, "passes": last - first + 1}
         )
     return out
+
+
+class PlacedArm:
+    """An arm standing where `T_base_part` puts the part, as the view choice asks of each
+    candidate view what the arm flies of it (`flown`). Picklable (sent to the view
+    workers): the cell's obstacles are built where they are first needed, once per part."""
+
+    def __init__(
+        self, robot: str | Path, tcp: np.ndarray, T_base_part: np.ndarray, context: PlanContext
+    ) -> None:
+        self.robot, self.context = robot, context
+        self.tcp, self.T_base_part = np.asarray(tcp), np.asarray(T_base_part)
+        self._obstacles: tuple[int, CellObstacles] | None = None
+
+    def __getstate__(self) -> dict:
+        return self.__dict__ | {"_obstacles": None}
+
+    def obstacles(self, part: Part) -> CellObstacles:
+        if self._obstacles is None or self._obstacles[0] != id(part):
+            spec = self.context.spec
+            cell = planned_cell(self.context, part)
+            self._obstacles = (
+                id(part),
+                obstacles_for(part, cell, spec.sensor, spec.clearance_mm),
+            )
+        return self._obstacles[1]
+
+    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
+        """`traj` as this arm flies it, quickly judged: each pass as planned or turned half
+        a turn about the beam (whichever keeps more), its scanning poses that are out of
+        reach or beyond the limits, or put a link or the sensor body into the cell, given
+        up (a pass goes on after them as a new pass). Configuration flips are left to
+        `fit_to_robot`, which splits a pass there and keeps its poses."""
+        arm = get_robot(self.robot)
+        obstacles = self.obstacles(part)
+        inv_tcp = np.linalg.inv(self.tcp)
+        planned, turned = flyable_poses(
+            traj, arm, self.T_base_part, inv_tcp, obstacles, exact=False
+        )
+        scanning = traj.scanning
+        better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
+        turn = np.isin(traj.swath, better)
+        keep = np.where(turn, turned, planned) | ~scanning
+        poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
+        swath = _renumbered(traj, keep, traj.swath, np.zeros(len(traj), bool))
+        return replace(traj, poses=poses).subset(keep, swath)

@@ -128,6 +128,61 @@ class ReachReport:
         )
 
 
+def _run_ends(linked: np.ndarray) -> np.ndarray:
+    """(n,) one past the last pose of the pass (run of `linked` poses) each pose is in."""
+    n = len(linked) + 1
+    last = np.flatnonzero(np.r_[~linked, True])  # a run's last pose
+    return last[np.searchsorted(last, np.arange(n))] + 1
+
+
+def _pass_start(
+    arm: Robot,
+    solutions: np.ndarray,
+    limits: np.ndarray,
+    prev: np.ndarray | None,
+    tol: np.ndarray,
+    jump_deg: float,
+) -> np.ndarray | None:
+    """The joints to enter a pass with, from its IK `solutions` (m, 8, 6): on the branch
+    that flies the most poses from the first one on without leaving the reach or the joint
+    limits, changing configuration (a sign of `singularity_terms`) or turning a joint more
+    than `jump_deg` between poses; among those that fly as many, the one nearest `prev`
+    (the joint move in), or without one the farthest from singularities and limits. None
+    where the first pose has no solution within the limits."""
+    first, inside = fit_limits(solutions[0], limits)
+    ok = inside & ~np.isnan(first).any(axis=1)
+    if not ok.any():
+        return None
+    if prev is not None:  # each branch turned the way nearest the previous joints
+        first, inside = fit_limits(prev + wrap(solutions[0] - prev), limits)
+        ok &= inside
+        if not ok.any():
+            first, _ = fit_limits(solutions[0], limits)
+    branches = np.flatnonzero(ok)
+    path = solutions[:, branches]  # (m, b, 6)
+    # Each branch followed continuously (unwrapped), from the first pose's turn.
+    path = first[branches] + np.cumsum(
+        np.r_[np.zeros((1, len(branches), 6)), wrap(np.diff(path, axis=0))], axis=0
+    )
+    lo, hi = limits[:, 0] - 1e-12, limits[:, 1] + 1e-12
+    held = ((path >= lo) & (path <= hi)).all(axis=2)  # NaN: not held
+    step = np.abs(np.diff(path, axis=0)).max(axis=2)
+    held[1:] &= step <= np.radians(jump_deg)
+    signs = np.signbit(arm.singularity_terms(np.nan_to_num(path)))
+    held &= (signs == signs[0]).all(axis=2)
+    flown = np.where(held.all(axis=0), len(path), np.argmin(held, axis=0))  # (b,)
+    best = branches[flown == flown.max()]
+    cand = first[best]
+    if prev is not None:
+        return cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
+    terms = np.abs(arm.singularity_terms(cand)) / tol
+    score = np.minimum(terms.min(axis=1), limit_margin(cand, limits) / np.radians(5))
+    # Rounded: branches that tie (a margin set by the same joint limit) must not be told
+    # apart by a pose's last digits, or a plan read back from its file (to 1e-6 mm) is
+    # checked on another branch than it was fitted on.
+    return cand[np.argmax(np.round(score, 4))]
+
+
 def check_reach(
     T_base_flange: np.ndarray,
     robot: str | Path | Robot = "ur5e",
@@ -141,9 +196,10 @@ def check_reach(
 ) -> ReachReport:
     """Follow the path through IK and report what would stop or upset a real arm.
 
-    The first reachable pose takes the solution closest to `q_start` if given, else the one
-    farthest from every singularity and limit; each next pose takes the in-limit solution
-    closest to the previous one, as a controller executing linear moves would. A
+    Each pass (and each pose outside a pass) is entered on the branch that flies the most
+    of it (`_pass_start`; the first reachable pose on the solution closest to `q_start` if
+    given); each next pose of a pass takes the in-limit solution closest to the previous
+    one, as a controller executing linear moves would. A
     configuration flip is a sign change of a singularity term (wrist, elbow, shoulder)
     between consecutive poses of one pass (`swath`, `scanning`; without them the whole
     path is one pass): the path went through that singularity. A jump is any joint
@@ -161,23 +217,23 @@ def check_reach(
     tol = np.array([wrist_tol, elbow_tol, shoulder_tol_mm])
     joints = np.full((n, 6), np.nan)
     prev: np.ndarray | None = None if q_start is None else np.asarray(q_start, dtype=float)
+    # A pass's configuration is chosen over the whole pass, where a program enters it by a
+    # joint move: the branch that flies most of it from its start.
+    entered = np.r_[True, ~linked]
+    pinned = q_start is not None
+    end = _run_ends(linked)
     # Sequential by nature: each pose's branch depends on the previous choice.
     for i in range(n):
         if not exists[i].any():
             continue
-        cand = solutions[i][exists[i]]
-        if prev is None:
-            cand, inside = fit_limits(cand, limits)
-            if not inside.any():
+        if prev is None or (entered[i] and not pinned):
+            start = _pass_start(arm, solutions[i : end[i]], limits, prev, tol, jump_deg)
+            if start is None:
                 continue
-            cand = cand[inside]
-            terms = np.abs(arm.singularity_terms(cand)) / tol
-            score = np.minimum(terms.min(axis=1), limit_margin(cand, limits) / np.radians(5))
-            # Rounded: branches that tie (a margin set by the same joint limit) must not be
-            # told apart by a pose's last digits, or a plan read back from its file (to
-            # 1e-6 mm) is checked on another branch than it was fitted on.
-            prev = cand[np.argmax(np.round(score, 4))]
-        else:
+            prev = start
+        else:  # in a pass, or the first pose when the caller gave `q_start`
+            pinned = False
+            cand = solutions[i][exists[i]]
             cand, inside = fit_limits(prev + wrap(cand - prev), limits)
             if not inside.any():
                 continue
