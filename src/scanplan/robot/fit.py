@@ -25,7 +25,7 @@ from scanplan.robot.place import (
     turned_passes,
 )
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import ReachReport, check_reach, pass_starts, same_pass
+from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
@@ -137,8 +137,7 @@ def fit_to_robot(
         why[report.unreachable] = CAUSES.index("reach")
         # A joint turning fast inside a pass (a base swing about a singularity) is a joint
         # move: the pass is split there, as at a flip, and the arm moves between the pieces.
-        in_pass = same_pass(len(current), current.swath, current.scanning)
-        swings = report.joint_jumps[in_pass[report.joint_jumps - 1]]
+        swings = report.pass_jumps
         if report.reachable and obstacles is not None:
             starts = pass_starts(current.swath, current.scanning)
             in_cell = check_links(arm, report.joints, obstacles, T_base_part, starts)

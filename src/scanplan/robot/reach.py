@@ -6,7 +6,7 @@ Works for any `Robot`; the path is `T_base_flange` (n, 4, 4) in mm, e.g. from
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +73,8 @@ class ReachReport:
     jump_deg: float
     margins: np.ndarray
     limit_margin_rad: np.ndarray
+    # The joint jumps between poses of one pass (the others are joint moves between passes).
+    pass_jumps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def near_singular(self) -> np.ndarray:
@@ -124,7 +126,7 @@ class ReachReport:
             f"elbow {len(self.elbow_singular)}, shoulder {len(self.shoulder_singular)}), "
             f"{len(self.config_flips)} configuration flips in a pass "
             f"({len(self.wrist_flips)} wrist), {len(self.joint_jumps)} joint jumps "
-            f"> {self.jump_deg:g}°"
+            f"> {self.jump_deg:g}° ({len(self.pass_jumps)} inside a pass)"
         )
 
 
@@ -260,6 +262,7 @@ def check_reach(
         config_flips=idx(flips.any(axis=1)) + 1,
         joint_jumps=idx(jumps) + 1,
         jump_deg=jump_deg,
+        pass_jumps=idx(jumps & linked) + 1,
         margins=margins,
         limit_margin_rad=limit_margin(joints, limits),
     )
