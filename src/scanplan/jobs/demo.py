@@ -139,9 +139,13 @@ def run_demo(
     evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
     arm = Plan.of(fitted).arm
     assert arm is not None  # fitted: it records its arm
-    program_said = replace(arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP), title=(
-        f"Robot program for the rl plan: {DEMO_ROBOT} ({FITTED_FILE} is the plan it flies)"
-    ))  # fmt: skip
+    said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP)
+    program_said = replace(
+        said,
+        title=f"Robot program for the rl plan: {DEMO_ROBOT}",
+        lines=(*said.lines, f"The tables below judge the rl plan as planned, without the "
+               f"arm; the program flies the fitted plan, {FITTED_FILE}."),
+    )  # fmt: skip
     report = _write_report(
         out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d,
         step, program_said,

@@ -59,8 +59,9 @@ def arm_finding(
         )
     place = record.get("part_pose", "")
     lines.append(
-        f"Arm {robot}; the part at {place} (x, y, z mm and roll, pitch, yaw ° in the arm's "
-        "base frame)" + (f"; the sensor at {tcp} on the flange." if tcp else ".")
+        f"Arm {robot}; the part at {place} in the arm's base frame (x, y, z in mm, then "
+        "A, B, C in degrees about z, y, x)"
+        + (f"; the sensor at {tcp} on the flange." if tcp else ".")
     )
     free, flown = record.get("in_spec_without_robot"), record.get("in_spec")
     if isinstance(free, int | float) and isinstance(flown, int | float):
@@ -73,9 +74,10 @@ def arm_finding(
     lines.append(
         f"The arm gave up {sum(given_up.values())} scanning poses and "
         f"{record.get('moves_given_up', 0)} move poses it cannot reach or fly clear of the "
-        f"cell; {record.get('passes_split', 0)} passes were split where the arm would flip "
-        f"its configuration, {record.get('passes_turned', 0)} turned half a turn about the "
-        "beam. What is left it flies (reach, joint limits and links checked)."
+        f"cell; passes split where the arm would flip its configuration: "
+        f"{record.get('passes_split', 0)}, turned half a turn about the beam: "
+        f"{record.get('passes_turned', 0)}. What is left it flies (reach, joint limits and "
+        "links checked)."
     )
     return Finding(f"Robot program and arm ({robot})", tuple(lines))
 
