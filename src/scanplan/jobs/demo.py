@@ -139,13 +139,8 @@ def run_demo(
     evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
     arm = Plan.of(fitted).arm
     assert arm is not None  # fitted: it records its arm
-    said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP)
-    program_said = replace(
-        said,
-        title=f"Robot program for the rl plan: {DEMO_ROBOT}",
-        lines=(*said.lines, f"The tables below judge the rl plan as planned, without the "
-               f"arm; the program flies the fitted plan, {FITTED_FILE}."),
-    )  # fmt: skip
+    fitted_note = f"The tables below judge the rl plan without the arm; it flies {FITTED_FILE}."
+    program_said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP, fitted_note)
     report = _write_report(
         out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d,
         step, program_said,

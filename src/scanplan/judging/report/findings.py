@@ -47,10 +47,14 @@ def verdict_finding(verdicts: Sequence[Verdict]) -> Finding | None:
 
 
 def arm_finding(
-    robot: str, record: Mapping[str, Any], program: Program | None = None, tcp: str = ""
+    robot: str,
+    record: Mapping[str, Any],
+    program: Program | None = None,
+    tcp: str = "",
+    note: str = "",
 ) -> Finding:
     """The arm a plan was made for, where the part sits, what the arm cost in coverage, and
-    the program written for it."""
+    the program written for it (and a `note` after)."""
     lines = []
     if program is not None:
         cycle = f", cycle time {program.cycle_s:.1f} s" if program.cycle_s is not None else ""
@@ -79,7 +83,7 @@ def arm_finding(
         f"{record.get('passes_turned', 0)}. What is left it flies (reach, joint limits and "
         "links checked)."
     )
-    return Finding(f"Robot program and arm ({robot})", tuple(lines))
+    return Finding(f"Robot program and arm ({robot})", (*lines, *([note] if note else [])))
 
 
 def robustness_finding(robust: Robustness | None, nominal: float) -> Finding | None:
