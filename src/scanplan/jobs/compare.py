@@ -68,7 +68,7 @@ def compare(job: Comparison, said: Callable[[str], None] = lambda _: None) -> li
             row = _row(job, ref, planner, views)
         except (ValueError, OSError) as exc:
             text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            row = Row(ref.name, planner, views or "", job.plan.robot or "", error=text)
+            row = Row(_shown(ref), planner, views or "", job.plan.robot or "", error=text)
         said(f"[{k}/{len(todo)}] {label}: {row.summary()} ({time.perf_counter() - started:.0f} s)")
         rows.append(row)
     return rows
@@ -99,7 +99,7 @@ def _row(job: Comparison, ref: PartRef, planner: str, views: str | None) -> Row:
     figures = figures_of(metrics, robust, arm, pod_a90_mm=pod_a90)
     notes = tuple(text for text, _ in planned.lines[2:])  # what plan said beyond its summary
     return Row(
-        ref.name,
+        _shown(ref),
         plan.planner or planner,
         plan.context.views,
         job.plan.robot or "",
@@ -108,6 +108,11 @@ def _row(job: Comparison, ref: PartRef, planner: str, views: str | None) -> Row:
         plan_file=str(output),
         notes=notes,
     )
+
+
+def _shown(ref: PartRef) -> str:
+    """The part as a table names it: its file's name (stems are distinct), or built-in name."""
+    return Path(ref.name).name
 
 
 def failed_rows(rows: Sequence[Row]) -> tuple[int, int]:

@@ -139,7 +139,9 @@ def run_demo(
     evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
     arm = Plan.of(fitted).arm
     assert arm is not None  # fitted: it records its arm
-    fitted_note = f"The tables below judge the rl plan without the arm; it flies {FITTED_FILE}."
+    fitted_note = (
+        f"The tables below judge the rl plan without the arm; the program flies {FITTED_FILE}."
+    )
     program_said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP, fitted_note)
     report = _write_report(
         out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d,
