@@ -89,7 +89,7 @@ ComparePerturbOpt = Annotated[
     typer.Option(
         "--perturb",
         help="also replay each plan on perturbed parts (as evaluate --perturb, e.g. "
-        "'place:2mm,1deg;warp:1mm@200mm') for the p5 and worst columns",
+        "'place:2mm,1deg;warp:1mm@200mm') for the p5 column (the JSON also holds the worst trial)",
         show_default=False,
     ),
 ]
