@@ -88,8 +88,9 @@ def test_require_passes_fails_with_exit_3_and_names_each_criterion(parts):
 
 
 def test_a_part_that_fails_is_one_error_row_and_the_rest_still_run(parts):
+    (parts / "gone.txt").write_text("gone.stl\n")
     result = runner.invoke(
-        app, ["compare", str(parts / "plate.stl"), str(parts / "gone.stl"), *FAST]
+        app, ["compare", str(parts / "plate.stl"), str(parts / "gone.txt"), *FAST]
     )
     assert result.exit_code == 1
     first, second = result.stdout.splitlines()[1:3]
@@ -106,6 +107,7 @@ def test_a_part_that_fails_is_one_error_row_and_the_rest_still_run(parts):
         (["--require", "in-spec>0.9;"], "expected NAME>=VALUE"),
         (["-o", "t.xlsx"], "--format 'xlsx'"),
         (["--format", "csv"], "give -o FILE too"),
+        (["missing.stl"], "part file missing.stl does not exist"),
     ],
 )
 def test_bad_options_are_one_line_before_any_work(parts, tmp_path, args, message):

@@ -106,7 +106,8 @@ def is_part_group(text: str) -> bool:
 
 
 def expand_parts(texts: list[str]) -> list[PartRef]:
-    """Every part the arguments name: a part (`PATH[:UNITS]`), a folder or a list file."""
+    """Every part the arguments name: a part (`PATH[:UNITS]`), a folder or a list file. A
+    part file named here must exist (a list's missing part is that part's failure)."""
     refs: list[PartRef] = []
     for text in texts:
         if Path(text).is_dir():
@@ -114,7 +115,10 @@ def expand_parts(texts: list[str]) -> list[PartRef]:
         elif Path(text).suffix.lower() == PART_LIST_SUFFIX:
             refs += read_part_list(Path(text))
         else:
-            refs.append(parse_part(text))
+            ref = parse_part(text)
+            if Path(ref.source).suffix and not Path(ref.source).exists():
+                raise ValueError(f"part file {ref.source} does not exist")
+            refs.append(ref)
     _distinct(refs, "parts")
     return refs
 
