@@ -348,6 +348,7 @@ NEEDS = {
     "sweep": ["-o", "{out}/sweep"],
     "view": ["{good}", "-o", "{out}/v.html"],
     "defects": ["{plate}", "{good}"],
+    "compare": ["{plate}", "--points", "16"],
 }
 
 
@@ -386,6 +387,7 @@ def _stop(*args, **kwargs):
 def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
     # The jobs imported before patching: each binds the stage it calls at its import, and
     # is patched where it looks the stage up.
+    import scanplan.jobs.compare
     import scanplan.jobs.defects
     import scanplan.jobs.demo
     import scanplan.jobs.place
@@ -402,6 +404,7 @@ def test_any_argument_list_exits_0_or_one_line_2(files, tmp_path_factory, args):
         mp.setattr(scanplan.jobs.place, "place", _stop)
         mp.setattr(scanplan.rl.learn.sweep, "connect", _stop)  # no cluster, no training
         mp.setattr(scanplan.jobs.defects, "defect_tasks", _stop)  # no defect trials
+        mp.setattr(scanplan.jobs.compare, "compare", _stop)  # no plans, no evaluations
         result = runner.invoke(app, argv)
     event(f"{args[0]} exit {result.exit_code}")
     assert result.exit_code in (0, 2), (argv, result.output, result.exception)

@@ -158,3 +158,19 @@ def test_a_wrong_guess_of_the_rl_plans_surface_is_fitted_again(demo, tmp_path, m
     for plan in fitted:
         del plan["plan_time_s"]  # the rl planner's wall time, that run's
     assert fitted[0] == fitted[1]
+
+
+def test_the_report_names_the_program_its_arm_and_what_the_arm_cost(demo):
+    out, _ = demo
+    page = (out / "report.html").read_text()
+    arm = read_json(out / "trajectory_rl_irb2400.json").meta["robot"]
+    assert "Program scan_rl.mod (RAPID, ABB)" in page
+    assert f"the part at {arm['part_pose']} in the arm" in page
+    free, flown = arm["in_spec_without_robot"], arm["in_spec"]
+    assert f"in-spec coverage {free:.1%} without it, {flown:.1%} with it" in page
+    # Plain words in the prose: no internal key, no backticks; the RL terms folded away.
+    prose = re.sub(r"<script.*?</script>", "", page, flags=re.S)
+    assert "in_spec_radius_mm" not in prose and "`" not in prose
+    details = prose.index("<details>")
+    assert prose.index("<th>mean reward</th>") > details
+    assert prose.index("<th>in-spec coverage") < details

@@ -10,6 +10,7 @@ import sys
 import typer
 
 from scanplan.cli.common import OneLineErrors
+from scanplan.cli.compare import compare_cmd
 from scanplan.cli.defects import defects_cmd
 from scanplan.cli.demo import demo_cmd
 from scanplan.cli.evaluate import evaluate_cmd, scan_cmd
@@ -34,6 +35,7 @@ app.command("part")(part_cmd)
 app.command("scan")(scan_cmd)
 app.command("plan")(plan_cmd)
 app.command("evaluate")(evaluate_cmd)
+app.command("compare")(compare_cmd)
 app.command("view")(view_cmd)
 app.command("defects")(defects_cmd)
 app.command("train")(train_cmd)

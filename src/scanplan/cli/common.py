@@ -1,6 +1,6 @@
 """What every command shares: one-line errors and exit codes (2 for a mistake, 1 for a bug,
-130 for Ctrl-C, 143 for SIGTERM), the progress bar on a terminal, and no half-made output
-directory after a failure.
+3 for a result that fails --require, 130 for Ctrl-C, 143 for SIGTERM), the progress bar on
+a terminal, and no half-made output directory after a failure.
 """
 
 from __future__ import annotations
@@ -155,6 +155,10 @@ def usage_message(exc: Exception) -> str:
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
     return " ".join(f"{text}{where}".split())
 
+
+# A run that worked but whose result fails a --require criterion (0 success, 1 a bug or a
+# failed part, 2 a mistake in the input).
+EXIT_FAILED_REQUIREMENT = 3
 
 F = TypeVar("F", bound=Callable[..., Any])
 # Set it to see the traceback of an internal error.

@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from scanplan.cli.common import progress_bar, user_errors
+from scanplan.cli.common import EXIT_FAILED_REQUIREMENT, progress_bar, user_errors
 from scanplan.cli.options import (
     POINTS_CHECK,
     FixtureOpt,
@@ -18,6 +18,7 @@ from scanplan.cli.options import (
     OutOpt,
     PartAndPlanArg,
     QuietOpt,
+    RequireOpt,
     RoiOpt,
     SeedOpt,
     TableOpt,
@@ -218,6 +219,7 @@ def evaluate_cmd(
     closed_loop: ClosedLoopOpt = False,
     policy: EvaluatePolicyOpt = None,
     other_part: OtherPartOpt = False,
+    require: RequireOpt = None,
 ):
     """Simulate the scan of a plan on its part and report its quality, judged as the plan
     file records it (part and units, sensor, tolerance, region of interest, surface) unless
@@ -237,8 +239,10 @@ def evaluate_cmd(
         write_evaluation,
     )
     from scanplan.jobs.planned import judged_context
+    from scanplan.judging.verdict import figures_of, judge, parse_requirements, verdict_lines
     from scanplan.sensor.perturb import Perturbation
 
+    criteria = () if require is None else parse_requirements(require)
     model = Perturbation.parse(perturb) if perturb is not None else None
     if model is None and scheduler is not None:
         raise ValueError("--scheduler runs --perturb's trials: give --perturb too")
@@ -251,6 +255,8 @@ def evaluate_cmd(
         raise ValueError(f"-o {str(output)!r}: give the report's folder name")
     part, trajectory = part_and_plan(paths)
     plan = read_plan(trajectory)
+    arm_record = plan.arm.record if plan.arm is not None else None
+    check_evaluate_require(criteria, model is not None, arm_record is not None)
     context, note = judged_context(
         plan, sensor, parse_tolerance(tolerance), roi, views, table, fixture
     )
@@ -265,18 +271,38 @@ def evaluate_cmd(
         robust = run_trials(
             plan, the_part, context, run, seed, points, lambda label: progress_bar(label, quiet)
         )
+    verdicts = judge(criteria, figures_of(metrics, robust, arm_record))
     if output is not None:
-        write_evaluation(output, plan, the_part, context, metrics, robust, full_3d)
+        write_evaluation(output, plan, the_part, context, metrics, robust, full_3d, verdicts)
     data = metrics.to_json_dict()
     if robust is not None:
         data["robustness"] = {"nominal": metrics.in_spec_coverage, **robust.to_json_dict()}
+    if verdicts:
+        data["verdicts"] = [v.to_json_dict() for v in verdicts]
+        data["pass"] = all(v.passed for v in verdicts)
     if note:  # after the work: a command that fails says one line, its error
         say(note)
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
-        return
-    typer.echo(metrics_line(metrics, data) + (f" -> {output}" if output is not None else ""))
-    if metrics.cycle is not None:
-        typer.echo(metrics.cycle.line())
-    if robust is not None:
-        typer.echo(robust.line(metrics.in_spec_coverage))
+    else:
+        typer.echo(metrics_line(metrics, data) + (f" -> {output}" if output is not None else ""))
+        if metrics.cycle is not None:
+            typer.echo(metrics.cycle.line())
+        if robust is not None:
+            typer.echo(robust.line(metrics.in_spec_coverage))
+        for line in verdict_lines(verdicts):
+            typer.echo(line)
+    if any(not v.passed for v in verdicts):
+        raise typer.Exit(EXIT_FAILED_REQUIREMENT)
+
+
+def check_evaluate_require(criteria: tuple, perturbed: bool, has_arm: bool) -> None:
+    """A criterion this evaluation will not measure is named before any work."""
+    from scanplan.judging.verdict import check_available
+
+    missing = {"pod-a90": "is measured by compare --defects or the defects command"}
+    if not perturbed:
+        missing |= dict.fromkeys(("p5", "worst"), "needs --perturb")
+    if not has_arm:
+        missing["arm-cost"] = "needs a plan made with --robot"
+    check_available(criteria, missing)

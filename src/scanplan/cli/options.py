@@ -314,3 +314,14 @@ FixtureOpt = Annotated[
         callback=fixture_count,
     ),
 ]
+RequireOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--require",
+        help="criteria the result must meet, comma-separated, e.g. "
+        "'in-spec>=0.9,cycle<=120s,p5>=80%' (figures: in-spec, ceiling, of-ceiling, coverage, "
+        "arm-cost, cycle, p5, worst, a90, pod-a90, collisions; see docs/compare.md); each is "
+        "printed pass or FAIL, and a failure ends with exit code 3",
+        show_default=False,
+    ),
+]

@@ -10,12 +10,13 @@ from typing import Annotated
 
 import typer
 
-from scanplan.cli.common import progress_bar, user_errors
+from scanplan.cli.common import EXIT_FAILED_REQUIREMENT, progress_bar, user_errors
 from scanplan.cli.options import (
     FixtureOpt,
     OutOpt,
     PartPoseOpt,
     QuietOpt,
+    RequireOpt,
     RoiOpt,
     SensorOpt,
     TableOpt,
@@ -130,9 +131,10 @@ def plan_cmd(
     part: Annotated[
         str,
         typer.Argument(
-            help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB), STEP file, or a folder "
-            "of them or a .txt list of them, one per line (each planned with the same options, "
-            "-o then the folder for the plans)"
+            help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB) or STEP file, optionally "
+            "with its units as PATH:UNITS (part.stl:in); or a folder of them, or a .txt list of "
+            "them, one 'PATH [UNITS]' a line (each planned with the same options, -o then the "
+            "folder for the plans)"
         ),
     ],
     output: OutOpt,
@@ -157,45 +159,58 @@ def plan_cmd(
     scheduler: PlanSchedulerOpt = None,
     view_candidates: ViewCandidatesOpt = VIEW_CHOICE_CANDIDATES,
     view_seconds: ViewSecondsOpt = None,
+    require: RequireOpt = None,
 ):
     """Plan a scan trajectory over a part; write it as CSV or JSON, with what it was planned
     under (part, sensor, tolerances, views, region of interest, table and fixtures, arm) for
     the other commands to read. With --robot, a plan that arm can fly (placed by the tool
     unless --part-pose is given), and what that cost. A folder of parts, or a .txt file
-    listing them (one path a line, relative to the list; # comments), is a catalogue: each
+    listing them (one 'PATH [UNITS]' a line, relative to the list; # comments), is a catalogue: each
     part planned on its own core (or Dask worker) into -o/NAME.json, one line per part."""
     # Deferred: the planners load trimesh, Embree and FCL (seconds), which --help need not.
     from scanplan.jobs.catalogue import catalogue_jobs, is_catalogue, plan_catalogue
     from scanplan.jobs.plan import PlanJob, run_plan_job
+    from scanplan.judging.verdict import parse_requirements
+    from scanplan.world.part_list import parse_part
 
     job = PlanJob(
         part, output, planner, scan_spec(sensor, tolerance), policy, direction, overlap,
         raster, roll, units, roi, views, coverage_target, table, tuple(fixture or ()), robot,
         tcp, part_pose, view_candidates, view_seconds,
+        require=() if require is None else parse_requirements(require),
     )  # fmt: skip
-    job.budget()  # a bad budget is named before any work
+    job.budget()  # a bad budget or criterion is named before any work
+    job.check_require()
     if is_catalogue(part):
         check_cluster(scheduler, None)
         jobs = catalogue_jobs(job)
         with progress_bar(f"planning {len(jobs)} parts", quiet) as progress:
             results = plan_catalogue(jobs, scheduler, progress)
-        failed = 0
-        for name, lines, error in results:
+        failed = verdicts_failed = 0
+        for name, done, error in results:
             if error is not None:
                 failed += 1
                 typer.echo(f"{name}: error: {error}", err=True)
-            for text, to_stderr in lines:
+            for text, to_stderr in done.lines:
                 typer.echo(f"{name}: {text}", err=to_stderr)
+            verdicts_failed += done.failed
         if failed:
             typer.echo(f"error: {failed} of {len(jobs)} parts not planned", err=True)
             raise typer.Exit(1)
+        if verdicts_failed:
+            typer.echo(f"{verdicts_failed} of {len(jobs)} plans fail --require", err=True)
+            raise typer.Exit(EXIT_FAILED_REQUIREMENT)
         return
+    ref = parse_part(part)  # part.stl:in, as in a list
+    job = replace(job, part=ref.source, units=ref.units_or(units))
     if scheduler is not None:
         check_cluster(scheduler, None)
         job = replace(job, scheduler=scheduler)
     if output.suffix.lower() not in (".csv", ".json"):
         raise ValueError(f"output {output} must be a .csv or .json file")
     with progress_bar(f"planning ({planner})", quiet) as progress:
-        lines = run_plan_job(job, progress)
-    for text, to_stderr in lines:
+        done = run_plan_job(job, progress)
+    for text, to_stderr in done.lines:
         typer.echo(text, err=to_stderr)
+    if done.failed:
+        raise typer.Exit(EXIT_FAILED_REQUIREMENT)

@@ -33,6 +33,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics
 from scanplan.judging.detectability import evaluate_detectable
 from scanplan.judging.report import Evaluated, write_report
+from scanplan.judging.report.findings import Finding, Program, arm_finding
 from scanplan.planning.pipeline import Arm, default_views, fit_arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot import get_robot
@@ -40,6 +41,7 @@ from scanplan.robot.export import ExportOptions, export_program, parse_pose_arg,
 from scanplan.robot.export.common import plan_motion
 from scanplan.robot.flyable import check_flyable
 from scanplan.robot.links import obstacles_for
+from scanplan.robot.program import program_cycle
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part, load_part
 
@@ -126,18 +128,25 @@ def run_demo(
             )
             if name != "rl":
                 metrics[name] = _evaluate(part, spec, traj, context, seed, points_per_profile)
-        fitted, robot_line, text, error_m, fit_seconds = second.result()
+        fitted, robot_line, text, error_m, program, fit_seconds = second.result()
         metrics["rl"] = second.result()
         if refit:
-            fitted, robot_line, text, error_m, fit_seconds = second.result()
+            fitted, robot_line, text, error_m, program, fit_seconds = second.result()
     files[PROGRAM_FILE] = text
     # The fitted plan records the arm, part pose and TCP: `scanplan export` takes it as is.
     files[FITTED_FILE] = dumps_json(to_json_dict(fitted), indent=1)
     step(f"{robot_line} ({fit_seconds:.0f} s)")
     evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
-    report = _write_report(
-        out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d, step
+    arm = Plan.of(fitted).arm
+    assert arm is not None  # fitted: it records its arm
+    fitted_note = (
+        f"The tables below judge the rl plan without the arm; the program flies {FITTED_FILE}."
     )
+    program_said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP, fitted_note)
+    report = _write_report(
+        out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d,
+        step, program_said,
+    )  # fmt: skip
     return DemoResult(
         out_dir,
         metrics,
@@ -160,6 +169,7 @@ def _write_report(
     points_per_profile: int | None,
     full_3d: bool,
     step: Callable[[str], None],
+    program: Finding,
 ) -> Path:
     """`report.write_report` of the demo's plans, with the shipped policy's training curves
     and log, and `files` written beside it; its path."""
@@ -167,7 +177,7 @@ def _write_report(
     from scanplan.rl.planner import DEFAULT_POLICY
 
     training_log, curves = _training_files(DEFAULT_POLICY)
-    files = {**files, **curves}
+    files = {**files, **curves}  # the curves' pictures in the folder; the page draws the log
     if training_log is not None:
         files["training_log.csv"] = training_log
     step("drawing the maps and writing the report")
@@ -178,7 +188,7 @@ def _write_report(
         part,
         evaluated,
         spec,
-        pictures=list(curves.values()),
+        pictures=[] if training_log is not None else list(curves.values()),
         notes=[
             f"Evaluated with {fan} pixel columns per profile, noise seed {seed}.",
             "Planned one after another (rl first) while a second process loaded the part and "
@@ -188,6 +198,7 @@ def _write_report(
         files=files,
         title=f"{part.name}: scan quality by planner",
         full_3d=full_3d,
+        findings=[program],
     )
 
 
@@ -252,7 +263,7 @@ def _evaluate_here(
 
 def _fit_here(
     traj: Trajectory, context: PlanContext, spec: ScanSpec
-) -> tuple[Trajectory, str, str, float, float]:
+) -> tuple[Trajectory, str, str, float, Program, float]:
     """`_robot_program`, and the seconds it took."""
     started = time.perf_counter()
     out = _robot_program(_loaded_part(), traj, context, spec)
@@ -269,10 +280,11 @@ def _judged_guess(rl: Trajectory, spec: ScanSpec) -> PlanContext:
 
 def _robot_program(
     part: Part, traj: Trajectory, context: PlanContext, spec: ScanSpec
-) -> tuple[Trajectory, str, str, float]:
+) -> tuple[Trajectory, str, str, float, Program]:
     """The rl plan fitted to `DEMO_ROBOT` (the part placed, what the arm cannot fly given
-    up), checked as `scanplan export` checks it and written in the arm's language: (the line
-    saying so, the program, its largest read-back position error in m), after the fitted plan."""
+    up), checked as `scanplan export` checks it and written in the arm's language: the fitted
+    plan, the line saying so, the program, its largest read-back position error in m, and
+    what the report says of it."""
     tcp = parse_pose_arg(DEMO_TCP)
     # Built once for the fit and the check: it samples the part's surface for the links.
     obstacles = obstacles_for(part, planned_cell(context, part), spec.sensor, spec.clearance_mm)
@@ -299,13 +311,15 @@ def _robot_program(
     error_m = float(np.abs(parsed[:, :3, 3] - expected[:, :3, 3]).max()) / 1000.0
     given_up = sum(record["scanning_poses_given_up"].values())
     unreachable = int((~np.isfinite(checked.joints).all(axis=1)).sum())
+    cycle = program_cycle(Plan.of(fitted), options).total_s
+    program = Program(PROGRAM_FILE, "RAPID, ABB", len(kept), cycle)
     line = (
         f"robot program: {DEMO_ROBOT} at --part-pose {record['part_pose']} --tcp {DEMO_TCP}, "
         f"{len(kept)} targets, {unreachable} unreachable, links clear -> "
         f"{PROGRAM_FILE}; the arm gave up {given_up} scanning poses (in-spec coverage "
         f"{record['in_spec_without_robot']:.3f} without it, {record['in_spec']:.3f} with it)"
     )
-    return fitted, line, text, error_m
+    return fitted, line, text, error_m, program
 
 
 class _SecondProcess:

@@ -5,7 +5,7 @@ its program flies, and (with a perturbation) how its in-spec coverage holds over
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,7 @@ from scanplan.jobs.trials import (
 )
 from scanplan.judging import Metrics, Robustness, robustness, trial_tasks
 from scanplan.judging.detectability import evaluate_detectable
+from scanplan.judging.verdict import Verdict
 from scanplan.robot.program import program_cycle
 from scanplan.sensor.perturb import Perturbation
 from scanplan.world.part import Part
@@ -122,10 +123,13 @@ def write_evaluation(
     metrics: Metrics,
     robust: Robustness | None,
     full_3d: bool = False,
+    verdicts: Sequence[Verdict] = (),
 ) -> None:
-    """The report folder: maps, metrics, report.html, and the fragility map of the trials."""
+    """The report folder: maps, metrics, report.html, and the fragility map of the trials;
+    the report tells the arm and what it cost, the trials and the verdicts."""
     # Deferred: the report loads matplotlib and plotly.
     from scanplan.judging.report import Evaluated, write_report
+    from scanplan.judging.report.findings import arm_finding, robustness_finding, verdict_finding
     from scanplan.judging.report.maps import plot_fragility_map
 
     name = Path(plan.where.removeprefix("plan ")).name
@@ -146,6 +150,15 @@ def write_evaluation(
             files=files,
             title=title,
             full_3d=full_3d,
+            findings=[
+                f
+                for f in (
+                    verdict_finding(verdicts),
+                    arm_finding(plan.arm.robot, plan.arm.record) if plan.arm is not None else None,
+                    robustness_finding(robust, metrics.in_spec_coverage),
+                )
+                if f is not None
+            ],
         )
 
 

@@ -28,6 +28,13 @@ from scanplan.robot.flyable import check_flyable
 from scanplan.robot.program import program_cycle, program_format
 from scanplan.world.part import Part
 
+# Why a program with joint jumps or near-singular poses is still written: it is flyable.
+FLYABLE_ANYWAY = (
+    " — the plan is still flyable (every target reachable within the joint limits, links "
+    "clear); a jump is a fast joint move between two targets and a near-singular pose a "
+    "slow one: check the speed on the cell"
+)
+
 
 @dataclass(frozen=True)
 class ProgramRequest:
@@ -188,7 +195,7 @@ def flyable_joints(
     report = result.reach
     if result.flyable:
         warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
-        say(("warning: " if warn else "") + report.summary())
+        say(("warning: " if warn else "") + report.summary() + (FLYABLE_ANYWAY if warn else ""))
         say(result.links.summary())
         return report.joints
     where = result.first_problem(plan.traj.swath)

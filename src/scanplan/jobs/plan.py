@@ -5,7 +5,7 @@ that say what it holds and what it cost.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from scanplan.core.context import LOWEST
@@ -13,6 +13,15 @@ from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.core.plan_file import as_read, write_csv, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDIDATES, ScanSpec
+from scanplan.judging.verdict import (
+    FIGURES,
+    Criterion,
+    Verdict,
+    check_available,
+    figures_of,
+    judge,
+    verdict_lines,
+)
 from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.planning.view_choice import ViewBudget
 from scanplan.rl.planners import make_planner
@@ -22,6 +31,20 @@ from scanplan.robot.program import program_cycle
 from scanplan.world.part import load_part
 
 Lines = list[tuple[str, bool]]  # (line, to stderr)
+# What `plan` measures itself; the other figures need the scan simulated.
+NOT_MEASURED_BY_PLAN = "is measured by evaluate or compare, not by plan"
+
+
+@dataclass(frozen=True)
+class Planned:
+    """What one part's plan says: its lines and its verdicts (none without --require)."""
+
+    lines: Lines
+    verdicts: list[Verdict] = field(default_factory=list)
+
+    @property
+    def failed(self) -> bool:
+        return any(not v.passed for v in self.verdicts)
 
 
 @dataclass(frozen=True)
@@ -49,9 +72,18 @@ class PlanJob:
     view_candidates: int = VIEW_CHOICE_CANDIDATES
     view_seconds: float | None = None  # a wall-clock limit only where the user asks
     scheduler: str | None = None  # one part's candidate views on this Dask scheduler
+    require: tuple[Criterion, ...] = ()  # --require: the criteria its verdict holds it to
 
     def budget(self) -> ViewBudget:
         return ViewBudget(self.view_candidates, self.view_seconds)
+
+    def check_require(self) -> None:
+        """A criterion `plan` cannot judge is named before any work."""
+        measured = {"cycle"} | ({"arm-cost"} if self.robot is not None else set())
+        missing = {k: NOT_MEASURED_BY_PLAN for k in FIGURES if k not in measured}
+        if self.robot is None:
+            missing["arm-cost"] = "needs --robot"
+        check_available(self.require, missing)
 
 
 def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
@@ -69,8 +101,8 @@ def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
     return Arm(job.robot, parse_pose_arg(job.tcp or IDENTITY_POSE, TCP_MM), pose), notes
 
 
-def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = None) -> Lines:
-    """Plan `job`, write its plan, and return what to print."""
+def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = None) -> Planned:
+    """Plan `job`, write its plan, and return what to print and its verdicts."""
     job.budget()  # a bad budget is named before the part is read
     the_part = load_part(job.part, job.units)
     the_planner = make_planner(job.planner, job.policy, job.roll)
@@ -98,7 +130,8 @@ def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = Non
     cycle = program_cycle(plan)
     traj = replace(traj, meta=traj.meta | {"cycle_time_s": round(cycle.total_s, 3)})
     (write_json if job.output.suffix.lower() == ".json" else write_csv)(traj, job.output)
-    return [
+    verdicts = judge(job.require, figures_of(arm=traj.meta.get("robot"), cycle_s=cycle.total_s))
+    lines: Lines = [
         *notes,
         (
             f"{the_planner.name}: {plan.counts()}, {traj.path_length_mm():.0f} mm, "
@@ -107,7 +140,9 @@ def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = Non
         ),
         (cycle.line(), False),
         *plan_notes(plan),
+        *((line, False) for line in verdict_lines(verdicts)),
     ]
+    return Planned(lines, verdicts)
 
 
 def plan_notes(plan: Plan) -> Lines:
@@ -120,7 +155,9 @@ def plan_notes(plan: Plan) -> Lines:
         lines.append(
             (
                 f"collisions: {dropped} scanning poses dropped (sensor body within "
-                f"{spec.clearance_mm:g} mm of the part, the table or a fixture)",
+                f"{spec.clearance_mm:g} mm of the part, the table or a fixture): the plan "
+                "is still safe, as it never goes there; what they would have measured is "
+                "lost, and the in-spec coverage counts it",
                 False,
             )
         )

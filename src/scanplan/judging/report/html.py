@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -22,18 +23,49 @@ from scanplan.judging.report.figures import (
     planner_figure,
     training_figure,
 )
+from scanplan.judging.report.findings import Finding
 from scanplan.judging.report.page import figure_html, lighter_trace, page_html, picture_html
 from scanplan.judging.report.scene import MAX_PART_FACES, part_trace
 from scanplan.judging.report.table import lookup, table_rows, tolerance_label
 from scanplan.judging.report.training import read_log
 from scanplan.world.part import Part
 
+# What the definitions carried in the JSON call by their keys, in words for the page.
+_PLAIN = (
+    ("`in_spec_radius_mm`", "the in-spec radius ({in_spec_radius_mm:.2f} mm)"),
+    ("`coverage_radius_mm`", "the coverage radius ({coverage_radius_mm:.2f} mm)"),
+    ("`in_spec_of_ceiling`", "the in-spec share of the ceiling"),
+    ("(`surface`)", ""),
+    ("(`tolerance`)", ""),
+    ("|z_s - W_d| <= tol_d", "a distance from the stand-off within the distance tolerance"),
+    ("alpha_i <= tol_alpha", "an angle between beam and normal within the angle tolerance"),
+    ("within tol_alpha", "within the angle tolerance"),
+    ("2 delta_s_opt", "twice the optimal spacing"),
+    ("delta_s_opt", "the optimal spacing"),
+    ("`top`", "top"),
+    ("`hemisphere`", "hemisphere"),
+    ("`roi`", "roi"),
+)
 
-def metrics_table_html(results: list[PlannerResult]) -> str:
+
+def plain(text: str, metrics: dict) -> str:
+    """A definition from the JSON in words: its keys named or given their values, no
+    backticks."""
+    for key, words in _PLAIN:
+        if key in text:
+            try:
+                words = words.format(**metrics)
+            except (KeyError, TypeError, ValueError):
+                words = words.split(" (")[0]
+            text = text.replace(key, words)
+    return " ".join(text.replace("`", "").split())
+
+
+def metrics_table_html(results: list[PlannerResult], diagnostics: bool | None = False) -> str:
     head = "".join(f"<th>{html.escape(r.name)}</th>" for r in results)
     rows = [
         f"<tr><th>{html.escape(label)}</th>" + "".join(f"<td>{v}</td>" for v in values) + "</tr>"
-        for label, values in table_rows([r.metrics for r in results])
+        for label, values in table_rows([r.metrics for r in results], diagnostics)
     ]
     return f"<table><tr><th>metric</th>{head}</tr>{''.join(rows)}</table>"
 
@@ -76,8 +108,11 @@ def write_html_report(
     pictures: list[Path] | None = None,
     notes: list[str] | None = None,
     full_3d: bool = False,
+    findings: Sequence[Finding] = (),
 ) -> None:
-    """Write the report atomically. `pictures` are PNGs embedded at the end (error maps).
+    """Write the report atomically. `pictures` are PNGs embedded at the end (error maps;
+    training curves, shown only where the training log is not drawn); `findings` (the
+    verdicts, the program and its arm, robustness) come first, each under its heading.
     full_3d: the 3-D views with every face of the part and every sampled point, pictures at
     full size and plotly.js as is (a page tens of MB for a large part)."""
     if not results:
@@ -100,6 +135,7 @@ def write_html_report(
     headline = _in_spec_headline(results)
     if headline:
         sections.append(headline)
+    sections += [f.to_html() for f in findings]
     sections += ["<h2>Scan quality</h2>", metrics_table_html(results)]
     for key, what in (
         ("in_spec_definition", "In-spec coverage"),
@@ -108,7 +144,8 @@ def write_html_report(
     ):
         definition = lookup(results[0].metrics, (key,))
         if definition:
-            sections.append(f"<p class='note'>{what}: {html.escape(str(definition))}</p>")
+            words = plain(str(definition), results[0].metrics)
+            sections.append(f"<p class='note'>{what}: {html.escape(words)}</p>")
     for note in notes or []:
         sections.append(f"<p class='note'>{html.escape(note)}</p>")
     # The in-spec maps belong with the headline figure; the error maps come at the end.
@@ -129,17 +166,43 @@ def write_html_report(
         f"lines show the laser axis along the path. Shown: {shown}.</p>"
     )
     sections.extend(divs)
-    if training_log is not None and Path(training_log).is_file():
-        log = read_log(training_log)
-        if len(log["timesteps"]):
-            sections.append("<h2>Training</h2>")
-            sections.append(figure_html(training_figure(log), "training"))
+    curves = [p for p in pictures if Path(p).name.startswith("training")]
+    pictures = [p for p in pictures if p not in curves]
     if pictures:
-        sections.append("<h2>Error maps and training curves</h2><div class='grid'>")
+        sections.append("<h2>Error maps</h2><div class='grid'>")
         sections.extend(picture_html(Path(pic), full_3d) for pic in pictures)
         sections.append("</div>")
+    sections += _diagnostics(results, training_log, curves, full_3d)
     text = page_html(f"scanplan report — {part.name}", sections, shared, compress=not full_3d)
     atomic_write_text(path, text)
+
+
+def _diagnostics(
+    results: list[PlannerResult], training_log: Path | None, curves: list[Path], full_3d: bool
+) -> list[str]:
+    """The learning's diagnostics, folded away: the RL reward terms per planner, and the
+    training curves once (the log drawn, or else its pictures)."""
+    inner = []
+    rewards = metrics_table_html(results, diagnostics=True)
+    if "<td>" in rewards:
+        inner += ["<p class='note'>The reward the RL agent learns from, per step (0 is best; "
+                  "distance, angle and spacing terms).</p>", rewards]  # fmt: skip
+    log = (
+        read_log(training_log)
+        if training_log is not None and Path(training_log).is_file()
+        else None
+    )
+    if log is not None and len(log["timesteps"]):
+        inner.append(figure_html(training_figure(log), "training"))
+    elif curves:
+        inner += [picture_html(Path(p), full_3d) for p in curves]
+    if not inner:
+        return []
+    return [
+        "<details><summary>RL diagnostics: reward terms and training</summary>",
+        *inner,
+        "</details>",
+    ]
 
 
 def write_scene_page(

@@ -19,6 +19,7 @@ from scanplan.world.part import Part
 
 if TYPE_CHECKING:
     from scanplan.judging.report.figures import PlannerResult
+    from scanplan.judging.report.findings import Finding
     from scanplan.judging.report.scene import ArmPoses
     from scanplan.world.cell import Cell
 
@@ -52,6 +53,7 @@ def write_report(
     files: Mapping[str, str | bytes | Path] | None = None,
     title: str | None = None,
     full_3d: bool = False,
+    findings: Sequence[Finding] = (),
 ) -> Path:
     """Write the report directory of one or more evaluated trajectories; return report.html.
 
@@ -61,7 +63,8 @@ def write_report(
     pictures: more PNGs for the HTML report (e.g. training curves); files: more outputs by
     relative name — text, bytes, or a Path to copy. full_3d: report.html's 3-D views at full
     resolution (every face, every sampled point) and its pictures at full size; by default
-    they are decimated so the page stays a few MB."""
+    they are decimated so the page stays a few MB. findings: what the page tells first (the
+    verdicts, the program and its arm, robustness), in plain words."""
     # Deferred: the HTML report draws with plotly and the arm (kinematics, FCL).
     from scanplan.judging.report.html import write_html_report
 
@@ -90,6 +93,7 @@ def write_report(
                 pictures=[*maps, *pictures],
                 notes=notes,
                 full_3d=full_3d,
+                findings=findings,
             )
     return out_dir / "report.html"
 

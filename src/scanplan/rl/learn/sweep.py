@@ -28,6 +28,7 @@ from scanplan.rl.learn.config import TrainConfig, env_options, typed_field
 from scanplan.rl.learn.train import train
 from scanplan.rl.planners import make_planner
 from scanplan.world.part import load_part
+from scanplan.world.part_list import parse_part
 from scanplan.world.parts import PART_NAMES
 
 CLUSTER_HINT = "scanplan sweep needs the cluster extra: pip install 'scanplan[cluster]'"
@@ -63,10 +64,8 @@ class EvalPart:
     @classmethod
     def parse(cls, text: str) -> EvalPart:
         """`door`, `drone` or `PATH[:UNITS]` (units mm, m or in; default mm)."""
-        source, sep, units = text.rpartition(":")
-        if not sep or units not in ("mm", "m", "in"):
-            source, units = text, "mm"
-        return cls(Path(source).stem, source, units)
+        ref = parse_part(text)
+        return cls(Path(ref.source).stem, ref.source, ref.units_or("mm"))
 
     def check(self) -> EvalPart:
         """Self, or a ValueError if it is neither a built-in part nor a file (checked before
