@@ -46,8 +46,9 @@ def test_a_port_that_answers_anything_but_dask_is_refused_at_once(kind):
     with tcp_server(ANSWERS[kind]) as address:
         start = time.monotonic()
         with pytest.raises(ValueError) as caught:
-            open_scheduler(address, connect_s=2.0)
-    assert time.monotonic() - start < 2.0
+            open_scheduler(address, connect_s=20.0)
+    # Refused without waiting out the connect timeout (a wide margin: a loaded CI machine).
+    assert time.monotonic() - start < 10.0
     message = str(caught.value)
     assert message == f"--scheduler {address}: what answers there is not a Dask scheduler"
 

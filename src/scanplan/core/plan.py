@@ -130,6 +130,22 @@ class ArmRecord:
         """Whether fitting left a plan the arm flies (the plan's own verdict)."""
         return bool(self.record.get("flyable", self.record.get("reachable", True)))
 
+    @property
+    def coverage(self) -> tuple[float, float] | None:
+        """`free_and_flown` of this arm's record."""
+        return free_and_flown(self.record)
+
+
+def free_and_flown(record: dict[str, Any]) -> tuple[float, float] | None:
+    """(free, flown) in-spec coverage of an arm's record, as the planner estimated them: the
+    plan made without the arm where one was made (views chosen for the arm), else the same
+    views before fitting; and what the arm flies. None where the record has neither."""
+    free = record.get("in_spec_free_plan", record.get("in_spec_without_robot"))
+    flown = record.get("in_spec")
+    if not isinstance(free, int | float) or not isinstance(flown, int | float):
+        return None
+    return float(free), float(flown)
+
 
 @dataclass(frozen=True)
 class Plan:

@@ -25,7 +25,7 @@ import numpy as np
 
 from scanplan.core.context import PlanContext, judged_alike, recorded
 from scanplan.core.files import dumps_json
-from scanplan.core.plan import Plan
+from scanplan.core.plan import Plan, free_and_flown
 from scanplan.core.plan_file import to_csv_text, to_json_dict
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import DEMO_POINTS
@@ -310,6 +310,7 @@ def _robot_program(
     expected = T_base_part @ fitted.poses[kept]
     error_m = float(np.abs(parsed[:, :3, 3] - expected[:, :3, 3]).max()) / 1000.0
     given_up = sum(record["scanning_poses_given_up"].values())
+    free, flown = free_and_flown(record) or (0.0, 0.0)
     unreachable = int((~np.isfinite(checked.joints).all(axis=1)).sum())
     cycle = program_cycle(Plan.of(fitted), options).total_s
     program = Program(PROGRAM_FILE, "RAPID, ABB", len(kept), cycle)
@@ -317,7 +318,7 @@ def _robot_program(
         f"robot program: {DEMO_ROBOT} at --part-pose {record['part_pose']} --tcp {DEMO_TCP}, "
         f"{len(kept)} targets, {unreachable} unreachable, links clear -> "
         f"{PROGRAM_FILE}; the arm gave up {given_up} scanning poses (in-spec coverage "
-        f"{record['in_spec_without_robot']:.3f} without it, {record['in_spec']:.3f} with it)"
+        f"{free:.3f} without it, {flown:.3f} with it)"
     )
     return fitted, line, text, error_m, program
 

@@ -27,6 +27,7 @@ from scanplan.planning.view_choice import ViewBudget
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
+from scanplan.robot.fit import what_would_help
 from scanplan.robot.program import program_cycle
 from scanplan.world.part import load_part
 
@@ -189,20 +190,31 @@ def _arm_notes(plan: Plan) -> Lines:
     assert plan.arm is not None
     arm, record = plan.arm, plan.arm.record
     by_view = record.get("scanning_poses_given_up", {})
-    given_up = ", ".join(f"view {k}: {v}" for k, v in by_view.items())
+    free, flown = arm.coverage or (0.0, 0.0)
     lines: Lines = [
         (
-            f"{arm.robot} at --part-pose {record.get('part_pose', '')}: "
-            f"{sum(by_view.values())} scanning poses given up"
-            f"{f' ({given_up})' if given_up else ''}, {record.get('moves_given_up', 0)} move "
-            f"poses, {record.get('passes_split', 0)} passes split at a configuration flip, "
+            f"{arm.robot} at --part-pose {record.get('part_pose', '')}: in-spec coverage "
+            f"{free:.3f} without the arm, {flown:.3f} flown by it ({flown - free:+.3f}); "
+            f"{sum(by_view.values())} scanning poses given up, "
+            f"{record.get('moves_given_up', 0)} move poses, {record.get('passes_split', 0)} "
+            "passes split at a configuration flip or a joint swing, "
             f"{record.get('passes_turned', 0)} turned half a turn about the beam (links kept "
-            f"clear of the part, table and fixtures); in-spec coverage "
-            f"{record.get('in_spec_without_robot', 0.0):.3f} without the arm, "
-            f"{record.get('in_spec', 0.0):.3f} with it",
+            "clear of the part, table and fixtures)",
             False,
         )
     ]
+    lost = record.get("in_spec_lost_by_view", {})
+    causes = record.get("given_up_by_cause", {})
+    worst = sorted(lost, key=lambda k: -lost[k])[:5]
+    if worst:
+        said = [
+            f"view {k} -{lost[k]:.3f} ("
+            + ", ".join(f"{c} {n}" for c, n in causes.get(k, {}).items())
+            + ")"
+            for k in worst
+        ]
+        lines.append(("what the arm cost, the worst views: " + "; ".join(said), False))
+    lines += [(f"what would help: {hint}", False) for hint in what_would_help(record)[:3]]
     if not arm.flyable:
         lines.append(
             (f"warning: {arm.robot} still cannot fly every pass; export will say where", True)

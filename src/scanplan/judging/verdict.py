@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from scanplan.core.plan import free_and_flown
 from scanplan.judging.robustness import Robustness
 from scanplan.judging.summary import Metrics
 
@@ -187,8 +188,8 @@ def figures_of(
         }
     if cycle_s is not None:
         out["cycle"] = cycle_s
-    if arm is not None and "in_spec" in arm:
-        out["arm-cost"] = float(arm["in_spec_without_robot"]) - float(arm["in_spec"])
+    if arm is not None and (coverage := free_and_flown(arm)) is not None:
+        out["arm-cost"] = coverage[0] - coverage[1]
     if robust is not None:
         out |= {"p5": robust.p5, "worst": robust.worst}
     if pod_a90_mm is not None:

@@ -21,6 +21,7 @@ from scanplan.robot.place import (
     Placement,
     flyable_poses,
     place,
+    reach_mm,
     sensor_clear_both,
     turned_passes,
 )
@@ -58,6 +59,9 @@ class RobotFit:
     moves_given_up: transition poses given up (the arm makes those moves as joint moves);
     splits: passes cut at a configuration flip or a joint swinging inside a pass.
     given_up_by_cause: per view index, the scanning poses given up by cause (`CAUSES`).
+    beyond_reach_mm: how much farther from the base axis than the arm reaches the farthest
+    pose given up for reach lies (<= 0: within that distance, out of reach at its height or
+    orientation); None if none was.
     links: the arm's links along what is kept (None: fitted without a cell). turned: passes
     flown with the sensor turned half a turn about its beam.
     """
@@ -72,6 +76,7 @@ class RobotFit:
     links: LinkReport | None = None
     turned: int = 0
     given_up_by_cause: dict[int, dict[str, int]] = field(default_factory=dict)
+    beyond_reach_mm: float | None = None
 
     @property
     def flyable(self) -> bool:
@@ -87,6 +92,9 @@ class RobotFit:
             "T_flange_sensor": np.asarray(tcp).tolist(),
             "scanning_poses_given_up": {str(k): v for k, v in self.given_up.items()},
             "given_up_by_cause": {str(k): v for k, v in self.given_up_by_cause.items()},
+            "beyond_reach_mm": (
+                None if self.beyond_reach_mm is None else round(self.beyond_reach_mm, 1)
+            ),
             "moves_given_up": self.moves_given_up,
             "passes_split": self.splits,
             "passes_turned": self.turned,
@@ -156,6 +164,9 @@ def fit_to_robot(
         cut[index[swings]] = True
         splits += int(len(np.union1d(report.config_flips, swings)))
         swath = _renumbered(traj, keep, swath, cut)
+    far = (cause == CAUSES.index("reach")) & traj.scanning
+    flange_xy = (T_base_part @ traj.poses[far] @ inv_tcp)[:, :2, 3]
+    beyond_mm = float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0] if far.any() else None
     given_up: dict[int, int] = {}
     by_cause: dict[int, dict[str, int]] = {}
     lost = ~keep & traj.scanning
@@ -188,6 +199,7 @@ def fit_to_robot(
         links,
         turned,
         by_cause,
+        beyond_mm,
     )
 
 
@@ -293,3 +305,42 @@ class PlacedArm:
         poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
         swath = _renumbered(traj, keep, traj.swath, np.zeros(len(traj), bool))
         return replace(traj, poses=poses).subset(keep, swath)
+
+
+def what_would_help(record: dict) -> list[str]:
+    """What the numbers of an arm's record (`RobotFit.record`) say would lift what bound:
+    the largest cause of poses given up first."""
+    causes: dict[str, int] = {}
+    for by in record.get("given_up_by_cause", {}).values():
+        for cause, count in by.items():
+            causes[cause] = causes.get(cause, 0) + int(count)
+    out = []
+    for cause, count in sorted(causes.items(), key=lambda c: -c[1]):
+        if cause == "reach":
+            beyond = record.get("beyond_reach_mm")
+            if beyond is not None and beyond > 0:
+                out.append(
+                    f"{count} poses out of reach, the farthest {beyond:.0f} mm beyond the "
+                    "arm's horizontal reach: an arm reaching that much farther, a linear "
+                    "track, or a turntable bringing the far side round"
+                )
+            else:
+                out.append(
+                    f"{count} poses out of reach at their height or tilt (within the arm's "
+                    "horizontal reach): the part higher or lower (--part-pose), or a "
+                    "positioner tilting it"
+                )
+        elif cause == "joint limits":
+            out.append(
+                f"{count} poses beyond the joint limits: a turntable turning the part, or "
+                "the arm placed elsewhere (--part-pose)"
+            )
+        elif cause.startswith("link in"):
+            what = cause.removeprefix("link in ")
+            out.append(
+                f"{count} poses put an arm link within the clearance of {what}: the part "
+                "raised or turned (--part-pose, a riser), or a positioner"
+            )
+        else:
+            out.append(f"{count} poses on passes no joint move reaches clear of the cell")
+    return out

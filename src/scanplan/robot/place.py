@@ -157,7 +157,7 @@ def kept_by_pass(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> 
     return np.where(np.isin(swath, turned_passes(swath, planned, turned)), turned, planned)
 
 
-def _reach_mm(robot: Robot) -> tuple[float, float]:
+def reach_mm(robot: Robot) -> tuple[float, float]:
     """(horizontal reach of the flange, height of the workspace centre) from FK samples."""
     lim = np.clip(robot.joint_limits, -np.pi, np.pi)
     q = np.random.default_rng(0).uniform(lim[:, 0], lim[:, 1], (4000, 6))
@@ -318,7 +318,7 @@ def place(
         raise ValueError(f"yaw step must be in (0, 360] degrees, got {yaw_step_deg}")
     tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=np.float64)
     T_part_flange = traj.poses @ np.linalg.inv(tcp)
-    reach, z_mid = _reach_mm(arm)
+    reach, z_mid = reach_mm(arm)
     lo, hi = height_range_mm if height_range_mm is not None else (z_mid - reach, z_mid + reach)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
         raise ValueError(f"height range must be LO <= HI in mm, got {lo}, {hi}")

@@ -10,6 +10,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from scanplan.core.plan import free_and_flown
 from scanplan.judging.robustness import Robustness
 from scanplan.judging.verdict import Verdict
 
@@ -67,8 +68,8 @@ def arm_finding(
         "A, B, C in degrees about z, y, x)"
         + (f"; the sensor at {tcp} on the flange." if tcp else ".")
     )
-    free, flown = record.get("in_spec_without_robot"), record.get("in_spec")
-    if isinstance(free, int | float) and isinstance(flown, int | float):
+    if (coverage := free_and_flown(record)) is not None:
+        free, flown = coverage
         lines.append(
             f"What the arm cost: in-spec coverage {free:.1%} without it, {flown:.1%} with it "
             f"({100 * (free - flown):.1f} points lost), as the planner estimated it with a "
