@@ -14,9 +14,10 @@ import typer
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.evaluate import (
     EvaluateSchedulerOpt,
-    EvaluateViewsOpt,
+    OldViewsOpt,
     OtherPartOpt,
     PlanUnitsOpt,
+    SurfaceOpt,
 )
 from scanplan.cli.options import (
     PartAndPlanArg,
@@ -24,6 +25,7 @@ from scanplan.cli.options import (
     SeedOpt,
     bounded,
     part_and_plan,
+    surface_choice,
     within,
 )
 from scanplan.cli.training import check_cluster
@@ -85,7 +87,12 @@ LinkOpt = Annotated[
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
 DirOpt = Annotated[
     Path | None,
-    typer.Option("-o", "--output", help="directory for pod.json, pod.png and defects.csv"),
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: pod.json, pod.png, defects.csv and the detectability map",
+    ),
 ]
 
 
@@ -122,7 +129,8 @@ def defects_cmd(
     as_json: JsonOpt = False,
     output: DirOpt = None,
     units: PlanUnitsOpt = None,
-    views: EvaluateViewsOpt = None,
+    surface: SurfaceOpt = None,
+    views: OldViewsOpt = None,
     scheduler: EvaluateSchedulerOpt = None,
     defect_free: DefectFreeOpt = True,
     quiet: QuietOpt = False,
@@ -149,7 +157,9 @@ def defects_cmd(
     plan = read_plan(trajectory)
     if not plan.traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
-    context, note = judged_context(plan, None, None, None, views)
+    context, note = judged_context(
+        plan, None, None, None, surface_choice(surface, views, "defects")
+    )
     say = lambda text: typer.echo(text, err=True)  # noqa: E731
     the_part = planned_part(plan, part, units, other_part=other_part, say=say)
     outcome = run_defects(plan, the_part, context, study, lambda label: progress_bar(label, quiet))

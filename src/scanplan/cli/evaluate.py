@@ -15,7 +15,6 @@ from scanplan.cli.options import (
     POINTS_CHECK,
     FixtureOpt,
     Full3dOpt,
-    OutOpt,
     PartAndPlanArg,
     QuietOpt,
     RoiOpt,
@@ -25,15 +24,17 @@ from scanplan.cli.options import (
     bounded,
     parse_tolerance,
     part_and_plan,
+    surface_choice,
 )
 from scanplan.cli.training import check_cluster
 from scanplan.core.quantities import PERTURB_TRIALS
-from scanplan.core.sensor_spec import SensorSpec
+from scanplan.core.sensor_spec import DEMO_POINTS, SensorSpec
 
 PlanUnitsOpt = Annotated[
     str | None,
     typer.Option(
         "--units",
+        metavar="UNIT",
         help="units of the part's mesh file: mm, m or in; default: those the plan was made with",
         show_default=False,
     ),
@@ -47,6 +48,15 @@ OtherPartOpt = Annotated[
     ),
 ]
 # ---- scan ---------------------------------------------------------------------------------
+CloudOutOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="output file: the point cloud (.ply), in the part's frame, mm",
+    ),
+]
 NoNoiseOpt = Annotated[bool, typer.Option("--no-noise", help="switch noise off")]
 ScanPointsOpt = Annotated[
     int | None,
@@ -82,7 +92,7 @@ ScanSensorOpt = Annotated[
 @user_errors
 def scan_cmd(
     paths: PartAndPlanArg,
-    output: OutOpt,
+    output: CloudOutOpt,
     sensor: ScanSensorOpt = None,
     units: PlanUnitsOpt = None,
     seed: SeedOpt = 0,
@@ -129,24 +139,36 @@ def scan_cmd(
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
 ReportDirOpt = Annotated[
     Path | None,
-    typer.Option("-o", "--output", help="report directory (maps, metrics, report.html)"),
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: the maps (PNG), metrics.json, metrics.md and report.html",
+    ),
 ]
 EvaluatePointsOpt = Annotated[
     int | None,
     typer.Option(
         "--points",
-        help=f"sub-sample the fan to N points (faster), 2 to {SensorSpec.MAX_POINTS}",
+        help="simulate N of the sensor's pixel columns across the same line (faster; the "
+        f"demo uses {DEMO_POINTS}), 2 to {SensorSpec.MAX_POINTS}; default: all of the sensor's "
+        f"({SensorSpec().points_per_profile} for the default sensor)",
+        show_default=False,
         callback=POINTS_CHECK,
     ),
 ]
-EvaluateViewsOpt = Annotated[
+SurfaceOpt = Annotated[
     str | None,
     typer.Option(
-        help="the surface to inspect: top (upward-visible) or auto (visible from the "
-        "upper hemisphere); default: as the plan records it",
+        "--surface",
+        metavar="NAME",
+        help="the surface to judge: top (what faces up) or hemisphere (what the upper "
+        "hemisphere sees, walls included); default: the plan's",
         show_default=False,
     ),
 ]
+# The old name of --surface (plan's --views chooses how to plan): still read, with a warning.
+OldViewsOpt = Annotated[str | None, typer.Option("--views", hidden=True, show_default=False)]
 EvaluateSensorOpt = Annotated[
     str | None,
     typer.Option(
@@ -208,7 +230,8 @@ def evaluate_cmd(
     tolerance: ToleranceOpt = None,
     quiet: QuietOpt = False,
     roi: RoiOpt = None,
-    views: EvaluateViewsOpt = None,
+    surface: SurfaceOpt = None,
+    views: OldViewsOpt = None,
     table: TableOpt = None,
     fixture: FixtureOpt = None,
     full_3d: Full3dOpt = False,
@@ -251,6 +274,7 @@ def evaluate_cmd(
         raise ValueError(f"-o {str(output)!r}: give the report's folder name")
     part, trajectory = part_and_plan(paths)
     plan = read_plan(trajectory)
+    views = surface_choice(surface, views, "evaluate")
     context, note = judged_context(
         plan, sensor, parse_tolerance(tolerance), roi, views, table, fixture
     )

@@ -18,12 +18,15 @@ from scanplan.cli.options import (
     TrajectoryArg,
 )
 
-PageOutOpt = Annotated[Path, typer.Option("-o", "--output", help="the page to write (HTML)")]
+PageOutOpt = Annotated[
+    Path, typer.Option("-o", "--output", metavar="FILE", help="output file: the page (.html)")
+]
 ViewRobotOpt = Annotated[
     str | None,
     typer.Option(
+        metavar="ARM",
         help="arm to draw: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file "
-        "of OPW parameters; 'none' for no arm; default: the arm the plan was made for, if any"
+        "of its kinematics; 'none' for no arm; default: the arm the plan was made for, if any",
     ),
 ]
 
