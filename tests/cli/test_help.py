@@ -9,8 +9,8 @@ import re
 import pytest
 from typer.testing import CliRunner
 
+from helpers import run_cli
 from scanplan.cli import COMMANDS, app
-from tests.helpers import run_cli
 
 HELPS = [[], *([name] for name, _, _ in COMMANDS)]
 

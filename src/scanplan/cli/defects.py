@@ -157,16 +157,16 @@ def defects_cmd(
     plan = read_plan(trajectory)
     if not plan.traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
-    context, note = judged_context(
-        plan, None, None, None, surface_choice(surface, views, "defects")
-    )
+    mode, warning = surface_choice(surface, views, "defects")
+    context, note = judged_context(plan, None, None, None, mode)
     say = lambda text: typer.echo(text, err=True)  # noqa: E731
     the_part = planned_part(plan, part, units, other_part=other_part, say=say)
     outcome = run_defects(plan, the_part, context, study, lambda label: progress_bar(label, quiet))
     if output is not None:
         write_defects(output, outcome, study, f"{the_part.name}: {trajectory.name}")
-    if note:  # after the work: a command that fails says one line, its error
-        say(note)
+    for line in (warning, note):  # after the work: a command that fails says one line, its error
+        if line:
+            say(line)
     if as_json:
         typer.echo(json.dumps(outcome.data, allow_nan=False))
         return

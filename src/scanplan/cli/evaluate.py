@@ -274,7 +274,7 @@ def evaluate_cmd(
         raise ValueError(f"-o {str(output)!r}: give the report's folder name")
     part, trajectory = part_and_plan(paths)
     plan = read_plan(trajectory)
-    views = surface_choice(surface, views, "evaluate")
+    views, warning = surface_choice(surface, views, "evaluate")
     context, note = judged_context(
         plan, sensor, parse_tolerance(tolerance), roi, views, table, fixture
     )
@@ -294,8 +294,9 @@ def evaluate_cmd(
     data = metrics.to_json_dict()
     if robust is not None:
         data["robustness"] = {"nominal": metrics.in_spec_coverage, **robust.to_json_dict()}
-    if note:  # after the work: a command that fails says one line, its error
-        say(note)
+    for line in (warning, note):  # after the work: a command that fails says one line, its error
+        if line:
+            say(line)
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
         return

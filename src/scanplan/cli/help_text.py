@@ -35,7 +35,7 @@ def polish(command: Any) -> None:
         param.help = unwrap(getattr(param, "help", None))
         if isinstance(param, typer.core.TyperArgument):
             # Typer prints an argument's Python type beside its name and offers no switch.
-            param.display_type_rich = _no_type
+            param.display_type_rich = _no_type  # type: ignore[method-assign]
         elif param.is_flag:
             param.metavar = ""
         elif param.metavar is None:

@@ -218,22 +218,24 @@ PartAndPlanArg = Annotated[
 ]
 
 
-def surface_choice(surface: str | None, views: str | None, command: str) -> str | None:
-    """--surface top|hemisphere (or its old name --views top|auto, with a warning on stderr) as
-    the judged context's view mode: top or auto (None: the plan's)."""
+def surface_choice(surface: str | None, views: str | None, command: str) -> tuple[str | None, str]:
+    """--surface top|hemisphere, or its old name --views top|auto, as the judged context's
+    view mode (top or auto; None: the plan's), and the warning to print once the command has
+    done its work ('' for --surface): a command that fails says one line, its error."""
+    warning = ""
     if views is not None:
-        typer.echo(
-            f"warning: {command} --views is now --surface (top or hemisphere); --views will go",
-            err=True,
-        )
         if surface is not None:
             raise ValueError("give --surface only (--views is its old name)")
         surface = "hemisphere" if views == "auto" else views
+        warning = (
+            f"warning: {command} --views is now --surface (top or hemisphere); --views will go"
+        )
     if surface is None:
-        return None
+        return None, warning
     if surface not in ("top", "hemisphere"):
-        raise ValueError(f"unknown --surface {surface!r}; use top or hemisphere")
-    return "auto" if surface == "hemisphere" else "top"
+        option = "--surface" if views is None else "--views (now --surface)"
+        raise ValueError(f"unknown {option} {surface!r}; use top or hemisphere")
+    return ("auto" if surface == "hemisphere" else "top"), warning
 
 
 def part_and_plan(values: list[str]) -> tuple[str | None, Path]:

@@ -42,9 +42,10 @@ def view_cmd(
     units: PlannedUnitsOpt = None,
 ):
     """Write a plan's 3-D page without simulating the scan: the part on its table, the
-    fixtures, the passes coloured by view, the moves in grey and, for a plan made for an arm
-    (or with --robot), the arm at the first, middle and last pose of each pass, with the
-    poses it cannot reach or where a link collides marked in red."""
+    fixtures, the passes coloured by the side their view looks from, the moves in grey and,
+    for a plan made for an arm (or with --robot), the arm at the first, middle and last pose
+    of each pass, see-through, with the poses it cannot reach or where a link collides
+    marked in red."""
     # Deferred: the page loads plotly, the arm the kinematics and FCL.
     from scanplan.core.plan import read_plan
     from scanplan.jobs.view import view_plan
