@@ -59,7 +59,8 @@ KSigmaOpt = Annotated[
     float,
     typer.Option(
         "--k-sigma",
-        help="a point is flagged beyond k·σ of the sensor noise there",
+        help="a point is flagged where it departs from the nominal surface by more than this "
+        "many standard deviations of the sensor noise there",
         callback=within(K_SIGMA),
     ),
 ]

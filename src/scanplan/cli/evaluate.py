@@ -182,9 +182,9 @@ PerturbOpt = Annotated[
     str | None,
     typer.Option(
         help="also replay the plan on perturbed parts, e.g. "
-        "'place:2mm,1deg;warp:1mm@200mm;scale:0.1%;path:0.1mm,0.05deg' (each a σ; ±2mm: "
-        "uniform bounds): placement error, as-built deviation (RMS along the normal @ "
-        "wavelength), scale, robot path error",
+        "'place:2mm,1deg;warp:1mm@200mm;scale:0.1%;path:0.1mm,0.05deg' (each a standard "
+        "deviation; ±2mm: uniform bounds): placement error, as-built deviation (RMS along the "
+        "normal @ wavelength), scale, robot path error",
         show_default=False,
     ),
 ]
@@ -245,9 +245,9 @@ def evaluate_cmd(
     """Simulate the scan of a plan on its part and report its quality, judged as the plan
     file records it (part and units, sensor, tolerance, region of interest, surface) unless
     an option says otherwise. With --perturb, also how that in-spec coverage holds on seeded
-    perturbed parts (mean, p5, worst over the trials) and which surface is fragile: the
-    plan replayed as planned, or with --closed-loop its controller (feedback, rl) acting on
-    the profiles of each perturbed part."""
+    perturbed parts (mean, p5 - the coverage 95 % of the trials reach - and worst) and which
+    surface is fragile: the plan replayed as planned, or with --closed-loop its controller
+    (feedback, rl) acting on the profiles of each perturbed part."""
     # Deferred: judging loads trimesh, Embree and FCL (seconds), which --help need not.
     from scanplan.core.plan import read_plan
     from scanplan.jobs.evaluate import (

@@ -297,8 +297,8 @@ ProceduralOpt = Annotated[
 FanPointsOpt = Annotated[
     int | None,
     typer.Option(
-        help=f"sub-sampled fan for training, 2 to {SensorSpec.MAX_POINTS} "
-        "(default: the env's training fan, 128)",
+        help=f"pixel columns simulated per profile in training, 2 to {SensorSpec.MAX_POINTS} "
+        "(default: 128)",
         callback=POINTS_CHECK,
     ),
 ]
@@ -335,8 +335,8 @@ PitchPivotOpt = Annotated[
     str | None,
     typer.Option(
         help="where a pitch step turns: sensor (its origin; the paper's model, when not "
-        "given) | footprint (W_d along the beam, so pitching does not swing the footprint; "
-        "beyond the paper, recorded in policy.json)"
+        "given) | footprint (one working distance along the beam, so pitching does not swing "
+        "the footprint; beyond the paper, recorded in policy.json)"
     ),
 ]
 BcSamplesOpt = Annotated[
