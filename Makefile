@@ -6,12 +6,19 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test lint bench clean install
 
+# pip's own lines (Collecting, Installing, Successfully installed) are the progress: the
+# first run installs for a minute or two, and a silent one looks hung.
 $(STAMP): pyproject.toml
+	@echo "scanplan: setting up $(VENV) (first run only, 1-2 minutes)"
 	python3 -m venv $(VENV)
+	@echo "scanplan: [1/3] pip"
 	$(PIP) install -q --upgrade pip
+	@echo "scanplan: [2/3] torch 2.13.0, CPU build"
 	# The CPU build of torch lies on disk here; install it first or pip fetches a CUDA build.
-	$(PIP) install -q torch==2.13.0
-	$(PIP) install -q -e '.[dev]'
+	$(PIP) install --progress-bar on torch==2.13.0
+	@echo "scanplan: [3/3] scanplan and its dependencies"
+	$(PIP) install --progress-bar on -e '.[dev]'
+	@echo "scanplan: $(VENV) ready"
 	touch $(STAMP)
 
 install: $(STAMP)

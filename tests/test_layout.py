@@ -1,4 +1,5 @@
-"""The README's layout section names every module of the package, and nothing that is gone."""
+"""The layout section of docs/development.md names every module of the package, and
+nothing that is gone."""
 
 from __future__ import annotations
 
@@ -10,13 +11,13 @@ PACKAGE = ROOT / "src/scanplan"
 
 
 def _layout_section() -> str:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    text = (ROOT / "docs/development.md").read_text(encoding="utf-8")
     start = text.index("Layout (`src/scanplan/`")
     return text[start : text.index("`tests/` mirrors the package", start)]
 
 
 def _listed() -> dict[str, set[str]]:
-    """Per top-level package, the module paths its README entry names (`learn/` followed by
+    """Per top-level package, the module paths its layout entry names (`learn/` followed by
     its files names them under learn/)."""
     entries = re.split(r"^- ", _layout_section(), flags=re.M)[1:]
     listed: dict[str, set[str]] = {}
@@ -51,5 +52,5 @@ def test_the_readme_layout_names_every_module_and_only_those():
         named = {m.split("/")[-1] for m in listed[package]}
         missing = sorted(m for m in modules if m.split("/")[-1] not in named)
         gone = sorted(n for n in named if n not in {m.split("/")[-1] for m in modules})
-        assert not missing, f"{package}/: not in the README's layout: {missing}"
-        assert not gone, f"{package}/: in the README's layout but gone: {gone}"
+        assert not missing, f"{package}/: not in the layout in docs/development.md: {missing}"
+        assert not gone, f"{package}/: in the layout in docs/development.md but gone: {gone}"

@@ -155,3 +155,29 @@ def test_links_in_the_table_are_drawn_red(tmp_path, no_simulation):
     assert "(0 unreachable, 41 link collisions)" in result.output
     html = page.read_text()
     assert "41 poses: a link collides" in html and "(view 0, pass 0, first): links collide" in html
+
+
+def test_the_page_renders_in_a_browser_with_the_part_lit(tmp_path):
+    """Headless Chromium (software WebGL) draws the page: the shaded part shows in many
+    tones of its blue-grey, not a blank scene."""
+    import shutil
+    import subprocess
+
+    from PIL import Image
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("no chromium here")
+    page, shot = tmp_path / "page.html", tmp_path / "page.png"
+    assert run_cli("view", str(robot_plan(tmp_path)), "-o", str(page)).exit_code == 0
+    subprocess.run(
+        [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader",
+         "--enable-unsafe-swiftshader", "--window-size=1400,1000", f"--screenshot={shot}",
+         page.as_uri()],
+        capture_output=True, timeout=120, check=True, cwd=tmp_path,
+    )  # fmt: skip
+    rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    r, b = rgb[..., 0], rgb[..., 2]
+    part = (b - r >= 8) & (b - r <= 60) & (r >= 40) & (r <= 200)  # the part's #8c99a6, shaded
+    assert part.mean() > 0.01, part.mean()
+    assert len(np.unique(rgb[part], axis=0)) > 50  # lit: many tones, not one flat colour

@@ -14,6 +14,7 @@ from scanplan.cli.compare import compare_cmd
 from scanplan.cli.defects import defects_cmd
 from scanplan.cli.demo import demo_cmd
 from scanplan.cli.evaluate import evaluate_cmd, scan_cmd
+from scanplan.cli.help_text import Command
 from scanplan.cli.parts import part_cmd
 from scanplan.cli.plan import plan_cmd
 from scanplan.cli.robot import export_cmd, place_cmd
@@ -30,19 +31,32 @@ app = typer.Typer(
     help="Plan, simulate, evaluate and export laser-profilometer scan trajectories.",
 )
 
-# The order `scanplan --help` lists them in.
-app.command("part")(part_cmd)
-app.command("scan")(scan_cmd)
-app.command("plan")(plan_cmd)
-app.command("evaluate")(evaluate_cmd)
-app.command("compare")(compare_cmd)
-app.command("view")(view_cmd)
-app.command("defects")(defects_cmd)
-app.command("train")(train_cmd)
-app.command("sweep")(sweep_cmd)
-app.command("export")(export_cmd)
-app.command("place")(place_cmd)
-app.command("demo")(demo_cmd)
+# The order `scanplan --help` lists them in, each with the one line it shows there (the
+# command's own --help gives the whole story).
+COMMANDS = (
+    ("part", part_cmd, "Write a built-in part (door, drone, training-piece) as a mesh file."),
+    ("scan", scan_cmd, "Simulate a plan's scan and write the point cloud (PLY)."),
+    ("plan", plan_cmd, "Plan the sensor's path over a part (or a folder or list of parts)."),
+    (
+        "evaluate",
+        evaluate_cmd,
+        "Simulate a plan's scan and judge it: in-spec coverage, errors, cycle time, robustness.",
+    ),
+    ("compare", compare_cmd, "Plan and judge several parts into one table, hardest first."),
+    ("view", view_cmd, "Write a plan's 3-D page (HTML): part, passes, moves and the arm."),
+    ("defects", defects_cmd, "Inject seeded defects and measure which a plan finds (POD)."),
+    ("train", train_cmd, "Train the pass agent with PPO and write a policy."),
+    (
+        "sweep",
+        sweep_cmd,
+        "Train seeds x settings on Dask and compare the policies on unseen parts.",
+    ),
+    ("export", export_cmd, "Write the robot program once the arm is shown to fly the plan."),
+    ("place", place_cmd, "Find where to put the part so the arm flies every pose."),
+    ("demo", demo_cmd, "The main job on the door: three planners, report, a RAPID program."),
+)
+for name, command, summary in COMMANDS:
+    app.command(name, cls=Command, short_help=summary)(command)
 
 
 def main() -> None:  # pragma: no cover - console entry for `python -m scanplan`

@@ -19,13 +19,18 @@ from typing import Any, TypeVar
 import typer
 import typer.core
 
+from scanplan.cli.help_text import ReadableHelp, polish
 from scanplan.core import files
 
 
-class OneLineErrors(typer.core.TyperGroup):
+class OneLineErrors(ReadableHelp, typer.core.TyperGroup):
     """The app's Click group: a usage error (unknown option or command, missing argument, a
     value that does not convert or is out of bounds) is one line on stderr and exit 2, not
-    Typer's boxed panel; --help stays rich."""
+    Typer's boxed panel; --help stays rich, and reads as prose (`help_text`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        polish(self)
 
     def main(
         self,

@@ -45,7 +45,7 @@ CompareOutOpt = Annotated[
     typer.Option(
         "-o",
         "--output",
-        help="also write the table to this file, its format from the extension (.md, .csv, "
+        help="output file: the table also written there, its format from the extension (.md, .csv, "
         ".json, .html, .txt) unless --format says",
         show_default=False,
     ),

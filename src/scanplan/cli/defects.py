@@ -14,9 +14,10 @@ import typer
 from scanplan.cli.common import progress_bar, user_errors
 from scanplan.cli.evaluate import (
     EvaluateSchedulerOpt,
-    EvaluateViewsOpt,
+    OldViewsOpt,
     OtherPartOpt,
     PlanUnitsOpt,
+    SurfaceOpt,
 )
 from scanplan.cli.options import (
     PartAndPlanArg,
@@ -24,6 +25,7 @@ from scanplan.cli.options import (
     SeedOpt,
     bounded,
     part_and_plan,
+    surface_choice,
     within,
 )
 from scanplan.cli.training import check_cluster
@@ -57,7 +59,8 @@ KSigmaOpt = Annotated[
     float,
     typer.Option(
         "--k-sigma",
-        help="a point is flagged beyond k·σ of the sensor noise there",
+        help="a point is flagged where it departs from the nominal surface by more than this "
+        "many standard deviations of the sensor noise there",
         callback=within(K_SIGMA),
     ),
 ]
@@ -85,7 +88,12 @@ LinkOpt = Annotated[
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
 DirOpt = Annotated[
     Path | None,
-    typer.Option("-o", "--output", help="directory for pod.json, pod.png and defects.csv"),
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: pod.json, pod.png, defects.csv and the detectability map",
+    ),
 ]
 
 
@@ -122,7 +130,8 @@ def defects_cmd(
     as_json: JsonOpt = False,
     output: DirOpt = None,
     units: PlanUnitsOpt = None,
-    views: EvaluateViewsOpt = None,
+    surface: SurfaceOpt = None,
+    views: OldViewsOpt = None,
     scheduler: EvaluateSchedulerOpt = None,
     defect_free: DefectFreeOpt = True,
     quiet: QuietOpt = False,
@@ -149,14 +158,16 @@ def defects_cmd(
     plan = read_plan(trajectory)
     if not plan.traj.scanning.any():
         raise ValueError(f"trajectory {trajectory} has no scanning pose")
-    context, note = judged_context(plan, None, None, None, views)
+    mode, warning = surface_choice(surface, views, "defects")
+    context, note = judged_context(plan, None, None, None, mode)
     say = lambda text: typer.echo(text, err=True)  # noqa: E731
     the_part = planned_part(plan, part, units, other_part=other_part, say=say)
     outcome = run_defects(plan, the_part, context, study, lambda label: progress_bar(label, quiet))
     if output is not None:
         write_defects(output, outcome, study, f"{the_part.name}: {trajectory.name}")
-    if note:  # after the work: a command that fails says one line, its error
-        say(note)
+    for line in (warning, note):  # after the work: a command that fails says one line, its error
+        if line:
+            say(line)
     if as_json:
         typer.echo(json.dumps(outcome.data, allow_nan=False))
         return

@@ -28,13 +28,24 @@ if TYPE_CHECKING:
 
     from scanplan.jobs.demo import DemoResult
 
-DemoDirOpt = Annotated[Path, typer.Option("-o", "--output", help="output directory")]
-DemoPartOpt = Annotated[str, typer.Option(help="built-in part or mesh file")]
+DemoDirOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: report.html, maps, metrics, the plans and the robot program",
+    ),
+]
+DemoPartOpt = Annotated[str, typer.Option(metavar="PART", help="built-in part or mesh file")]
 DemoPointsOpt = Annotated[
     int,
     typer.Option(
         "--points",
-        help=f"pixel columns per profile in the evaluation, 2 to {SensorSpec.MAX_POINTS}",
+        help=f"pixel columns simulated per profile, 2 to {SensorSpec.MAX_POINTS} (all "
+        f"{SensorSpec().points_per_profile} of the default sensor take minutes); to repeat a "
+        "figure, evaluate OUTPUT/trajectory_NAME.csv --points with this number and --surface "
+        "hemisphere",
         callback=POINTS_CHECK,
     ),
 ]

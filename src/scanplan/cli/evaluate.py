@@ -15,7 +15,6 @@ from scanplan.cli.options import (
     POINTS_CHECK,
     FixtureOpt,
     Full3dOpt,
-    OutOpt,
     PartAndPlanArg,
     QuietOpt,
     RequireOpt,
@@ -26,15 +25,17 @@ from scanplan.cli.options import (
     bounded,
     parse_tolerance,
     part_and_plan,
+    surface_choice,
 )
 from scanplan.cli.training import check_cluster
 from scanplan.core.quantities import PERTURB_TRIALS
-from scanplan.core.sensor_spec import SensorSpec
+from scanplan.core.sensor_spec import DEMO_POINTS, SensorSpec
 
 PlanUnitsOpt = Annotated[
     str | None,
     typer.Option(
         "--units",
+        metavar="UNIT",
         help="units of the part's mesh file: mm, m or in; default: those the plan was made with",
         show_default=False,
     ),
@@ -48,6 +49,15 @@ OtherPartOpt = Annotated[
     ),
 ]
 # ---- scan ---------------------------------------------------------------------------------
+CloudOutOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="output file: the point cloud (.ply), in the part's frame, mm",
+    ),
+]
 NoNoiseOpt = Annotated[bool, typer.Option("--no-noise", help="switch noise off")]
 ScanPointsOpt = Annotated[
     int | None,
@@ -83,7 +93,7 @@ ScanSensorOpt = Annotated[
 @user_errors
 def scan_cmd(
     paths: PartAndPlanArg,
-    output: OutOpt,
+    output: CloudOutOpt,
     sensor: ScanSensorOpt = None,
     units: PlanUnitsOpt = None,
     seed: SeedOpt = 0,
@@ -130,24 +140,36 @@ def scan_cmd(
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object")]
 ReportDirOpt = Annotated[
     Path | None,
-    typer.Option("-o", "--output", help="report directory (maps, metrics, report.html)"),
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: the maps (PNG), metrics.json, metrics.md and report.html",
+    ),
 ]
 EvaluatePointsOpt = Annotated[
     int | None,
     typer.Option(
         "--points",
-        help=f"sub-sample the fan to N points (faster), 2 to {SensorSpec.MAX_POINTS}",
+        help="simulate N of the sensor's pixel columns across the same line (faster; the "
+        f"demo uses {DEMO_POINTS}), 2 to {SensorSpec.MAX_POINTS}; default: all of the sensor's "
+        f"({SensorSpec().points_per_profile} for the default sensor)",
+        show_default=False,
         callback=POINTS_CHECK,
     ),
 ]
-EvaluateViewsOpt = Annotated[
+SurfaceOpt = Annotated[
     str | None,
     typer.Option(
-        help="the surface to inspect: top (upward-visible) or auto (visible from the "
-        "upper hemisphere); default: as the plan records it",
+        "--surface",
+        metavar="NAME",
+        help="the surface to judge: top (what faces up) or hemisphere (what the upper "
+        "hemisphere sees, walls included); default: the plan's",
         show_default=False,
     ),
 ]
+# The old name of --surface (plan's --views chooses how to plan): still read, with a warning.
+OldViewsOpt = Annotated[str | None, typer.Option("--views", hidden=True, show_default=False)]
 EvaluateSensorOpt = Annotated[
     str | None,
     typer.Option(
@@ -161,9 +183,9 @@ PerturbOpt = Annotated[
     str | None,
     typer.Option(
         help="also replay the plan on perturbed parts, e.g. "
-        "'place:2mm,1deg;warp:1mm@200mm;scale:0.1%;path:0.1mm,0.05deg' (each a σ; ±2mm: "
-        "uniform bounds): placement error, as-built deviation (RMS along the normal @ "
-        "wavelength), scale, robot path error",
+        "'place:2mm,1deg;warp:1mm@200mm;scale:0.1%;path:0.1mm,0.05deg' (each a standard "
+        "deviation; ±2mm: uniform bounds): placement error, as-built deviation (RMS along the "
+        "normal @ wavelength), scale, robot path error",
         show_default=False,
     ),
 ]
@@ -209,7 +231,8 @@ def evaluate_cmd(
     tolerance: ToleranceOpt = None,
     quiet: QuietOpt = False,
     roi: RoiOpt = None,
-    views: EvaluateViewsOpt = None,
+    surface: SurfaceOpt = None,
+    views: OldViewsOpt = None,
     table: TableOpt = None,
     fixture: FixtureOpt = None,
     full_3d: Full3dOpt = False,
@@ -224,9 +247,9 @@ def evaluate_cmd(
     """Simulate the scan of a plan on its part and report its quality, judged as the plan
     file records it (part and units, sensor, tolerance, region of interest, surface) unless
     an option says otherwise. With --perturb, also how that in-spec coverage holds on seeded
-    perturbed parts (mean, p5, worst over the trials) and which surface is fragile: the
-    plan replayed as planned, or with --closed-loop its controller (feedback, rl) acting on
-    the profiles of each perturbed part."""
+    perturbed parts (mean, p5 - the coverage 95 % of the trials reach - and worst) and which
+    surface is fragile: the plan replayed as planned, or with --closed-loop its controller
+    (feedback, rl) acting on the profiles of each perturbed part."""
     # Deferred: judging loads trimesh, Embree and FCL (seconds), which --help need not.
     from scanplan.core.plan import read_plan
     from scanplan.jobs.evaluate import (
@@ -257,6 +280,7 @@ def evaluate_cmd(
     plan = read_plan(trajectory)
     arm_record = plan.arm.record if plan.arm is not None else None
     check_evaluate_require(criteria, model is not None, arm_record is not None)
+    views, warning = surface_choice(surface, views, "evaluate")
     context, note = judged_context(
         plan, sensor, parse_tolerance(tolerance), roi, views, table, fixture
     )
@@ -280,8 +304,9 @@ def evaluate_cmd(
     if verdicts:
         data["verdicts"] = [v.to_json_dict() for v in verdicts]
         data["pass"] = all(v.passed for v in verdicts)
-    if note:  # after the work: a command that fails says one line, its error
-        say(note)
+    for line in (warning, note):  # after the work: a command that fails says one line, its error
+        if line:
+            say(line)
     if as_json:
         typer.echo(json.dumps(data, allow_nan=False))
     else:

@@ -136,6 +136,8 @@ def scan_spec(sensor: str, tolerance: str | None = None) -> ScanSpec:
 
 
 SEED_CHECK = bounded(0, MAX_SEED)
+# The defaults --help states as values.
+_DEFAULT_SPEC = ScanSpec()
 POSITIVE = bounded(0, lo_open=True)
 POINTS_CHECK = bounded(2, SensorSpec.MAX_POINTS)
 
@@ -143,7 +145,14 @@ POINTS_CHECK = bounded(2, SensorSpec.MAX_POINTS)
 PartArg = Annotated[
     str, typer.Argument(help="built-in part name, mesh file (STL/OBJ/PLY/OFF/GLB) or STEP file")
 ]
-UnitsOpt = Annotated[str, typer.Option("--units", help="units of a mesh file: mm, m or in")]
+UnitsOpt = Annotated[
+    str,
+    typer.Option(
+        "--units",
+        metavar="UNIT",
+        help="units of a mesh file: mm, m or in (a STEP file carries its own)",
+    ),
+]
 PlannedPartOpt = Annotated[
     str | None,
     typer.Option(
@@ -154,12 +163,17 @@ PlannedPartOpt = Annotated[
 ]
 PlannedUnitsOpt = Annotated[
     str | None,
-    typer.Option("--units", help="units of --part's mesh file: mm, m or in; default: the plan's"),
+    typer.Option(
+        "--units",
+        metavar="UNIT",
+        help="units of --part's mesh file: mm, m or in; default: the plan's",
+    ),
 ]
 RoiOpt = Annotated[
     str | None,
     typer.Option(
         "--roi",
+        metavar="SPEC",
         help="region of interest: box:x0,y0,z0,x1,y1,z1 (mm), +z:30 (a normal cone; any of "
         "±x ±y ±z or n:X,Y,Z:DEG), body:I (the I-th connected body); ';' joins terms (AND)",
     ),
@@ -167,22 +181,32 @@ RoiOpt = Annotated[
 # Default: scanplan.core.sensor_spec.DEFAULT_SENSOR (Typer wants an Annotated option's
 # default on the parameter, not here).
 SensorOpt = Annotated[
-    str, typer.Option("--sensor", help="sensor preset name or TOML/YAML datasheet file")
+    str,
+    typer.Option(
+        "--sensor", metavar="SENSOR", help="sensor preset name or TOML/YAML datasheet file"
+    ),
 ]
 ToleranceOpt = Annotated[
     str | None,
     typer.Option(
         "--tolerance",
-        help="in-spec tolerance MM,DEG: |z_s - W_d| in mm and orientation error in degrees "
-        "(default Z_r/20 and 15)",
+        metavar="MM,DEG",
+        help="in-spec tolerance: how far a point may lie from the working distance (mm) and "
+        "how far the beam may turn from the surface normal (degrees); default "
+        f"{_num(_DEFAULT_SPEC.tolerance_mm)},{_num(math.degrees(_DEFAULT_SPEC.tol_angle_rad))} "
+        "for the default sensor (a twentieth of a sensor's measuring range, and 15°), or what "
+        "the plan records",
     ),
 ]
-OutOpt = Annotated[Path, typer.Option("-o", "--output", help="output file")]
-SeedOpt = Annotated[int, typer.Option(help="noise seed, >= 0", callback=SEED_CHECK)]
+SeedOpt = Annotated[
+    int, typer.Option(help="seed of the simulated noise, an integer >= 0", callback=SEED_CHECK)
+]
 QuietOpt = Annotated[
     bool, typer.Option("--quiet", "-q", help="no progress bar (none either off a terminal)")
 ]
-TrajectoryArg = Annotated[Path, typer.Argument(help="trajectory CSV or JSON")]
+TrajectoryArg = Annotated[
+    Path, typer.Argument(metavar="PLAN", help="the plan file (CSV or JSON) `plan` wrote")
+]
 PartAndPlanArg = Annotated[
     list[str],
     typer.Argument(
@@ -192,6 +216,26 @@ PartAndPlanArg = Annotated[
         show_default=False,
     ),
 ]
+
+
+def surface_choice(surface: str | None, views: str | None, command: str) -> tuple[str | None, str]:
+    """--surface top|hemisphere, or its old name --views top|auto, as the judged context's
+    view mode (top or auto; None: the plan's), and the warning to print once the command has
+    done its work ('' for --surface): a command that fails says one line, its error."""
+    warning = ""
+    if views is not None:
+        if surface is not None:
+            raise ValueError("give --surface only (--views is its old name)")
+        surface = "hemisphere" if views == "auto" else views
+        warning = (
+            f"warning: {command} --views is now --surface (top or hemisphere); --views will go"
+        )
+    if surface is None:
+        return None, warning
+    if surface not in ("top", "hemisphere"):
+        option = "--surface" if views is None else "--views (now --surface)"
+        raise ValueError(f"unknown {option} {surface!r}; use top or hemisphere")
+    return ("auto" if surface == "hemisphere" else "top"), warning
 
 
 def part_and_plan(values: list[str]) -> tuple[str | None, Path]:
@@ -211,16 +255,25 @@ Full3dOpt = Annotated[
 ]
 
 # ---- poses (export, place) ----------------------------------------------------------------
-POSE_HELP = "x,y,z in mm then A,B,C in degrees (KUKA intrinsic ZYX: Rz(A) Ry(B) Rx(C))"
+POSE_HELP = (
+    "x,y,z in mm then A,B,C in degrees, rotations about Z, then the new Y, then the new X "
+    "(KUKA's A,B,C)"
+)
 TcpOpt = Annotated[
     str | None,
-    typer.Option(help=f"flange->sensor TCP: {POSE_HELP}", callback=pose_option(tcp=True)),
+    typer.Option(
+        metavar="POSE",
+        help=f"the sensor's pose on the robot's flange: {POSE_HELP}; default: the plan's, else "
+        "the flange itself",
+        callback=pose_option(tcp=True),
+    ),
 ]
 PartPoseOpt = Annotated[
     str | None,
     typer.Option(
         "--part-pose",
-        help=f"part in the robot base frame: {POSE_HELP}",
+        metavar="POSE",
+        help=f"the part's pose in the robot's base frame: {POSE_HELP}",
         callback=pose_option(tcp=False),
     ),
 ]
@@ -244,8 +297,8 @@ ProceduralOpt = Annotated[
 FanPointsOpt = Annotated[
     int | None,
     typer.Option(
-        help=f"sub-sampled fan for training, 2 to {SensorSpec.MAX_POINTS} "
-        "(default: the env's training fan, 128)",
+        help=f"pixel columns simulated per profile in training, 2 to {SensorSpec.MAX_POINTS} "
+        "(default: 128)",
         callback=POINTS_CHECK,
     ),
 ]
@@ -255,7 +308,8 @@ LogStdInitOpt = Annotated[
 InitAdvanceOpt = Annotated[
     float | None,
     typer.Option(
-        help="initial mean Δy action, -1 to 1 (0.5 = Δs_opt); default none",
+        help="initial mean advance action Δy, -1 to 1 (0.5 advances one planned profile "
+        "spacing); default: none",
         callback=within(ACTION),
     ),
 ]
@@ -270,8 +324,9 @@ StartOffsetOpt = Annotated[
 RewardDistanceScaleOpt = Annotated[
     float | None,
     typer.Option(
-        help="R_D's scale in mm, the depth error charged -1 (a deviation from the paper, whose "
-        "Z_r/2 leaves a training piece's relief in R_D's flat bottom; default: Z_r/2), "
+        help="the distance reward's scale in mm, the depth error it charges -1 (a deviation "
+        "from the paper, whose half measuring range, 125 mm for the default sensor, leaves a "
+        "training piece's relief in the reward's flat bottom; default: that half range), "
         f"{_num(REWARD_DISTANCE_SCALE_MM.lo)} to {_num(REWARD_DISTANCE_SCALE_MM.hi)}",
         callback=within(REWARD_DISTANCE_SCALE_MM),
     ),
@@ -280,14 +335,14 @@ PitchPivotOpt = Annotated[
     str | None,
     typer.Option(
         help="where a pitch step turns: sensor (its origin; the paper's model, when not "
-        "given) | footprint (W_d along the beam, so pitching does not swing the footprint; "
-        "beyond the paper, recorded in policy.json)"
+        "given) | footprint (one working distance along the beam, so pitching does not swing "
+        "the footprint; beyond the paper, recorded in policy.json)"
     ),
 ]
 BcSamplesOpt = Annotated[
     int,
     typer.Option(
-        help="warm start: behaviour-clone a P-controller on N states first",
+        help="warm start: first imitate the feedback (proportional) controller on N states",
         callback=bounded(0, MAX_BC_SAMPLES),
     ),
 ]

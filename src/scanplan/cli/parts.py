@@ -2,16 +2,29 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from scanplan.cli.common import user_errors
-from scanplan.cli.options import OutOpt
+
+MeshOutOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="output file: the mesh (.stl, .ply, .obj, ...), in mm",
+    ),
+]
 
 
 @user_errors
-def part_cmd(name: Annotated[str, typer.Argument(help="built-in part name")], output: OutOpt):
+def part_cmd(
+    name: Annotated[str, typer.Argument(help="door, drone or training-piece")],
+    output: MeshOutOpt,
+):
     """Write a built-in procedural part as a mesh file (STL, PLY, OBJ, ...)."""
     # Deferred: parts load trimesh and Embree.
     from scanplan.core.files import atomic_write_bytes

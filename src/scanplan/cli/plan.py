@@ -13,7 +13,6 @@ import typer
 from scanplan.cli.common import EXIT_FAILED_REQUIREMENT, progress_bar, user_errors
 from scanplan.cli.options import (
     FixtureOpt,
-    OutOpt,
     PartPoseOpt,
     QuietOpt,
     RequireOpt,
@@ -31,7 +30,25 @@ from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, VIEW_CHOICE_CANDI
 from scanplan.core.sensor_spec import DEFAULT_SENSOR
 
 # ---- plan ---------------------------------------------------------------------------------
-PlannerOpt = Annotated[str, typer.Option(help="fixed, feedback, geometric or rl")]
+PlannerOpt = Annotated[
+    str,
+    typer.Option(
+        metavar="NAME",
+        help="geometric (follows the CAD surface), feedback (a controller on what the sensor "
+        "measures), rl (the paper's learned agent) or fixed (the paper's constant-height "
+        "baseline)",
+    ),
+]
+PlanOutOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="PATH",
+        help="output file: the plan (.csv or .json); output folder for a folder or list of "
+        "parts (one NAME.json each)",
+    ),
+]
 PolicyOpt = Annotated[
     Path | None,
     typer.Option(
@@ -42,38 +59,44 @@ PolicyOpt = Annotated[
 DirectionOpt = Annotated[
     str,
     typer.Option(
-        help="scan direction: x, y, long (the footprint's long side) or auto "
-        "(the long side unless scanning across leaves clearly less cross-line error)"
+        metavar="DIR",
+        help="scan direction: along x, along y, long (the long side of the part's outline seen "
+        "from above) or auto (the long side, unless scanning across keeps the surface under "
+        "the laser line clearly flatter)",
     ),
 ]
 OverlapOpt = Annotated[
     float,
     typer.Option(
-        help="overlap of adjacent passes of the nominal raster, [0, 1)",
+        help="overlap of adjacent passes of the nominal raster, a fraction of the line width, "
+        "[0, 1)",
         callback=bounded(0, 1, hi_open=True),
     ),
 ]
 RasterOpt = Annotated[
     str,
     typer.Option(
-        help="nominal (the paper's: line width x (1 - overlap)), adaptive (passes spaced "
-        "by the band of the line that stays in spec) or auto (adaptive if the planner rolls)"
+        metavar="MODE",
+        help="how passes are spaced: nominal (the paper's: line width x (1 - overlap)), "
+        "adaptive (by the part of the laser line that stays in spec there, closer on curved "
+        "surface) or auto (adaptive if the planner rolls)",
     ),
 ]
 RollOpt = Annotated[
     bool,
     typer.Option(
         "--roll/--no-roll",
-        help="geometric/feedback: roll the line with the surface (--no-roll: the paper's "
-        "pitch-only model); rl follows its policy",
+        help="geometric and feedback: tilt the laser line with a surface that slopes across "
+        "it (--no-roll: the paper's model, which only pitches); rl does what its policy does",
     ),
 ]
 PlanViewsOpt = Annotated[
     str | None,
     typer.Option(
-        help="top (the paper's single top-down raster) or auto (views chosen greedily, "
-        "each a raster of the part seen along its own axis, toward --coverage-target); "
-        "default: auto if the planner rolls, else top",
+        metavar="MODE",
+        help="how to plan views: top (the paper's single raster looking down) or auto (views "
+        "from other directions added while they raise in-spec coverage, up to "
+        "--coverage-target); default: auto if the planner rolls, else top",
         show_default=False,
     ),
 ]
@@ -81,15 +104,17 @@ PlanRobotOpt = Annotated[
     str | None,
     typer.Option(
         "--robot",
-        help="plan for this arm (ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
-        "file): every pose reachable, no configuration flip within a pass",
+        metavar="ARM",
+        help="plan for this arm: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
+        "file of its kinematics; poses it cannot fly are given up and plan says what that cost",
         show_default=False,
     ),
 ]
 CoverageTargetOpt = Annotated[
     float,
     typer.Option(
-        help="--views auto: in-spec coverage (of the surface to inspect) to stop adding views at"
+        help="--views auto: stop adding views once in-spec coverage of the surface to inspect "
+        "reaches this fraction"
     ),
 ]
 
@@ -137,7 +162,7 @@ def plan_cmd(
             "folder for the plans)"
         ),
     ],
-    output: OutOpt,
+    output: PlanOutOpt,
     planner: PlannerOpt = "geometric",
     sensor: SensorOpt = DEFAULT_SENSOR,
     policy: PolicyOpt = None,

@@ -34,10 +34,17 @@ from scanplan.core.limits import (
 # ---- export -------------------------------------------------------------------------------
 ROBOT_HELP = (
     "arm to check reach on: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML "
-    "file of OPW parameters; 'none' to skip"
+    "file of its kinematics; 'none' to skip"
 )
 ProgramOutOpt = Annotated[
-    Path, typer.Option("-o", "--output", help="output file (a directory for rosbag2)")
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="output file: the program (.script, .src, .mod, .yaml, .csv); an output folder "
+        "for --format rosbag2",
+    ),
 ]
 FormatOpt = Annotated[
     str | None,
@@ -53,6 +60,7 @@ FormatOpt = Annotated[
 ProfileRateOpt = Annotated[
     float | None,
     typer.Option(
+        metavar="HZ",
         help=f"sensor profile rate, Hz, {PROFILE_RATE_HZ.lo:g} to {PROFILE_RATE_HZ.hi:g}; scan "
         f"speed = rate x spacing, at most {MAX_SCAN_SPEED_MM_S:g} mm/s; default: the plan's",
         show_default=False,
@@ -62,6 +70,7 @@ ProfileRateOpt = Annotated[
 SpacingOpt = Annotated[
     float | None,
     typer.Option(
+        metavar="MM",
         help=f"profile spacing on the part, mm, {STEP_MM.lo:g} to {STEP_MM.hi:g}; default: the "
         "plan's",
         show_default=False,
@@ -71,6 +80,7 @@ SpacingOpt = Annotated[
 TravelSpeedOpt = Annotated[
     float | None,
     typer.Option(
+        metavar="MM/S",
         help=f"speed between passes, mm/s, {SPEED_MM_S.lo:g} to {SPEED_MM_S.hi:g}; default: the "
         "plan's",
         show_default=False,
@@ -79,7 +89,9 @@ TravelSpeedOpt = Annotated[
 ]
 ReachRobotOpt = Annotated[
     str | None,
-    typer.Option(help=ROBOT_HELP + "; default: the arm the plan was made for, if any"),
+    typer.Option(
+        metavar="ARM", help=ROBOT_HELP + "; default: the arm the plan was made for, if any"
+    ),
 ]
 ChordTolOpt = Annotated[
     float | None,
@@ -177,16 +189,29 @@ def export_cmd(
 
 # ---- place --------------------------------------------------------------------------------
 PlaceRobotOpt = Annotated[
-    str, typer.Option(help="ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file")
+    str,
+    typer.Option(
+        metavar="ARM",
+        help="ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file of the arm's "
+        "kinematics",
+    ),
 ]
 HeightRangeOpt = Annotated[
     str | None,
-    typer.Option("--height-range", help="LO,HI mm: the part origin's z in the base frame"),
+    typer.Option(
+        "--height-range",
+        metavar="LO,HI",
+        help="heights (mm) the part's origin may take in the robot's base frame",
+    ),
 ]
 YawStepOpt = Annotated[
     float,
     typer.Option(
-        "--yaw-step", help="coarse yaw grid, deg, (0, 360]", callback=bounded(0, 360, lo_open=True)
+        "--yaw-step",
+        metavar="DEG",
+        help="step of the coarse search over the part's rotation about the vertical, degrees, "
+        "(0, 360]",
+        callback=bounded(0, 360, lo_open=True),
     ),
 ]
 

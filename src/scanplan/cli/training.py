@@ -66,7 +66,15 @@ def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
 
 
 # ---- train --------------------------------------------------------------------------------
-PolicyDirOpt = Annotated[Path, typer.Option("-o", "--output", help="policy directory")]
+PolicyDirOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: the policy, its log and checkpoints",
+    ),
+]
 TrainPartsOpt = Annotated[
     list[str] | None, typer.Option("--part", help="training part(s): built-in name or mesh")
 ]
@@ -220,7 +228,15 @@ def run_on_cluster(
         return write_tables(rows, output)
 
 
-SweepDirOpt = Annotated[Path, typer.Option("-o", "--output", help="directory of runs and tables")]
+SweepDirOpt = Annotated[
+    Path,
+    typer.Option(
+        "-o",
+        "--output",
+        metavar="FOLDER",
+        help="output folder: one folder a run, sweep.csv, sweep.md",
+    ),
+]
 EvalPartsOpt = Annotated[
     list[str] | None,
     typer.Option("--part", help="unseen part(s) to evaluate on: name or PATH[:UNITS]"),

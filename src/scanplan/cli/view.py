@@ -18,12 +18,15 @@ from scanplan.cli.options import (
     TrajectoryArg,
 )
 
-PageOutOpt = Annotated[Path, typer.Option("-o", "--output", help="the page to write (HTML)")]
+PageOutOpt = Annotated[
+    Path, typer.Option("-o", "--output", metavar="FILE", help="output file: the page (.html)")
+]
 ViewRobotOpt = Annotated[
     str | None,
     typer.Option(
+        metavar="ARM",
         help="arm to draw: ur3e, ur5e, ur10e, kr6-r900, irb2400, lrmate200id or a TOML file "
-        "of OPW parameters; 'none' for no arm; default: the arm the plan was made for, if any"
+        "of its kinematics; 'none' for no arm; default: the arm the plan was made for, if any",
     ),
 ]
 
@@ -39,9 +42,10 @@ def view_cmd(
     units: PlannedUnitsOpt = None,
 ):
     """Write a plan's 3-D page without simulating the scan: the part on its table, the
-    fixtures, the passes coloured by view, the moves in grey and, for a plan made for an arm
-    (or with --robot), the arm at the first, middle and last pose of each pass, with the
-    poses it cannot reach or where a link collides marked in red."""
+    fixtures, the passes coloured by the side their view looks from, the moves in grey and,
+    for a plan made for an arm (or with --robot), the arm at the first, middle and last pose
+    of each pass, see-through, with the poses it cannot reach or where a link collides
+    marked in red."""
     # Deferred: the page loads plotly, the arm the kinematics and FCL.
     from scanplan.core.plan import read_plan
     from scanplan.jobs.view import view_plan

@@ -45,14 +45,15 @@ def view_plan(
     title = f"{the_part.name}: {Path(plan.where.removeprefix('plan ')).name}"
     notes = [
         f"{plan.planner or 'plan'}: {plan.counts()}, {len(plan.traj)} poses; passes coloured "
-        "by view, moves in grey; click a legend entry to hide it."
+        "by the side their view looks from (hover over a pass for its view), moves in grey; "
+        "click a legend entry to hide it, the arm's to hide the arm."
     ]
     if arm is not None:
         notes.append(
-            f"{arm.robot} at --part-pose {pose_arg(arm.T_base_part)}, drawn as the capsules "
-            "its links are checked with at the first, middle and last pose of each pass (the "
-            "slider under the scene steps through them); red: poses it cannot reach or where "
-            "a link collides."
+            f"{arm.robot} at --part-pose {pose_arg(arm.T_base_part)}, drawn see-through as "
+            "the capsules its links are checked with at the first, middle and last pose of each "
+            "pass (the slider under the scene steps through them); red: poses it cannot reach "
+            "or where a link collides."
         )
         notes += list(arm.summaries)
     write_scene_page(output, scene_figure(the_part, plan.traj, cell, arm, title), title, notes)

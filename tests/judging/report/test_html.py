@@ -98,7 +98,8 @@ def test_views_get_their_own_colours_and_the_surface_its_in_spec_map(tmp_path, r
     out = tmp_path / "report.html"
     write_html_report(out, part, [result], "at-c5-4090cs30-495")
     page = out.read_text()
-    assert "view 0 (0.00, 0.00, 1.00)" in page and "view 1 (0.98, 0.00, 0.17)" in page
+    # Named by where they look from (plotly may write ° as \u00b0).
+    assert "from above" in page and "from +X, 10\\u00b0 up" in page.replace("°", "\\u00b0")
     assert VIEW_COLOURS[0] in page and VIEW_COLOURS[1] in page
     assert "in-spec map" in page
     for colour in ("#1b9e77", "#d95f02", "#b4b4b4"):  # in spec, out of spec, not seen

@@ -14,10 +14,10 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging import CoverageMap, SurfaceState
 from scanplan.judging.report.maps import COVERAGE_COLOURS
 from scanplan.judging.report.scene import (
-    VIEW_COLOURS,
     ArmPoses,
     add_arm,
     cell_traces,
+    passes_traces,
     path_trace,
 )
 from scanplan.judging.report.training import CURVES
@@ -63,16 +63,8 @@ def planner_figure(
     traces = [part_mesh]
     views = view_records(traj)
     if len(views) > 1:
-        # Each view's poses in its own colour (a view is a block of swaths), moves in grey.
-        traces.append(path_trace(pos, ~traj.scanning, "moves", "gray", 2, max_path))
-        for k, v in enumerate(views):
-            in_view = v.holds(traj.swath)
-            axis = ", ".join(f"{c:.2f}" for c in v.axis)
-            colour = VIEW_COLOURS[k % len(VIEW_COLOURS)]
-            keep = in_view & traj.scanning
-            if not keep.any():
-                continue  # a view the arm gave up whole: not flown, not in the legend
-            traces.append(path_trace(pos, keep, f"view {k} ({axis})", colour, 4, max_path))
+        # The views grouped by the side they look from, as on the plan's 3-D page.
+        traces += passes_traces(traj, max_path)
     else:
         every = np.ones(len(pos), bool)
         traces.append(path_trace(pos, every, "sensor path", "black", 3, max_path))

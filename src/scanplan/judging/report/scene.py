@@ -1,6 +1,7 @@
-"""The 3-D scene of a plan, drawn without simulating it: the part, its table and fixtures,
-the passes coloured by view, the moves between them, and the arm at a few poses of each pass
-with the poses it cannot fly marked. Plotly traces only; `html` puts them in a page.
+"""The 3-D scene of a plan, drawn without simulating it: the part lit and smooth-shaded, its
+table and fixtures, the passes coloured by the side their view looks from, the moves between
+them, and the arm (see-through) at a few poses of each pass with the poses it cannot fly
+marked. Plotly traces only; `html` puts them in a page.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 
 from scanplan.core.plan import Plan, view_of_pose, view_records
 from scanplan.core.trajectory import Trajectory
+from scanplan.judging.report import view_groups
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.links import check_links, obstacles_for
 from scanplan.robot.reach import pass_starts
@@ -25,10 +27,16 @@ MAX_PATH_POINTS = 20_000
 # all (passes taken evenly when a plan has more): beyond that the arms hide the part.
 MAX_ARM_POSES = 48
 CAPSULE_SIDES = 12
-# One colour per view of a scan of several views (plotly's D3 palette).
+# One colour per side the views look from (plotly's D3 palette).
 VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
                 "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
 ARM_COLOUR = "#6b6b6b"
+# See-through, so the part and the passes show through the arm.
+ARM_OPACITY = 0.35
+# A grey part lit from above and in front: relief (a boss, a hole) shows by its shading.
+PART_LIGHTING = {"ambient": 0.35, "diffuse": 0.85, "specular": 0.25, "roughness": 0.6,
+                 "fresnel": 0.1}  # fmt: skip
+PART_LIGHT_POSITION = {"x": 3e4, "y": -6e4, "z": 1e5}  # plotly caps each at 1e5
 PROBLEM_COLOUR = "#e6001a"
 MOVE_COLOUR = "#a0a0a0"
 # The table is drawn as a slab this deep, not its whole block (a metre deep), which would
@@ -158,8 +166,11 @@ def part_trace(
     colour: str = "lightgray",
     opacity: float = 0.45,
     max_faces: int | None = MAX_PART_FACES,
+    **kwargs: Any,
 ):
-    """The part's mesh, decimated to `max_faces` if larger (None: every face)."""
+    """The part's mesh, decimated to `max_faces` if larger (None: every face), lit and
+    smooth-shaded: vertices split at edges sharper than 30° (trimesh's smooth_shaded), so
+    curved faces shade smoothly and edges stay crisp."""
     import plotly.graph_objects as go
 
     mesh = part.mesh
@@ -168,11 +179,12 @@ def part_trace(
             mesh = mesh.simplify_quadric_decimation(face_count=max_faces)
         except (ImportError, ValueError):  # decimation is cosmetic: fall back to the full mesh
             mesh = part.mesh
+    mesh = mesh.smooth_shaded
     v, f = mesh.vertices, mesh.faces
     return go.Mesh3d(
         x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2],
-        color=colour, opacity=opacity, name=name, hoverinfo="skip", flatshading=True,
-        showlegend=True,
+        color=colour, opacity=opacity, name=name, hoverinfo="skip", flatshading=False,
+        lighting=PART_LIGHTING, lightposition=PART_LIGHT_POSITION, showlegend=True, **kwargs,
     )  # fmt: skip
 
 
@@ -208,25 +220,31 @@ def view_label(traj: Trajectory, k: int) -> str:
     views = view_records(traj)
     if len(views) <= 1:
         return "passes"
-    return f"view {k} ({', '.join(f'{c:.2f}' for c in views[k].axis)})"
+    return f"view {k}: {view_groups.view_name(views[k].axis)}"
 
 
 def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
-    """The passes, one trace per view in its colour (a legend group its arm joins), and the
-    moves between them in grey."""
+    """The passes, one trace per view, coloured and grouped in the legend by the side they
+    look from (one entry per side: at most five), and the moves between them in grey."""
     pos = traj.positions_mm
     view = view_of_pose(traj)
-    n_views = max(len(view_records(traj)), 1)
+    axes = [v.axis for v in view_records(traj)] or [(0.0, 0.0, 1.0)]
     traces = [path_trace(pos, ~traj.scanning, "moves", MOVE_COLOUR, 2, max_points)]
-    for k in range(n_views):
-        if not (traj.scanning & (view == k)).any():
-            continue  # a view the arm gave up whole: not flown, not in the legend
-        traces.append(
-            path_trace(
-                pos, traj.scanning & (view == k), view_label(traj, k),
-                VIEW_COLOURS[k % len(VIEW_COLOURS)], 4, max_points, legendgroup=f"view{k}",
-            )
+    flown = [k for k in range(len(axes)) if (traj.scanning & (view == k)).any()]  # not given up
+    for g, (where, members) in enumerate(view_groups.groups([axes[k] for k in flown]).items()):
+        views = [flown[m] for m in members]
+        label = (
+            view_label(traj, 0) if len(axes) == 1
+            else view_groups.group_label(where, axes, views)
         )  # fmt: skip
+        for n, k in enumerate(views):
+            traces.append(
+                path_trace(
+                    pos, traj.scanning & (view == k), label if n == 0 else view_label(traj, k),
+                    VIEW_COLOURS[g % len(VIEW_COLOURS)], 4, max_points, legendgroup=where,
+                    showlegend=n == 0,
+                )
+            )  # fmt: skip
     return traces
 
 
@@ -252,8 +270,11 @@ def cell_traces(part: Part, cell: Cell) -> list:
         lo, hi = block[0].copy(), block[1]
         lo[2] = hi[2] - TABLE_SLAB_MM
         traces.append(_box_mesh(lo, hi, "table", "#c8a165", 0.6))
-    for k, fixture in enumerate(cell.fixtures):
-        traces.append(part_trace(fixture, f"fixture {k}", "#5b6f80", 0.8))
+    for k, fixture in enumerate(cell.fixtures):  # one legend entry for them all
+        traces.append(
+            part_trace(fixture, f"fixtures ({len(cell.fixtures)})" if k == 0 else f"fixture {k}",
+                       "#5b6f80", 0.8, legendgroup="fixtures", showlegend=k == 0)
+        )  # fmt: skip
     return traces
 
 
@@ -296,8 +317,9 @@ def _arm_mesh(capsules: np.ndarray, radii: np.ndarray, name: str, colour: str, *
     v, f = capsule_mesh(capsules.reshape(-1, 2, 3), np.tile(radii, len(capsules)))
     return go.Mesh3d(
         x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2], color=colour,
-        opacity=1.0, name=name, hoverinfo="name", flatshading=False, showlegend=True,
-        lighting={"ambient": 0.55, "diffuse": 0.7, "specular": 0.2}, **kwargs,
+        opacity=ARM_OPACITY, name=name, hoverinfo="name", flatshading=False,
+        lighting={"ambient": 0.55, "diffuse": 0.7, "specular": 0.2}, legendgroup="arm",
+        **{"showlegend": False, **kwargs},
     )  # fmt: skip
 
 
@@ -376,8 +398,9 @@ def add_arm(fig, traj: Trajectory, arm: ArmPoses) -> None:
     # The column from the base up to the first link: where the arm stands.
     top = arm.capsules_part[0, 0, 0] if m else base
     fig.add_trace(
-        go_line(np.array([base, top]), f"{arm.robot} base", ARM_COLOUR, 14,
-                mode="lines+markers+text", text=[f"{arm.robot} base", ""],
+        # Always shown, so the legend entry that hides and shows the whole arm.
+        go_line(np.array([base, top]), f"{arm.robot} arm", ARM_COLOUR, 14,
+                mode="lines+markers+text", text=[f"{arm.robot} base", ""], legendgroup="arm",
                 textposition="bottom center",
                 marker={"symbol": "square", "size": 6, "color": "black"})
     )  # fmt: skip
