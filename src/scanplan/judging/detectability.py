@@ -112,6 +112,8 @@ class Detectability:
             # A pass with a share of the points there has its profiles that much farther apart.
             gap_pass = gap[pos] / self.pass_share[mask]
         col_pass = col[pos]
+        # What a disc needs to be found, per pass and offset, does not depend on its depth.
+        crossing = _disc_crossing(gap_pass, col_pass, detector.min_points)
 
         def pod(size_mm: float | np.ndarray) -> np.ndarray:
             size = np.broadcast_to(np.asarray(size_mm, dtype=float), idx.shape)
@@ -124,7 +126,7 @@ class Detectability:
                     rk, (length - width)[pos], gap_pass, col_pass, detector.min_points
                 )
             else:
-                found = _found_share(rk, gap_pass, col_pass, detector.min_points)
+                found = _found_share(rk, gap_pass, col_pass, detector.min_points, crossing)
             log_miss = np.bincount(pos, np.log(np.maximum(1.0 - found, 1e-300)), len(idx))
             return np.where(seen, 1.0 - np.exp(log_miss), 0.0)
 
@@ -196,21 +198,51 @@ class Detectability:
         }
 
 
-def _found_share(rk: np.ndarray, gap: np.ndarray, col: np.ndarray, min_points: int) -> np.ndarray:
+def _profile_sums() -> tuple[np.ndarray, np.ndarray]:
+    """(r,) ρ from 0 to `WIDE_PROFILES` and (r, OFFSETS) S(ρ): Σ_j sqrt(ρ² − (o + j)²)⁺ for
+    each profile offset o, the chord lengths (over 2 · spacing) a disc of radius ρ spacings
+    holds; each column non-decreasing in ρ. Tabulated once."""
+    global _SUMS
+    if _SUMS is None:
+        rho = np.linspace(0.0, WIDE_PROFILES, _TABLE_STEPS + 1)
+        reach = int(math.ceil(WIDE_PROFILES)) + 1
+        j = np.arange(-reach, reach + 1)
+        offsets = (np.arange(OFFSETS) + 0.5) / OFFSETS
+        u = offsets[None, :, None] + j[None, None, :]
+        _SUMS = rho, np.sqrt(np.maximum(rho[:, None, None] ** 2 - u**2, 0.0)).sum(axis=2)
+    return _SUMS
+
+
+_TABLE_STEPS = 8192  # ρ every 0.0005 spacings: a threshold off by far less than any input's error
+_SUMS: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def _disc_crossing(gap: np.ndarray, col: np.ndarray, min_points: int) -> np.ndarray:
+    """(k, OFFSETS) the radius, in profile spacings, from which a disc crossed by profiles
+    `gap` apart, sampled `col` apart along them, holds `min_points` points at each offset
+    (inf: not below `WIDE_PROFILES`): the inverse of `_profile_sums`, interpolated."""
+    rho, sums = _profile_sums()
+    need = min_points * col / (2.0 * gap)  # S(ρ) >= need: the chords hold enough points
+    out = np.empty((len(gap), OFFSETS))
+    for i in range(OFFSETS):
+        s = sums[:, i]
+        first = int(np.searchsorted(s, 0.0, side="right")) - 1  # S strictly rises from here
+        out[:, i] = np.interp(need, s[first:], rho[first:], right=np.inf)
+    return np.where(need[:, None] <= 0.0, 0.0, out)
+
+
+def _found_share(
+    rk: np.ndarray, gap: np.ndarray, col: np.ndarray, min_points: int, crossing: np.ndarray
+) -> np.ndarray:
     """(k,) the share of profile offsets for which a disc of radius rk, crossed by profiles
-    `gap` apart and sampled `col` apart along them, holds `min_points` points."""
+    `gap` apart and sampled `col` apart along them, holds `min_points` points; crossing:
+    `_disc_crossing` of gap, col and min_points."""
     ratio = rk / gap
     # Far more than a few profiles across the disc: the count is its area's.
     wide = ratio > WIDE_PROFILES
-    reach = int(np.ceil(np.max(np.where(wide, 0.0, ratio), initial=0.0))) + 1
-    j = np.arange(-reach, reach + 1)
-    found = np.zeros(len(rk))
-    for i in range(OFFSETS):
-        u = ((i + 0.5) / OFFSETS + j[None, :]) * gap[:, None]  # (k, j) profiles' offsets
-        chord = 2.0 * np.sqrt(np.maximum(rk[:, None] ** 2 - u**2, 0.0))
-        found += (chord / col[:, None]).sum(axis=1) >= min_points
+    found = (ratio[:, None] >= crossing).mean(axis=1)
     area_count = np.pi * rk**2 / (gap * col)
-    return np.where(wide, (area_count >= min_points).astype(float), found / OFFSETS)
+    return np.where(wide, (area_count >= min_points).astype(float), found)
 
 
 def _found_share_groove(
