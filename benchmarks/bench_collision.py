@@ -2,9 +2,10 @@
 
 Trajectory: the fixed planner's plan of the built-in door (scanning and transition poses),
 plus the same poses lowered 400 mm so the body meets the skin (every pose goes to FCL).
-Prints poses/s of `CollisionChecker.check` (prefiltered, and exact=True) next to a bare
-`fcl.collide` and `fcl.distance` per pose of the same body and BVH; the ratios are what
-travels between machines.
+Prints poses/s of `CollisionChecker.check` (prefiltered, and exact=True) and of the yes/no
+`CollisionChecker.colliding` (checked to agree with `check`) next to a bare `fcl.collide`
+and `fcl.distance` per pose of the same body and BVH; the ratios are what travels between
+machines.
 Run: .venv/bin/python benchmarks/bench_collision.py
 """
 
@@ -60,12 +61,16 @@ def main() -> None:
         ours = rate(lambda p=poses: checker.check(p, spec.clearance_mm), n)
         few = poses[::20]
         exact = rate(lambda p=few: checker.check(p, spec.clearance_mm, exact=True), len(few))
+        yes_no = rate(lambda p=poses: checker.colliding(p, spec.clearance_mm), n)
+        agree = (checker.colliding(poses, spec.clearance_mm) == report.colliding).mean()
         collide = rate(bare(poses, "collide"), n)
         distance = rate(bare(few, "distance"), len(few))
         print(
             f"{label}: {n} poses, {int(report.exact.sum())} measured by FCL, "
             f"{int(report.colliding.sum())} colliding\n"
             f"  check            {ours:12.0f} poses/s  ({ours / collide:.2f} x bare collide)\n"
+            f"  colliding        {yes_no:12.0f} poses/s  ({yes_no / collide:.2f} x bare collide;"
+            f" agrees with check on {agree:.1%} of poses)\n"
             f"  check exact=True {exact:12.0f} poses/s  ({exact / distance:.2f} x bare distance)\n"
             f"  bare fcl.collide {collide:12.0f} poses/s\n"
             f"  bare fcl.distance{distance:12.0f} poses/s"

@@ -5,7 +5,8 @@ Plans the door with every planner in its default configuration (default raster a
 measured in the same run, with the paper's configuration (`geometric-v0`: pitch only,
 nominal raster — what planning cost before roll and adaptive passes). Prints each planning
 time (median of `--repeats`) and its ratio to that reference, then evaluates each plan
-(`--points` columns) and prints the evaluation throughput in profiles/s next to a bare
+(`--points` columns) as `scanplan evaluate` does (`evaluate_detectable`: the in-spec map and
+the dent prediction) and prints the evaluation throughput in profiles/s next to a bare
 `LineProfilometer.measure_many` of the same poses (the simulator alone): only ratios travel.
 Run: .venv/bin/python benchmarks/bench_planning.py [--points N] [--repeats 3]
 """
@@ -18,7 +19,7 @@ import statistics
 import time
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.judging import evaluate
+from scanplan.judging.detectability import evaluate_detectable
 from scanplan.planning.pipeline import plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.sensor.profilometer import LineProfilometer
@@ -55,7 +56,7 @@ def main() -> None:
         reference = reference or plan_s
         poses = traj.scan_poses
         t0 = time.perf_counter()
-        metrics = evaluate(part, spec, traj, points_per_profile=args.points or None)
+        metrics = evaluate_detectable(part, spec, traj, points_per_profile=args.points or None)
         eval_s = time.perf_counter() - t0
         bare = poses[: args.bare_profiles]
         profiler = LineProfilometer(part, sensor)

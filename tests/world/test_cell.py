@@ -77,6 +77,9 @@ def test_the_body_is_checked_against_the_table_and_the_fixtures(block, tmp_path)
     assert report.colliding_with("fixtures").tolist() == [False, False, False, True]
     np.testing.assert_allclose(report.by_obstacle["table"][:3], [90.0, 15.0, -5.0], atol=1e-9)
     assert report.touching.tolist() == [False, False, True, False]
+    # Yes or no, without measuring: the same answers, at the clearance and touching.
+    assert checker.colliding(poses, 20.0).tolist() == [False, True, True, True]
+    assert checker.colliding(poses, 0.0).tolist() == [False, False, True, False]
     # Without a cell, only the part counts.
     alone = checker_for(block, CUBE).check(poses, clearance_mm=20.0)
     assert not alone.colliding.any()

@@ -165,7 +165,7 @@ def view_transition(
             straight_move(b, next_pose[:3, 3]),
         ]
     )
-    colliding = checker.check(moves, clearance_mm, colliding_only=True).colliding
+    colliding = checker.colliding(moves, clearance_mm)
     if colliding.any():
         where = moves[np.flatnonzero(colliding)[0], :3, 3]
         raise ValueError(

@@ -73,9 +73,7 @@ def plan_path(
                         planned.poses, cell.table.normal, spec.working_distance_mm
                     ),
                 )
-            colliding = checker.check(
-                planned.poses, spec.clearance_mm, colliding_only=True
-            ).colliding
+            colliding = checker.colliding(planned.poses, spec.clearance_mm)
             dropped += int(colliding.sum())
             for k, run in enumerate(_runs(~colliding)):
                 poses = planned.poses[run]
@@ -195,7 +193,7 @@ def passes_blocked(part: Part, spec: ScanSpec, swaths: list[Swath], cell: Cell |
         ]
     )
     checker = checker_for(part, spec.sensor, cell)
-    return bool(checker.check(poses, spec.clearance_mm, colliding_only=True).colliding.all())
+    return bool(checker.colliding(poses, spec.clearance_mm).all())
 
 
 def _all_too_near(part: Part, spec: ScanSpec) -> str:

@@ -202,14 +202,29 @@ class LineProfilometer:
             f"rays to cast ({m:,} poses x {self.spec.points_per_profile:,} points per profile)",
             "give fewer poses or --points",
         )
-        for lo in range(0, m, chunk_poses):
-            hi = min(m, lo + chunk_poses)
-            scan = self.measure_many(poses[lo:hi])
-            if self.part.inspect_faces is not None:
-                scan = scan.on_faces(self.part.inspect_faces)
-            yield lo, scan
-            if progress is not None:
-                progress(hi, m)
+        starts = range(0, m, chunk_poses)
+        # The next chunk is measured while the caller works on this one (Embree and numpy
+        # release the GIL): judging a chunk costs about what measuring it does. One worker
+        # draws the chunks' noise in order, so the scan is the same as measured in turn.
+        with ThreadPoolExecutor(max_workers=1) as ahead:
+            job = ahead.submit(self._chunk_of, poses, 0, chunk_poses) if m else None
+            for lo in starts:
+                hi = min(m, lo + chunk_poses)
+                assert job is not None
+                scan = job.result()
+                if hi < m:
+                    job = ahead.submit(self._chunk_of, poses, hi, chunk_poses)
+                yield lo, scan
+                if progress is not None:
+                    progress(hi, m)
+
+    def _chunk_of(self, poses: np.ndarray, lo: int, chunk_poses: int) -> Scan:
+        """The scan of poses lo, lo+1, ... (`chunk_poses` of them at most), on the region of
+        interest's faces."""
+        scan = self.measure_many(poses[lo : lo + chunk_poses])
+        if self.part.inspect_faces is not None:
+            scan = scan.on_faces(self.part.inspect_faces)
+        return scan
 
     def _measure_chunk(self, scan: Scan, lo: int, hi: int, rng: np.random.Generator) -> None:
         """Fill poses lo:hi of scan, drawing the Gaussian noise from rng in pose order.

@@ -147,7 +147,7 @@ class CellObstacles:
         the fixtures and the table (all True when no sensor was given)."""
         if self._sensor is None:
             return np.ones(len(poses), bool)
-        return ~self._sensor.check(poses, self.clearance_mm).colliding
+        return ~self._sensor.colliding(poses, self.clearance_mm)
 
     def capsules_hit(
         self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float, exact: bool = True

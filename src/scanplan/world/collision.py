@@ -20,20 +20,21 @@ import numpy as np
 
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.world.cell import Cell
-from scanplan.world.collision_shapes import body_corners, mesh_object, rounded_box, triangle_bvh
+from scanplan.world.collision_shapes import (
+    body_corners,
+    mesh_object,
+    pieces_touch,
+    rounded_box,
+    triangle_bvh,
+)
 from scanplan.world.part import Part
 
 # An inside test casts one ray in a direction no axis-aligned edge of a mesh lies along.
 _INSIDE_RAY = np.array([0.267, 0.534, 0.802]) / np.linalg.norm([0.267, 0.534, 0.802])
 # The most poses after a measured one that may be cleared by it (`CollisionChecker.check`).
 _RIDE = 256
-# Asked only whether poses collide: after a pose measured within _HOVER_MM of the clearance
-# (the next one can ride on it only if its body moves less than that), the next
-# _HOVER_POSES - 1 are tested yes or no (`_within`), then one is measured again. A pass along
-# a pocket's wall hovers there (1 737 of the NIST pocket plate's 2 154 measured poses sat
-# 20-21 mm from it against a clearance of 20).
-_HOVER_MM = 2.0
-_HOVER_POSES = 8
+# The yes/no test's margin below the clearance (`CollisionChecker.colliding`).
+_STRICT_MM = 1e-6
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,6 @@ class CollisionChecker:
         poses: np.ndarray,
         clearance_mm: float,
         exact: bool = False,
-        colliding_only: bool = False,
     ) -> CollisionReport:
         """Body vs part for every pose (n, 4, 4).
 
@@ -175,11 +175,6 @@ class CollisionChecker:
         that separates them, exact when a face or a corner presses in), else, for an edge
         crossing an edge, FCL's contact depth. A body wholly inside a closed part counts as
         penetrating by its corners' depth. exact=True: every pose gets `fcl.distance`.
-        colliding_only=True: only `colliding` is asked for; poses within the clearance ride
-        on a measured one too (their distance an upper bound below the clearance, their
-        depth unknown: `touching` and the depths are not to be read), and poses after one
-        measured near the clearance are only tested for being within it (`_within`: a pose
-        within reads just under the clearance, one clear reads the clearance).
         """
         if not (np.isfinite(clearance_mm) and clearance_mm >= 0):
             raise ValueError(f"clearance must be a finite number >= 0 mm, got {clearance_mm}")
@@ -210,22 +205,12 @@ class CollisionChecker:
             near = np.asarray(keep, dtype=np.int64)
         corners = self.body_corners_part(poses[near]) if len(near) and not exact else None
         at = 0
-        hovering = 0  # poses since a measured one that sat at the clearance
         while at < len(near):
             i = near[at]
             at += 1
-            if 0 < hovering < _HOVER_POSES:
-                # The one measured last sat too near the clearance for the next to ride on
-                # it: whether each is within, not how far (half a measurement's time).
-                within = self._within(poses[i], clearance_mm)
-                distance[i] = np.nextafter(clearance_mm, 0.0) if within else clearance_mm
-                hovering += 1
-                continue
             distance[i] = d = self._distance_mm(poses[i])
             measured[i] = True
-            near_edge = abs(d - clearance_mm) < _HOVER_MM
-            hovering = int(colliding_only and not exact and clearance_mm > 0 and near_edge)
-            if corners is None or (d <= clearance_mm and not colliding_only):
+            if corners is None or d <= clearance_mm:
                 continue
             moved = np.linalg.norm(corners[at : at + _RIDE] - corners[at - 1], axis=2).max(axis=1)
             # Apart by more than the clearance: at least d - moved. Within it: at most
@@ -238,6 +223,34 @@ class CollisionChecker:
             at += ride
         return CollisionReport(distance, measured, float(clearance_mm))
 
+    def colliding(self, poses: np.ndarray, clearance_mm: float) -> np.ndarray:
+        """(n,) bool: whether the body at each pose (n, 4, 4) comes closer than `clearance_mm`
+        to the part (touches it, at 0) or lies inside a closed one, without
+        measuring how far: `check(...).colliding` at `fcl.collide`'s speed. A pose in the
+        part meets the first slab of the body grown by the clearance at once, one call; one
+        near the part pays for the grown box and the pieces of the rounded box it touches."""
+        if not (np.isfinite(clearance_mm) and clearance_mm >= 0):
+            raise ValueError(f"clearance must be a finite number >= 0 mm, got {clearance_mm}")
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        out = np.zeros(len(poses), bool)
+        near = np.flatnonzero(self.aabb_gap_mm(poses) <= clearance_mm)
+        if not len(near):
+            return out
+        rot = poses[near, :3, :3]
+        centre = rot @ self.body_centre + poses[near, :3, 3]
+        if clearance_mm > _STRICT_MM:
+            # Grown a hair less than the clearance: a body exactly at it is clear, as `check`
+            # says (closer than the clearance collides).
+            grow = clearance_mm - _STRICT_MM
+            pieces, grown = self._rounded(grow), self._grown_box(grow)
+        else:
+            pieces, grown = [(self._box_obj, np.eye(3), np.zeros(3))], None
+        out[near] = pieces_touch(pieces, grown, self._part_obj, rot, centre)
+        if self._closed:  # a body wholly inside a closed part touches no triangle
+            apart = np.flatnonzero(~out[near])
+            out[near[apart]] = self._inside(centre[apart])
+        return out
+
     def _distance_mm(self, pose: np.ndarray) -> float:
         """The exact signed distance of the body at `pose` (negative: penetration depth)."""
         self._box_obj.setTransform(self._transform(pose))
@@ -249,26 +262,10 @@ class CollisionChecker:
             return -self._penetration_mm(pose)
         return float(d)
 
-    def _within(self, pose: np.ndarray, clearance_mm: float) -> bool:
-        """Whether the body at `pose` comes within `clearance_mm` of the part (or lies inside
-        a closed one; exactly at the clearance counts as within), without measuring how
-        far: the body grown by the clearance in every direction (a box with rounded edges
-        and corners) is the union of three slabs (the box grown along one axis) and twelve
-        capsules (its edges grown all round), tested one by one until one touches (half an
-        `fcl.distance`'s time on a machined part whose passes hover just outside the
-        clearance)."""
-        rot, centre = pose[:3, :3], pose[:3, :3] @ self.body_centre + pose[:3, 3]
-        request, part = fcl.CollisionRequest(), self._part_obj
-        for obj, turn, shift in self._rounded(clearance_mm):
-            obj.setTransform(fcl.Transform(rot @ turn, rot @ shift + centre))
-            if fcl.collide(obj, part, request, fcl.CollisionResult()):
-                return True
-        return bool(self._closed and self._inside(centre[None])[0])
-
     def _rounded(
         self, clearance_mm: float
     ) -> list[tuple[fcl.CollisionObject, np.ndarray, np.ndarray]]:
-        """The slabs and capsules of `_within` (`rounded_box`), each with its rotation and
+        """The slabs and capsules of `colliding` (`rounded_box`), each with its rotation and
         offset from the body box's centre in the sensor frame; built once per clearance."""
         pieces = self._rounded_by.get(clearance_mm)
         if pieces is None:
@@ -388,12 +385,11 @@ class CellChecker:
         poses: np.ndarray,
         clearance_mm: float,
         exact: bool = False,
-        colliding_only: bool = False,
     ) -> CollisionReport:
         """`CollisionChecker.check` against every obstacle; the table's distance is exact
         (the lowest body corner's height above the plane)."""
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-        reports = [c.check(poses, clearance_mm, exact, colliding_only) for c in self.meshes]
+        reports = [c.check(poses, clearance_mm, exact) for c in self.meshes]
         by_obstacle = {"part": reports[0].distance_mm}
         distance = reports[0].distance_mm.copy()
         measured = reports[0].exact.copy()
@@ -410,6 +406,19 @@ class CellChecker:
             distance = np.where(closer, table, distance)
             measured |= closer
         return CollisionReport(distance, measured, float(clearance_mm), by_obstacle)
+
+    def colliding(self, poses: np.ndarray, clearance_mm: float) -> np.ndarray:
+        """(n,) bool: `check(...).colliding` against every obstacle, yes or no
+        (`CollisionChecker.colliding`): no distance measured."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        out = np.zeros(len(poses), bool)
+        if self.table is not None:
+            table = self.table.height_mm(self.body_corners_part(poses)).min(axis=1)
+            out = (table < clearance_mm) | (table <= 0.0)
+        for mesh in self.meshes:
+            todo = np.flatnonzero(~out)
+            out[todo] = mesh.colliding(poses[todo], clearance_mm)
+        return out
 
 
 def checker_for(part: Part, sensor: SensorSpec, cell: Cell | None = None) -> CellChecker:

@@ -84,3 +84,36 @@ def mesh_object(part: Part) -> fcl.CollisionObject:
         else:
             _MESH_OBJECTS[part] = fcl.CollisionObject(_mesh_bvh(part), fcl.Transform())
     return _MESH_OBJECTS[part]
+
+
+def pieces_touch(
+    pieces: list[tuple[fcl.CollisionObject, np.ndarray, np.ndarray]],
+    grown: fcl.CollisionObject | None,
+    part: fcl.CollisionObject,
+    rot: np.ndarray,
+    centre: np.ndarray,
+) -> np.ndarray:
+    """(n,) bool: whether any of `pieces` (`rounded_box`'s, or the box alone) placed at each
+    rotation (n, 3, 3) and centre (n, 3) touches `part`. The first piece is tried alone (a
+    body in the part meets it at once: one `fcl.collide`); the rest only where `grown`, a
+    box holding them all, touches (None: no other piece)."""
+    request = fcl.CollisionRequest()
+    out = np.zeros(len(rot), bool)
+    first, turn, shift = pieces[0]
+    for k in range(len(rot)):
+        r, c = rot[k], centre[k]
+        first.setTransform(fcl.Transform(r @ turn, r @ shift + c))
+        if fcl.collide(first, part, request, fcl.CollisionResult()):
+            out[k] = True
+            continue
+        if grown is None:
+            continue
+        grown.setTransform(fcl.Transform(r, c))
+        if not fcl.collide(grown, part, request, fcl.CollisionResult()):
+            continue
+        for obj, turn_k, shift_k in pieces[1:]:
+            obj.setTransform(fcl.Transform(r @ turn_k, r @ shift_k + c))
+            if fcl.collide(obj, part, request, fcl.CollisionResult()):
+                out[k] = True
+                break
+    return out

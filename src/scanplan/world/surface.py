@@ -56,6 +56,17 @@ def oriented_normals(part: Part) -> np.ndarray:
     if part.turned_from is not None:  # the original's, turned (a view of the part)
         base, R = part.turned_from
         return oriented_normals(base) @ R[:3, :3].T
+    # Once per part while it lives: every evaluation (and every trial) of it asks again.
+    if (known := _NORMALS.get(part)) is None:
+        known = _NORMALS[part] = _oriented_normals(part)
+        known.setflags(write=False)
+    return known
+
+
+_NORMALS: weakref.WeakKeyDictionary[Part, np.ndarray] = weakref.WeakKeyDictionary()
+
+
+def _oriented_normals(part: Part) -> np.ndarray:
     mesh = part.mesh
     normals = np.asarray(part.ray_engine.face_normals)
     if mesh.is_watertight and mesh.is_winding_consistent:
