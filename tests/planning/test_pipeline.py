@@ -373,3 +373,24 @@ def test_a_lid_over_part_of_the_plate_is_planned_around_and_judged(plate, tmp_pa
     views = evaluate(plate, SPEC, auto, points_per_profile=128)
     assert views.visibility_ceiling is not None and views.visibility_ceiling < 0.75
     assert views.in_spec_coverage == pytest.approx(views.visibility_ceiling, abs=0.03)
+
+
+def test_views_for_an_arm_are_chosen_by_what_it_flies():
+    from scanplan.planning.pipeline import Arm
+    from scanplan.robot.export import parse_pose_arg
+
+    part = overhang_part()
+    spec = ScanSpec()
+    planner = make_planner("geometric")
+    tcp = parse_pose_arg("0,0,90,0,0,0")
+    _, traj = plan_views(part, spec, planner, "auto", arm=Arm("ur5e", tcp))
+    record = traj.meta["robot"]
+    # The plan made without the arm is judged beside what the arm flies of the plan made
+    # for it; every pose given up has a cause, and a view's cost is what nothing flown holds.
+    assert 0.0 < record["in_spec"] <= record["in_spec_without_robot"] + 1e-9
+    assert 0.0 < record["in_spec_free_plan"] <= 1.0
+    given_up = {k: sum(v.values()) for k, v in record["given_up_by_cause"].items()}
+    assert given_up == record["scanning_poses_given_up"]
+    lost = record["in_spec_lost_by_view"]
+    assert all(0.0 < v <= record["in_spec_without_robot"] for v in lost.values())
+    assert record["flyable"]

@@ -163,3 +163,61 @@ def test_a_pass_is_not_turned_where_its_move_turned_would_bring_the_body_into_th
     # Without a cell there is no body to keep clear: both passes turn.
     monkeypatch.setattr(fit_module, "flyable_poses", lambda *a, **k: (planned, turned))
     assert fit_module._turned(traj, None, np.eye(4), np.eye(4), None)[1] == 2  # type: ignore[arg-type]
+
+
+def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
+    traj = _two_views(900.0)
+    fit = fit_to_robot(traj, "ur3e", TCP, parse_pose_arg("450,0,-200,0,0,0"))
+    record = fit.record(TCP)
+    by_cause = record["given_up_by_cause"]
+    # Every pose given up is counted under a cause, view by view.
+    assert {k: sum(v.values()) for k, v in by_cause.items()} == record["scanning_poses_given_up"]
+    assert set().union(*by_cause.values()) <= set(fit_module.CAUSES)
+    assert "reach" in set().union(*by_cause.values())
+    # The far end lies beyond the UR3e's reach: the hint says by how much.
+    assert record["beyond_reach_mm"] > 0
+    hints = fit_module.what_would_help(record)
+    assert f"{record['beyond_reach_mm']:.0f} mm beyond the arm's horizontal reach" in hints[0]
+
+
+def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):
+    from scanplan.core.context import PlanContext
+    from scanplan.core.quantities import ScanSpec
+
+    traj = _two_views(900.0)
+    T_base_part = parse_pose_arg("450,0,-200,0,0,0")
+    arm = fit_module.PlacedArm("ur3e", TCP, T_base_part, PlanContext(ScanSpec()))
+    flown = arm.flown(plate, traj)
+    assert 0 < flown.scanning.sum() < traj.scanning.sum()
+    # What it keeps (each pass as planned or turned about the beam) the arm reaches.
+    reach = check_reach(
+        T_base_part @ flown.poses @ np.linalg.inv(TCP),
+        "ur3e",
+        swath=flown.swath,
+        scanning=flown.scanning,
+    )
+    assert not np.isnan(reach.joints[flown.scanning]).any()
+    # Picklable for the view workers, without the cell's obstacles (built where needed).
+    import pickle
+
+    copy = pickle.loads(pickle.dumps(arm))
+    assert copy._obstacles is None
+    np.testing.assert_array_equal(copy.flown(plate, traj).poses, flown.poses)
+
+
+def test_a_pass_is_entered_on_the_branch_that_flies_it_whole():
+    from scanplan.robot.ur import forward_kinematics
+
+    # A straight path whose q5 crosses 0 on the branch the move before it ends on: followed
+    # from there it flips the wrist mid-pass; entered on another branch it flies whole.
+    s = np.linspace(0, 1, 200)[:, None]
+    q0 = np.array([0.3, -1.4, 1.6, -1.7, 0.35, 0.4])
+    q1 = np.array([0.5, -1.2, 1.4, -1.5, -0.35, 0.2])
+    poses = forward_kinematics(np.vstack([q0[None], q0 + s * (q1 - q0)]))
+    swath = np.r_[0, np.ones(200, int)]
+    scanning = np.r_[False, np.ones(200, bool)]
+    pinned = check_reach(poses[1:], "ur5e", q_start=q0)
+    assert len(pinned.config_flips) == 1
+    report = check_reach(poses, "ur5e", q_start=q0, swath=swath, scanning=scanning)
+    assert report.reachable and len(report.config_flips) == 0 and len(report.pass_jumps) == 0
+    np.testing.assert_allclose(report.joints[0], q0, atol=1e-8)  # the move: as given
