@@ -394,3 +394,21 @@ def test_views_for_an_arm_are_chosen_by_what_it_flies():
     lost = record["in_spec_lost_by_view"]
     assert all(0.0 < v <= record["in_spec_without_robot"] for v in lost.values())
     assert record["flyable"]
+
+
+def test_a_view_the_arm_left_measuring_nothing_holds_nothing(plate):
+    from helpers import straight
+
+    from scanplan.core.trajectory import Trajectory
+
+    seen = straight(np.arange(0.0, 600.0, 0.5))
+    # The second view's pass 5 m up: it measures nothing (in_spec_samples raises for it).
+    far = straight(np.arange(0.0, 600.0, 20.0), h_mm=5000.0, swath_index=1)
+    traj = Trajectory.concatenate([seen, far], "t")
+    views = [
+        {"index": k, "axis": [0.0, 0.0, 1.0], "first_swath": k, "last_swath": k, "passes": 1}
+        for k in range(2)
+    ]
+    traj = Trajectory(traj.poses, traj.swath, traj.scanning, meta={"views": views})
+    held = pipeline_module._held_by_view(plate, traj, PlanContext(ScanSpec()))
+    assert list(held) == [0] and held[0].any()

@@ -173,14 +173,16 @@ def fit_arm(
     # Judged view by view (a sample's in-spec state depends on one pass): the union is the
     # plan's figure, and what a view held that nothing flown holds is what the arm cost.
     planned, flown = _held_by_view(part, traj, context), _held_by_view(part, fit.traj, context)
-    held = np.logical_or.reduce([*flown.values()]) if flown else np.zeros(0, bool)
+    sets = [*planned.values(), *flown.values()]
+    nothing = np.zeros(len(sets[0]) if sets else 0, bool)
+    held = np.logical_or.reduce([nothing, *flown.values()])
+    before = np.logical_or.reduce([nothing, *planned.values()])
     record["in_spec"] = float(held.mean()) if len(held) else 0.0
-    before = np.logical_or.reduce([*planned.values()])
     record["in_spec_without_robot"] = float(before.mean()) if len(before) else 0.0
     record["in_spec_lost_by_view"] = {
         str(k): round(float((v & ~held).mean()), 4)
         for k, v in planned.items()
-        if len(held) and (v & ~held).mean() >= 5e-4
+        if (v & ~held).mean() >= 5e-4
     }
     if free is not None:
         held = in_spec_samples(part, context.spec, free, 0, VIEW_CHOICE_FAN_POINTS, context)
@@ -189,12 +191,17 @@ def fit_arm(
 
 
 def _held_by_view(part: Part, traj: Trajectory, context: PlanContext) -> dict[int, np.ndarray]:
-    """Each view's in-spec set on the view choice's samples (`in_spec_samples`)."""
+    """Each view's in-spec set on the view choice's samples (`in_spec_samples`); none for a
+    view that measures nothing."""
     out = {}
     for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
         mine = view.holds(traj.swath)
-        if (mine & traj.scanning).any():
+        if not (mine & traj.scanning).any():
+            continue
+        try:
             out[view.index] = in_spec_samples(
                 part, context.spec, traj.subset(mine), 0, VIEW_CHOICE_FAN_POINTS, context
             )
+        except ValueError:  # what the arm left of a view measures nothing: it holds nothing
+            continue
     return out

@@ -353,7 +353,7 @@ def place(
 
     # The answer is judged on every pose, following the branch as a controller would; in a
     # cell the arm's links too (on a subsample while ranking): the candidate that keeps
-    # the most poses flyable wins, a fully flyable one first.
+    # the most scanning poses flyable wins, a fully flyable one first.
     ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
     sample = _subsample(traj, _LINK_RANK_POSES)
     inv_tcp = np.linalg.inv(tcp)
@@ -373,7 +373,10 @@ def place(
             )
             good = kept_by_pass(traj.swath[sample], *kept)
             flyable = bool(good.all())
-        ranked.append((flyable, float(good.mean()), -rank, T_base_part, float(best_scores[i])))
+        # What counts is the scanning kept (a move given up is flown as a joint move).
+        scanning = traj.scanning if obstacles is None else traj.scanning[sample]
+        held = float(good[scanning].mean()) if scanning.any() else float(good.mean())
+        ranked.append((flyable, held, -rank, T_base_part, float(best_scores[i])))
         if flyable and obstacles is None:
             break
     *_, T_best, score = max(ranked, key=lambda r: r[:3])
