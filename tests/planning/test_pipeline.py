@@ -15,15 +15,16 @@ import scanplan.planning.pass_path as pass_path_module
 import scanplan.planning.pipeline as pipeline_module
 import scanplan.planning.view_joining as view_joining_module
 import scanplan.planning.view_workers as view_workers_module
-from helpers import HEMISPHERE, fcl_distance, fixture_files, overhang_part
+from helpers import HEMISPHERE, fcl_distance, fixture_files, overhang_part, straight
 from scanplan.cli import app
 from scanplan.core.context import PlanContext
 from scanplan.core.cycle import view_seconds
 from scanplan.core.plan_file import read_json, read_trajectory, write_json
 from scanplan.core.quantities import COVERAGE_TARGET, OVERLAP, UP, VIEW_CHOICE_FAN_POINTS, ScanSpec
+from scanplan.core.trajectory import Trajectory
 from scanplan.judging import evaluate
 from scanplan.planning.pass_path import ViewRaster, passes_blocked, plan_scan
-from scanplan.planning.pipeline import default_views, plan_views
+from scanplan.planning.pipeline import Arm, default_views, plan_views
 from scanplan.planning.view_choice import (
     ViewBudget,
     _eval_spacing,
@@ -34,6 +35,7 @@ from scanplan.planning.view_choice import (
 )
 from scanplan.planning.view_joining import order_views
 from scanplan.rl.planners import make_planner
+from scanplan.robot.export import parse_pose_arg
 from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.collision import checker_for
 from scanplan.world.part import load_part, part_from_mesh
@@ -376,9 +378,6 @@ def test_a_lid_over_part_of_the_plate_is_planned_around_and_judged(plate, tmp_pa
 
 
 def test_views_for_an_arm_are_chosen_by_what_it_flies():
-    from scanplan.planning.pipeline import Arm
-    from scanplan.robot.export import parse_pose_arg
-
     part = overhang_part()
     spec = ScanSpec()
     planner = make_planner("geometric")
@@ -397,10 +396,6 @@ def test_views_for_an_arm_are_chosen_by_what_it_flies():
 
 
 def test_a_view_the_arm_left_measuring_nothing_holds_nothing(plate):
-    from helpers import straight
-
-    from scanplan.core.trajectory import Trajectory
-
     seen = straight(np.arange(0.0, 600.0, 0.5))
     # The second view's pass 5 m up: it measures nothing (in_spec_samples raises for it).
     far = straight(np.arange(0.0, 600.0, 20.0), h_mm=5000.0, swath_index=1)

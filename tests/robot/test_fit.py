@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 from typer.testing import CliRunner
 
 import scanplan.robot.fit as fit_module
 from scanplan.cli import app
+from scanplan.core.context import PlanContext
 from scanplan.core.plan_file import read_json
+from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
@@ -18,6 +21,7 @@ from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.place import HALF_TURN
+from scanplan.robot.ur import forward_kinematics
 
 TCP = parse_pose_arg("0,0,90,0,0,0")
 
@@ -181,9 +185,6 @@ def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
 
 
 def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):
-    from scanplan.core.context import PlanContext
-    from scanplan.core.quantities import ScanSpec
-
     traj = _two_views(900.0)
     T_base_part = parse_pose_arg("450,0,-200,0,0,0")
     arm = fit_module.PlacedArm("ur3e", TCP, T_base_part, PlanContext(ScanSpec()))
@@ -198,16 +199,12 @@ def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):
     )
     assert not np.isnan(reach.joints[flown.scanning]).any()
     # Picklable for the view workers, without the cell's obstacles (built where needed).
-    import pickle
-
     copy = pickle.loads(pickle.dumps(arm))
     assert copy._obstacles is None
     np.testing.assert_array_equal(copy.flown(plate, traj).poses, flown.poses)
 
 
 def test_a_pass_is_entered_on_the_branch_that_flies_it_whole():
-    from scanplan.robot.ur import forward_kinematics
-
     # A straight path whose q5 crosses 0 on the branch the move before it ends on: followed
     # from there it flips the wrist mid-pass; entered on another branch it flies whole.
     s = np.linspace(0, 1, 200)[:, None]

@@ -6,6 +6,7 @@ so a count, a tool or a cycle time means the same thing in every command.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
@@ -136,7 +137,7 @@ class ArmRecord:
         return free_and_flown(self.record)
 
 
-def free_and_flown(record: dict[str, Any]) -> tuple[float, float] | None:
+def free_and_flown(record: Mapping[str, Any]) -> tuple[float, float] | None:
     """(free, flown) in-spec coverage of an arm's record, as the planner estimated them: the
     plan made without the arm where one was made (views chosen for the arm), else the same
     views before fitting; and what the arm flies. None where the record has neither."""

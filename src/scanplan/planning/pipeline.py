@@ -116,11 +116,12 @@ def plan_views(
         if arm is not None:
             # Views chosen for the arm: placed where it flies most of the views chosen
             # without it, then each candidate judged by what the arm flies of it there.
-            if arm.T_base_part is None:
+            T_base_part = arm.T_base_part
+            if T_base_part is None:
                 _, free = join_views(part, order_views(choose().plans), spec, cell)
-                placement = place(free, arm.robot, arm.tcp, obstacles=obstacles)
-                arm = replace(arm, T_base_part=placement.T_base_part)
-            placed = PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
+                T_base_part = place(free, arm.robot, arm.tcp, obstacles=obstacles).T_base_part
+                arm = replace(arm, T_base_part=T_base_part)
+            placed = PlacedArm(arm.robot, arm.tcp, T_base_part, context)
         selection = choose(arm=placed)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
