@@ -155,11 +155,9 @@ def _pass_start(
     ok = inside & ~np.isnan(first).any(axis=1)
     if not ok.any():
         return None
-    if prev is not None:  # each branch turned the way nearest the previous joints
-        first, inside = fit_limits(prev + wrap(solutions[0] - prev), limits)
-        ok &= inside
-        if not ok.any():
-            first, _ = fit_limits(solutions[0], limits)
+    if prev is not None:  # each branch turned the way nearest the previous joints, if legal
+        near, inside = fit_limits(prev + wrap(solutions[0] - prev), limits)
+        first = np.where((inside & ~np.isnan(near).any(axis=1))[:, None], near, first)
     branches = np.flatnonzero(ok)
     path = solutions[:, branches]  # (m, b, 6)
     # Each branch followed continuously (unwrapped), from the first pose's turn.
