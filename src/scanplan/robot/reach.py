@@ -158,6 +158,9 @@ def _pass_start(
     if prev is not None:  # each branch turned the way nearest the previous joints, if legal
         near, inside = fit_limits(prev + wrap(solutions[0] - prev), limits)
         first = np.where((inside & ~np.isnan(near).any(axis=1))[:, None], near, first)
+        if len(solutions) == 1:  # a move's pose: every branch flies it, the nearest wins
+            cand = first[ok]
+            return cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
     branches = np.flatnonzero(ok)
     path = solutions[:, branches]  # (m, b, 6)
     # Each branch followed continuously (unwrapped), from the first pose's turn.
@@ -181,6 +184,49 @@ def _pass_start(
     # apart by a pose's last digits, or a plan read back from its file (to 1e-6 mm) is
     # checked on another branch than it was fitted on.
     return cand[np.argmax(np.round(score, 4))]
+
+
+def _candidates(
+    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(m, 8, 6) each pose's solutions turned the way nearest `prev` (m, 6) and shifted into
+    the limits where they can be; (m, 8) their squared distance to `prev`, inf where there
+    is no solution within the limits."""
+    cand, inside = fit_limits(prev[:, None] + wrap(solutions - prev[:, None]), limits)
+    inside &= ~np.isnan(cand).any(axis=-1)
+    dist = np.where(inside, ((cand - prev[:, None]) ** 2).sum(axis=-1), np.inf)
+    return cand, dist
+
+
+def _nearest(
+    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray
+) -> tuple[int, np.ndarray] | None:
+    """(branch, joints) of the one pose's (1, 8, 6) in-limit solution nearest `prev` (1, 6),
+    as a controller moving linearly takes it; None if it has none within the limits."""
+    cand, dist = _candidates(solutions, limits, prev)
+    branch = int(np.argmin(dist[0]))
+    return None if not np.isfinite(dist[0, branch]) else (branch, cand[0, branch])
+
+
+def _follow(
+    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, branch: int
+) -> np.ndarray:
+    """(t, 6) the joints of the first t poses of `solutions` (m, 8, 6) while taking, pose by
+    pose, the in-limit solution nearest the previous joints (`_nearest`) stays on `branch`
+    from `prev`: each pose checked against the branch's path unwrapped from `prev` at once,
+    so a pass costs a few array operations instead of a Python step a pose. t stops at the
+    first pose where the nearest is another branch, or none (the caller steps it alone)."""
+    if not len(solutions):
+        return np.zeros((0, 6))
+    along = solutions[:, branch]
+    path = prev + np.cumsum(wrap(np.diff(np.r_[prev[None], along], axis=0)), axis=0)
+    before = np.r_[prev[None], path[:-1]]
+    cand, dist = _candidates(solutions, limits, before)
+    held = (np.argmin(dist, axis=1) == branch) & np.isfinite(dist[:, branch])
+    # Shifted by a turn into the limits, or off the unwrapped path: stepped alone.
+    held &= (np.abs(cand[:, branch] - path) < 1e-9).all(axis=1)
+    t = len(held) if held.all() else int(np.argmin(held))
+    return cand[:t, branch]
 
 
 def check_reach(
@@ -222,24 +268,36 @@ def check_reach(
     entered = np.r_[True, ~linked]
     pinned = q_start is not None
     end = _run_ends(linked)
-    # Sequential by nature: each pose's branch depends on the previous choice.
-    for i in range(n):
+    # Sequential by nature (each pose's branch depends on the previous choice), but within a
+    # pass the choice follows one branch: checked for a whole run at once (`_follow`).
+    i = 0
+    while i < n:
         if not exists[i].any():
+            i += 1
             continue
         if prev is None or (entered[i] and not pinned):
             start = _pass_start(arm, solutions[i : end[i]], limits, prev, tol, jump_deg)
             if start is None:
+                i += 1
                 continue
             prev = start
-        else:  # in a pass, or the first pose when the caller gave `q_start`
-            pinned = False
-            cand = solutions[i][exists[i]]
-            cand, inside = fit_limits(prev + wrap(cand - prev), limits)
-            if not inside.any():
-                continue
-            cand = cand[inside]
-            prev = cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
+            joints[i] = prev
+            i += 1
+            continue
+        # In a pass, or the first pose when the caller gave `q_start`: the in-limit
+        # solution nearest the previous joints.
+        pinned = False
+        step = _nearest(solutions[i : i + 1], limits, prev[None])
+        if step is None:
+            i += 1
+            continue
+        branch, prev = step
         joints[i] = prev
+        ran = _follow(solutions[i + 1 : end[i]], limits, prev, branch)
+        if len(ran):
+            joints[i + 1 : i + 1 + len(ran)] = ran
+            prev = ran[-1]
+        i += 1 + len(ran)
     reachable = ~np.isnan(joints).any(axis=1)
     terms = arm.singularity_terms(joints)
     margins = np.abs(terms)

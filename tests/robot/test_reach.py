@@ -1,0 +1,80 @@
+"""`check_reach` follows a pass's branch a whole run at a time: the same joints as the
+pose-by-pose rule (the in-limit solution nearest the previous joints), on paths with passes,
+unreachable poses and branch changes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scanplan.robot.base import wrap
+from scanplan.robot.presets import get_robot
+from scanplan.robot.reach import _pass_start, _run_ends, check_reach, fit_limits, same_pass
+
+
+def _pose_by_pose(poses, robot, q_start=None, swath=None, scanning=None, jump_deg=30.0):
+    """The rule `check_reach` implements, one Python step a pose (its earlier form)."""
+    arm = get_robot(robot)
+    n = len(poses)
+    linked = same_pass(n, swath, scanning)
+    limits = arm.joint_limits
+    solutions = arm.inverse(poses)
+    exists = ~np.isnan(solutions).any(axis=2)
+    tol = np.array([np.sin(np.radians(5.0)), np.sin(np.radians(5.0)), 20.0])
+    joints = np.full((n, 6), np.nan)
+    prev = None if q_start is None else np.asarray(q_start, dtype=float)
+    entered = np.r_[True, ~linked]
+    pinned = q_start is not None
+    end = _run_ends(linked)
+    for i in range(n):
+        if not exists[i].any():
+            continue
+        if prev is None or (entered[i] and not pinned):
+            start = _pass_start(arm, solutions[i : end[i]], limits, prev, tol, jump_deg)
+            if start is None:
+                continue
+            prev = start
+        else:
+            pinned = False
+            cand = solutions[i][exists[i]]
+            cand, inside = fit_limits(prev + wrap(cand - prev), limits)
+            if not inside.any():
+                continue
+            cand = cand[inside]
+            prev = cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
+        joints[i] = prev
+    return joints
+
+
+def _path(robot: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smooth joint-space passes (some crossing the wrist singularity, some sweeping a joint
+    past a limit), with moves between them and a few poses out of reach."""
+    arm = get_robot(robot)
+    rng = np.random.default_rng(seed)
+    lim = np.clip(arm.joint_limits, -np.pi, np.pi)
+    blocks, swath, scanning = [], [], []
+    for k in range(12):
+        q0 = rng.uniform(lim[:, 0] * 0.8, lim[:, 1] * 0.8)
+        q1 = q0 + rng.normal(0, 0.6, 6)
+        s = np.linspace(0, 1, int(rng.integers(20, 120)))[:, None]
+        T = arm.forward(q0 + s * (q1 - q0))
+        if k % 4 == 3:  # some poses out of reach
+            T[len(T) // 3 : len(T) // 2, :3, 3] *= 5.0
+        blocks.append(T)
+        swath += [k] * len(T)
+        scanning += [k % 5 != 4] * len(T)  # every fifth a move of its own poses
+    return np.concatenate(blocks), np.array(swath), np.array(scanning)
+
+
+@pytest.mark.parametrize("robot", ["ur5e", "kr6-r900"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_follows_the_pose_by_pose_rule(robot: str, seed: int) -> None:
+    poses, swath, scanning = _path(robot, seed)
+    q_start = get_robot(robot).inverse(poses[:1])[0, 0] if seed == 2 else None
+    if q_start is not None and np.isnan(q_start).any():
+        q_start = None
+    got = check_reach(poses, robot, q_start, swath, scanning).joints
+    want = _pose_by_pose(poses, robot, q_start, swath, scanning)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    assert np.isnan(got).any() and not np.isnan(got).all()  # both kinds of pose are met
+    np.testing.assert_allclose(got, want, atol=1e-9, equal_nan=True)
