@@ -28,7 +28,6 @@ from scanplan.planning.pipeline import Arm, default_views, plan_views
 from scanplan.planning.view_choice import (
     ViewBudget,
     _eval_spacing,
-    _view_key,
     choose_views,
     steep_samples,
     top_view_may_suffice,
@@ -248,6 +247,24 @@ def test_a_budget_in_work_chooses_the_same_views_with_or_without_workers(housing
     assert picks[0].out_of_time and picks[1].out_of_time
 
 
+def test_a_second_choice_plans_no_view_the_first_planned(housing):
+    # The choice for an arm runs after one without it on the same samples: the views that
+    # one planned are taken as planned (and as judged, where the arm flies all of them).
+    cell = planned_cell(PlanContext(SPEC, views="auto"), housing)
+    raster = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
+    first = choose_views(housing, SPEC, raster, budget=ViewBudget(candidates=6), workers=0)
+    assert len(first.known) >= len(first.plans) >= 2
+
+    def never(*_):
+        raise AssertionError("a view planned twice")
+
+    again = choose_views(
+        housing, SPEC, never, budget=ViewBudget(candidates=6), workers=0, known=first.known
+    )
+    assert [v.view.key() for v in again.plans] == [v.view.key() for v in first.plans]
+    assert again.coverage == first.coverage
+
+
 @pytest.mark.parametrize(
     ("option", "value", "message"),
     [("--view-seconds", "0", "--view-seconds"), ("--view-candidates", "0", "--view-candidates")],
@@ -267,7 +284,7 @@ def test_views_for_what_is_missed_are_also_scanned_level_and_none_is_planned_twi
     plan_view = view_workers_module.plan_view
 
     def recording(part, view, plan):
-        planned.append(_view_key(view))
+        planned.append(view.key())
         return plan_view(part, view, plan)
 
     # Planned here, one at a time, to see each view planned.
@@ -350,7 +367,7 @@ def test_views_planned_beside_the_top_view_on_workers_are_those_chosen_in_one_pr
     here = choose_views(part, SPEC, plan, workers=0)
     there = choose_views(part, SPEC, plan, workers=2)
     assert len(here.plans) >= 2
-    assert [_view_key(v.view) for v in here.plans] == [_view_key(v.view) for v in there.plans]
+    assert [v.view.key() for v in here.plans] == [v.view.key() for v in there.plans]
     assert here.coverage == there.coverage
 
 
@@ -381,9 +398,17 @@ def test_views_for_an_arm_are_chosen_by_what_it_flies():
     part = overhang_part()
     spec = ScanSpec()
     planner = make_planner("geometric")
-    tcp = parse_pose_arg("0,0,90,0,0,0")
-    _, traj = plan_views(part, spec, planner, "auto", arm=Arm("ur5e", tcp))
+    straight, angled = parse_pose_arg("0,0,90,0,0,0"), parse_pose_arg("0,0,90,0,30,0")
+    arm = Arm("ur5e", straight, brackets=(straight, angled))
+    _, traj = plan_views(part, spec, planner, "auto", arm=arm)
     record = traj.meta["robot"]
+    # Both brackets placed and judged on the plan made without the arm; the plan is made
+    # with the one that flies most of it.
+    tried = record["brackets"]
+    assert [b["tcp"] for b in tried] == ["0,0,90,0,0,0", "0,0,90,0,30,0"]
+    used = [b for b in tried if b["used"]]
+    assert len(used) == 1 and used[0]["in_spec_flown"] == max(b["in_spec_flown"] for b in tried)
+    assert used[0]["tcp"] == record["tcp"] and used[0]["part_pose"] == record["part_pose"]
     # The plan made without the arm is judged beside what the arm flies of the plan made
     # for it; every pose given up has a cause, and a view's cost is what nothing flown holds.
     assert 0.0 < record["in_spec"] <= record["in_spec_without_robot"] + 1e-9

@@ -218,3 +218,26 @@ def test_a_pass_is_entered_on_the_branch_that_flies_it_whole():
     report = check_reach(poses, "ur5e", q_start=q0, swath=swath, scanning=scanning)
     assert report.reachable and len(report.config_flips) == 0 and len(report.pass_jumps) == 0
     np.testing.assert_allclose(report.joints[0], q0, atol=1e-8)  # the move: as given
+
+
+def test_a_pass_whose_joint_move_in_hits_the_cell_is_flown_the_other_way_then_given_up():
+    # Pass 0 (poses 0-4), the move into pass 1 (pose 5), pass 1 (poses 6-10): the joint move
+    # into pose 6 sweeps a link into the cell.
+    swath = np.array([0] * 5 + [1] * 6)
+    scanning = np.array([True] * 5 + [False] + [True] * 5)
+    poses = np.tile(np.eye(4), (11, 1, 1))
+    poses[:, 0, 3] = np.arange(11.0)  # told apart by x
+    traj = Trajectory(poses, swath, scanning)
+    index, flipped = np.arange(11), np.zeros(11, bool)
+    why = np.full(11, -1)
+    out, reversed_now = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, flipped)
+    # Entered from its other end; the move that led to its old start is given up.
+    assert reversed_now
+    np.testing.assert_array_equal(out.poses[:, 0, 3], [0, 1, 2, 3, 4, 5, 10, 9, 8, 7, 6])
+    assert why[5] == fit_module.CAUSES.index("joint move into a pass")
+    assert (why[:5] == -1).all() and (why[6:] == -1).all()
+    # Its move in hits the cell that way too: now it is given up.
+    why = np.full(11, -1)
+    again, reversed_now = fit_module._reversed(out, out, index, {6: (0, 0)}, why, flipped)
+    assert not reversed_now and again is out
+    assert (why[5:] == fit_module.CAUSES.index("joint move into a pass")).all()

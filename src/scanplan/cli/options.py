@@ -92,6 +92,17 @@ def pose_option(tcp: bool) -> Callable[[str | None], str | None]:
     return check
 
 
+def pose_list_option(value: str | None) -> str | None:
+    """The callback of plan's --tcp: one pose, or several separated by ';' (brackets to
+    choose among), each checked as `pose_option`'s."""
+    if value is None:
+        return None
+    check = pose_option(tcp=True)
+    for one in value.split(";"):
+        check(one.strip())
+    return value
+
+
 def fixture_count(value: list[str] | None) -> list[str] | None:
     """--fixture, counted before any file is read (thousands crash the ray casts)."""
     try:
@@ -266,6 +277,18 @@ TcpOpt = Annotated[
         help=f"the sensor's pose on the robot's flange: {POSE_HELP}; default: the plan's, else "
         "the flange itself",
         callback=pose_option(tcp=True),
+    ),
+]
+PlanTcpOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--tcp",
+        metavar="POSE[;POSE...]",
+        help=f"the sensor's pose on the robot's flange: {POSE_HELP}; several separated by ';' "
+        "(brackets, e.g. straight and angled: '0,0,90,0,0,0;0,0,90,0,30,0'): each is placed "
+        "and judged, and the plan is made with the one the arm flies most of the scan with; "
+        "default: the flange itself",
+        callback=pose_list_option,
     ),
 ]
 PartPoseOpt = Annotated[

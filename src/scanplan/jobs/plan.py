@@ -99,7 +99,9 @@ def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
     if job.tcp is None:
         notes.append((f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)", False))
     pose = None if job.part_pose is None else parse_pose_arg(job.part_pose)
-    return Arm(job.robot, parse_pose_arg(job.tcp or IDENTITY_POSE, TCP_MM), pose), notes
+    # Several brackets, `A;B`: the plan is made with the one the arm flies most with.
+    brackets = tuple(parse_pose_arg(t, TCP_MM) for t in (job.tcp or IDENTITY_POSE).split(";"))
+    return Arm(job.robot, brackets[0], pose, brackets if len(brackets) > 1 else ()), notes
 
 
 def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = None) -> Planned:
@@ -198,11 +200,18 @@ def _arm_notes(plan: Plan) -> Lines:
             f"{sum(by_view.values())} scanning poses given up, "
             f"{record.get('moves_given_up', 0)} move poses, {record.get('passes_split', 0)} "
             "passes split at a configuration flip or a joint swing, "
-            f"{record.get('passes_turned', 0)} turned half a turn about the beam (links kept "
-            "clear of the part, table and fixtures)",
+            f"{record.get('passes_turned', 0)} turned half a turn about the beam, "
+            f"{record.get('passes_reversed', 0)} flown the other way (links kept clear of the "
+            "part, table and fixtures)",
             False,
         )
     ]
+    if brackets := record.get("brackets"):
+        said = [
+            f"--tcp {b['tcp']} flies {b['in_spec_flown']:.3f}" + (" (used)" if b["used"] else "")
+            for b in brackets
+        ]
+        lines.append(("brackets, of the plan made without the arm: " + "; ".join(said), False))
     lost = record.get("in_spec_lost_by_view", {})
     causes = record.get("given_up_by_cause", {})
     worst = sorted(lost, key=lambda k: -lost[k])[:5]

@@ -23,6 +23,7 @@ from scanplan.planning.view_choice import ViewBudget, choose_views
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
+from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import PlacedArm, fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import place
@@ -96,6 +97,7 @@ def plan_views(
     plan = ViewRaster(spec, planner, raster, direction, overlap, cell)
 
     start = time.perf_counter()
+    brackets: list[dict] = []
     obstacles = None if arm is None else obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
     free: Trajectory | None = None
     if views == "top":
@@ -112,17 +114,18 @@ def plan_views(
             workers=view_worker_count(),
             scheduler=scheduler,
         )
-        placed = None
+        placed, known = None, None
         if arm is not None:
             # Views chosen for the arm: placed where it flies most of the views chosen
-            # without it, then each candidate judged by what the arm flies of it there.
-            T_base_part = arm.T_base_part
-            if T_base_part is None:
-                _, free = join_views(part, order_views(choose().plans), spec, cell)
-                T_base_part = place(free, arm.robot, arm.tcp, obstacles=obstacles).T_base_part
-                arm = replace(arm, T_base_part=T_base_part)
-            placed = PlacedArm(arm.robot, arm.tcp, T_base_part, context)
-        selection = choose(arm=placed)
+            # without it, then each candidate judged by what the arm flies of it there
+            # (those the free choice planned are not planned again).
+            first = choose()
+            known = first.known
+            _, free = join_views(part, order_views(first.plans), spec, cell)
+            arm, brackets = _placed(part, free, arm, context, obstacles)
+            assert arm.T_base_part is not None
+            placed = PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
+        selection = choose(arm=placed, known=known)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
@@ -140,17 +143,58 @@ def plan_views(
         traj = replace(traj, meta=traj.meta | {"view_choice": choice})
     if arm is not None:
         traj = fit_arm(part, traj, arm, context, obstacles, free)
+        if brackets:
+            record = traj.meta["robot"] | {"brackets": brackets}
+            traj = replace(traj, meta=traj.meta | {"robot": record})
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
 
 
 @dataclass(frozen=True)
 class Arm:
     """The robot a plan is made for: a preset name or file, the sensor on its flange
-    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`)."""
+    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`).
+    `brackets`: several sensor mounts to choose `tcp` among (`_placed`), if given."""
 
     robot: str
     tcp: np.ndarray
     T_base_part: np.ndarray | None = None
+    brackets: tuple[np.ndarray, ...] = ()
+
+
+def _placed(
+    part: Part, free: Trajectory, arm: Arm, context: PlanContext, obstacles: CellObstacles | None
+) -> tuple[Arm, list[dict]]:
+    """`arm` placed (by `place`, unless it is) for the plan made without it (`free`); with
+    several `brackets`, each placed and judged by the in-spec coverage the arm flies of
+    `free` from there (`PlacedArm.flown`, the view choice's fan), the best kept. Returns the
+    arm and, with brackets, what each flew (`tcp`, `part_pose`, `in_spec_flown`)."""
+    tried: list[tuple[float, Arm]] = []
+    brackets: list[dict] = []
+    for tcp in arm.brackets or (arm.tcp,):
+        T_base_part = arm.T_base_part
+        if T_base_part is None:
+            T_base_part = place(free, arm.robot, tcp, obstacles=obstacles).T_base_part
+        candidate = replace(arm, tcp=tcp, T_base_part=T_base_part)
+        if len(arm.brackets) < 2:
+            return candidate, []
+        flown = PlacedArm(arm.robot, tcp, T_base_part, context).flown(part, free)
+        try:
+            held = in_spec_samples(part, context.spec, flown, 0, VIEW_CHOICE_FAN_POINTS, context)
+            share = float(held.mean()) if len(held) else 0.0
+        except ValueError:  # the arm flies nothing that measures
+            share = 0.0
+        tried.append((share, candidate))
+        brackets.append(
+            {
+                "tcp": pose_arg(tcp),
+                "part_pose": pose_arg(T_base_part),
+                "in_spec_flown": round(share, 4),
+            }
+        )
+    best = max(range(len(tried)), key=lambda k: tried[k][0])  # the first of equals
+    for k, said in enumerate(brackets):
+        said["used"] = k == best
+    return tried[best][1], brackets
 
 
 def fit_arm(

@@ -24,7 +24,7 @@ from scanplan.core.quantities import (
     ScanSpec,
 )
 from scanplan.judging import coverage_spacing_mm
-from scanplan.planning.view_workers import ViewJudge, ViewWorkers
+from scanplan.planning.view_workers import KnownViews, ViewJudge, ViewWorkers
 from scanplan.planning.views import PlanView, View, ViewPlan, candidate_views, missed_views
 from scanplan.robot.fit import PlacedArm
 from scanplan.world.part import Part
@@ -87,6 +87,9 @@ class ViewSelection:
     in_spec: list[np.ndarray] = field(default_factory=list)
     exact_coverage: float | None = None  # the exact cover's by as many views, for scale
     out_of_time: bool = False  # stopped by the time budget, not by gain or target
+    # Every view planned, chosen or not, by key: what a second choice on the same samples
+    # need not plan again (`ViewJudge.known`).
+    known: KnownViews = field(default_factory=dict)
 
 
 def steep_samples(part: Part, samples: VisibleSurface) -> np.ndarray:
@@ -119,6 +122,7 @@ def choose_views(
     workers: int = 0,
     scheduler: str | None = None,
     arm: PlacedArm | None = None,
+    known: KnownViews | None = None,
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -153,10 +157,11 @@ def choose_views(
     (`view_workers.view_worker_count`), candidates are planned on that many processes, each
     the next one the choice would try: the same views, sooner; with `scheduler`, as Dask
     tasks on that cluster. With a placed `arm`, each view is judged by what that arm flies
-    of it (`fit.PlacedArm.flown`), so the cover is of what the arm can scan."""
+    of it (`fit.PlacedArm.flown`), so the cover is of what the arm can scan; `known`, the
+    views a choice without the arm planned (`ViewSelection.known`), are not planned again."""
 
     spent = _Spent(ViewBudget() if budget is None else budget)
-    judge = ViewJudge(spec, plan, points_per_profile, seed, arm)
+    judge = ViewJudge(spec, plan, points_per_profile, seed, arm, known)
     with ExitStack() as stack:
         # The top view is planned on a thread of its own from the start, beside the samples
         # the views are judged on (`evaluate` draws the same) and the workers' start: a
@@ -180,7 +185,9 @@ def choose_views(
                 greedy.ask(int(i))
         greedy.take_top(top_view)
         if greedy.target_reached():
-            return ViewSelection(greedy.plans, greedy.coverage, 0, greedy.chosen)
+            return ViewSelection(
+                greedy.plans, greedy.coverage, 0, greedy.chosen, known=greedy.known()
+            )
         if greedy.pool is None:
             # Started only now: a part whose top view is enough (the door) needs no worker, and
             # starting them anyway took the demo from 55 s to 60 beside its second process.
@@ -273,7 +280,7 @@ class _Greedy:
         self.candidates = candidate_views(self.part, self.spec)
         # The samples on each candidate's faces: the bound on its gain.
         self.on_faces = [self._on_faces(v) for v in self.candidates]
-        self.tried = {_view_key(v) for v in self.candidates}
+        self.tried = {v.key() for v in self.candidates}
         self.pool = stack.enter_context(ViewWorkers(self.part, judge, workers, scheduler))
         return self.pool
 
@@ -289,7 +296,8 @@ class _Greedy:
         try:
             top, covered = top_view.result()
             self.plans, self.coverage, self.chosen = [top], [float(covered.mean())], [covered]
-            self.covered = covered  # chosen[0] itself: `_choose` ORs each view into it too
+            # A copy: `_choose` ORs each view into it, and the top view's own set is kept.
+            self.covered = covered.copy()
         except TooLarge:  # the user's numbers, not the view's fault
             raise
         except ValueError:  # nothing to inspect faces up (walls only): the views must see it all
@@ -392,10 +400,10 @@ class _Greedy:
         if scan_level:
             more += [replace(v, level=True) for v in more if v.level_direction() is not None]
         # A view planned before would add what it added then: nothing worth a view.
-        more = [v for v in more if _view_key(v) not in self.tried]
+        more = [v for v in more if v.key() not in self.tried]
         if not more:
             return False
-        self.tried |= {_view_key(v) for v in more}
+        self.tried |= {v.key() for v in more}
         self.candidates += more
         self.on_faces += [self._on_faces(v) for v in more]
         return True
@@ -420,13 +428,13 @@ class _Greedy:
             self.chosen + left_out,
             exact,
             self.spent.timed_out,
+            self.known(),
         )
 
-
-def _view_key(view: View) -> tuple[bytes, bytes, bool]:
-    """What makes two proposed views the same view: their axis, region and scan rule."""
-    faces = b"" if view.faces is None else np.sort(np.asarray(view.faces)).tobytes()
-    return np.round(view.axis, 9).tobytes(), faces, view.level
+    def known(self) -> KnownViews:
+        """Every view planned and its in-spec set, by key."""
+        judged = [*zip(self.plans, self.chosen, strict=True), *self.evaluated.values()]
+        return {vp.view.key(): (vp, cov) for vp, cov in judged}
 
 
 def _eval_spacing(spec: ScanSpec, points_per_profile: int) -> float:

@@ -18,7 +18,7 @@ import warnings
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from multiprocessing import forkserver
 from typing import Any
 
@@ -38,24 +38,38 @@ from scanplan.world.part import Part
 TASKS_AHEAD = 2
 
 
+# A view's key (`View.key`) -> its plan and in-spec set, as a view choice judged them.
+KnownViews = dict[tuple[bytes, bytes, bool], tuple[ViewPlan, np.ndarray]]
+
+
 @dataclass(frozen=True)
 class ViewJudge:
     """A view planned by `plan` (on the part turned into its frame: `views.plan_view`) and
     judged: its in-spec set on the samples of the surface seen from the upper hemisphere
     (`in_spec_samples` with a fan of `points_per_profile` columns and samples drawn with
-    `seed`). Picklable when `plan` is."""
+    `seed`). With an `arm`, what it flies of the view is judged. `known`: views planned
+    and judged before on the same samples without the arm (the free choice's), taken as
+    they were planned, and as they were judged where the arm flies all of them as
+    planned. Picklable when `plan` is."""
 
     spec: ScanSpec
     plan: PlanView
     points_per_profile: int
     seed: int = 0
     arm: PlacedArm | None = None
+    known: KnownViews | None = None
 
     def __call__(self, part: Part, view: View) -> tuple[ViewPlan, np.ndarray]:
-        planned = plan_view(part, view, self.plan)
-        context = PlanContext(self.spec, views="auto")
+        before = None if self.known is None else self.known.get(view.key())
+        if before is None:
+            planned = plan_view(part, view, self.plan)
+        else:
+            planned = replace(before[0], view=replace(before[0].view, index=view.index))
         # With an arm, what it flies of the view: the choice then picks views it can fly.
         flown = planned.traj if self.arm is None else self.arm.flown(part, planned.traj)
+        if before is not None and flown is planned.traj:
+            return planned, before[1]
+        context = PlanContext(self.spec, views="auto")
         held = in_spec_samples(part, self.spec, flown, self.seed, self.points_per_profile, context)
         return planned, held
 

@@ -149,6 +149,11 @@ class View:
             mask &= region
         return replace(part.turned(self.R), inspect_faces=mask)
 
+    def key(self) -> tuple[bytes, bytes, bool]:
+        """What makes two proposed views the same view: their axis, region and scan rule."""
+        faces = b"" if self.faces is None else np.sort(np.asarray(self.faces)).tobytes()
+        return np.round(self.axis, 9).tobytes(), faces, self.level
+
     def level_direction(self) -> np.ndarray | None:
         """The scan direction of a tilted view, in its frame: level in the part frame
         (across the tilt). The camera sits beside the laser along the scan; scanning level

@@ -6,6 +6,7 @@ happens only between passes, as a joint move. It says what it gave up.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -63,7 +64,8 @@ class RobotFit:
     pose given up for reach lies (<= 0: within that distance, out of reach at its height or
     orientation); None if none was.
     links: the arm's links along what is kept (None: fitted without a cell). turned: passes
-    flown with the sensor turned half a turn about its beam.
+    flown with the sensor turned half a turn about its beam; reversed: passes flown the
+    other way, as the joint move into their first pose swept a link into the cell.
     """
 
     traj: Trajectory
@@ -77,6 +79,7 @@ class RobotFit:
     turned: int = 0
     given_up_by_cause: dict[int, dict[str, int]] = field(default_factory=dict)
     beyond_reach_mm: float | None = None
+    reversed: int = 0
 
     @property
     def flyable(self) -> bool:
@@ -98,6 +101,7 @@ class RobotFit:
             "moves_given_up": self.moves_given_up,
             "passes_split": self.splits,
             "passes_turned": self.turned,
+            "passes_reversed": self.reversed,
             "reachable": self.report.reachable,
             "links_checked": self.links is not None,
             "flyable": self.flyable,
@@ -118,8 +122,9 @@ def fit_to_robot(
     new pass) and passes are split where the arm flips its configuration, until the reach
     check of the whole path finds neither. First, each pass is turned half a turn about the
     beam where the arm keeps more of its poses that way. In a cell (`obstacles`), poses that
-    put an arm link into the part, a fixture or the table are given up too, and so is a
-    pass whose joint move in would sweep a link through them."""
+    put an arm link into the part, a fixture or the table are given up too; a pass whose
+    joint move in would sweep a link through them is flown the other way, and given up if
+    that move does too."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
@@ -131,6 +136,7 @@ def fit_to_robot(
     cause = np.full(len(traj), -1)  # why each pose given up was: an index into CAUSES
     swath = traj.swath.copy()
     splits = 0
+    flipped = np.zeros(len(traj), bool)  # the poses of passes flown the other way
     for _ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         report = check_reach(
@@ -149,11 +155,12 @@ def fit_to_robot(
         if report.reachable and obstacles is not None:
             starts = pass_starts(current.swath, current.scanning)
             in_cell = check_links(arm, report.joints, obstacles, T_base_part, starts)
-            for i in in_cell.moves:  # the whole pass the arm cannot be brought into
-                why[current.swath == current.swath[i]] = CAUSES.index("joint move into a pass")
+            traj, reversed_now = _reversed(traj, current, index, in_cell.moves, why, flipped)
             hit = in_cell.colliding
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
-        if report.reachable and not len(swings) and (why < 0).all():
+        else:
+            reversed_now = False
+        if report.reachable and not len(swings) and (why < 0).all() and not reversed_now:
             break
         bad = np.flatnonzero(why >= 0)
         keep[index[bad]] = False
@@ -176,6 +183,7 @@ def fit_to_robot(
             given_up[view.index] = count
             causes = np.bincount(cause[in_view], minlength=len(CAUSES))
             by_cause[view.index] = {CAUSES[k]: int(c) for k, c in enumerate(causes) if c}
+    reversed_passes = len(np.unique(swath[flipped & keep & traj.scanning]))
     fitted = traj.subset(keep, swath)
     if not fitted.scanning.any():
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
@@ -200,7 +208,39 @@ def fit_to_robot(
         turned,
         by_cause,
         beyond_mm,
+        reversed_passes,
     )
+
+
+def _reversed(
+    traj: Trajectory,
+    current: Trajectory,
+    index: np.ndarray,
+    moves: Iterable[int],
+    why: np.ndarray,
+    flipped: np.ndarray,
+) -> tuple[Trajectory, bool]:
+    """Passes of `current` (the kept poses of `traj`, at `index`) whose joint move in
+    (`moves`: their first poses) sweeps a link into the cell, flown the other way: entered
+    from their other end, the moves that led to their first pose given up (the arm makes
+    a joint move instead); a pass already flown so is given up (in `why`). `flipped` marks
+    the poses reversed. Returns `traj` with those passes reversed, and whether any was."""
+    poses = traj.poses
+    reversed_any = False
+    for i in moves:
+        in_pass = current.swath == current.swath[i]
+        piece = np.flatnonzero(in_pass & current.scanning)
+        slots = index[piece]
+        if flipped[slots].any() or len(slots) < 2:
+            why[in_pass] = CAUSES.index("joint move into a pass")
+            continue
+        if not reversed_any:
+            poses = poses.copy()
+        poses[slots] = poses[slots[::-1]]
+        flipped[slots] = True
+        why[in_pass & ~current.scanning] = CAUSES.index("joint move into a pass")
+        reversed_any = True
+    return (replace(traj, poses=poses) if reversed_any else traj), reversed_any
 
 
 def _turned(
@@ -291,7 +331,8 @@ class PlacedArm:
         a turn about the beam (whichever keeps more), its scanning poses that are out of
         reach or beyond the limits, or put a link or the sensor body into the cell, given
         up (a pass goes on after them as a new pass). Configuration flips are left to
-        `fit_to_robot`, which splits a pass there and keeps its poses."""
+        `fit_to_robot`, which splits a pass there and keeps its poses. `traj` itself when
+        the arm flies all of it as planned."""
         arm = get_robot(self.robot)
         obstacles = self.obstacles(part)
         inv_tcp = np.linalg.inv(self.tcp)
@@ -302,6 +343,8 @@ class PlacedArm:
         better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
         turn = np.isin(traj.swath, better)
         keep = np.where(turn, turned, planned) | ~scanning
+        if keep.all() and not turn.any():
+            return traj  # flown as planned: the caller may reuse what it knows of it
         poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
         swath = _renumbered(traj, keep, traj.swath, np.zeros(len(traj), bool))
         return replace(traj, poses=poses).subset(keep, swath)

@@ -174,11 +174,15 @@ def _groups(traj: Trajectory, keep: np.ndarray) -> np.ndarray:
 
 
 def _subsample(traj: Trajectory, m: int) -> np.ndarray:
-    """Indices of about m poses, always including every pass's first and last pose."""
+    """Indices of at most 2m poses: m evenly spaced, and the first and last poses of the
+    passes and moves (m of them evenly spaced among those, when there are more: a plan of
+    many views has hundreds, which made the search's sample ten times its `m`)."""
     n = len(traj)
     s, w = traj.scanning, traj.swath
     edge = np.r_[True, (s[1:] != s[:-1]) | (w[1:] != w[:-1])]
     ends = np.flatnonzero(edge | np.r_[edge[1:], True])
+    if len(ends) > m:
+        ends = ends[np.linspace(0, len(ends) - 1, m).round().astype(int)]
     even = np.linspace(0, n - 1, min(m, n)).round().astype(int)
     return np.union1d(ends, even)
 
@@ -233,28 +237,27 @@ def _scores(
 def _coarse_grid(
     reach: float, step: float, lo: float, hi: float, yaw_step_deg: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(P, 4) rows (x, y, z, yaw rad): `step` apart over the disc of radius `reach`, every
-    yaw step, 7 heights from `lo` to `hi` (one where they meet); and those heights."""
-    g = np.arange(-reach, reach + 1e-9, step)
-    gx, gy = np.meshgrid(g, g, indexing="ij")
-    disc = np.hypot(gx, gy) <= reach
+    """(P, 4) rows (x, y, z, yaw rad): `step` apart along the base's +x axis out to `reach`,
+    every yaw step, 7 heights from `lo` to `hi` (one where they meet); and those heights.
+    One line, not the disc: the part and its cell (table, fixtures) turned with it about the
+    base's vertical axis give the arm the same joints but the first, turned as much, so the
+    disc only repeats the line with that joint's margin changed (the pattern search moves
+    off the line); the line on +x keeps that joint mid-range on arms whose first joint turns
+    ±170-180°."""
+    radii = np.arange(0.0, reach + 1e-9, step)
     heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
-    n_yaws = math.ceil(360.0 / yaw_step_deg - 1e-9)
+    n_yaws = math.ceil(3 * 360.0 / yaw_step_deg - 1e-9)
     check_count(  # before the grid is allocated
-        int(disc.sum()) * len(heights) * n_yaws,
+        len(radii) * len(heights) * n_yaws,
         MAX_PLACEMENTS,
         f"candidate placements (yaw step {yaw_step_deg:g} deg)",
         "give a larger yaw step",
     )
-    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg))
-    grid = np.array(
-        [
-            (x, y, z, a)
-            for x, y in zip(gx[disc], gy[disc], strict=True)
-            for z in heights
-            for a in yaws
-        ]
-    )
+    # Yaw three times finer: the disc's positions round the base turned the part against
+    # the arm in between its yaw steps, which the line does not.
+    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg / 3))
+    r, z, a = np.meshgrid(radii, heights, yaws, indexing="ij")
+    grid = np.stack([r.ravel(), np.zeros(r.size), z.ravel(), a.ravel()], axis=1)
     return grid, heights
 
 
@@ -271,7 +274,7 @@ def _pattern_search(
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Improve every candidate row of `best` (scored `best_scores`) at once: each round tries
     a step of `delta` either way along x, y, z and yaw (z kept in `height_range`), keeps the
-    best that scores higher, and halves the steps when none does, until they are under 1 mm
+    best that scores higher, and halves the steps when none does, until they are under 4 mm
     or 24 rounds have run. Returns the candidates, their scores and how many were scored."""
     lo, hi = height_range
     evaluated = 0
@@ -289,7 +292,7 @@ def _pattern_search(
         best_scores = np.maximum(best_scores, s.max(axis=1))
         if not improved.any():
             delta = delta / 2
-            if delta[0] < 1.0:
+            if delta[0] < 4.0:  # a few mm move no pose in or out of reach worth the rounds
                 break
     return best, best_scores, evaluated
 
@@ -324,10 +327,10 @@ def place(
         raise ValueError(f"height range must be LO <= HI in mm, got {lo}, {hi}")
     centre = T_part_flange[:, :2, 3].mean(axis=0)
 
-    # Coarse: a grid over the disc the arm reaches, every yaw step, a few heights.
+    # Coarse: a grid along a line out to the arm's reach, every yaw step, a few heights.
     coarse = _subsample(traj, coarse_poses)
     step = reach / 6
-    grid, heights = _coarse_grid(reach, step, lo, hi, yaw_step_deg)
+    grid, heights = _coarse_grid(reach, step / 2, lo, hi, yaw_step_deg)
     placements = _placements(grid, centre)
     scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), placements, obstacles)
     # And on evenly spaced poses alone: the first and last pose of every pass and move can

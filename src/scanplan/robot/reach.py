@@ -208,9 +208,7 @@ def _nearest(
     return None if not np.isfinite(dist[0, branch]) else (branch, cand[0, branch])
 
 
-def _follow(
-    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, branch: int
-) -> np.ndarray:
+def _follow(solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, branch: int) -> np.ndarray:
     """(t, 6) the joints of the first t poses of `solutions` (m, 8, 6) while taking, pose by
     pose, the in-limit solution nearest the previous joints (`_nearest`) stays on `branch`
     from `prev`: each pose checked against the branch's path unwrapped from `prev` at once,
@@ -287,11 +285,11 @@ def check_reach(
         # In a pass, or the first pose when the caller gave `q_start`: the in-limit
         # solution nearest the previous joints.
         pinned = False
-        step = _nearest(solutions[i : i + 1], limits, prev[None])
-        if step is None:
+        nearest = _nearest(solutions[i : i + 1], limits, prev[None])
+        if nearest is None:
             i += 1
             continue
-        branch, prev = step
+        branch, prev = nearest
         joints[i] = prev
         ran = _follow(solutions[i + 1 : end[i]], limits, prev, branch)
         if len(ran):
