@@ -152,3 +152,26 @@ def test_a_turn_about_the_beam_is_checked_for_the_sensor_body() -> None:
     assert (planned & ~turned).any() and (turned & ~planned).any()
     # Without the sensor, only the links are checked: every pose passes this test.
     assert obstacles_for(part, Cell.around(part)).sensor_clear(poses @ HALF_TURN).all()
+
+
+def test_the_table_block_is_measured_as_fcl_measures_a_capsule_against_a_box() -> None:
+    from scanplan.world.capsule_collision import segment_box_distance
+
+    lo, hi = np.array([-300.0, -200.0, -40.0]), np.array([300.0, 200.0, 0.0])
+    box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(0.5 * (lo + hi)))
+    rng = np.random.default_rng(4)
+    ends = rng.uniform([-500, -400, -200], [500, 400, 300], (300, 2, 3))
+    far = segment_box_distance(ends, lo, hi)
+    radius = 20.0
+    for (a, b), d in zip(ends, far, strict=True):
+        capsule = fcl.CollisionObject(
+            fcl.Capsule(radius, float(np.linalg.norm(b - a))),
+            fcl.Transform(_z_to(b - a), 0.5 * (a + b)),
+        )
+        result = fcl.DistanceResult()
+        measured = fcl.distance(capsule, box, fcl.DistanceRequest(), result)
+        if measured > 1e-6:  # apart: the same distance
+            assert d - radius == pytest.approx(measured, abs=1e-3)
+        else:  # touching or inside: within the radius
+            assert d <= radius + 1e-6
+    assert (far == 0).any() and (far > 50).any()

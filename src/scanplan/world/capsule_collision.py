@@ -76,11 +76,14 @@ class _SurfaceProxy:
         self.bound_mm = self.pitch / 2
         self._tree = cKDTree(_surface_points(part.mesh, self.bound_mm / 2))
 
-    def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def within(
+        self, segments: np.ndarray, radii: np.ndarray, sharpen: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
         """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
         mesh, and those that surely do (a point of the surface lies inside the capsule).
         Points every `pitch` along each axis stand for it (the axis is within pitch / 2 of
-        one of them)."""
+        one of them). sharpen: the capsules left unsure measured again with exact nearest
+        points, so that few are left to FCL."""
         a, b = segments[:, 0], segments[:, 1]
         length = np.linalg.norm(b - a, axis=1)
         count = np.ceil(length / self.pitch).astype(int) + 1
@@ -101,7 +104,46 @@ class _SurfaceProxy:
         np.logical_or.at(maybe, owner, d <= (1 + eps) * reach[owner])
         # The axis points lie on the axis, the tree's on the surface.
         np.logical_or.at(surely, owner, d <= radii[owner])
+        if sharpen:
+            # The exact nearest of the unsure capsules' points that may be near: each
+            # capsule left to FCL costs more than this query (the exact query of every
+            # point cost the drone's fit on a KR 6 more than FCL saved).
+            unsure = (maybe & ~surely)[owner] & (d <= (1 + eps) * reach[owner])
+            exact, _ = self._tree.query(points[unsure], distance_upper_bound=float(reach.max()))
+            near = np.zeros(len(segments), bool)
+            np.logical_or.at(near, owner[unsure], exact <= reach[owner[unsure]])
+            np.logical_or.at(surely, owner[unsure], exact <= radii[owner[unsure]])
+            maybe = surely | near
         return maybe, surely
+
+
+def segment_box_distance(segments: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(m,) the distance (mm) from each segment (m, 2, 3) to the axis-aligned box lo..hi
+    (0 where it enters it). The distance from a point moving along a segment to a convex
+    set is convex in the segment's parameter: a golden-section search finds its minimum
+    (to 1e-9 of the segment's length in 45 steps), for all segments at once."""
+    a, d = segments[:, 0], segments[:, 1] - segments[:, 0]
+
+    def dist(t: np.ndarray) -> np.ndarray:
+        p = a + t[:, None] * d
+        return np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=1)
+
+    g = (np.sqrt(5.0) - 1.0) / 2.0
+    left, right = np.zeros(len(a)), np.ones(len(a))
+    x1, x2 = right - g * (right - left), left + g * (right - left)
+    f1, f2 = dist(x1), dist(x2)
+    for _ in range(45):
+        lower = f1 <= f2  # the minimum lies in [left, x2], else in [x1, right]
+        left, right = np.where(lower, left, x1), np.where(lower, x2, right)
+        new = np.where(lower, right - g * (right - left), left + g * (right - left))
+        value = dist(new)
+        x1, f1, x2, f2 = (
+            np.where(lower, new, x2),
+            np.where(lower, value, f2),
+            np.where(lower, x1, new),
+            np.where(lower, f1, value),
+        )
+    return np.minimum.reduce([f1, f2, dist(np.zeros(len(a))), dist(np.ones(len(a)))])
 
 
 class CellObstacles:
@@ -168,12 +210,19 @@ class CellObstacles:
             near = (lo <= ohi).all(axis=2) & (hi >= olo).all(axis=2) & (hit < 0)
             rows, links = np.nonzero(near)
             if proxy is not None and len(rows):
-                maybe, surely = proxy.within(ends[rows, links], grown[rows, links])
+                # Sharpened where FCL measures what is left: a capsule sent to it cost
+                # about 30 ms near the drone, more than the exact query of its points.
+                maybe, surely = proxy.within(ends[rows, links], grown[rows, links], exact)
                 if not exact:
                     surely = maybe
                 hit[rows[surely], links[surely]] = kind
                 rows, links = rows[maybe & ~surely], links[maybe & ~surely]
             if not len(rows):
+                continue
+            if proxy is None:  # the table block: an axis-aligned box, its distance exact here
+                far = segment_box_distance(ends[rows, links], olo, ohi)
+                touch = far <= grown[rows, links]
+                hit[rows[touch], links[touch]] = kind
                 continue
             seg = ends[rows, links]
             axis = seg[:, 1] - seg[:, 0]
