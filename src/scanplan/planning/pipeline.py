@@ -19,7 +19,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging import in_spec_samples
 from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.planners import Planner
-from scanplan.planning.view_choice import ViewBudget, choose_views
+from scanplan.planning.view_choice import ViewBudget, ViewSelection, choose_views
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
@@ -133,20 +133,24 @@ def plan_views(
         budget = ViewBudget() if budget is None else budget
         traj = replace(traj, meta=traj.meta | {"view_choice_out_of_budget": budget.said()})
     if views != "top" and selection.exact_coverage is not None:
-        # The view choice's own estimate (its fan, its samples) of the greedy choice, and
-        # of the exact cover by as many views among those it planned.
-        choice = {
-            "views_planned": len(selection.in_spec),
-            "in_spec_greedy": round(selection.coverage[-1], 4),
-            "in_spec_exact": round(selection.exact_coverage, 4),
-        }
-        traj = replace(traj, meta=traj.meta | {"view_choice": choice})
+        traj = replace(traj, meta=traj.meta | {"view_choice": _choice_record(selection)})
     if arm is not None:
         traj = fit_arm(part, traj, arm, context, obstacles, free)
         if brackets:
             record = traj.meta["robot"] | {"brackets": brackets}
             traj = replace(traj, meta=traj.meta | {"robot": record})
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
+
+
+def _choice_record(selection: ViewSelection) -> dict:
+    """The view choice's own estimate (its fan, its samples) of the greedy choice, and of
+    the exact cover by as many views among those it planned."""
+    assert selection.exact_coverage is not None
+    return {
+        "views_planned": len(selection.in_spec),
+        "in_spec_greedy": round(selection.coverage[-1], 4),
+        "in_spec_exact": round(selection.exact_coverage, 4),
+    }
 
 
 @dataclass(frozen=True)

@@ -171,9 +171,7 @@ def fit_to_robot(
         cut[index[swings]] = True
         splits += int(len(np.union1d(report.config_flips, swings)))
         swath = _renumbered(traj, keep, swath, cut)
-    far = (cause == CAUSES.index("reach")) & traj.scanning
-    flange_xy = (T_base_part @ traj.poses[far] @ inv_tcp)[:, :2, 3]
-    beyond_mm = float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0] if far.any() else None
+    beyond_mm = _beyond_reach_mm(traj, arm, T_base_part, inv_tcp, cause)
     given_up: dict[int, int] = {}
     by_cause: dict[int, dict[str, int]] = {}
     lost = ~keep & traj.scanning
@@ -210,6 +208,18 @@ def fit_to_robot(
         beyond_mm,
         reversed_passes,
     )
+
+
+def _beyond_reach_mm(
+    traj: Trajectory, arm: Robot, T_base_part: np.ndarray, inv_tcp: np.ndarray, cause: np.ndarray
+) -> float | None:
+    """How much farther from the base axis than the arm reaches the farthest scanning pose
+    given up for reach lies; None if none was."""
+    far = (cause == CAUSES.index("reach")) & traj.scanning
+    if not far.any():
+        return None
+    flange_xy = (T_base_part @ traj.poses[far] @ inv_tcp)[:, :2, 3]
+    return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
 def _reversed(

@@ -297,6 +297,24 @@ def _pattern_search(
     return best, best_scores, evaluated
 
 
+def _seeds(
+    grid: np.ndarray,
+    heights: np.ndarray,
+    scores: np.ndarray,
+    even_scores: np.ndarray,
+    keep: int,
+    in_cell: bool,
+) -> np.ndarray:
+    """The coarse placements the pattern search starts from: the best `keep` by either
+    score, and in a cell the best at each height too."""
+    seeds = list(np.argsort(-scores)[:keep]) + list(np.argsort(-even_scores)[:keep])
+    if in_cell:
+        for z in heights:
+            at = np.flatnonzero(grid[:, 2] == z)
+            seeds.append(int(at[np.argmax(scores[at])]))
+    return np.unique(seeds)
+
+
 def place(
     traj: Trajectory,
     robot: str | Path | Robot,
@@ -346,12 +364,7 @@ def place(
     starts = _groups(traj, fine)
     # Seeds: the best few, and in a cell the best at each height too, since the margins
     # favour heights from which the links may not clear the table (ranked at the end).
-    seeds = list(np.argsort(-scores)[:keep]) + list(np.argsort(-even_scores)[:keep])
-    if obstacles is not None:
-        for z in heights:
-            at = np.flatnonzero(grid[:, 2] == z)
-            seeds.append(int(at[np.argmax(scores[at])]))
-    best = grid[np.unique(seeds)]
+    best = grid[_seeds(grid, heights, scores, even_scores, keep, obstacles is not None)]
     best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre), obstacles)
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
     best, best_scores, searched = _pattern_search(
