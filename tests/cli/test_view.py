@@ -173,7 +173,9 @@ def test_the_page_renders_in_a_browser_with_the_part_lit(tmp_path):
     subprocess.run(
         [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader",
          "--enable-unsafe-swiftshader", "--window-size=1400,1000", f"--screenshot={shot}",
-         page.as_uri()],
+         # Without a time budget the shot is taken at the load event, which on a busy
+         # machine comes before the software WebGL has drawn the scene.
+         "--virtual-time-budget=15000", page.as_uri()],
         capture_output=True, timeout=120, check=True, cwd=tmp_path,
     )  # fmt: skip
     rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)
