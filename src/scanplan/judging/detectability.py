@@ -21,11 +21,11 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from scanplan.core.quantities import DEFECT_TYPE, ScanSpec
+from scanplan.core.quantities import DEFECT_TYPE, ScanSpec, norm_rows
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
+from scanplan.judging.accumulators import valid_points
 from scanplan.judging.detection import (
     Detector,
     FalseCalls,
@@ -367,11 +367,12 @@ class DetectabilitySurvey:
         cos = cos_incidence(scan, fan)
         sig_n = sigma_mm(scan, fan, cos) * cos
         col = np.full(valid.shape, np.nan)
-        col[:, :-1] = np.linalg.norm(np.diff(scan.points_part, axis=1), axis=2)
+        col[:, :-1] = norm_rows(np.diff(scan.points_part, axis=1))
         col[:, :-1][~(valid[:, 1:] & valid[:, :-1])] = np.nan
         pick = (slice(None), slice(None, None, self._stride))
         v = valid[pick]
-        pts = scan.points_part[pick][v]
+        # The coverage's tree where its stride is this one (the same points).
+        pts, near_tree = valid_points(scan, self._stride)
         if len(pts) == 0:
             return
         rows = lo + np.nonzero(v)[0]
@@ -380,16 +381,14 @@ class DetectabilitySurvey:
         inside = self._in_box(box_lo, box_hi)
         if len(inside) == 0:
             return
-        near_tree = cKDTree(pts)
+        # One worker: the next chunk is measured on the other core meanwhile.
         self._count[inside] += self._stride * np.asarray(
-            near_tree.query_ball_point(
-                samples[inside], self._radius, return_length=True, workers=-1
-            )
+            near_tree.query_ball_point(samples[inside], self._radius, return_length=True)
         )
         # Each sample's noise, pitch and passes from its nearest points (not each point's
         # nearest sample: a sub-sampled fan's columns may lie farther apart than the samples).
         dist, j = near_tree.query(
-            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius, workers=-1
+            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius
         )
         c, s = col[pick][v], sig_n[pick][v]
         j = np.where(np.isfinite(dist), j, 0)
