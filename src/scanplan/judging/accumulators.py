@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -57,30 +58,37 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
         return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
 
 
-class _LastTree(threading.local):
+class _LastPoints(threading.local):
     """The last chunk's valid points and their tree, per thread: `valid_points`' memo."""
 
-    key: tuple[int, int] | None = None
     scan: Scan | None = None
-    value: tuple[np.ndarray, cKDTree] | None = None
+    stride = 0
+    points: np.ndarray | None = None
+    tree: cKDTree | None = None
 
 
-_LAST_TREE = _LastTree()
+_LAST = _LastPoints()
 
 
-def valid_points(scan: Scan, stride: int) -> tuple[np.ndarray, cKDTree]:
-    """(k, 3) the valid points of every `stride`-th column of `scan`, row by row, and a k-d
-    tree of them: built once per chunk, though the coverage and the detectability survey
-    both ask (the same points where their strides agree). The tree is unbalanced: built per
-    chunk and queried a few times, it builds in half the time."""
-    memo = _LAST_TREE
-    if memo.scan is scan and memo.key == (id(scan), stride) and memo.value is not None:
-        return memo.value
-    cols = slice(None, None, stride)
-    points = scan.points_part[:, cols][scan.valid[:, cols]]
-    value = points, cKDTree(points, balanced_tree=False, compact_nodes=False)
-    memo.scan, memo.key, memo.value = scan, (id(scan), stride), value
-    return value
+def valid_points(scan: Scan, stride: int) -> np.ndarray:
+    """(k, 3) the valid points of every `stride`-th column of `scan`, row by row: gathered
+    once per chunk, though the coverage and the detectability survey both ask (the same
+    points where their strides agree)."""
+    memo = _LAST
+    if memo.scan is not scan or memo.stride != stride or memo.points is None:
+        cols = slice(None, None, stride)
+        memo.points = scan.points_part[:, cols][scan.valid[:, cols]]
+        memo.scan, memo.stride, memo.tree = scan, stride, None
+    return memo.points
+
+
+def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
+    """A k-d tree of `valid_points(scan, stride)`, built once per chunk. Unbalanced: built
+    per chunk and queried a few times, it builds in half the time."""
+    points = valid_points(scan, stride)
+    if _LAST.tree is None:
+        _LAST.tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+    return _LAST.tree
 
 
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:
@@ -252,7 +260,8 @@ class Coverage:
             near = np.concatenate([near, self._last[0][self._last[1]]])
         cand = self.surface.near(near, max(self.cover_radius, self.in_spec_radius))
         if self.plain:
-            points, tree = valid_points(scan, self.col_stride)
+            points = valid_points(scan, self.col_stride)
+            tree = lambda: valid_points_tree(scan, self.col_stride)  # noqa: E731
             self._mark(self.covered, points, None, self.cover_radius, cand, tree)
 
         ok = in_spec(scan.z_sensor[:, c], ori_rad[:, c], valid, self.spec)
@@ -265,7 +274,7 @@ class Coverage:
             val_prev = np.concatenate([np.zeros_like(valid[:1]), valid[:-1]])
         self._last = (pts[-1], valid[-1])
         both = valid & val_prev & has_prev[:, None]
-        gap_prev = np.where(both, np.linalg.norm(pts - pts_prev, axis=-1), np.nan)
+        gap_prev = np.where(both, norm_rows(pts - pts_prev), np.nan)
         if self._pending is not None:
             pts = np.concatenate([self._pending[0][None], pts])
             ok = np.concatenate([self._pending[1][None], ok])
@@ -302,13 +311,13 @@ class Coverage:
         normals: np.ndarray | None,
         radius: float,
         cand: np.ndarray | None = None,
-        tree: cKDTree | None = None,
+        tree: Callable[[], cKDTree] | None = None,
     ) -> None:
         """Mark in `marked` the samples within `radius` of one of `points` (n, 3) — on the
         sample's side where the points' `normals` are given — testing only those not marked
         yet among `cand` (sorted sample indices, every one near the points; None: looked
         up): from each sample its nearest point, not from each point its samples (a chunk
-        has several points per sample); tree: one of `points` if the caller has it."""
+        has several points per sample); tree: gives one of `points` if the caller has it."""
         if not len(points):
             return
         cand = self.surface.near(points, radius) if cand is None else cand
@@ -316,9 +325,11 @@ class Coverage:
         if not len(cand):
             return
         if tree is None:  # built per call and queried once: unbalanced, it builds faster
-            tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+            points_tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        else:
+            points_tree = tree()
         samples = self.surface.points[cand]
-        dist, j = tree.query(samples, k=1, distance_upper_bound=radius)
+        dist, j = points_tree.query(samples, k=1, distance_upper_bound=radius)
         found = np.flatnonzero(np.isfinite(dist))
         if normals is None:
             marked[cand[found]] = True
@@ -331,7 +342,7 @@ class Coverage:
         k = 8
         while len(rest):
             k = min(k, len(points))
-            dist, j = tree.query(samples[rest], k=k, distance_upper_bound=radius)
+            dist, j = points_tree.query(samples[rest], k=k, distance_upper_bound=radius)
             near = np.isfinite(dist)
             cos = np.einsum("ijk,ik->ij", normals[np.where(near, j, 0)], self.normals[cand[rest]])
             hit = (near & (cos >= SAME_SIDE_COS)).any(axis=1)
