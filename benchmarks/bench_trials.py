@@ -5,8 +5,8 @@ evaluation (`evaluate_detectable`) and the trials (`robustness` over `trial_task
 on every core as the command spreads them). Prints both times and the ratio trials /
 evaluation (the issue's target: 16 trials at most 4x one evaluation), and one trial run
 here, in this process, next to the evaluation. Default part: the NIST pocket plate of the
-shared parts (mm), its plan made here by the geometric planner unless --plan gives one
-(`scanplan plan PART -o plan.json`).
+shared parts (mm; the built-in door without them), its plan made here by the geometric
+planner unless --plan gives one (`scanplan plan PART -o plan.json`).
 Run: .venv/bin/python benchmarks/bench_trials.py [--part PATH:UNITS] [--plan plan.json]
      [--points 256] [--trials 16] [--perturb 'place:2mm,1deg'] [--repeats 1]
 """
@@ -34,7 +34,8 @@ POCKET = Path(__file__).resolve().parents[2] / "shared/parts/nist_pmi4_pocket_pl
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--part", default=f"{POCKET}:mm", help="PATH:UNITS or a built-in")
+    default = f"{POCKET}:mm" if POCKET.exists() else "door"  # without the shared parts
+    parser.add_argument("--part", default=default, help="PATH:UNITS or a built-in")
     parser.add_argument("--plan", default=None, help="plan file (default: planned here)")
     parser.add_argument("--points", type=int, default=256)
     parser.add_argument("--trials", type=int, default=16)
