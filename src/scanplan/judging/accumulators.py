@@ -8,9 +8,12 @@ points for the maps. D, α, Δs, the in-spec test and the rewards come from `qua
 from __future__ import annotations
 
 import math
+import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from scanplan.core.quantities import (
     ScanSpec,
@@ -53,6 +56,39 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
     z = scan.z_sensor[:, cols]
     with np.errstate(divide="ignore", invalid="ignore"):
         return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
+
+
+class _LastPoints(threading.local):
+    """The last chunk's valid points and their tree, per thread: `valid_points`' memo."""
+
+    scan: Scan | None = None
+    stride = 0
+    points: np.ndarray | None = None
+    tree: cKDTree | None = None
+
+
+_LAST = _LastPoints()
+
+
+def valid_points(scan: Scan, stride: int) -> np.ndarray:
+    """(k, 3) the valid points of every `stride`-th column of `scan`, row by row: gathered
+    once per chunk, though the coverage and the detectability survey both ask (the same
+    points where their strides agree)."""
+    memo = _LAST
+    if memo.scan is not scan or memo.stride != stride or memo.points is None:
+        cols = slice(None, None, stride)
+        memo.points = scan.points_part[:, cols][scan.valid[:, cols]]
+        memo.scan, memo.stride, memo.tree = scan, stride, None
+    return memo.points
+
+
+def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
+    """A k-d tree of `valid_points(scan, stride)`, built once per chunk. Unbalanced: built
+    per chunk and queried a few times, it builds in half the time."""
+    points = valid_points(scan, stride)
+    if _LAST.tree is None:
+        _LAST.tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+    return _LAST.tree
 
 
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:
@@ -198,6 +234,7 @@ class Coverage:
     ) -> None:
         self.surface, self.spec = surface, scan_spec
         self.normals = normals
+        self.col_stride = col_stride
         self.cols = slice(None, None, col_stride)
         self.cover_radius, self.in_spec_radius = cover_radius, in_spec_radius
         self.plain = plain
@@ -205,31 +242,27 @@ class Coverage:
         k = len(surface.points)
         self.covered = np.zeros(k, bool)
         self.in_spec = np.zeros(k, bool)
-        self.tree = None
-        if k:
-            self.tree = surface.tree
-            # Enough neighbours that every sample within the radius of a point is returned.
-            per_mm2 = k / max(surface.area_mm2, 1e-9)
-            expected = per_mm2 * math.pi * in_spec_radius**2
-            self.k_in_spec = int(np.clip(math.ceil(2 * expected + 4), 4, 64))
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # previous profile's columns
         # The held-back last profile: points, qualifies-but-for-the-along-gap, gap to previous.
         self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def add(self, scan: Scan, ori_rad: np.ndarray, has_prev: np.ndarray) -> None:
-        if self.tree is None:
+        if not len(self.surface.points):
             return
         c = self.cols
         valid = scan.valid[:, c]
         pts = scan.points_part[:, c]
         nrm = scan.normals_part[:, c]
-        near = pts[valid] if self.plain else pts[:0]
-        if len(near):
-            # k nearest: a sample with a small Voronoi cell is still marked.
-            dist, which = self.tree.query(
-                near, k=8, distance_upper_bound=self.cover_radius, workers=-1
-            )
-            self.covered[which[np.isfinite(dist)]] = True
+        # The samples near this chunk's points and the held-back profile's: those the
+        # chunk's points (and that profile's, in spec now) may mark.
+        near = pts[valid]
+        if self._last is not None:
+            near = np.concatenate([near, self._last[0][self._last[1]]])
+        cand = self.surface.near(near, max(self.cover_radius, self.in_spec_radius))
+        if self.plain:
+            points = valid_points(scan, self.col_stride)
+            tree = lambda: valid_points_tree(scan, self.col_stride)  # noqa: E731
+            self._mark(self.covered, points, None, self.cover_radius, cand, tree)
 
         ok = in_spec(scan.z_sensor[:, c], ori_rad[:, c], valid, self.spec)
         ok &= real_column_pitch(scan, self.spec.sensor, c) <= self.limit_mm
@@ -241,7 +274,7 @@ class Coverage:
             val_prev = np.concatenate([np.zeros_like(valid[:1]), valid[:-1]])
         self._last = (pts[-1], valid[-1])
         both = valid & val_prev & has_prev[:, None]
-        gap_prev = np.where(both, np.linalg.norm(pts - pts_prev, axis=-1), np.nan)
+        gap_prev = np.where(both, norm_rows(pts - pts_prev), np.nan)
         if self._pending is not None:
             pts = np.concatenate([self._pending[0][None], pts])
             ok = np.concatenate([self._pending[1][None], ok])
@@ -250,7 +283,7 @@ class Coverage:
         gap_next = np.full_like(gap_prev, np.nan)
         gap_next[:-1] = gap_prev[1:]
         self._pending = (pts[-1], ok[-1], gap_prev[-1], nrm[-1])
-        self._mark_in_spec(pts[:-1], ok[:-1], gap_prev[:-1], gap_next[:-1], nrm[:-1])
+        self._mark_in_spec(pts[:-1], ok[:-1], gap_prev[:-1], gap_next[:-1], nrm[:-1], cand)
 
     def _mark_in_spec(
         self,
@@ -259,20 +292,64 @@ class Coverage:
         gap_prev: np.ndarray,
         gap_next: np.ndarray,
         nrm: np.ndarray,
+        cand: np.ndarray | None = None,
     ) -> None:
         # The larger of the two gaps, or the one there is; none (an isolated profile) fails.
         along = np.fmax(gap_prev, gap_next)
         with np.errstate(invalid="ignore"):
             qualifies = ok & (along <= self.limit_mm)
         good = pts[qualifies]
-        if len(good) and self.tree is not None:
-            dist, which = self.tree.query(
-                good, k=self.k_in_spec, distance_upper_bound=self.in_spec_radius, workers=-1
-            )
-            found = np.isfinite(dist)
-            point = np.broadcast_to(np.arange(len(good))[:, None], found.shape)[found]
-            cos = np.einsum("ij,ij->i", nrm[qualifies][point], self.normals[which[found]])
-            self.in_spec[which[found][cos >= SAME_SIDE_COS]] = True
+        if cand is not None and self.plain and self.in_spec_radius <= self.cover_radius:
+            # A sample within the in-spec radius of a qualifying (so valid) point is covered.
+            cand = cand[self.covered[cand]]
+        self._mark(self.in_spec, good, nrm[qualifies], self.in_spec_radius, cand)
+
+    def _mark(
+        self,
+        marked: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray | None,
+        radius: float,
+        cand: np.ndarray | None = None,
+        tree: Callable[[], cKDTree] | None = None,
+    ) -> None:
+        """Mark in `marked` the samples within `radius` of one of `points` (n, 3) — on the
+        sample's side where the points' `normals` are given — testing only those not marked
+        yet among `cand` (sorted sample indices, every one near the points; None: looked
+        up): from each sample its nearest point, not from each point its samples (a chunk
+        has several points per sample); tree: gives one of `points` if the caller has it."""
+        if not len(points):
+            return
+        cand = self.surface.near(points, radius) if cand is None else cand
+        cand = cand[~marked[cand]]
+        if not len(cand):
+            return
+        if tree is None:  # built per call and queried once: unbalanced, it builds faster
+            points_tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        else:
+            points_tree = tree()
+        samples = self.surface.points[cand]
+        dist, j = points_tree.query(samples, k=1, distance_upper_bound=radius)
+        found = np.flatnonzero(np.isfinite(dist))
+        if normals is None:
+            marked[cand[found]] = True
+            return
+        same = dot_rows(normals[j[found]], self.normals[cand[found]]) >= SAME_SIDE_COS
+        marked[cand[found[same]]] = True
+        # The nearest point lies on the other side (an edge, a thin sheet): any other within
+        # the radius on this one?
+        rest = found[~same] if len(points) > 1 else found[:0]
+        k = 8
+        while len(rest):
+            k = min(k, len(points))
+            dist, j = points_tree.query(samples[rest], k=k, distance_upper_bound=radius)
+            near = np.isfinite(dist)
+            cos = np.einsum("ijk,ik->ij", normals[np.where(near, j, 0)], self.normals[cand[rest]])
+            hit = (near & (cos >= SAME_SIDE_COS)).any(axis=1)
+            marked[cand[rest[hit]]] = True
+            # Still undecided: all k within the radius and on the other side; look further.
+            rest = rest[~hit & near[:, -1]] if k < len(points) else rest[:0]
+            k *= 4
 
     def finish(self) -> tuple[float, float, CoverageMap]:
         """(coverage fraction, in-spec fraction, the map)."""

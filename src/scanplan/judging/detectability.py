@@ -21,11 +21,11 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from scanplan.core.quantities import DEFECT_TYPE, ScanSpec
+from scanplan.core.quantities import DEFECT_TYPE, ScanSpec, norm_rows
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
+from scanplan.judging.accumulators import valid_points, valid_points_tree
 from scanplan.judging.detection import (
     Detector,
     FalseCalls,
@@ -336,22 +336,6 @@ class DetectabilitySurvey:
         # would jump with where its columns fall.
         pitch = fan.line_width_mm / max(fan.points_per_profile - 1, 1)
         self._radius = max(DENSITY_RADIUS_MM, 2.0 * self._stride * pitch)
-        # The samples sorted along each axis: a chunk's box is then two binary searches on
-        # its narrowest axis and a test of the samples between (not of every sample).
-        points = surface.points
-        self._order = [np.argsort(points[:, a], kind="stable") for a in range(3)]
-        self._sorted = [points[order, a] for a, order in enumerate(self._order)]
-        span = points.max(axis=0) - points.min(axis=0) if k else np.ones(3)
-        self._span = np.maximum(span, 1e-9)
-
-    def _in_box(self, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
-        """Sorted indices of the samples inside the box."""
-        a = int(np.argmin((box_hi - box_lo) / self._span))
-        lo = np.searchsorted(self._sorted[a], box_lo[a], side="left")
-        hi = np.searchsorted(self._sorted[a], box_hi[a], side="right")
-        cand = self._order[a][lo:hi]
-        near = self.surface.points[cand] if self.surface is not None else np.zeros((0, 3))
-        return np.sort(cand[np.all((near >= box_lo) & (near <= box_hi), axis=1)])
 
     def add(self, lo: int, scan: Scan) -> None:
         """The chunk of scanning poses lo, lo+1, ... measured."""
@@ -367,29 +351,28 @@ class DetectabilitySurvey:
         cos = cos_incidence(scan, fan)
         sig_n = sigma_mm(scan, fan, cos) * cos
         col = np.full(valid.shape, np.nan)
-        col[:, :-1] = np.linalg.norm(np.diff(scan.points_part, axis=1), axis=2)
+        col[:, :-1] = norm_rows(np.diff(scan.points_part, axis=1))
         col[:, :-1][~(valid[:, 1:] & valid[:, :-1])] = np.nan
         pick = (slice(None), slice(None, None, self._stride))
         v = valid[pick]
-        pts = scan.points_part[pick][v]
+        # The coverage's tree where its stride is this one (the same points).
+        pts = valid_points(scan, self._stride)
         if len(pts) == 0:
             return
         rows = lo + np.nonzero(v)[0]
         point_pass = np.zeros(len(pts), np.int64) if self._pass_of is None else self._pass_of[rows]
-        box_lo, box_hi = pts.min(axis=0) - self._radius, pts.max(axis=0) + self._radius
-        inside = self._in_box(box_lo, box_hi)
+        inside = self.surface.near(pts, self._radius)  # those within reach, and some more
         if len(inside) == 0:
             return
-        near_tree = cKDTree(pts)
+        # One worker: the next chunk is measured on the other core meanwhile.
+        near_tree = valid_points_tree(scan, self._stride)
         self._count[inside] += self._stride * np.asarray(
-            near_tree.query_ball_point(
-                samples[inside], self._radius, return_length=True, workers=-1
-            )
+            near_tree.query_ball_point(samples[inside], self._radius, return_length=True)
         )
         # Each sample's noise, pitch and passes from its nearest points (not each point's
         # nearest sample: a sub-sampled fan's columns may lie farther apart than the samples).
         dist, j = near_tree.query(
-            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius, workers=-1
+            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius
         )
         c, s = col[pick][v], sig_n[pick][v]
         j = np.where(np.isfinite(dist), j, 0)

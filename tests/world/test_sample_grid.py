@@ -1,0 +1,33 @@
+"""The sample grid finds every binned point within a cell of the points asked about."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scanplan.world.sample_grid import SampleGrid
+
+
+def _within(binned: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+    d = np.linalg.norm(binned[:, None, :] - points[None, :, :], axis=-1)
+    return np.flatnonzero((d <= radius).any(axis=1))
+
+
+def test_near_holds_every_point_within_a_cell_and_is_sorted():
+    rng = np.random.default_rng(3)
+    binned = rng.uniform(-50, 50, (4000, 3)) * [1, 1, 0.1]
+    grid = SampleGrid(binned, 5.0)
+    for asked in (rng.uniform(-60, 60, (40, 3)), binned[:7] + 4.9):
+        near = grid.near(asked)
+        assert np.all(np.diff(near) > 0)
+        assert set(_within(binned, asked, 5.0)) <= set(near)
+        assert len(near) < len(binned)  # not everything: the cells rule out the rest
+
+
+def test_near_outside_the_grid_and_without_points():
+    binned = np.random.default_rng(0).uniform(0, 10, (100, 3))
+    grid = SampleGrid(binned, 2.0)
+    assert len(grid.near(np.array([[1e6, -1e6, 0.0]]))) == 0
+    assert len(grid.near(np.zeros((0, 3)))) == 0
+    edge = grid.near(np.array([[11.5, 5.0, 5.0]]))  # beyond the edge, within a cell of it
+    assert set(_within(binned, np.array([[11.5, 5.0, 5.0]]), 2.0)) <= set(edge)
+    assert len(SampleGrid(np.zeros((0, 3)), 2.0).near(binned)) == 0
