@@ -29,6 +29,7 @@ from scanplan.judging.robustness import (
     TrialTask,
     run_trial,
     summarize,
+    TrialWorld,
     trial_tasks,
     trial_world,
 )
@@ -61,7 +62,9 @@ class ClosedLoopTask:
     whose poses the closed loop replaces; `planner` the feedback or rl planner (its
     `measure_with` set in the worker); `views` the plan's views and pass lines; the cell
     as planned: `table` (None: held in the air), `table_z_mm`, `fixtures` (vertices, faces,
-    name) each; `spec` the plan's ScanSpec."""
+    name) each; `spec` the plan's ScanSpec. knows_part: the planner (any, open-loop ones
+    too) plans the same pass lines on the part as built and where it lies instead, as if it
+    knew it exactly: the ceiling of any controller on those lines."""
 
     judge: TrialTask
     planner: Any
@@ -70,6 +73,7 @@ class ClosedLoopTask:
     table_z_mm: float | None
     fixtures: tuple[tuple[np.ndarray, np.ndarray, str], ...]
     spec: ScanSpec
+    knows_part: bool = False  # the planner plans on the part as it is (the re-plan ceiling)
 
 
 def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
@@ -97,6 +101,7 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     cell = Cell(task.table, fixtures, task.table_z_mm)
     nominal = cell.occluding(nominal)  # the CAD the controller probes, among the fixtures
     placed = world.T_part_placed
+    there = _part_there(world, judge, cell) if task.knows_part else None
     pieces = []
     for lines in task.views:
         view = lines.view
@@ -109,10 +114,12 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
         def measured(_: Part, sensor: SensorSpec, built=built, T=T) -> PlacedProfilometer:
             return PlacedProfilometer(built, sensor, T)
 
-        planner = replace(task.planner, measure_with=measured)
+        planner = (
+            task.planner if there is not None else replace(task.planner, measure_with=measured)
+        )
         try:
             flown = plan_path(
-                view.part(nominal),
+                view.part(nominal if there is None else there),
                 task.spec,
                 planner,
                 list(lines.swaths),
@@ -130,6 +137,14 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     traj = Trajectory.concatenate(pieces)
     idx, has_prev = scanning_steps(traj)
     return run_trial(replace(judge, poses=traj.poses[idx], has_prev=has_prev))
+
+
+def _part_there(world: TrialWorld, judge: TrialTask, cell: Cell) -> Part:
+    """The part as built, where it lies (in the nominal frame), among the cell's fixtures."""
+    mesh = world.part.mesh.copy()
+    mesh.apply_transform(world.T_part_placed)
+    part = Part(mesh, name=judge.name, source=judge.name, inspect_faces=judge.inspect_faces)
+    return cell.occluding(part)
 
 
 def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
@@ -239,6 +254,28 @@ def closed_loop_tasks(
     """The `trials` tasks of a closed-loop robustness run of `traj` (a feedback or rl plan,
     every view of it), judged as `metrics.robustness.trial_tasks` judges its replay."""
     planner = closed_loop_planner(context, policy, where)
+    return controller_tasks(
+        part, traj, context, planner, model, trials, seed, points_per_profile, where
+    )
+
+
+def controller_tasks(
+    part: Part,
+    traj: Trajectory,
+    context: PlanContext,
+    planner: Any,
+    model: Perturbation,
+    trials: int,
+    seed: int = 0,
+    points_per_profile: int | None = None,
+    where: str = "the plan",
+    knows_part: bool = False,
+) -> list[ClosedLoopTask]:
+    """The `trials` tasks of `planner` flying the views and pass lines of `traj` (any plan
+    that records them, whoever made it) on each perturbed part: in closed loop for a
+    feedback or rl planner, or, with `knows_part`, planned on the part as it is (any
+    planner: the re-plan ceiling). Judged as `metrics.robustness.trial_tasks` judges the
+    replay of `traj`, so every planner given the same plan is judged on the same samples."""
     views = tuple(plan_views_of(traj, where))
     if looks_ahead(planner) and any(not np.array_equal(v.view.R, np.eye(4)) for v in views):
         # Its look-ahead probes only the view's region, which the plan file does not keep.
@@ -246,6 +283,8 @@ def closed_loop_tasks(
             f"{planner.source} looks ahead on each view's region, which {where} does not "
             "record: only its views looking straight down could run in closed loop"
         )
+    if not knows_part and getattr(planner, "name", None) not in CLOSED_LOOP_PLANNERS:
+        raise ValueError(f"{planner.name} does not act on measured profiles: no closed loop")
     judges = trial_tasks(
         part, context.spec, traj, model, trials, seed, points_per_profile, context=context
     )
@@ -254,7 +293,9 @@ def closed_loop_tasks(
         (np.asarray(f.mesh.vertices), np.asarray(f.mesh.faces), f.name) for f in cell.fixtures
     )
     return [
-        ClosedLoopTask(j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec)
+        ClosedLoopTask(
+            j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec, knows_part
+        )
         for j in judges
     ]
 
