@@ -27,9 +27,9 @@ from scanplan.judging.robustness import (
     Robustness,
     TrialMap,
     TrialTask,
+    TrialWorld,
     run_trial,
     summarize,
-    TrialWorld,
     trial_tasks,
     trial_world,
 )
