@@ -17,7 +17,7 @@ import trimesh
 
 from scanplan.core.context import PlanContext
 from scanplan.core.limits import MAX_POSES, check_count
-from scanplan.core.plan import Plan
+from scanplan.core.plan import ArmRecord, Plan, ViewRecord
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
@@ -33,6 +33,7 @@ from scanplan.judging.robustness import (
     trial_tasks,
     trial_world,
 )
+from scanplan.planning.arm_guard import HALF_TURN, ArmGuard, PieceNominal, fitted_pieces
 from scanplan.planning.dynamics import step_budget
 from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners import FeedbackPlanner
@@ -50,10 +51,17 @@ CLOSED_LOOP_PLANNERS = ("feedback", "rl")
 class ViewLines:
     """One view of a plan as its file records it: `view` (its axis and rotation; no region,
     the file does not keep it) and `swaths`, its pass lines in the view's frame, numbered
-    as the plan's passes."""
+    as the plan's passes. A plan fitted to an arm: `pieces`, its passes as pieces of those
+    lines with the plan's states along each (`arm_guard.fitted_pieces`), flown instead."""
 
     view: View
     swaths: tuple[Swath, ...]
+    pieces: tuple[PieceNominal, ...] = ()
+
+    @property
+    def flown(self) -> list[Swath]:
+        """The lines the controller flies: the pieces of a fitted plan, else the lines."""
+        return [p.swath for p in self.pieces] if self.pieces else list(self.swaths)
 
 
 @dataclass(frozen=True)
@@ -62,9 +70,11 @@ class ClosedLoopTask:
     whose poses the closed loop replaces; `planner` the feedback or rl planner (its
     `measure_with` set in the worker); `views` the plan's views and pass lines; the cell
     as planned: `table` (None: held in the air), `table_z_mm`, `fixtures` (vertices, faces,
-    name) each; `spec` the plan's ScanSpec. knows_part: the planner (any, open-loop ones
-    too) plans the same pass lines on the part as built and where it lies instead, as if it
-    knew it exactly: the ceiling of any controller on those lines."""
+    name) each; `spec` the plan's ScanSpec; `arm` the arm a fitted plan was fitted to (the
+    controller's corrections are kept within it, `arm_guard.ArmGuard`). knows_part: the
+    planner (any, open-loop ones too) plans the same pass lines on the part as built and
+    where it lies instead, as if it knew it exactly: the ceiling of any controller on those
+    lines."""
 
     judge: TrialTask
     planner: Any
@@ -73,12 +83,23 @@ class ClosedLoopTask:
     table_z_mm: float | None
     fixtures: tuple[tuple[np.ndarray, np.ndarray, str], ...]
     spec: ScanSpec
+    arm: ArmRecord | None = None  # a fitted plan's arm: the corrections kept within it
     knows_part: bool = False  # the planner plans on the part as it is (the re-plan ceiling)
 
 
 def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     """(k,) bool: which nominal surface samples the closed loop holds in spec on trial
-    `task.judge.index`. Each view's passes are planned as `pipeline.plan_views` plans them
+    `task.judge.index` (the poses `fly_trial` flew, judged as a replayed plan's)."""
+    traj = fly_trial(task)
+    if traj is None:
+        return np.zeros(len(task.judge.surface.points), bool)
+    idx, has_prev = scanning_steps(traj)
+    return run_trial(replace(task.judge, poses=traj.poses[idx], has_prev=has_prev))
+
+
+def fly_trial(task: ClosedLoopTask) -> Trajectory | None:
+    """The poses (part frame) the closed loop flies on trial `task.judge.index`; None if
+    every view was lost. Each view's passes are planned as `pipeline.plan_views` plans them
     on the CAD turned into the view's frame (where each starts and ends, the table's tilt
     limit, the poses dropped for the clearance to the nominal part and cell), but every
     profile the controller acts on is measured on the part as built and placed, turned the
@@ -117,12 +138,14 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
         planner = (
             task.planner if there is not None else replace(task.planner, measure_with=measured)
         )
+        if task.arm is not None:
+            planner = replace(planner, arm_guard=_guard(task.arm, lines))
         try:
             flown = plan_path(
                 view.part(nominal if there is None else there),
                 task.spec,
                 planner,
-                list(lines.swaths),
+                lines.flown,
                 cell=cell if np.array_equal(R, np.eye(4)) else cell.rotated(R),
             )
         except ValueError as exc:
@@ -131,12 +154,23 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
             # `view_joining.join_views` leaves out a view no clear move reaches.
             warnings.warn(f"trial {judge.index}: view {view.index} lost: {exc}", stacklevel=1)
             continue
+        if lines.pieces:
+            turned = [p.swath.index for p in lines.pieces if p.turned]
+            turn = np.isin(flown.swath, turned)[:, None, None]
+            flown = replace(flown, poses=np.where(turn, flown.poses @ HALF_TURN, flown.poses))
         pieces.append(view.to_part_frame(flown))
-    if not pieces:
-        return np.zeros(len(judge.surface.points), bool)
-    traj = Trajectory.concatenate(pieces)
-    idx, has_prev = scanning_steps(traj)
-    return run_trial(replace(judge, poses=traj.poses[idx], has_prev=has_prev))
+    return Trajectory.concatenate(pieces) if pieces else None
+
+
+def _guard(arm: ArmRecord, lines: ViewLines) -> ArmGuard:
+    """The arm a fitted plan's view is flown by, keeping the controller's corrections."""
+    return ArmGuard(
+        arm.robot,
+        arm.T_base_part,
+        arm.T_flange_sensor,
+        lines.view.R,
+        {p.swath.index: p for p in lines.pieces},
+    )
 
 
 def _part_there(world: TrialWorld, judge: TrialTask, cell: Cell) -> Part:
@@ -149,13 +183,9 @@ def _part_there(world: TrialWorld, judge: TrialTask, cell: Cell) -> Part:
 
 def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
     """The views and pass lines a plan records, in its order, for running it in closed
-    loop; ValueError (one line) for a plan that records none, or was fitted to a robot."""
+    loop (a plan fitted to an arm: its passes as pieces of those lines, `ViewLines.pieces`);
+    ValueError (one line) for a plan that records none."""
     plan = Plan.of(traj, where)
-    if plan.arm is not None:
-        raise ValueError(
-            f"{where} was fitted to a robot (passes split or turned): the closed loop runs "
-            "the plan as planned on the CAD; evaluate the plan made without --robot"
-        )
     if not plan.views:
         raise ValueError(f"{where} records no views: plan it again to run it in closed loop")
     out = []
@@ -172,20 +202,42 @@ def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
         swaths = tuple(
             swath_from_record(r, f"{where}: views[{k}].swaths[{i}]") for i, r in enumerate(lines)
         )
-        out.append(ViewLines(View(k, axis, rotation_to_up(axis)), swaths))
+        the_view = View(k, axis, rotation_to_up(axis))
+        pieces: tuple[PieceNominal, ...] = ()
+        if plan.arm is not None:
+            pieces = _fitted(traj, plan, view, the_view, swaths)
+        out.append(ViewLines(the_view, swaths, pieces))
     planned = set(np.unique(traj.swath[traj.scanning]).tolist())
-    if not planned <= {sw.index for v in out for sw in v.swaths}:
+    if plan.arm is None and not planned <= {sw.index for v in out for sw in v.swaths}:
         raise ValueError(f"{where}: its pass lines do not match its passes")
     # Counted before any work: the steps a trial may take (each pass's episode limit).
-    steps = sum(step_budget(sw.length_mm, plan.spec)[1] for v in out for sw in v.swaths)
+    flown = [sw for v in out for sw in v.flown]
+    steps = sum(step_budget(sw.length_mm, plan.spec)[1] for sw in flown)
     check_count(
         steps,
         MAX_POSES,
         f"{where}: closed-loop steps of one trial (passes of "
-        f"{sum(sw.length_mm for v in out for sw in v.swaths):g} mm in steps of "
+        f"{sum(sw.length_mm for sw in flown):g} mm in steps of "
         f"{plan.spec.delta_s_opt_mm:g} mm, up to 3 times as many)",
     )
     return out
+
+
+def _fitted(
+    traj: Trajectory, plan: Plan, record: ViewRecord, view: View, lines: tuple[Swath, ...]
+) -> tuple[PieceNominal, ...]:
+    """The passes of one view of a plan fitted to an arm, as pieces of its lines."""
+    mine = traj.scanning & (traj.swath >= record.first_swath) & (traj.swath <= record.last_swath)
+    poses = view.R[None] @ traj.poses[mine]
+    return tuple(
+        fitted_pieces(
+            list(lines),
+            poses,
+            traj.swath[mine],
+            2 * plan.spec.delta_s_opt_mm,
+            roll=plan.context.full_beam_angle,
+        )
+    )
 
 
 def plan_swaths_of(traj: Trajectory, where: str) -> list[Swath]:
@@ -292,9 +344,12 @@ def controller_tasks(
     fixtures = tuple(
         (np.asarray(f.mesh.vertices), np.asarray(f.mesh.faces), f.name) for f in cell.fixtures
     )
+    arm = Plan.of(traj, where).arm
+    if arm is not None and knows_part:
+        raise ValueError(f"{where} was fitted to an arm: no re-planned ceiling on its passes")
     return [
         ClosedLoopTask(
-            j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec, knows_part
+            j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec, arm, knows_part
         )
         for j in judges
     ]
