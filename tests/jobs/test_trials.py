@@ -25,6 +25,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.jobs.trials import (
     closed_loop_robustness,
     closed_loop_tasks,
+    controller_tasks,
     fly_trial,
     plan_swaths_of,
     plan_views_of,
@@ -358,3 +359,36 @@ def test_a_robot_fitted_plan_runs_in_closed_loop_within_the_arms_reach(bumpy, tm
     assert [out_of_reach(fly_trial(task)) for task in tasks] == [0, 0]
     nominal = evaluate(bumpy, SPEC, traj, points_per_profile=POINTS).in_spec_coverage
     assert closed_loop_robustness(tasks).worst > 0.8 * nominal
+
+
+def test_any_controller_flies_one_plans_lines_and_the_ceiling_replans_them(bumpy, feedback_plan):
+    """The feedback and geometric plans' lines are one raster: the feedback controller
+    flying the geometric plan's lines at no perturbation is the feedback plan's figure, and
+    the geometric planner re-planned on them on the (unperturbed) part is the geometric
+    plan's; both judged on the geometric plan's samples. On a part lifted 25 mm the ceiling
+    follows it where the replay does not. An open-loop planner has no closed loop."""
+    _, geometric = plan_views(bumpy, SPEC, GeometricPlanner(), "top")
+    context = recorded(geometric, SPEC)
+    lines = plan_views_of(geometric, "g")[0].swaths
+    assert [sw.start_mm.tolist() for sw in lines] == [
+        sw.start_mm.tolist() for sw in plan_views_of(feedback_plan, "f")[0].swaths
+    ]
+    zero = Perturbation.parse("place:0mm")
+
+    def flown(planner, model, seed=0, knows_part=False):
+        tasks = controller_tasks(
+            bumpy, geometric, context, planner, model, 1, seed, POINTS, knows_part=knows_part
+        )
+        return closed_loop_robustness(tasks).mean
+
+    def judged(plan):
+        return evaluate(bumpy, SPEC, plan, points_per_profile=POINTS, ceiling=False)
+
+    assert flown(FeedbackPlanner(), zero) == judged(feedback_plan).in_spec_coverage
+    ceiling = flown(GeometricPlanner(), zero, knows_part=True)
+    assert ceiling == judged(geometric).in_spec_coverage
+    lifted = Perturbation.parse("place:15mm,1deg")  # trial 0 of seed 4: lifted 25 mm
+    assert flown(GeometricPlanner(), lifted, 4, True) > 0.9 * ceiling
+    assert _open(bumpy, geometric, "place:15mm,1deg", trials=1, seed=4).mean < 0.5 * ceiling
+    with pytest.raises(ValueError, match="does not act on measured profiles"):
+        controller_tasks(bumpy, geometric, context, GeometricPlanner(), zero, 1)
