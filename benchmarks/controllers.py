@@ -16,6 +16,8 @@ noise; `nominal` is each controller on the unperturbed part. Usage:
         [--points 128] [--trials 16] [--seed 0] [--perturb SPEC]... [--policy NAME]...
         [--json results.jsonl]
 
+    python benchmarks/controllers.py --summary results.jsonl   # the table and the verdict
+
 A part is a built-in name, a mesh file (`:m`, `:in` for its units) or `kinds:NAME`, a part
 of `benchmarks/kinds.py` (e.g. `kinds:housing`). Prints one markdown row per part,
 perturbation and controller (nominal, mean, p5, worst), the seconds each took in an HTML
@@ -128,9 +130,46 @@ def run_part(args: argparse.Namespace, text: str, out: Any) -> None:
                 out.flush()
 
 
+# The issue's criterion: closed-loop rl's p5 at least this far above closed-loop feedback's.
+MARGIN = 0.02
+
+
+def summary(path: str) -> None:
+    """The records of `--json` as one table (p5 / mean per controller and perturbation) and,
+    per perturbation, the parts on which each policy's p5 beats feedback's by `MARGIN`."""
+    records = [json.loads(line) for line in open(path) if line.strip()]
+    parts = list(dict.fromkeys(r["part"] for r in records))
+    labels = list(dict.fromkeys(r["controller"] for r in records))
+    specs = list(dict.fromkeys(r["spec"] for r in records))
+    at = {(r["part"], r["spec"], r["controller"]): r for r in records}
+    for spec in specs:
+        print(f"\n{spec}: p5 / mean in-spec coverage over {records[0]['trials']} trials\n")
+        print("| part | " + " | ".join(labels) + " |")
+        print("|---|" + "---|" * len(labels))
+        for part in parts:
+            cells = []
+            for label in labels:
+                r = at.get((part, spec, label))
+                cells.append("—" if r is None else f"{r['p5']:.3f} / {r['mean']:.3f}")
+            print(f"| {part} | " + " | ".join(cells) + " |")
+        for label in labels:
+            if not label.startswith("rl "):
+                continue
+            wins = [
+                part
+                for part in parts
+                if (part, spec, label) in at
+                and (part, spec, "feedback") in at
+                and at[part, spec, label]["p5"] >= at[part, spec, "feedback"]["p5"] + MARGIN
+            ]
+            done = sum((part, spec, label) in at for part in parts)
+            print(f"\n{label}: p5 >= feedback + {MARGIN} on {len(wins)} of {done} parts {wins}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("parts", nargs="+")
+    parser.add_argument("parts", nargs="*")
+    parser.add_argument("--summary", default=None, help="print the table of a --json file")
     parser.add_argument("--views", default="top")
     parser.add_argument("--points", type=int, default=128)
     parser.add_argument("--trials", type=int, default=16)
@@ -139,6 +178,9 @@ def main() -> None:
     parser.add_argument("--policy", action="append", default=None)
     parser.add_argument("--json", default=None, help="append the records here, a line each")
     args = parser.parse_args()
+    if args.summary:
+        summary(args.summary)
+        return
     args.policy = args.policy or ["default", "paper"]
     out = open(args.json, "a") if args.json else None  # noqa: SIM115
     try:
