@@ -1,18 +1,20 @@
 """The controllers compared on the same views and pass lines (issue 45): one plan per part,
 chosen once on the nominal CAD (the geometric planner's, pitch only, so every controller
-below acts in the same step model), then, on each of N perturbed parts (seeded):
+below acts in the same step model; with --roll all roll, the policy v1), then, on each
+of N perturbed parts (seeded):
 
 - `geometric, replayed`: that plan's poses flown open loop (`evaluate --perturb`);
 - `feedback` / `rl default` / `rl paper`: the controller flies the plan's pass lines in
   closed loop on the part as built and where it lies (`evaluate --closed-loop`, but every
   controller on the same lines);
 - `ceiling`: the geometric planner re-planned on the same pass lines on the part as it is
-  (it knows the part exactly): the most any controller on these lines could hold.
+  (it knows the part exactly): the best geometric answer on these lines (not an upper
+  bound on in-spec coverage: the planner minimizes its own cost).
 
 All are judged on the same nominal surface samples (the plan's), with the plan's sensor
 noise; `nominal` is each controller on the unperturbed part. Usage:
 
-    python benchmarks/controllers.py PART[:UNITS] [PART[:UNITS]...] [--views top]
+    python benchmarks/controllers.py PART[:UNITS] [PART[:UNITS]...] [--views top] [--roll]
         [--points 128] [--trials 16] [--seed 0] [--perturb SPEC]... [--policy NAME]...
         [--json results.jsonl]
 
@@ -57,14 +59,15 @@ def the_part(text: str) -> Part:
     return load_part(path, units or "mm")
 
 
-def controllers(policies: list[str]) -> list[tuple[str, Any]]:
-    """(label, planner) of every closed-loop controller: feedback (pitch only, as the
-    policies) and each policy."""
-    out: list[tuple[str, Any]] = [("feedback", FeedbackPlanner(roll=False))]
+def controllers(policies: list[str], roll: bool) -> list[tuple[str, Any]]:
+    """(label, planner) of every closed-loop controller: feedback and each policy, all
+    pitching only or (`roll`) all rolling too."""
+    out: list[tuple[str, Any]] = [("feedback", FeedbackPlanner(roll=roll))]
     for name in policies:
         rl = RLPlanner.from_file(name)
-        if rl.roll:
-            raise SystemExit(f"policy {name} rolls: the plan's controllers pitch only")
+        if rl.roll != roll:
+            kind = "rolls" if rl.roll else "does not roll"
+            raise SystemExit(f"policy {name} {kind}: give {'' if rl.roll else 'no '}--roll")
         out.append((f"rl {name}", rl))
     return out
 
@@ -73,7 +76,8 @@ def run_part(args: argparse.Namespace, text: str, out: Any) -> None:
     part = the_part(text)
     spec = ScanSpec()
     start = time.perf_counter()
-    _, plan = plan_views(part, spec, GeometricPlanner(), args.views)
+    geometric = GeometricPlanner.with_roll() if args.roll else GeometricPlanner()
+    _, plan = plan_views(part, spec, geometric, args.views)
     context = recorded(plan, spec)
     views = len(plan.meta.get("views") or [])
     passes = len(np.unique(plan.swath[plan.scanning]))
@@ -86,8 +90,8 @@ def run_part(args: argparse.Namespace, text: str, out: Any) -> None:
     print("|---|---|---|---|---|---|---|", flush=True)
     zero = Perturbation()
     rows: list[tuple[str, Any, bool]] = [("geometric, replayed", None, False)]
-    rows += [(label, planner, False) for label, planner in controllers(args.policy)]
-    rows.append(("ceiling (geometric re-planned)", GeometricPlanner(), True))
+    rows += [(label, planner, False) for label, planner in controllers(args.policy, args.roll)]
+    rows.append(("ceiling (geometric re-planned)", geometric, True))
 
     def judged(planner: Any, knows: bool, model: Perturbation, trials: int) -> Robustness:
         if planner is None:
@@ -188,12 +192,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--perturb", action="append", default=None)
     parser.add_argument("--policy", action="append", default=None)
+    parser.add_argument(
+        "--roll", action="store_true", help="every planner and controller rolls (policy v1)"
+    )
     parser.add_argument("--json", default=None, help="append the records here, a line each")
     args = parser.parse_args()
     if args.summary:
         summary(args.summary)
         return
-    args.policy = args.policy or ["default", "paper"]
+    args.policy = args.policy or (["v1"] if args.roll else ["default", "paper"])
     out = open(args.json, "a") if args.json else None  # noqa: SIM115
     try:
         for text in args.parts:
