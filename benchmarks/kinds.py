@@ -7,7 +7,11 @@ mm, resting on z = 0:
   on it with a bowl-shaped cavity 70 mm deep, ribs standing on the flange against the body,
   bolt bosses at the flange's corners.
 
-These two are heightfields over a grid (vertical walls, no overhangs), so they are
+- `wavy`: a doubly curved panel, 700 x 260 mm: two long waves (±25 mm, 350 mm apart)
+  along it and a gentle trough across it (9 mm deep at the edges), on a 40 mm base; a kind
+  the policies never trained on (their strips are flat across, at most a 10° cross slope).
+
+These three are heightfields over a grid (vertical walls, no overhangs), so they are
 watertight by construction (`scanplan.world.parts.heightfield.heightfield_solid`). One more has
 overhangs, made of boxes (closed solids that touch, not merged: rays and the body check see
 the same surface):
@@ -57,6 +61,14 @@ def housing() -> Part:
     return part_from_mesh(heightfield_solid(xs, ys, z), "housing")
 
 
+def wavy() -> Part:
+    xs = np.linspace(0.0, 700.0, 351)
+    ys = np.linspace(-130.0, 130.0, 53)
+    gx, gy = np.meshgrid(xs, ys)
+    z = 70.0 + 25.0 * np.sin(2 * np.pi * gx / 350.0) + 9.0 * (gy / 130.0) ** 2
+    return part_from_mesh(heightfield_solid(xs, ys, z), "wavy")
+
+
 def slotted() -> Part:
     boxes = [((120.0, 80.0, 15.0), (240.0, 160.0, 30.0))]  # the block: centre, extents
     for y in (45.0, 115.0):
@@ -70,4 +82,4 @@ def slotted() -> Part:
     return part_from_mesh(trimesh.util.concatenate(meshes), "slotted")
 
 
-KINDS = {"heightfield": heightfield, "housing": housing, "slotted": slotted}
+KINDS = {"heightfield": heightfield, "housing": housing, "slotted": slotted, "wavy": wavy}

@@ -2,7 +2,7 @@
 the nominal plan again (the nominal figure exactly); on a part that is not where the CAD says
 it follows the part the open-loop replay misses; seeded runs repeat, worker processes and a
 Dask cluster give the serial numbers; a plan of several views runs every view in its frame;
-only feedback and rl plans not fitted to a robot are taken."""
+only feedback and rl plans are taken; a plan fitted to an arm is flown within the arm's reach."""
 
 from __future__ import annotations
 
@@ -25,13 +25,17 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.jobs.trials import (
     closed_loop_robustness,
     closed_loop_tasks,
+    controller_tasks,
+    fly_trial,
     plan_swaths_of,
     plan_views_of,
 )
 from scanplan.judging import SurfaceState, evaluate, robustness, trial_tasks
-from scanplan.planning.pipeline import plan_views
+from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.planning.planners import FeedbackPlanner, GeometricPlanner
 from scanplan.planning.view_choice import choose_views
+from scanplan.robot import check_reach
+from scanplan.robot.export import parse_pose_arg
 from scanplan.sensor.perturb import Perturbation
 from scanplan.world.part import part_from_mesh
 from scanplan.world.parts import heightfield_solid
@@ -159,7 +163,7 @@ def test_a_loopback_dask_cluster_gives_the_local_numbers(bumpy, feedback_plan):
     assert np.array_equal(on_dask.per_trial, _closed(bumpy, feedback_plan, text, 1).per_trial)
 
 
-def test_open_loop_multi_view_and_robot_plans_are_refused(bumpy, feedback_plan):
+def test_open_loop_and_old_plans_are_refused(bumpy, feedback_plan):
     _, geometric = plan_views(bumpy, SPEC, GeometricPlanner(), "top")
     model = Perturbation.parse("place:1mm")
     with pytest.raises(ValueError, match="made by geometric"):
@@ -175,14 +179,6 @@ def test_open_loop_multi_view_and_robot_plans_are_refused(bumpy, feedback_plan):
     old = replace(feedback_plan, meta=feedback_plan.meta | {"views": [view]})
     with pytest.raises(ValueError, match="does not record its pass lines"):
         closed_loop_tasks(bumpy, old, context, model, 1)
-    arm = {
-        "robot": "ur5e",
-        "T_base_part": np.eye(4).tolist(),
-        "T_flange_sensor": np.eye(4).tolist(),
-    }
-    fitted = replace(feedback_plan, meta=feedback_plan.meta | {"robot": arm})
-    with pytest.raises(ValueError, match="fitted to a robot"):
-        closed_loop_tasks(bumpy, fitted, context, model, 1)
 
 
 def test_an_rl_plan_runs_its_policy_in_the_loop(bumpy, tmp_path):
@@ -333,3 +329,66 @@ def test_a_closed_loop_counts_its_steps_before_any_work():
         TooLarge, match=r"^plan: closed-loop steps of one trial \(passes of 90000 mm"
     ):
         plan_views_of(replace(traj, meta=meta), "plan")
+
+
+def test_a_robot_fitted_plan_runs_in_closed_loop_within_the_arms_reach(bumpy, tmp_path):
+    """The bump fitted to a UR3e that stands far to its side: the arm gives up the passes'
+    far ends, so what is left runs along the edge of its reach. On parts lifted and shifted
+    by up to 20 mm the controller's corrections, flown as they are, leave that reach; kept
+    within it by the arm's inverse kinematics, every scanning pose of every trial is one the
+    arm reaches within its limits on one branch per pass, and the loop still covers the
+    part."""
+    tcp, T_base_part = parse_pose_arg("0,0,90,0,0,0"), parse_pose_arg("0,490,-250,0,0,0")
+    _, traj = plan_views(bumpy, SPEC, FeedbackPlanner(), "top", arm=Arm("ur3e", tcp, T_base_part))
+    path = tmp_path / "fitted.json"
+    write_json(traj, path)
+    traj = read_json(path)
+    assert sum(traj.meta["robot"]["scanning_poses_given_up"].values()) > 0
+
+    def out_of_reach(flown):
+        sc = flown.scanning
+        flange = T_base_part @ flown.poses[sc] @ np.linalg.inv(tcp)
+        report = check_reach(flange, "ur3e", swath=flown.swath[sc], scanning=sc[sc])
+        return len(report.unreachable) + len(report.limit_violations) + len(report.config_flips)
+
+    assert out_of_reach(traj) == 0
+    model = Perturbation.parse("place:±20mm")
+    tasks = closed_loop_tasks(bumpy, traj, recorded(traj, SPEC), model, 2, 0, POINTS)
+    unguarded = [out_of_reach(fly_trial(replace(task, arm=None))) for task in tasks]
+    assert max(unguarded) > 50  # the corrections alone leave the arm's reach
+    assert [out_of_reach(fly_trial(task)) for task in tasks] == [0, 0]
+    nominal = evaluate(bumpy, SPEC, traj, points_per_profile=POINTS).in_spec_coverage
+    assert closed_loop_robustness(tasks).worst > 0.8 * nominal
+
+
+def test_any_controller_flies_one_plans_lines_and_the_ceiling_replans_them(bumpy, feedback_plan):
+    """The feedback and geometric plans' lines are one raster: the feedback controller
+    flying the geometric plan's lines at no perturbation is the feedback plan's figure, and
+    the geometric planner re-planned on them on the (unperturbed) part is the geometric
+    plan's; both judged on the geometric plan's samples. On a part lifted 25 mm the ceiling
+    follows it where the replay does not. An open-loop planner has no closed loop."""
+    _, geometric = plan_views(bumpy, SPEC, GeometricPlanner(), "top")
+    context = recorded(geometric, SPEC)
+    lines = plan_views_of(geometric, "g")[0].swaths
+    assert [sw.start_mm.tolist() for sw in lines] == [
+        sw.start_mm.tolist() for sw in plan_views_of(feedback_plan, "f")[0].swaths
+    ]
+    zero = Perturbation.parse("place:0mm")
+
+    def flown(planner, model, seed=0, knows_part=False):
+        tasks = controller_tasks(
+            bumpy, geometric, context, planner, model, 1, seed, POINTS, knows_part=knows_part
+        )
+        return closed_loop_robustness(tasks).mean
+
+    def judged(plan):
+        return evaluate(bumpy, SPEC, plan, points_per_profile=POINTS, ceiling=False)
+
+    assert flown(FeedbackPlanner(), zero) == judged(feedback_plan).in_spec_coverage
+    ceiling = flown(GeometricPlanner(), zero, knows_part=True)
+    assert ceiling == judged(geometric).in_spec_coverage
+    lifted = Perturbation.parse("place:15mm,1deg")  # trial 0 of seed 4: lifted 25 mm
+    assert flown(GeometricPlanner(), lifted, 4, True) > 0.9 * ceiling
+    assert _open(bumpy, geometric, "place:15mm,1deg", trials=1, seed=4).mean < 0.5 * ceiling
+    with pytest.raises(ValueError, match="does not act on measured profiles"):
+        controller_tasks(bumpy, geometric, context, GeometricPlanner(), zero, 1)

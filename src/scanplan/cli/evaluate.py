@@ -205,7 +205,8 @@ ClosedLoopOpt = Annotated[
     typer.Option(
         "--closed-loop",
         help="with --perturb, a feedback or rl plan's controller runs again on each perturbed "
-        "part, acting on its profiles as on a cell (default: the plan is replayed)",
+        "part, acting on its profiles as on a cell; in a plan fitted to an arm, its "
+        "corrections kept within the arm's reach (default: the plan is replayed)",
     ),
 ]
 EvaluatePolicyOpt = Annotated[

@@ -17,7 +17,7 @@ import trimesh
 
 from scanplan.core.context import PlanContext
 from scanplan.core.limits import MAX_POSES, check_count
-from scanplan.core.plan import Plan
+from scanplan.core.plan import ArmRecord, Plan, ViewRecord
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
@@ -27,11 +27,13 @@ from scanplan.judging.robustness import (
     Robustness,
     TrialMap,
     TrialTask,
+    TrialWorld,
     run_trial,
     summarize,
     trial_tasks,
     trial_world,
 )
+from scanplan.planning.arm_guard import HALF_TURN, ArmGuard, PieceNominal, fitted_pieces
 from scanplan.planning.dynamics import step_budget
 from scanplan.planning.pass_path import plan_path
 from scanplan.planning.planners import FeedbackPlanner
@@ -49,10 +51,17 @@ CLOSED_LOOP_PLANNERS = ("feedback", "rl")
 class ViewLines:
     """One view of a plan as its file records it: `view` (its axis and rotation; no region,
     the file does not keep it) and `swaths`, its pass lines in the view's frame, numbered
-    as the plan's passes."""
+    as the plan's passes. A plan fitted to an arm: `pieces`, its passes as pieces of those
+    lines with the plan's states along each (`arm_guard.fitted_pieces`), flown instead."""
 
     view: View
     swaths: tuple[Swath, ...]
+    pieces: tuple[PieceNominal, ...] = ()
+
+    @property
+    def flown(self) -> list[Swath]:
+        """The lines the controller flies: the pieces of a fitted plan, else the lines."""
+        return [p.swath for p in self.pieces] if self.pieces else list(self.swaths)
 
 
 @dataclass(frozen=True)
@@ -61,7 +70,11 @@ class ClosedLoopTask:
     whose poses the closed loop replaces; `planner` the feedback or rl planner (its
     `measure_with` set in the worker); `views` the plan's views and pass lines; the cell
     as planned: `table` (None: held in the air), `table_z_mm`, `fixtures` (vertices, faces,
-    name) each; `spec` the plan's ScanSpec."""
+    name) each; `spec` the plan's ScanSpec; `arm` the arm a fitted plan was fitted to (the
+    controller's corrections are kept within it, `arm_guard.ArmGuard`). knows_part: the
+    planner (any, open-loop ones too) plans the same pass lines on the part as built and
+    where it lies instead, as if it knew it exactly: the ceiling of any controller on those
+    lines."""
 
     judge: TrialTask
     planner: Any
@@ -70,11 +83,23 @@ class ClosedLoopTask:
     table_z_mm: float | None
     fixtures: tuple[tuple[np.ndarray, np.ndarray, str], ...]
     spec: ScanSpec
+    arm: ArmRecord | None = None  # a fitted plan's arm: the corrections kept within it
+    knows_part: bool = False  # the planner plans on the part as it is (the re-plan ceiling)
 
 
 def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     """(k,) bool: which nominal surface samples the closed loop holds in spec on trial
-    `task.judge.index`. Each view's passes are planned as `pipeline.plan_views` plans them
+    `task.judge.index` (the poses `fly_trial` flew, judged as a replayed plan's)."""
+    traj = fly_trial(task)
+    if traj is None:
+        return np.zeros(len(task.judge.surface.points), bool)
+    idx, has_prev = scanning_steps(traj)
+    return run_trial(replace(task.judge, poses=traj.poses[idx], has_prev=has_prev))
+
+
+def fly_trial(task: ClosedLoopTask) -> Trajectory | None:
+    """The poses (part frame) the closed loop flies on trial `task.judge.index`; None if
+    every view was lost. Each view's passes are planned as `pipeline.plan_views` plans them
     on the CAD turned into the view's frame (where each starts and ends, the table's tilt
     limit, the poses dropped for the clearance to the nominal part and cell), but every
     profile the controller acts on is measured on the part as built and placed, turned the
@@ -97,6 +122,7 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
     cell = Cell(task.table, fixtures, task.table_z_mm)
     nominal = cell.occluding(nominal)  # the CAD the controller probes, among the fixtures
     placed = world.T_part_placed
+    there = _part_there(world, judge, cell) if task.knows_part else None
     pieces = []
     for lines in task.views:
         view = lines.view
@@ -109,13 +135,17 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
         def measured(_: Part, sensor: SensorSpec, built=built, T=T) -> PlacedProfilometer:
             return PlacedProfilometer(built, sensor, T)
 
-        planner = replace(task.planner, measure_with=measured)
+        planner = (
+            task.planner if there is not None else replace(task.planner, measure_with=measured)
+        )
+        if task.arm is not None:
+            planner = replace(planner, arm_guard=_guard(task.arm, lines))
         try:
             flown = plan_path(
-                view.part(nominal),
+                view.part(nominal if there is None else there),
                 task.spec,
                 planner,
-                list(lines.swaths),
+                lines.flown,
                 cell=cell if np.array_equal(R, np.eye(4)) else cell.rotated(R),
             )
         except ValueError as exc:
@@ -124,23 +154,38 @@ def run_closed_loop_trial(task: ClosedLoopTask) -> np.ndarray:
             # `view_joining.join_views` leaves out a view no clear move reaches.
             warnings.warn(f"trial {judge.index}: view {view.index} lost: {exc}", stacklevel=1)
             continue
+        if lines.pieces:
+            turned = [p.swath.index for p in lines.pieces if p.turned]
+            turn = np.isin(flown.swath, turned)[:, None, None]
+            flown = replace(flown, poses=np.where(turn, flown.poses @ HALF_TURN, flown.poses))
         pieces.append(view.to_part_frame(flown))
-    if not pieces:
-        return np.zeros(len(judge.surface.points), bool)
-    traj = Trajectory.concatenate(pieces)
-    idx, has_prev = scanning_steps(traj)
-    return run_trial(replace(judge, poses=traj.poses[idx], has_prev=has_prev))
+    return Trajectory.concatenate(pieces) if pieces else None
+
+
+def _guard(arm: ArmRecord, lines: ViewLines) -> ArmGuard:
+    """The arm a fitted plan's view is flown by, keeping the controller's corrections."""
+    return ArmGuard(
+        arm.robot,
+        arm.T_base_part,
+        arm.T_flange_sensor,
+        lines.view.R,
+        {p.swath.index: p for p in lines.pieces},
+    )
+
+
+def _part_there(world: TrialWorld, judge: TrialTask, cell: Cell) -> Part:
+    """The part as built, where it lies (in the nominal frame), among the cell's fixtures."""
+    mesh = world.part.mesh.copy()
+    mesh.apply_transform(world.T_part_placed)
+    part = Part(mesh, name=judge.name, source=judge.name, inspect_faces=judge.inspect_faces)
+    return cell.occluding(part)
 
 
 def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
     """The views and pass lines a plan records, in its order, for running it in closed
-    loop; ValueError (one line) for a plan that records none, or was fitted to a robot."""
+    loop (a plan fitted to an arm: its passes as pieces of those lines, `ViewLines.pieces`);
+    ValueError (one line) for a plan that records none."""
     plan = Plan.of(traj, where)
-    if plan.arm is not None:
-        raise ValueError(
-            f"{where} was fitted to a robot (passes split or turned): the closed loop runs "
-            "the plan as planned on the CAD; evaluate the plan made without --robot"
-        )
     if not plan.views:
         raise ValueError(f"{where} records no views: plan it again to run it in closed loop")
     out = []
@@ -157,20 +202,42 @@ def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
         swaths = tuple(
             swath_from_record(r, f"{where}: views[{k}].swaths[{i}]") for i, r in enumerate(lines)
         )
-        out.append(ViewLines(View(k, axis, rotation_to_up(axis)), swaths))
+        the_view = View(k, axis, rotation_to_up(axis))
+        pieces: tuple[PieceNominal, ...] = ()
+        if plan.arm is not None:
+            pieces = _fitted(traj, plan, view, the_view, swaths)
+        out.append(ViewLines(the_view, swaths, pieces))
     planned = set(np.unique(traj.swath[traj.scanning]).tolist())
-    if not planned <= {sw.index for v in out for sw in v.swaths}:
+    if plan.arm is None and not planned <= {sw.index for v in out for sw in v.swaths}:
         raise ValueError(f"{where}: its pass lines do not match its passes")
     # Counted before any work: the steps a trial may take (each pass's episode limit).
-    steps = sum(step_budget(sw.length_mm, plan.spec)[1] for v in out for sw in v.swaths)
+    flown = [sw for v in out for sw in v.flown]
+    steps = sum(step_budget(sw.length_mm, plan.spec)[1] for sw in flown)
     check_count(
         steps,
         MAX_POSES,
         f"{where}: closed-loop steps of one trial (passes of "
-        f"{sum(sw.length_mm for v in out for sw in v.swaths):g} mm in steps of "
+        f"{sum(sw.length_mm for sw in flown):g} mm in steps of "
         f"{plan.spec.delta_s_opt_mm:g} mm, up to 3 times as many)",
     )
     return out
+
+
+def _fitted(
+    traj: Trajectory, plan: Plan, record: ViewRecord, view: View, lines: tuple[Swath, ...]
+) -> tuple[PieceNominal, ...]:
+    """The passes of one view of a plan fitted to an arm, as pieces of its lines."""
+    mine = traj.scanning & (traj.swath >= record.first_swath) & (traj.swath <= record.last_swath)
+    poses = view.R[None] @ traj.poses[mine]
+    return tuple(
+        fitted_pieces(
+            list(lines),
+            poses,
+            traj.swath[mine],
+            2 * plan.spec.delta_s_opt_mm,
+            roll=plan.context.full_beam_angle,
+        )
+    )
 
 
 def plan_swaths_of(traj: Trajectory, where: str) -> list[Swath]:
@@ -239,6 +306,28 @@ def closed_loop_tasks(
     """The `trials` tasks of a closed-loop robustness run of `traj` (a feedback or rl plan,
     every view of it), judged as `metrics.robustness.trial_tasks` judges its replay."""
     planner = closed_loop_planner(context, policy, where)
+    return controller_tasks(
+        part, traj, context, planner, model, trials, seed, points_per_profile, where
+    )
+
+
+def controller_tasks(
+    part: Part,
+    traj: Trajectory,
+    context: PlanContext,
+    planner: Any,
+    model: Perturbation,
+    trials: int,
+    seed: int = 0,
+    points_per_profile: int | None = None,
+    where: str = "the plan",
+    knows_part: bool = False,
+) -> list[ClosedLoopTask]:
+    """The `trials` tasks of `planner` flying the views and pass lines of `traj` (any plan
+    that records them, whoever made it) on each perturbed part: in closed loop for a
+    feedback or rl planner, or, with `knows_part`, planned on the part as it is (any
+    planner: the re-plan ceiling). Judged as `metrics.robustness.trial_tasks` judges the
+    replay of `traj`, so every planner given the same plan is judged on the same samples."""
     views = tuple(plan_views_of(traj, where))
     if looks_ahead(planner) and any(not np.array_equal(v.view.R, np.eye(4)) for v in views):
         # Its look-ahead probes only the view's region, which the plan file does not keep.
@@ -246,6 +335,8 @@ def closed_loop_tasks(
             f"{planner.source} looks ahead on each view's region, which {where} does not "
             "record: only its views looking straight down could run in closed loop"
         )
+    if not knows_part and getattr(planner, "name", None) not in CLOSED_LOOP_PLANNERS:
+        raise ValueError(f"{planner.name} does not act on measured profiles: no closed loop")
     judges = trial_tasks(
         part, context.spec, traj, model, trials, seed, points_per_profile, context=context
     )
@@ -253,8 +344,13 @@ def closed_loop_tasks(
     fixtures = tuple(
         (np.asarray(f.mesh.vertices), np.asarray(f.mesh.faces), f.name) for f in cell.fixtures
     )
+    arm = Plan.of(traj, where).arm
+    if arm is not None and knows_part:
+        raise ValueError(f"{where} was fitted to an arm: no re-planned ceiling on its passes")
     return [
-        ClosedLoopTask(j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec)
+        ClosedLoopTask(
+            j, planner, views, cell.table, cell.table_z_mm, fixtures, context.spec, arm, knows_part
+        )
         for j in judges
     ]
 

@@ -19,7 +19,13 @@ from scanplan.core.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.core.trajectory import Trajectory
 from scanplan.planning.dynamics import PassDynamics
 from scanplan.planning.observation import observe
-from scanplan.planning.planners.closed_loop import Controller, Guards, SensorFactory, drive_passes
+from scanplan.planning.planners.closed_loop import (
+    Controller,
+    Guards,
+    PoseGuard,
+    SensorFactory,
+    drive_passes,
+)
 from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT
 from scanplan.planning.swaths import Swath
 from scanplan.rl.policy import load_policy
@@ -56,6 +62,7 @@ class RLPlanner:
     guards: Guards = field(default_factory=Guards)
     name: str = "rl"
     measure_with: SensorFactory | None = None  # `closed_loop.SensorFactory`
+    arm_guard: PoseGuard | None = None  # a fitted plan's arm (`closed_loop.PoseGuard`)
 
     @classmethod
     def from_file(cls, path: str | Path | None = None) -> RLPlanner:
@@ -131,6 +138,7 @@ class RLPlanner:
             guards=self.guards,
             roll=self.roll,
             measure_with=self.measure_with,
+            arm=self.arm_guard,
             pitch_pivot=self.pitch_pivot,
         )
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -26,6 +27,13 @@ Controller = Callable[[PassDynamics, np.ndarray], np.ndarray]
 # on: None in a planner is that sensor on the part itself; a robustness trial gives one on the
 # part as built and placed (`metrics.robustness.PlacedProfilometer`), the closed loop online.
 SensorFactory = Callable[[Part, SensorSpec], LineProfilometer]
+
+
+class PoseGuard(Protocol):
+    """What keeps a controller's poses within an arm (`arm_guard.ArmGuard`): the states
+    (k, n) proposed on passes `indices` (swath indices) in, the states the arm follows out."""
+
+    def admit(self, indices: list[int], states: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -80,6 +88,7 @@ def drive_passes(
     roll: bool = False,
     measure_with: SensorFactory | None = None,
     pitch_pivot: str = DEFAULT_PITCH_PIVOT,
+    arm: PoseGuard | None = None,
 ) -> list[Trajectory]:
     """Run `controller` over each whole pass on a noiseless sensor of `fan_points` columns,
     from an aligned start at the first station that sees the part to the last (SPEC §5's
@@ -89,7 +98,9 @@ def drive_passes(
     pose's ray cast is mostly overhead); each pass's poses are those it would have alone.
     measure_with: the sensor the controller measures with (`SensorFactory`); where each pass
     starts and ends is the planned part's (the CAD's), whatever that sensor sees.
-    pitch_pivot: where the controller's pitch steps turn (`step_model.PITCH_PIVOTS`)."""
+    pitch_pivot: where the controller's pitch steps turn (`step_model.PITCH_PIVOTS`).
+    arm: the arm the passes are flown by (a fitted plan's, `PoseGuard`): every pose the
+    controller proposes, the aligned start too, is first made one the arm follows."""
     guards = guards or Guards()
     limits = limits or StepLimits()
     sensor = spec.sensor.with_points(fan_points).without_noise()
@@ -99,10 +110,18 @@ def drive_passes(
     hold = ds_opt / limits.dy_max_mm  # the action "advance Δs_opt"
     runs = [
         _start_run(
-            PassDynamics(part, swath, plan_spec, sim, limits, roll=roll, pitch_pivot=pitch_pivot)
+            PassDynamics(part, swath, plan_spec, sim, limits, roll=roll, pitch_pivot=pitch_pivot),
+            arm,
         )
         for swath in swaths
     ]
+
+    def admitted(batch: list[_Run], steps: list[Step]) -> list[Step]:
+        if arm is None:
+            return steps
+        indices = [run.dyn.swath.index for run in batch]
+        states = arm.admit(indices, np.stack([step.state for step in steps]))
+        return [Step(step.action_mm_rad, x) for step, x in zip(steps, states, strict=True)]
 
     def measure(batch: list[tuple[_Run, Step]]) -> list[Profile]:
         passes = [run.dyn.swath for run, _ in batch]
@@ -128,6 +147,7 @@ def drive_passes(
                 run.stall_overrides += 1
             actions.append(action)
             proposed.append(run.dyn.propose(action))
+        proposed = admitted(active, proposed)
         profiles = measure(list(zip(active, proposed, strict=True)))
         # The accepted profile's advance, where already known.
         advances: list[float | None] = [None] * len(active)
@@ -143,6 +163,9 @@ def drive_passes(
                     advances[k] = None
                     redo.append(k)
             if redo:
+                fixed = admitted([active[k] for k in redo], [proposed[k] for k in redo])
+                for k, step in zip(redo, fixed, strict=True):
+                    proposed[k] = step
                 again = measure([(active[k], proposed[k]) for k in redo])
                 for k, profile in zip(redo, again, strict=True):
                     profiles[k] = profile
@@ -157,15 +180,18 @@ def drive_passes(
     return [_trajectory_of(run, name) for run in runs]
 
 
-def _start_run(dyn: PassDynamics) -> _Run:
-    """A pass ready to drive: the sensor aligned at the first station that sees the part,
-    ending at the last (the planned part's, whatever `dyn`'s sensor sees), with its step
-    budget. Its plan time starts with the alignment's."""
+def _start_run(dyn: PassDynamics, arm: PoseGuard | None = None) -> _Run:
+    """A pass ready to drive: the sensor aligned at the first station that sees the part
+    (where the `arm` follows it), ending at the last (the planned part's, whatever `dyn`'s
+    sensor sees), with its step budget. Its plan time starts with the alignment's."""
     start_time = time.perf_counter()
     part, swath, plan_spec = dyn.part, dyn.swath, dyn.spec
     geo = pass_geometry(part, swath, plan_spec)
     _, step_limit = step_budget(geo.s_last_mm - geo.s_first_mm, plan_spec)
-    dyn.start(dyn.aligned_start(geo.s_first_mm))
+    state = dyn.aligned_start(geo.s_first_mm)
+    if arm is not None:
+        state = arm.admit([swath.index], state[None])[0]
+    dyn.start(state)
     run = _Run(dyn, geo.s_last_mm, step_limit, dyn.state.copy(), [dyn.pose()], [dyn.progress_mm])
     run.plan_time_s = time.perf_counter() - start_time
     return run

@@ -13,7 +13,7 @@ import numpy as np
 from scanplan.core.quantities import PLANNING_FAN_POINTS, ScanSpec, StepLimits
 from scanplan.core.trajectory import Trajectory
 from scanplan.planning.dynamics import PassDynamics
-from scanplan.planning.planners.closed_loop import Guards, SensorFactory, drive_passes
+from scanplan.planning.planners.closed_loop import Guards, PoseGuard, SensorFactory, drive_passes
 from scanplan.planning.swaths import Swath
 from scanplan.world.part import Part
 
@@ -61,6 +61,7 @@ class FeedbackPlanner:
     limits: StepLimits = field(default_factory=StepLimits)
     name: str = "feedback"
     measure_with: SensorFactory | None = None  # `closed_loop.SensorFactory`
+    arm_guard: PoseGuard | None = None  # a fitted plan's arm (`closed_loop.PoseGuard`)
 
     def plan(self, part: Part, swath: Swath, spec: ScanSpec) -> Trajectory:
         return self.plan_passes(part, [swath], spec)[0]
@@ -78,4 +79,5 @@ class FeedbackPlanner:
             limits=self.limits,
             roll=self.roll,
             measure_with=self.measure_with,
+            arm=self.arm_guard,
         )
