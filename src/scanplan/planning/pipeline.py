@@ -23,6 +23,8 @@ from scanplan.planning.view_choice import ViewBudget, choose_views
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
+from scanplan.robot.axes import ExternalAxes
+from scanplan.robot.axes_fit import PlacedArmOnAxes, arm_on_axes, choose_values, fitted_axes_record
 from scanplan.robot.fit import PlacedArm, fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import place
@@ -117,11 +119,19 @@ def plan_views(
             # Views chosen for the arm: placed where it flies most of the views chosen
             # without it, then each candidate judged by what the arm flies of it there.
             T_base_part = arm.T_base_part
-            if T_base_part is None:
+            if T_base_part is None or arm.axes is not None:
                 _, free = join_views(part, order_views(choose().plans), spec, cell)
+            if arm.axes is not None and free is not None:  # placed with its axes
+                T_base_part, axes = arm_on_axes(
+                    free, arm.robot, arm.tcp, T_base_part, arm.axes, part, obstacles
+                )
+                arm = replace(arm, T_base_part=T_base_part, axes=axes)
+            elif T_base_part is None and free is not None:
                 T_base_part = place(free, arm.robot, arm.tcp, obstacles=obstacles).T_base_part
                 arm = replace(arm, T_base_part=T_base_part)
             placed = PlacedArm(arm.robot, arm.tcp, T_base_part, context)
+            if arm.axes is not None:
+                placed = PlacedArmOnAxes(arm.robot, arm.tcp, T_base_part, context, arm.axes)
         selection = choose(arm=placed)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
@@ -146,11 +156,13 @@ def plan_views(
 @dataclass(frozen=True)
 class Arm:
     """The robot a plan is made for: a preset name or file, the sensor on its flange
-    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`)."""
+    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`);
+    the cell's external axes (a turntable, a track; `robot.axes`), None: the arm alone."""
 
     robot: str
     tcp: np.ndarray
     T_base_part: np.ndarray | None = None
+    axes: ExternalAxes | None = None
 
 
 def fit_arm(
@@ -169,8 +181,23 @@ def fit_arm(
     if obstacles is None:
         spec = context.spec
         obstacles = obstacles_for(part, planned_cell(context, part), spec.sensor, spec.clearance_mm)
-    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
+    if arm.axes is not None:  # the axes' settings chosen view by view (`robot.axes_fit`)
+        if arm.T_base_part is None or not arm.axes.resolved:
+            T0, axes = arm_on_axes(
+                traj, arm.robot, arm.tcp, arm.T_base_part, arm.axes, part, obstacles
+            )
+            arm = replace(arm, T_base_part=T0, axes=axes)
+        assert arm.T_base_part is not None and arm.axes is not None
+        centre = part.bounds.mean(axis=0)
+        traj, _ = choose_values(
+            traj, arm.robot, arm.tcp, arm.T_base_part, arm.axes, obstacles, centre
+        )
+    fit = fit_to_robot(
+        traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles, axes=arm.axes
+    )
     record = fit.record(arm.tcp)
+    if arm.axes is not None:
+        record["external_axes"] = fitted_axes_record(arm.axes, fit.traj)
     # Judged view by view (a sample's in-spec state depends on one pass): the union is the
     # plan's figure, and what a view held that nothing flown holds is what the arm cost.
     planned, flown = _held_by_view(part, traj, context), _held_by_view(part, fit.traj, context)

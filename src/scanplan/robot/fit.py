@@ -14,6 +14,7 @@ import numpy as np
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
+from scanplan.robot.axes import ExternalAxes, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.place import (
@@ -111,6 +112,7 @@ def fit_to_robot(
     T_base_part: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
     obstacles: CellObstacles | None = None,
+    axes: ExternalAxes | None = None,
 ) -> RobotFit:
     """`traj` (part frame) made flyable by `robot` with the sensor at `tcp`
     (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
@@ -119,22 +121,25 @@ def fit_to_robot(
     check of the whole path finds neither. First, each pass is turned half a turn about the
     beam where the arm keeps more of its poses that way. In a cell (`obstacles`), poses that
     put an arm link into the part, a fixture or the table are given up too, and so is a
-    pass whose joint move in would sweep a link through them."""
+    pass whose joint move in would sweep a link through them. With external `axes`, each
+    pose is flown with the part where its values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
         placement = place(traj, arm, tcp, height_range_mm, obstacles=obstacles)
         T_base_part = placement.T_base_part
     inv_tcp = np.linalg.inv(tcp)
-    traj, turned = _turned(traj, arm, T_base_part, inv_tcp, obstacles)
+    T_all = part_poses(T_base_part, traj.external, axes)
+    traj, turned = _turned(traj, arm, T_all, inv_tcp, obstacles)
     keep = np.ones(len(traj), bool)
     cause = np.full(len(traj), -1)  # why each pose given up was: an index into CAUSES
     swath = traj.swath.copy()
     splits = 0
     for _ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
+        T_now = kept(T_all, keep)
         report = check_reach(
-            T_base_part @ current.poses @ inv_tcp,
+            T_now @ current.poses @ inv_tcp,
             arm,
             swath=current.swath,
             scanning=current.scanning,
@@ -148,7 +153,7 @@ def fit_to_robot(
         swings = report.pass_jumps
         if report.reachable and obstacles is not None:
             starts = pass_starts(current.swath, current.scanning)
-            in_cell = check_links(arm, report.joints, obstacles, T_base_part, starts)
+            in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
             for i in in_cell.moves:  # the whole pass the arm cannot be brought into
                 why[current.swath == current.swath[i]] = CAUSES.index("joint move into a pass")
             hit = in_cell.colliding
@@ -165,7 +170,7 @@ def fit_to_robot(
         splits += int(len(np.union1d(report.config_flips, swings)))
         swath = _renumbered(traj, keep, swath, cut)
     far = (cause == CAUSES.index("reach")) & traj.scanning
-    flange_xy = (T_base_part @ traj.poses[far] @ inv_tcp)[:, :2, 3]
+    flange_xy = (kept(T_all, far) @ traj.poses[far] @ inv_tcp)[:, :2, 3]
     beyond_mm = float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0] if far.any() else None
     given_up: dict[int, int] = {}
     by_cause: dict[int, dict[str, int]] = {}
@@ -181,13 +186,14 @@ def fit_to_robot(
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
+    T_now = kept(T_all, keep)
     report = check_reach(
-        T_base_part @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
+        T_now @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
     )
     links: LinkReport | None = None
     if obstacles is not None:
         starts = pass_starts(fitted.swath, fitted.scanning)
-        links = check_links(arm, report.joints, obstacles, T_base_part, starts)
+        links = check_links(arm, report.joints, obstacles, T_now, starts)
     return RobotFit(
         fitted,
         T_base_part,

@@ -118,8 +118,11 @@ def flyable_poses(
     default) of `traj` the arm reaches within its limits with its links clear, and (the
     body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
     last verdict for both, if known (it does not depend on the placement). exact=False: the
-    links' quick, slightly cautious verdict (`links.check_links`)."""
+    links' quick, slightly cautious verdict (`links.check_links`). T_base_part: (4, 4), or
+    (len(traj), 4, 4) one per pose (external axes)."""
     index = np.arange(len(traj)) if index is None else index
+    if np.ndim(T_base_part) == 3:  # one per pose of `traj` (external axes)
+        T_base_part = np.asarray(T_base_part)[index]
     if sensor_ok is None and obstacles is not None:
         sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
     out = []
