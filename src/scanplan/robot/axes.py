@@ -29,6 +29,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from scanplan.core.cycle import trapezoid_time_s
 from scanplan.core.paths import read_regular
 from scanplan.core.validation import error_line
 
@@ -205,7 +206,7 @@ class ExternalAxes:
         """From a plan's record (`record`); ValueError naming `where` and the field."""
         if not isinstance(data, dict):
             raise ValueError(f"{where}: expected a JSON object")
-        fields = {k: v for k, v in data.items() if k != "names"}
+        fields = {k: v for k, v in data.items() if k not in ("names", "travel")}
         try:
             model = _AxesFile.model_validate(fields)
             axes = cls(model.turntable, model.track)
@@ -292,3 +293,61 @@ def kept(T_base_part: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The part poses of the poses `mask` selects: (4, 4) as it is, (n, 4, 4) those rows."""
     T = np.asarray(T_base_part)
     return T if T.ndim == 2 else T[mask]
+
+
+def plan_axes(record: dict[str, Any] | None, external: np.ndarray | None, where: str):
+    """The external axes of a plan's arm `record` (its `external_axes`), checked against the
+    plan's values per pose (`Trajectory.external`); None for a plan of the arm alone.
+    ValueError (one line, naming `where`) where they disagree or a value is out of range."""
+    data = None if record is None else record.get("external_axes")
+    if data is None:
+        if external is not None:
+            raise ValueError(f"{where}: external axis values per pose but no external_axes record")
+        return None
+    axes = ExternalAxes.of_record(data, f"{where}: robot.external_axes")
+    if external is None:
+        raise ValueError(f"{where}: robot.external_axes without their values per pose")
+    if external.shape[1] != len(axes.names):
+        raise ValueError(
+            f"{where}: {external.shape[1]} external axis values per pose, "
+            f"{len(axes.names)} axes ({', '.join(axes.names)})"
+        )
+    lo, hi = axes.limits.T
+    bad = np.flatnonzero(((external < lo - 1e-6) | (external > hi + 1e-6)).any(axis=1))
+    if len(bad):
+        j = int(np.argmax((external[bad[0]] < lo - 1e-6) | (external[bad[0]] > hi + 1e-6)))
+        raise ValueError(
+            f"{where}: pose {bad[0]}: {axes.names[j]} {external[bad[0], j]:g} beyond its "
+            f"range {lo[j]:g}..{hi[j]:g}"
+        )
+    if not axes.resolved:
+        raise ValueError(
+            f"{where}: robot.external_axes: the turntable's point or track's direction unset"
+        )
+    return axes
+
+
+def axes_seconds(traj, axes: ExternalAxes, spec, scan_speed_mm_s: float) -> float:
+    """s the arm waits on the external axes over `traj` (its values `traj.external`): each
+    turn of the turntable between views in full (the arm stands while it indexes: a
+    trapezoid at its speed and acceleration), and where the track must move faster than
+    its speed to follow the sensor, the time it takes beyond the arm's own (the TCP at the
+    scan speed in a pass, at the travel speed elsewhere)."""
+    if traj.external is None:
+        return 0.0
+    delta = np.abs(np.diff(traj.external, axis=0))
+    total = 0.0
+    col = 0
+    if axes.turntable is not None:
+        turns = delta[:, 0][delta[:, 0] > 1e-9]
+        t = axes.turntable
+        total += float(trapezoid_time_s(turns, t.speed_deg_s, t.accel_deg_s2).sum())
+        col = 1
+    if axes.track is not None:
+        tcp = (traj.poses @ spec.T_sensor_line)[:, :3, 3]
+        step = np.linalg.norm(np.diff(tcp, axis=0), axis=1)
+        in_pass = traj.scanning[1:] & traj.scanning[:-1] & (traj.swath[1:] == traj.swath[:-1])
+        arm_s = step / np.where(in_pass, scan_speed_mm_s, spec.travel_speed_mm_s)
+        track_s = delta[:, col] / axes.track.speed_mm_s
+        total += float(np.maximum(track_s - arm_s, 0.0).sum())
+    return total
