@@ -140,10 +140,10 @@ def _score(
 
 
 def _pick(scores: np.ndarray, settings: np.ndarray, last: np.ndarray | None) -> int:
-    """The best setting; among those within NEAR_BEST of it, the nearest to `last`."""
+    """The best setting; among those within NEAR_BEST of it, the nearest to `last` (to
+    every axis at 0 for the first view)."""
     near = np.flatnonzero(scores >= scores.max() * (1.0 - NEAR_BEST) - 1e-9)
-    if last is None or len(near) == 1:
-        return int(near[0]) if len(near) == 1 else int(np.argmax(scores))
+    last = np.zeros(settings.shape[1]) if last is None else last
     return int(near[np.argmin(np.abs(settings[near] - last).sum(axis=1))])
 
 
