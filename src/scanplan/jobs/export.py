@@ -15,6 +15,7 @@ from scanplan.core.limits import MAX_SCAN_SPEED_MM_S, POSITION_MM, TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part
 from scanplan.robot import get_robot
+from scanplan.robot.axes import with_disk
 from scanplan.robot.export import (
     FORMATS,
     ExportOptions,
@@ -193,7 +194,7 @@ def flyable_joints(
     with bar("reach and collision check"):
         result = check_flyable(
             plan.traj, get_robot(robot), options.part_pose, options.tcp, part,
-            plan_cell(plan, part), plan.spec.sensor, axes=options.axes,
+            with_disk(plan_cell(plan, part), options.axes), plan.spec.sensor, axes=options.axes,
         )  # fmt: skip
     report = result.reach
     if result.flyable:

@@ -23,7 +23,7 @@ from scanplan.planning.view_choice import ViewBudget, choose_views
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
-from scanplan.robot.axes import ExternalAxes
+from scanplan.robot.axes import ExternalAxes, with_disk
 from scanplan.robot.axes_fit import PlacedArmOnAxes, arm_on_axes, choose_values, fitted_axes_record
 from scanplan.robot.fit import PlacedArm, fit_to_robot
 from scanplan.robot.links import obstacles_for
@@ -188,6 +188,9 @@ def fit_arm(
             )
             arm = replace(arm, T_base_part=T0, axes=axes)
         assert arm.T_base_part is not None and arm.axes is not None
+        spec = context.spec
+        cell = with_disk(planned_cell(context, part), arm.axes)
+        obstacles = obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
         centre = part.bounds.mean(axis=0)
         traj, _ = choose_values(
             traj, arm.robot, arm.tcp, arm.T_base_part, arm.axes, obstacles, centre

@@ -22,7 +22,7 @@ A plan's external axis values are one column each (`Trajectory.external`), in th
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -32,6 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from scanplan.core.cycle import trapezoid_time_s
 from scanplan.core.paths import read_regular
 from scanplan.core.validation import error_line
+from scanplan.world.cell import Cell, Disk
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -351,3 +352,12 @@ def axes_seconds(traj, axes: ExternalAxes, spec, scan_speed_mm_s: float) -> floa
         track_s = delta[:, col] / axes.track.speed_mm_s
         total += float(np.maximum(track_s - arm_s, 0.0).sum())
     return total
+
+
+def with_disk(cell: Cell, axes: ExternalAxes | None) -> Cell:
+    """`cell` with the turntable's disk (and body below it) the part lies on, as an obstacle
+    of the arm's links; as it is without a turntable (or one whose point is not set)."""
+    if axes is None or (t := axes.turntable) is None or t.axis_point_mm is None:
+        return cell
+    top = (float(t.axis_point_mm[0]), float(t.axis_point_mm[1]), float(t.axis_point_mm[2]))
+    return replace(cell, disk=Disk(top, t.radius_mm, t.height_mm))

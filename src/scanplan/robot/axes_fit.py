@@ -23,9 +23,10 @@ import numpy as np
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
-from scanplan.robot.axes import ExternalAxes, kept, part_poses
+from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
 from scanplan.robot.base import Robot
 from scanplan.robot.fit import PlacedArm, _renumbered
+from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import (
     HALF_TURN,
     _subsample,
@@ -38,6 +39,7 @@ from scanplan.robot.place import (
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
+from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
 
 TURN_STEP_DEG = 15.0  # the turntable's candidate angles, this far apart
@@ -46,6 +48,8 @@ SAMPLE_POSES = 96  # a view's poses a candidate setting is judged on
 # Among settings within this share of the best, the one nearest the last view's is held
 # (the axis moves less).
 NEAR_BEST = 0.01
+# The arm's column stands at least this far outside the turntable's disk.
+BESIDE_DISK_MM = 150.0
 
 
 def resolved(axes: ExternalAxes, part: Part, T_base_part: np.ndarray, traj: Trajectory):
@@ -205,6 +209,14 @@ class PlacedArmOnAxes(PlacedArm):
         super().__init__(robot, tcp, T_base_part, context)
         self.axes = axes
 
+    def obstacles(self, part: Part) -> CellObstacles:
+        """The cell's obstacles with the turntable's disk among them."""
+        if self._obstacles is None or self._obstacles[0] != id(part):
+            spec = self.context.spec
+            cell = with_disk(planned_cell(self.context, part), self.axes)
+            self._obstacles = (id(part), obstacles_for(part, cell, spec.sensor, spec.clearance_mm))
+        return self._obstacles[1]
+
     def flown(self, part: Part, traj: Trajectory) -> Trajectory:
         arm = get_robot(self.robot)
         obstacles = self.obstacles(part)
@@ -243,7 +255,8 @@ def place_on_axes(
     if axes.turntable is not None:
         reach, z_mid = reach_mm(arm)
         point = resolved(axes, part, T_base_part, traj).turntable.axis_point_mm  # type: ignore[union-attr]
-        for r in np.linspace(0.3, 0.8, 6) * reach:
+        beside = axes.turntable.radius_mm + BESIDE_DISK_MM
+        for r in np.linspace(max(0.3 * reach, beside), max(0.8 * reach, beside + 100.0), 6):
             for z in z_mid + np.linspace(-0.5, 0.2, 5) * reach:
                 T = np.eye(4)
                 T[:3, 3] = np.array([r, 0.0, z]) - np.asarray(point)
@@ -251,6 +264,10 @@ def place_on_axes(
     best, best_score = tries[0], -1.0
     for T in tries:
         choice = resolved(axes, part, T, traj)
+        if (t := choice.turntable) is not None and t.axis_point_mm is not None:
+            base = np.linalg.inv(T)[:3, 3]
+            if np.hypot(*(base - t.axis_point_mm)[:2]) < t.radius_mm + BESIDE_DISK_MM:
+                continue  # the arm's column in the turntable
         sample = _subsample(traj, 4 * SAMPLE_POSES)
         settings = candidates(choice, arm)
         sub = traj.subset(np.isin(np.arange(len(traj)), sample))

@@ -15,6 +15,7 @@ from scanplan.core.plan import Plan, view_of_pose, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.report import view_groups
 from scanplan.robot import check_reach, get_robot
+from scanplan.robot.axes import ExternalAxes, part_poses, plan_axes, with_disk
 from scanplan.robot.links import check_links, obstacles_for
 from scanplan.robot.reach import pass_starts
 from scanplan.world.cell import Cell, planned_cell
@@ -44,6 +45,12 @@ MOVE_COLOUR = "#a0a0a0"
 TABLE_SLAB_MM = 30.0
 # The sensor drawn from the flange to its origin (the TCP) as a capsule of this radius.
 SENSOR_RADIUS_MM = 25.0
+# External axes: the turntable's pointer (from its axis to its rim, towards the arm: it
+# turns with the slider) and the track's carriage under the arm (rides with the slider).
+POINTER_RADIUS_MM = 12.0
+CARRIAGE_RADIUS_MM = 80.0
+CARRIAGE_HALF_MM = 200.0
+POSITIONER_COLOUR = "#4a6fa5"
 
 
 @dataclass(frozen=True)
@@ -55,7 +62,9 @@ class ArmPoses:
     colliding: (n,) a link within the clearance of the part, the table or a fixture;
     shown: (m,) indices of the poses drawn; capsules_part: (m, k, 2, 3) their links'
     segment ends in the part frame (mm), the last one flange to sensor origin; radii: (k,)
-    mm; summaries: the reach and link checks' one-line summaries.
+    mm; summaries: the reach and link checks' one-line summaries. axes: the external axes
+    (None: the arm alone), their values at the poses drawn `shown_axes` (m, k), and the
+    part's pose at each pose drawn `T_base_part_shown` (m, 4, 4).
     """
 
     robot: str
@@ -66,6 +75,8 @@ class ArmPoses:
     capsules_part: np.ndarray
     radii: np.ndarray
     summaries: tuple[str, ...]
+    axes: ExternalAxes | None = None
+    shown_axes: np.ndarray | None = None
 
     @property
     def base_part(self) -> np.ndarray:
@@ -105,19 +116,23 @@ def check_arm(
     T_flange_sensor: np.ndarray,
     part: Part,
     cell: Cell,
+    axes: ExternalAxes | None = None,
 ) -> ArmPoses:
     """The arm `robot` along `traj` (the part at `T_base_part`, the sensor at
-    `T_flange_sensor` on the flange): its reach and link checks and the poses to draw."""
+    `T_flange_sensor` on the flange; with external `axes`, the part where their values per
+    pose put it): its reach and link checks and the poses to draw."""
     arm = get_robot(robot)
     T_base_part = np.asarray(T_base_part, dtype=np.float64)
-    T_base_flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    T_all = part_poses(T_base_part, traj.external, axes)
+    T_base_flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    cell = with_disk(cell, axes)
     reach = check_reach(T_base_flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(
         arm,
         reach.joints,
         # The links keep the clearance the plan was made with, as the sensor does.
         obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm),
-        T_base_part,
+        T_all,
         pass_starts(traj.swath, traj.scanning),
     )
     unreachable = np.zeros(len(traj), dtype=bool)
@@ -126,13 +141,20 @@ def check_arm(
     shown = shown_poses(traj, unreachable | colliding)
     shown = shown[~np.isnan(reach.joints[shown]).any(axis=1)]  # no joints, no arm to draw
     ends, radii, _ = arm.link_capsules(reach.joints[shown])
-    T_part_base = np.linalg.inv(T_base_part)
-    ends_part = ends @ T_part_base[:3, :3].T + T_part_base[:3, 3]
+    T_part_base = np.linalg.inv(np.broadcast_to(T_all, (len(traj), 4, 4))[shown])
+    ends_part = np.einsum("mij,mkej->mkei", T_part_base[:, :3, :3], ends)
+    ends_part = ends_part + T_part_base[:, None, None, :3, 3]
     # The sensor on the flange, flange to sensor origin: the arm visibly reaches its pose.
     flange_part = (traj.poses[shown] @ np.linalg.inv(T_flange_sensor))[:, :3, 3]
     tool = np.stack([flange_part, traj.poses[shown, :3, 3]], axis=1)[:, None]
     ends_part = np.concatenate([ends_part.reshape(len(shown), len(radii), 2, 3), tool], 1)
     radii = np.r_[radii, SENSOR_RADIUS_MM]
+    shown_axes = None
+    if axes is not None and traj.external is not None:
+        shown_axes = traj.external[shown]
+        extra = _axis_capsules(axes, T_part_base)
+        ends_part = np.concatenate([ends_part, extra[0]], 1)
+        radii = np.r_[radii, extra[1]]
     return ArmPoses(
         arm.name,
         T_base_part,
@@ -142,7 +164,62 @@ def check_arm(
         ends_part,
         np.asarray(radii, dtype=np.float64),
         (reach.summary(), links.summary()),
+        axes,
+        shown_axes,
     )
+
+
+def _axis_capsules(axes: ExternalAxes, T_part_base: np.ndarray) -> tuple[np.ndarray, list]:
+    """((m, j, 2, 3) segment ends in the part frame, (j,) radii) of what moves with the
+    external axes at the poses drawn (the arm's base at `T_part_base` (m, 4, 4)): the
+    turntable's pointer from its axis towards the arm, the track's carriage under it."""
+    base = T_part_base[:, :3, 3]
+    out, radii = [], []
+    if (t := axes.turntable) is not None and t.axis_point_mm is not None:
+        centre = np.broadcast_to(np.asarray(t.axis_point_mm, dtype=np.float64), base.shape)
+        towards = base - centre
+        towards[:, 2] = 0.0
+        towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-9)
+        rim = centre + t.radius_mm * towards
+        out.append(np.stack([centre, rim], axis=1) + [0.0, 0.0, POINTER_RADIUS_MM])
+        radii.append(POINTER_RADIUS_MM)
+    if (k := axes.track) is not None and k.direction is not None:
+        d = np.einsum("mij,j->mi", T_part_base[:, :3, :3], np.asarray(k.direction, float))
+        out.append(np.stack([base - CARRIAGE_HALF_MM * d, base + CARRIAGE_HALF_MM * d], axis=1))
+        radii.append(CARRIAGE_RADIUS_MM)
+    return np.stack(out, axis=1), radii
+
+
+def axes_traces(part: Part, arm: ArmPoses) -> list:
+    """What of the external axes stands still in the part frame: the turntable's disk
+    under the part, the track's rail (its whole travel, where the arm rides)."""
+    if arm.axes is None:
+        return []
+    traces = []
+    if (t := arm.axes.turntable) is not None and t.axis_point_mm is not None:
+        top = np.asarray(t.axis_point_mm, dtype=np.float64)
+        disk = np.array([[top - [0.0, 0.0, 40.0], top]])
+        v, f = capsule_mesh(disk, np.array([t.radius_mm]), sides=48)
+        traces.append(_solid(v, f, f"turntable (r {t.radius_mm:g} mm)", POSITIONER_COLOUR, 0.5))
+    if (k := arm.axes.track) is not None and k.direction is not None:
+        lo, hi = arm.axes.limits[-1]
+        values = np.zeros((2, len(arm.axes.names)))
+        values[:, -1] = lo, hi
+        if arm.shown_axes is not None and len(arm.shown_axes) and arm.axes.turntable:
+            values[:, 0] = arm.shown_axes[0, 0]
+        ends = np.linalg.inv(arm.axes.base_part(arm.T_base_part, values))[:, :3, 3]
+        v, f = capsule_mesh(ends[None], np.array([40.0]))
+        traces.append(_solid(v, f, f"track ({k.length_mm:g} mm)", POSITIONER_COLOUR, 0.6))
+    return traces
+
+
+def _solid(v: np.ndarray, f: np.ndarray, name: str, colour: str, opacity: float):
+    import plotly.graph_objects as go
+
+    return go.Mesh3d(
+        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2], color=colour,
+        opacity=opacity, name=name, hoverinfo="name", flatshading=True, showlegend=True,
+    )  # fmt: skip
 
 
 def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]:
@@ -154,7 +231,8 @@ def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]
     if plan.arm is None:
         return cell, None
     arm = plan.arm
-    return cell, check_arm(traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell)
+    axes = plan_axes(arm.record, traj.external, plan.where)
+    return cell, check_arm(traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell, axes)
 
 
 # ---- traces -------------------------------------------------------------------------------
@@ -346,7 +424,13 @@ def add_arm(fig, traj: Trajectory, arm: ArmPoses) -> None:
     for j, i in enumerate(arm.shown):
         run = runs[pass_of[i]] if pass_of[i] >= 0 else np.array([i])
         where = "first" if i == run[0] else "last" if i == run[-1] else "middle"
-        labels.append(f"pose {i} (view {view[i]}, pass {pass_of[i]}, {where})")
+        setting = ""
+        if arm.axes is not None and arm.shown_axes is not None:
+            setting = ", " + ", ".join(
+                f"{n.rsplit('_', 1)[0]} {v:.0f} {n.rsplit('_', 1)[1]}"
+                for n, v in zip(arm.axes.names, arm.shown_axes[j], strict=True)
+            )
+        labels.append(f"pose {i} (view {view[i]}, pass {pass_of[i]}, {where}{setting})")
         bad = bool(arm.colliding[i])
         fig.add_trace(
             _arm_mesh(
@@ -431,6 +515,8 @@ def scene_figure(
     if cell is not None:
         traces += cell_traces(part, cell)
     traces += passes_traces(traj, max_points)
+    if arm is not None:
+        traces += axes_traces(part, arm)
     fig = go.Figure(traces)
     if arm is not None:
         add_arm(fig, traj, arm)
