@@ -26,7 +26,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
 from scanplan.robot.base import Robot
 from scanplan.robot.fit import PlacedArm, _renumbered
-from scanplan.robot.links import obstacles_for
+from scanplan.robot.links import column_clear, obstacles_for
 from scanplan.robot.place import (
     HALF_TURN,
     _subsample,
@@ -50,6 +50,9 @@ SAMPLE_POSES = 96  # a view's poses a candidate setting is judged on
 NEAR_BEST = 0.01
 # The arm's column stands at least this far outside the turntable's disk.
 BESIDE_DISK_MM = 150.0
+# With a track, the placement is searched across it and in height about the arm's own.
+TRACK_ACROSS_MM = np.arange(-400.0, 401.0, 100.0)
+TRACK_HEIGHTS_MM = np.arange(-300.0, 301.0, 150.0)
 
 
 def resolved(axes: ExternalAxes, part: Part, T_base_part: np.ndarray, traj: Trajectory):
@@ -245,10 +248,11 @@ def place_on_axes(
     obstacles: CellObstacles | None = None,
 ) -> tuple[np.ndarray, ExternalAxes]:
     """The placement (and the axes' choices) from which the arm with its axes flies most of
-    `traj`'s scanning: from `T_base_part` (the arm's own placement for the plan), and for a
-    turntable also the part's axis at distances and heights around the arm's reach, each
-    judged by the scanning poses the best per-view settings keep (reach and limits, on a
-    sample)."""
+    `traj`'s scanning: from `T_base_part` (the arm's own placement for the plan), for a
+    turntable also the part's axis at distances and heights around the arm's reach (the
+    arm's column outside the disk), for a track the part moved across the track and up or
+    down; each judged by the scanning poses the best per-view settings keep (reach and
+    limits, on a sample), the arm's column clear of the table."""
     arm = get_robot(robot)
     inv_tcp = np.linalg.inv(tcp)
     tries = [np.asarray(T_base_part, dtype=np.float64)]
@@ -261,6 +265,17 @@ def place_on_axes(
                 T = np.eye(4)
                 T[:3, 3] = np.array([r, 0.0, z]) - np.asarray(point)
                 tries.append(T)
+    if axes.track is not None:  # the part nearer or farther across the track, higher, lower
+        d = np.asarray(resolved(axes, part, T_base_part, traj).track.direction)  # type: ignore[union-attr]
+        across = np.array([-d[1], d[0], 0.0])
+        for u in TRACK_ACROSS_MM:
+            for z in TRACK_HEIGHTS_MM:
+                T = np.array(T_base_part, dtype=np.float64)
+                T[:3, 3] += u * across + [0.0, 0.0, z]
+                tries.append(T)
+    if obstacles is not None:  # the arm's column beside the table, not in it
+        clear = column_clear(arm, np.array(tries), obstacles.table_block, obstacles.clearance_mm)
+        tries = [T for T, ok in zip(tries, clear, strict=True) if ok] or tries[:1]
     best, best_score = tries[0], -1.0
     for T in tries:
         choice = resolved(axes, part, T, traj)
