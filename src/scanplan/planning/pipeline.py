@@ -129,6 +129,7 @@ def plan_views(
             elif T_base_part is None and free is not None:
                 T_base_part = place(free, arm.robot, arm.tcp, obstacles=obstacles).T_base_part
                 arm = replace(arm, T_base_part=T_base_part)
+            assert T_base_part is not None
             placed = PlacedArm(arm.robot, arm.tcp, T_base_part, context)
             if arm.axes is not None:
                 placed = PlacedArmOnAxes(arm.robot, arm.tcp, T_base_part, context, arm.axes)

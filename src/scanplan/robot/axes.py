@@ -93,7 +93,7 @@ class _AxesFile(BaseModel):
     track: Track | None = None
 
 
-def _unit(v: list[float]) -> np.ndarray:
+def _unit(v: list[float] | np.ndarray) -> np.ndarray:
     u = np.asarray(v, dtype=np.float64)
     return u / np.linalg.norm(u)
 
