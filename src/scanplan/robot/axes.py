@@ -361,3 +361,12 @@ def with_disk(cell: Cell, axes: ExternalAxes | None) -> Cell:
         return cell
     top = (float(t.axis_point_mm[0]), float(t.axis_point_mm[1]), float(t.axis_point_mm[2]))
     return replace(cell, disk=Disk(top, t.radius_mm, t.height_mm))
+
+
+def axis_steps(traj, axes: ExternalAxes | None) -> np.ndarray:
+    """(n,) bool: the poses of `traj` where the turntable takes a new angle (the program
+    reaches them by a joint move on which it turns), none without a turntable."""
+    step = np.zeros(len(traj), bool)
+    if axes is not None and axes.turntable is not None and traj.external is not None:
+        step[1:] = np.abs(np.diff(traj.external[:, 0])) > 1e-9
+    return step

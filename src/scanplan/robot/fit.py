@@ -14,7 +14,7 @@ import numpy as np
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
-from scanplan.robot.axes import ExternalAxes, kept, part_poses
+from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.place import (
@@ -152,7 +152,7 @@ def fit_to_robot(
         # move: the pass is split there, as at a flip, and the arm moves between the pieces.
         swings = report.pass_jumps
         if report.reachable and obstacles is not None:
-            starts = pass_starts(current.swath, current.scanning)
+            starts = pass_starts(current.swath, current.scanning) | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
             for i in in_cell.moves:  # the whole pass the arm cannot be brought into
                 why[current.swath == current.swath[i]] = CAUSES.index("joint move into a pass")
@@ -192,7 +192,7 @@ def fit_to_robot(
     )
     links: LinkReport | None = None
     if obstacles is not None:
-        starts = pass_starts(fitted.swath, fitted.scanning)
+        starts = pass_starts(fitted.swath, fitted.scanning) | axis_steps(fitted, axes)
         links = check_links(arm, report.joints, obstacles, T_now, starts)
     return RobotFit(
         fitted,

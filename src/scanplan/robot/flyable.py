@@ -12,7 +12,7 @@ import numpy as np
 from scanplan.core.plan import Plan
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.robot.axes import ExternalAxes, part_poses
+from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses
 from scanplan.robot.base import Robot
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
@@ -81,7 +81,8 @@ def check_flyable(
         reach.joints,
         obstacles_for(part, cell, sensor, clearance) if obstacles is None else obstacles,
         T_all,
-        pass_starts(traj.swath, traj.scanning),
+        # The joint moves into each pass, and those on which the turntable turns.
+        pass_starts(traj.swath, traj.scanning) | axis_steps(traj, axes),
     )
     touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []

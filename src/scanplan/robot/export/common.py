@@ -22,7 +22,7 @@ import numpy as np
 
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory, pass_bounds
-from scanplan.robot.axes import ExternalAxes, kept, part_poses
+from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.export.thinning import thin
 
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, RAPID 32
@@ -246,15 +246,6 @@ class Motion:
         return np.broadcast_to(
             part_poses(self.part_pose, self.external, self.axes), (len(self.poses), 4, 4)
         )
-
-
-def axis_steps(traj: Trajectory, axes: ExternalAxes | None) -> np.ndarray:
-    """(n,) bool: the poses where the turntable takes a new angle (the joint move into them
-    turns it), none without a turntable."""
-    step = np.zeros(len(traj), bool)
-    if axes is not None and axes.turntable is not None and traj.external is not None:
-        step[1:] = np.abs(np.diff(traj.external[:, 0])) > 1e-9
-    return step
 
 
 def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
