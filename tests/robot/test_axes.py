@@ -241,3 +241,12 @@ def test_the_arm_waits_on_the_turntable_and_on_a_track_too_slow_to_follow():
     assert axes_seconds(follow, TRACK, spec, 100.0) == pytest.approx(0.0, abs=1e-9)
     slow = ExternalAxes(track=Track(direction=[0.0, 1.0, 0.0], length_mm=2000, speed_mm_s=20))
     assert axes_seconds(follow, slow, spec, 100.0) > 4 * 160 * (1 / 20 - 1 / 100) * 0.9
+
+
+def test_a_rosbag_of_a_plan_with_axes_is_refused_not_misread(tmp_path):
+    from scanplan.robot.export import export_rosbag
+
+    options = ExportOptions(part_pose=T0, axes=TURNTABLE)
+    with pytest.raises(ValueError, match="rosbag2 does not carry external axes"):
+        export_rosbag(_turntable_traj(), tmp_path / "bag", options)
+    assert not (tmp_path / "bag").exists()

@@ -126,6 +126,11 @@ class ExternalAxes:
         )
 
     @property
+    def labels(self) -> tuple[str, ...]:
+        """The axes' names with their units, for a program's header: 'turntable (deg)'."""
+        return tuple(f"{n.rsplit('_', 1)[0]} ({n.rsplit('_', 1)[1]})" for n in self.names)
+
+    @property
     def rotary(self) -> np.ndarray:
         """(k,) bool: which axes turn (degrees) rather than slide (mm)."""
         return np.array([n.endswith("_deg") for n in self.names])

@@ -70,9 +70,9 @@ def _axes_header(motion: Motion) -> list[str]:
     """What the header says of the external axes: which E is which, and the axes' record."""
     if motion.axes is None:
         return []
-    names = ", ".join(f"E{j + 1} {n}" for j, n in enumerate(motion.axes.names))
+    names = ", ".join(f"E{j + 1} {n}" for j, n in enumerate(motion.axes.labels))
     out = [
-        f"; External axes on every target: {names} (degrees, mm), moved with the arm.",
+        f"; External axes on every target: {names}, moved with the arm.",
         "; $BASE is the part with every external axis at 0. A turntable: declare that base",
         "; as coupled to the turntable's kinematics (BASE_TYPE #EK on its flange), so the",
         "; controller turns it with E1. A track: $ROBROOT rides it (a ROBROOT kinematic),",

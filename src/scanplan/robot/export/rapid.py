@@ -103,9 +103,9 @@ def write(motion: Motion, options: ExportOptions) -> str:
     extax = _extax(motion)
     axes_lines = []
     if motion.axes is not None:
-        which = ", ".join(f"eax_{'abcdef'[j]} {n}" for j, n in enumerate(motion.axes.names))
+        which = ", ".join(f"eax_{'abcdef'[j]} {n}" for j, n in enumerate(motion.axes.labels))
         axes_lines = [
-            f"  ! External axes in every robtarget's extax: {which} (degrees, mm). wobjPart is",
+            f"  ! External axes in every robtarget's extax: {which}. wobjPart is",
             "  ! the part with every axis at 0: with a turntable, make it a coordinated work",
             "  ! object moved by the turntable's mechanical unit (ufmec), so it turns with",
             "  ! eax_a; with a track, the robot's base rides it (a track unit).",
