@@ -88,14 +88,19 @@ def main() -> None:
             if args.only and args.only not in name:
                 continue
             part = load_part(source, units)
-            _, free = plan_views(part, spec, planner, "auto")
+            _, free = plan_views(part, spec, planner, "auto", fixture_units=units)
             without = evaluate(part, spec, free, points_per_profile=args.points).in_spec_coverage
             t_alone = None
             rows = [(None, "arm alone")] * (not args.no_alone) + [(axes, axes.describe())]
             for with_axes, label in rows:
                 start = time.perf_counter()
                 _, traj = plan_views(
-                    part, spec, planner, "auto", arm=Arm(robot, TCP, None, with_axes)
+                    part,
+                    spec,
+                    planner,
+                    "auto",
+                    fixture_units=units,
+                    arm=Arm(robot, TCP, None, with_axes),
                 )
                 seconds = time.perf_counter() - start
                 t_alone = seconds if with_axes is None else t_alone
