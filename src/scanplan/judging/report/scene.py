@@ -14,6 +14,12 @@ import numpy as np
 from scanplan.core.plan import Plan, view_of_pose, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.report import view_groups
+from scanplan.judging.report.scene_axes import (
+    CAPSULE_SIDES,
+    axes_traces,
+    axis_capsules,
+    capsule_mesh,
+)
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.axes import ExternalAxes, part_poses, plan_axes, with_disk
 from scanplan.robot.links import check_links, obstacles_for
@@ -27,7 +33,6 @@ MAX_PATH_POINTS = 20_000
 # The arm is drawn at each pass's first, middle and last pose, at most this many poses in
 # all (passes taken evenly when a plan has more): beyond that the arms hide the part.
 MAX_ARM_POSES = 48
-CAPSULE_SIDES = 12
 # One colour per side the views look from (plotly's D3 palette).
 VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
                 "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
@@ -45,12 +50,6 @@ MOVE_COLOUR = "#a0a0a0"
 TABLE_SLAB_MM = 30.0
 # The sensor drawn from the flange to its origin (the TCP) as a capsule of this radius.
 SENSOR_RADIUS_MM = 25.0
-# External axes: the turntable's pointer (from its axis to its rim, towards the arm: it
-# turns with the slider) and the track's carriage under the arm (rides with the slider).
-POINTER_RADIUS_MM = 12.0
-CARRIAGE_RADIUS_MM = 80.0
-CARRIAGE_HALF_MM = 200.0
-POSITIONER_COLOUR = "#4a6fa5"
 
 
 @dataclass(frozen=True)
@@ -152,7 +151,7 @@ def check_arm(
     shown_axes = None
     if axes is not None and traj.external is not None:
         shown_axes = traj.external[shown]
-        extra = _axis_capsules(axes, T_part_base)
+        extra = axis_capsules(axes, T_part_base)
         ends_part = np.concatenate([ends_part, extra[0]], 1)
         radii = np.r_[radii, extra[1]]
     return ArmPoses(
@@ -167,59 +166,6 @@ def check_arm(
         axes,
         shown_axes,
     )
-
-
-def _axis_capsules(axes: ExternalAxes, T_part_base: np.ndarray) -> tuple[np.ndarray, list]:
-    """((m, j, 2, 3) segment ends in the part frame, (j,) radii) of what moves with the
-    external axes at the poses drawn (the arm's base at `T_part_base` (m, 4, 4)): the
-    turntable's pointer from its axis towards the arm, the track's carriage under it."""
-    base = T_part_base[:, :3, 3]
-    out, radii = [], []
-    if (t := axes.turntable) is not None and t.axis_point_mm is not None:
-        centre = np.broadcast_to(np.asarray(t.axis_point_mm, dtype=np.float64), base.shape)
-        towards = base - centre
-        towards[:, 2] = 0.0
-        towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-9)
-        rim = centre + t.radius_mm * towards
-        out.append(np.stack([centre, rim], axis=1) + [0.0, 0.0, POINTER_RADIUS_MM])
-        radii.append(POINTER_RADIUS_MM)
-    if (k := axes.track) is not None and k.direction is not None:
-        d = np.einsum("mij,j->mi", T_part_base[:, :3, :3], np.asarray(k.direction, float))
-        out.append(np.stack([base - CARRIAGE_HALF_MM * d, base + CARRIAGE_HALF_MM * d], axis=1))
-        radii.append(CARRIAGE_RADIUS_MM)
-    return np.stack(out, axis=1), radii
-
-
-def axes_traces(part: Part, arm: ArmPoses) -> list:
-    """What of the external axes stands still in the part frame: the turntable's disk
-    under the part, the track's rail (its whole travel, where the arm rides)."""
-    if arm.axes is None:
-        return []
-    traces = []
-    if (t := arm.axes.turntable) is not None and t.axis_point_mm is not None:
-        top = np.asarray(t.axis_point_mm, dtype=np.float64)
-        disk = np.array([[top - [0.0, 0.0, 40.0], top]])
-        v, f = capsule_mesh(disk, np.array([t.radius_mm]), sides=48)
-        traces.append(_solid(v, f, f"turntable (r {t.radius_mm:g} mm)", POSITIONER_COLOUR, 0.5))
-    if (k := arm.axes.track) is not None and k.direction is not None:
-        lo, hi = arm.axes.limits[-1]
-        values = np.zeros((2, len(arm.axes.names)))
-        values[:, -1] = lo, hi
-        if arm.shown_axes is not None and len(arm.shown_axes) and arm.axes.turntable:
-            values[:, 0] = arm.shown_axes[0, 0]
-        ends = np.linalg.inv(arm.axes.base_part(arm.T_base_part, values))[:, :3, 3]
-        v, f = capsule_mesh(ends[None], np.array([40.0]))
-        traces.append(_solid(v, f, f"track ({k.length_mm:g} mm)", POSITIONER_COLOUR, 0.6))
-    return traces
-
-
-def _solid(v: np.ndarray, f: np.ndarray, name: str, colour: str, opacity: float):
-    import plotly.graph_objects as go
-
-    return go.Mesh3d(
-        x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2], color=colour,
-        opacity=opacity, name=name, hoverinfo="name", flatshading=True, showlegend=True,
-    )  # fmt: skip
 
 
 def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]:
@@ -356,39 +302,6 @@ def cell_traces(part: Part, cell: Cell) -> list:
     return traces
 
 
-def capsule_mesh(ends: np.ndarray, radii: np.ndarray, sides: int = CAPSULE_SIDES):
-    """(vertices (c·(2·sides+2), 3), faces (c·4·sides, 3)) of closed cylinders round the
-    segments `ends` (c, 2, 3) with `radii` (c,): the capsules drawn without their caps'
-    domes (a joint's neighbour covers them)."""
-    a, b = ends[:, 0], ends[:, 1]
-    axis = b - a
-    length = np.linalg.norm(axis, axis=1, keepdims=True)
-    d = np.where(length > 1e-9, axis / np.maximum(length, 1e-9), [0.0, 0.0, 1.0])
-    helper = np.where(np.abs(d[:, [0]]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    u = np.cross(d, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    w = np.cross(d, u)
-    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
-    ring = np.cos(t)[None, :, None] * u[:, None] + np.sin(t)[None, :, None] * w[:, None]
-    ring *= radii[:, None, None]
-    # Per capsule: ring at a, ring at b, then the two cap centres.
-    verts = np.concatenate([a[:, None] + ring, b[:, None] + ring, a[:, None], b[:, None]], axis=1)
-    j = np.arange(sides)
-    k = (j + 1) % sides
-    ca, cb = 2 * sides, 2 * sides + 1
-    local = np.concatenate(
-        [
-            np.stack([j, k, sides + k], axis=1),
-            np.stack([j, sides + k, sides + j], axis=1),
-            np.stack([np.full(sides, ca), k, j], axis=1),
-            np.stack([np.full(sides, cb), sides + j, sides + k], axis=1),
-        ]
-    )
-    per = verts.shape[1]
-    faces = local[None] + (np.arange(len(ends)) * per)[:, None, None]
-    return verts.reshape(-1, 3), faces.reshape(-1, 3)
-
-
 def _arm_mesh(capsules: np.ndarray, radii: np.ndarray, name: str, colour: str, **kwargs: Any):
     import plotly.graph_objects as go
 
@@ -516,7 +429,7 @@ def scene_figure(
         traces += cell_traces(part, cell)
     traces += passes_traces(traj, max_points)
     if arm is not None:
-        traces += axes_traces(part, arm)
+        traces += axes_traces(arm.axes, arm.shown_axes, arm.T_base_part)
     fig = go.Figure(traces)
     if arm is not None:
         add_arm(fig, traj, arm)

@@ -8,17 +8,15 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.export.axes_lines import axes_note, on_axes, read_axes
 from scanplan.robot.export.common import (
     ExportOptions,
     Kinematics,
     Motion,
     Parsed,
     PassTracker,
-    axes_note,
     floats,
     joint_move_targets,
-    on_axes,
-    read_axes,
     read_standoff,
     scan_output,
     sensor_poses,

@@ -22,11 +22,11 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from scanplan.robot.axes import ExternalAxes
+from scanplan.robot.export.axes_lines import on_axes
 from scanplan.robot.export.common import (
     ExportOptions,
     Motion,
     Parsed,
-    on_axes,
     sensor_poses,
     standoff_note,
 )

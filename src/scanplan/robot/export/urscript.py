@@ -8,6 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.export.axes_lines import axes_note
 from scanplan.robot.export.common import (
     JOINT_ACCEL_DEG_S2,
     JOINT_SPEED_DEG_S,
@@ -15,7 +16,6 @@ from scanplan.robot.export.common import (
     Motion,
     Parsed,
     PassTracker,
-    axes_note,
     floats,
     joint_move_targets,
     read_standoff,
