@@ -250,3 +250,23 @@ def test_a_rosbag_of_a_plan_with_axes_is_refused_not_misread(tmp_path):
     with pytest.raises(ValueError, match="rosbag2 does not carry external axes"):
         export_rosbag(_turntable_traj(), tmp_path / "bag", options)
     assert not (tmp_path / "bag").exists()
+
+
+def test_the_turntable_disk_is_an_obstacle_of_the_links():
+    from scanplan.robot.axes import with_disk
+    from scanplan.robot.links import obstacles_for
+    from scanplan.world.cell import Cell
+    from scanplan.world.part import load_part
+
+    part = load_part("training-piece")
+    lo = part.bounds[0]
+    axes = ExternalAxes(turntable=Turntable(axis_point_mm=[float(v) for v in lo], radius_mm=900))
+    cell = Cell()
+    # A capsule 800 mm out from the axis, 100 mm below the disk's top: inside its body.
+    ends = np.array([[[lo + [800.0, 0.0, -100.0], lo + [800.0, 0.0, -150.0]]]])
+    radii = np.array([10.0])
+    assert obstacles_for(part, cell).capsules_hit(ends, radii, 5.0)[0, 0] == -1
+    hit = obstacles_for(part, with_disk(cell, axes)).capsules_hit(ends, radii, 5.0)[0, 0]
+    assert hit == 2  # counted with the table
+    beyond = ends + [200.0, 0.0, 0.0]  # 1000 mm out: beside the disk
+    assert obstacles_for(part, with_disk(cell, axes)).capsules_hit(beyond, radii, 5.0)[0, 0] == -1
