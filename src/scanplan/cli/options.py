@@ -301,6 +301,26 @@ PartPoseOpt = Annotated[
     ),
 ]
 
+PositionerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--positioner",
+        metavar="NAME|FILE.toml",
+        help="a turntable the part sits on, turned view by view so the arm flies each view "
+        "from its good side: turntable (a 1 m-class turntable beside the arm, placed by the "
+        "tool) or a TOML file with a [turntable] (and/or [track]) table; needs --robot",
+    ),
+]
+TrackOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--track",
+        metavar="LENGTH_MM",
+        help="a linear track under the arm, this long (mm), its direction chosen by the tool: "
+        "the arm rides with the sensor along it; needs --robot",
+    ),
+]
+
 # ---- training (train, sweep) --------------------------------------------------------------
 # Each declared once; training.training_config turns them into the trainer's config.
 NEnvsOpt = Annotated[

@@ -15,12 +15,14 @@ from scanplan.cli.options import (
     FixtureOpt,
     PartPoseOpt,
     PlanTcpOpt,
+    PositionerOpt,
     QuietOpt,
     RequireOpt,
     RoiOpt,
     SensorOpt,
     TableOpt,
     ToleranceOpt,
+    TrackOpt,
     UnitsOpt,
     bounded,
     scan_spec,
@@ -181,6 +183,8 @@ def plan_cmd(
     robot: PlanRobotOpt = None,
     tcp: PlanTcpOpt = None,
     part_pose: PartPoseOpt = None,
+    positioner: PositionerOpt = None,
+    track: TrackOpt = None,
     scheduler: PlanSchedulerOpt = None,
     view_candidates: ViewCandidatesOpt = VIEW_CHOICE_CANDIDATES,
     view_seconds: ViewSecondsOpt = None,
@@ -203,6 +207,7 @@ def plan_cmd(
         raster, roll, units, roi, views, coverage_target, table, tuple(fixture or ()), robot,
         tcp, part_pose, view_candidates, view_seconds,
         require=() if require is None else parse_requirements(require),
+        positioner=positioner, track=track,
     )  # fmt: skip
     job.budget()  # a bad budget or criterion is named before any work
     job.check_require()

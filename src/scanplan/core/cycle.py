@@ -137,6 +137,7 @@ class CycleTime:
     joint_moves: int
     swaths: int
     limits: MotionLimits
+    axes_s: float = 0.0  # the external axes' own time (the arm waiting on them), in total_s
 
     @property
     def runs(self) -> int:
@@ -146,6 +147,7 @@ class CycleTime:
         """'cycle time 83.4 s (scanning 61.2 s in 42 passes, moving 22.2 s; trapezoidal,
         kr6-r900 limits)': what `plan`, `evaluate` and `export` print."""
         joints = f", {self.joint_moves} joint moves" if self.joint_moves else ""
+        joints += f", waiting {self.axes_s:.1f} s on the external axes" if self.axes_s else ""
         runs = f" ({self.runs} runs)" if self.runs != self.swaths else ""
         return (
             f"cycle time {self.total_s:.1f} s (scanning {self.scanning_s:.1f} s in "
@@ -157,6 +159,7 @@ class CycleTime:
         return {
             "total_s": self.total_s,
             "scanning_s": self.scanning_s,
+            "axes_s": self.axes_s,
             "moving_s": self.moving_s,
             "passes": self.swaths,
             "runs": self.runs,

@@ -1,5 +1,6 @@
-"""A plan's files: the trajectory as CSV (columns `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`)
-or JSON, with what it was made under riding along (top-level keys of the JSON, `# key: <JSON>`
+"""A plan's files: the trajectory as CSV (columns `swath,scanning,x_mm,y_mm,z_mm,qw,qx,qy,qz`,
+then `e1,e2,..` where external axes hold values per pose) or JSON (a pose's `external`),
+with what it was made under riding along (top-level keys of the JSON, `# key: <JSON>`
 comment lines under the CSV's header, which CSV tools skip). Every malformation is a
 ValueError naming the file, line and field.
 """
@@ -23,14 +24,22 @@ from scanplan.core.validation import field_line
 
 CSV_COLUMNS = ("swath", "scanning", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
 CSV_COMMENT = "#"
+MAX_EXTERNAL_AXES = 6  # a controller's external axes (RAPID's eax_a..eax_f, KRL's E1..E6)
+
+
+def external_columns(k: int) -> tuple[str, ...]:
+    """The CSV columns of k external axes' values: e1..ek."""
+    return tuple(f"e{j + 1}" for j in range(k))
 
 
 def to_csv_text(traj: Trajectory) -> str:
     q = traj.quaternions_wxyz
     p = traj.positions_mm
+    external = traj.external
+    k = 0 if external is None else external.shape[1]
     # The records right under the header: CSV tools that know comments skip them
     # (pandas `comment="#"`, numpy `genfromtxt(names=True)`), and the header stays line 1.
-    lines = [",".join(CSV_COLUMNS)]
+    lines = [",".join((*CSV_COLUMNS, *external_columns(k)))]
     lines += [
         f"{CSV_COMMENT} {key}: {dumps_json(traj.meta[key])}"
         for key in FILE_RECORDS
@@ -42,6 +51,7 @@ def to_csv_text(traj: Trajectory) -> str:
             + ",".join(f"{v:.6f}" for v in p[i])
             + ","
             + ",".join(f"{v:.9f}" for v in q[i])
+            + ("".join(f",{v:.6f}" for v in external[i]) if external is not None else "")
         )
     return "\n".join(lines) + "\n"
 
@@ -93,7 +103,9 @@ def read_csv(path: str | os.PathLike, text: str | None = None) -> Trajectory:
             f"trajectory file {path} is a robot program exported as CSV (targets in the robot's "
             "base frame, with speeds and blends), not a plan: give the plan it was exported from"
         )
-    if tuple(header) != CSV_COLUMNS:
+    k = _external_count(header)
+    columns = (*CSV_COLUMNS, *external_columns(k))
+    if tuple(header) != columns:
         missing = [c for c in CSV_COLUMNS if c not in header]
         extra = [c for c in header if c not in CSV_COLUMNS]
         detail = (f"missing {', '.join(missing)}; " if missing else "") + (
@@ -109,22 +121,22 @@ def read_csv(path: str | os.PathLike, text: str | None = None) -> Trajectory:
     check_count(len(numbers), MAX_POSES, f"trajectory file {path}: poses")
     cells = [lines[i - 1].split(",") for i in numbers]
     counts = np.array([len(c) for c in cells])
-    wrong = np.flatnonzero(counts != len(CSV_COLUMNS))
+    wrong = np.flatnonzero(counts != len(columns))
     if len(wrong):
         raise ValueError(
-            f"trajectory file {path} line {numbers[wrong[0]]}: expected {len(CSV_COLUMNS)} "
+            f"trajectory file {path} line {numbers[wrong[0]]}: expected {len(columns)} "
             f"values, got {counts[wrong[0]]}"
         )
     try:
         values = np.array(cells, dtype=np.float64)
     except ValueError:
-        values = _locate_bad_number(path, cells, numbers)
+        values = _locate_bad_number(path, cells, numbers, columns)
     line = np.asarray(numbers)
     bad = ~np.isfinite(values)
     if bad.any():
         row, col = np.argwhere(bad)[0]
         raise ValueError(
-            f"trajectory file {path} line {line[row]}, column {CSV_COLUMNS[col]}: non-finite value"
+            f"trajectory file {path} line {line[row]}, column {columns[col]}: non-finite value"
         )
     far = ~((values[:, 2:5] >= POSITION_MM.lo) & (values[:, 2:5] <= POSITION_MM.hi))
     if far.any():
@@ -162,7 +174,15 @@ def read_csv(path: str | os.PathLike, text: str | None = None) -> Trajectory:
         scanning=values[:, 1] > 0.5,
         planner=planner,
         meta=meta,
+        external=values[:, len(CSV_COLUMNS) :] if k else None,
     )
+
+
+def _external_count(header: list[str]) -> int:
+    """How many external axes' columns (e1..ek) follow the pose columns of `header`."""
+    extra = header[len(CSV_COLUMNS) :]
+    k = min(len(extra), MAX_EXTERNAL_AXES)
+    return k if tuple(extra[:k]) == external_columns(k) else 0
 
 
 def _csv_records(path: Path, lines: list[str], numbers: list[int]) -> dict[str, Any]:
@@ -184,7 +204,9 @@ def _csv_records(path: Path, lines: list[str], numbers: list[int]) -> dict[str, 
     return validated_records(meta, f"trajectory file {path}")
 
 
-def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -> np.ndarray:
+def _locate_bad_number(
+    path: Path, cells: list[list[str]], numbers: list[int], columns: tuple[str, ...]
+) -> np.ndarray:
     """Only on the error path: find the first cell that is not a number, to name it."""
     for row, line in zip(cells, numbers, strict=True):
         for col, cell in enumerate(row):
@@ -192,7 +214,7 @@ def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -
                 float(cell)
             except ValueError:
                 raise ValueError(
-                    f"trajectory file {path} line {line}, column {CSV_COLUMNS[col]}: "
+                    f"trajectory file {path} line {line}, column {columns[col]}: "
                     f"not a number: {cell.strip()[:20]!r}"
                 ) from None
     raise AssertionError("unreachable: numpy refused a table float() accepts")
@@ -200,6 +222,7 @@ def _locate_bad_number(path: Path, cells: list[list[str]], numbers: list[int]) -
 
 def to_json_dict(traj: Trajectory) -> dict:
     positions, quaternions = traj.positions_mm.tolist(), traj.quaternions_wxyz.tolist()
+    external = None if traj.external is None else traj.external.tolist()
     return {
         "units": {"length": "mm", "rotation": "unit quaternion, scalar first (w, x, y, z)"},
         "frame": "part frame; each pose is T_part_sensor (sensor z = laser axis towards the "
@@ -213,6 +236,7 @@ def to_json_dict(traj: Trajectory) -> dict:
                 "scanning": bool(traj.scanning[i]),
                 "position_mm": positions[i],
                 "quaternion_wxyz": quaternions[i],
+                **({} if external is None else {"external": external[i]}),
             }
             for i in range(len(traj))
         ],
@@ -238,6 +262,7 @@ class _PoseJson(BaseModel):
     scanning: bool
     position_mm: list[Annotated[float, in_range(POSITION_MM)]] = Field(min_length=3, max_length=3)
     quaternion_wxyz: list[FiniteFloat] = Field(min_length=4, max_length=4)
+    external: list[FiniteFloat] | None = Field(None, min_length=1, max_length=MAX_EXTERNAL_AXES)
 
 
 class _TrajectoryJson(BaseModel):
@@ -283,7 +308,24 @@ def read_json(path: str | os.PathLike, text: str | None = None) -> Trajectory:
         plan_time_s=model.plan_time_s,
         planner=model.planner,
         meta=meta,
+        external=_json_external(path, model.poses),
     )
+
+
+def _json_external(path: Path, poses: list[_PoseJson]) -> np.ndarray | None:
+    """(n, k) the poses' external axis values: every pose has k, or none has any."""
+    counts = {len(p.external) if p.external is not None else 0 for p in poses}
+    if counts == {0}:
+        return None
+    if len(counts) > 1:
+        first = next(
+            i for i, p in enumerate(poses) if len(p.external or ()) != len(poses[0].external or ())
+        )
+        raise ValueError(
+            f"trajectory file {path}: poses[{first}].external: every pose holds as many "
+            "external axis values as the first"
+        )
+    return np.array([p.external for p in poses], dtype=np.float64)
 
 
 def read_trajectory(path: str | os.PathLike) -> Trajectory:

@@ -21,6 +21,9 @@ class Trajectory:
     scanning: (n,) bool, True where the sensor records profiles.
     plan_time_s: wall time the planner took.
     planner:  name of the planner that made it.
+    external: (n, k) float64 or None: the external axes' values at each pose (a turntable's
+              angle in degrees, a track's position in mm, in the order of the arm record's
+              `external_axes`); None: the arm alone.
     meta:     extra records; those named in `plan_records.FILE_RECORDS` go into the files:
               `context` (what it was planned under, `context.PlanContext`), `views` (per
               view its `axis` and its block of swath indices `first_swath..last_swath`)
@@ -33,6 +36,7 @@ class Trajectory:
     plan_time_s: float = 0.0
     planner: str = ""
     meta: dict = field(default_factory=dict)
+    external: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         poses = np.asarray(self.poses, dtype=np.float64)
@@ -49,6 +53,14 @@ class Trajectory:
             raise ValueError("trajectory has non-finite poses")
         if not math.isfinite(self.plan_time_s):
             raise ValueError(f"trajectory plan_time_s must be finite, got {self.plan_time_s}")
+        if self.external is not None:
+            external = np.asarray(self.external, dtype=np.float64)
+            if external.ndim != 2 or len(external) != n or not np.isfinite(external).all():
+                raise ValueError(
+                    f"trajectory external axis values must be finite, ({n}, k), got "
+                    f"{external.shape}"
+                )
+            object.__setattr__(self, "external", external)
         object.__setattr__(self, "poses", poses)
         object.__setattr__(self, "swath", swath)
         object.__setattr__(self, "scanning", scanning)
@@ -76,8 +88,13 @@ class Trajectory:
         """The poses where `keep` (n,) is True, with the pass indices `swath` (n,) if given
         (renumbered ones), else their own; times and records unchanged."""
         swath = self.swath if swath is None else swath
+        external = None if self.external is None else self.external[keep]
         return replace(
-            self, poses=self.poses[keep], swath=swath[keep], scanning=self.scanning[keep]
+            self,
+            poses=self.poses[keep],
+            swath=swath[keep],
+            scanning=self.scanning[keep],
+            external=external,
         )
 
     def path_length_mm(self, scanning_only: bool = False) -> float:
@@ -90,6 +107,9 @@ class Trajectory:
     def concatenate(parts: list[Trajectory], planner: str = "") -> Trajectory:
         if not parts:
             raise ValueError("cannot concatenate an empty list of trajectories")
+        with_axes = [t.external is not None for t in parts]
+        if any(with_axes) and not all(with_axes):
+            raise ValueError("cannot concatenate trajectories with and without external axes")
         return Trajectory(
             poses=np.concatenate([t.poses for t in parts]),
             swath=np.concatenate([t.swath for t in parts]),
@@ -97,6 +117,11 @@ class Trajectory:
             plan_time_s=float(sum(t.plan_time_s for t in parts)),
             planner=planner or parts[0].planner,
             meta=_sum_counters([t.meta for t in parts]),
+            external=(
+                np.concatenate([t.external for t in parts if t.external is not None])
+                if all(with_axes)
+                else None
+            ),
         )
 
 

@@ -15,6 +15,7 @@ from scanplan.core.limits import MAX_SCAN_SPEED_MM_S, POSITION_MM, TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part
 from scanplan.robot import get_robot
+from scanplan.robot.axes import with_disk
 from scanplan.robot.export import (
     FORMATS,
     ExportOptions,
@@ -25,7 +26,7 @@ from scanplan.robot.export import (
 )
 from scanplan.robot.export.rotations import IDENTITY_POSE
 from scanplan.robot.flyable import check_flyable
-from scanplan.robot.program import program_cycle, program_format
+from scanplan.robot.program import axes_of, program_cycle, program_format
 from scanplan.world.part import Part
 
 # Why a program with joint jumps or near-singular poses is still written: it is flyable.
@@ -140,7 +141,10 @@ def export_plan(plan: Plan, req: ProgramRequest, say: Say, bar: ProgressBar = no
         chord_tol_mm=req.chord_tol_mm,
         angle_tol_deg=req.angle_tol_deg,
         scan_output=req.scan_output,
+        axes=axes_of(plan),
     )
+    if options.axes is not None:
+        say(f"external axes: {options.axes.describe()} (the plan's, values per pose)")
     if req.ros_frame is not None:
         options = replace(options, ros_frame_id=req.ros_frame)
     motion = plan_motion(plan.traj, options)  # refuse an unexportable plan before the reach check
@@ -190,7 +194,7 @@ def flyable_joints(
     with bar("reach and collision check"):
         result = check_flyable(
             plan.traj, get_robot(robot), options.part_pose, options.tcp, part,
-            plan_cell(plan, part), plan.spec.sensor,
+            with_disk(plan_cell(plan, part), options.axes), plan.spec.sensor, axes=options.axes,
         )  # fmt: skip
     report = result.reach
     if result.flyable:

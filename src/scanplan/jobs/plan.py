@@ -25,6 +25,7 @@ from scanplan.judging.verdict import (
 from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.planning.view_choice import ViewBudget
 from scanplan.rl.planners import make_planner
+from scanplan.robot.axes import combined, load_positioner, track_of
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
 from scanplan.robot.fit import what_would_help
@@ -74,6 +75,8 @@ class PlanJob:
     view_seconds: float | None = None  # a wall-clock limit only where the user asks
     scheduler: str | None = None  # one part's candidate views on this Dask scheduler
     require: tuple[Criterion, ...] = ()  # --require: the criteria its verdict holds it to
+    positioner: str | None = None  # --positioner: a preset or a TOML file
+    track: float | None = None  # --track LENGTH_MM
 
     def budget(self) -> ViewBudget:
         return ViewBudget(self.view_candidates, self.view_seconds)
@@ -91,7 +94,12 @@ def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
     """The arm `plan --robot` makes the plan for (None: no robot), and a note where the TCP
     is the flange because none was given."""
     if job.robot is None:
-        for option, value in (("--tcp", job.tcp), ("--part-pose", job.part_pose)):
+        for option, value in (
+            ("--tcp", job.tcp),
+            ("--part-pose", job.part_pose),
+            ("--positioner", job.positioner),
+            ("--track", job.track),
+        ):
             if value is not None:
                 raise ValueError(f"{option} needs --robot: the arm it refers to")
         return None, []
@@ -99,9 +107,13 @@ def robot_arm(job: PlanJob) -> tuple[Arm | None, Lines]:
     if job.tcp is None:
         notes.append((f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)", False))
     pose = None if job.part_pose is None else parse_pose_arg(job.part_pose)
+    axes = combined(
+        None if job.positioner is None else load_positioner(job.positioner),
+        None if job.track is None else track_of(job.track),
+    )
     # Several brackets, `A;B`: the plan is made with the one the arm flies most with.
     brackets = tuple(parse_pose_arg(t, TCP_MM) for t in (job.tcp or IDENTITY_POSE).split(";"))
-    return Arm(job.robot, brackets[0], pose, brackets if len(brackets) > 1 else ()), notes
+    return Arm(job.robot, brackets[0], pose, axes, brackets if len(brackets) > 1 else ()), notes
 
 
 def run_plan_job(job: PlanJob, progress: Callable[[int, int], None] | None = None) -> Planned:
@@ -212,6 +224,12 @@ def _arm_notes(plan: Plan) -> Lines:
             for b in brackets
         ]
         lines.append(("brackets, of the plan made without the arm: " + "; ".join(said), False))
+    if (axes := record.get("external_axes")) is not None:
+        travel = ", ".join(
+            f"{name.rsplit('_', 1)[0]} {t:g} {name.rsplit('_', 1)[1]}"
+            for name, t in zip(axes.get("names", []), axes.get("travel", []), strict=False)
+        )
+        lines.append((f"external axes: {', '.join(axes.get('names', []))}; travel {travel}", False))
     lost = record.get("in_spec_lost_by_view", {})
     causes = record.get("given_up_by_cause", {})
     worst = sorted(lost, key=lambda k: -lost[k])[:5]

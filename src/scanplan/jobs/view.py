@@ -13,6 +13,7 @@ from scanplan.judging.report.html import write_scene_page
 from scanplan.judging.report.scene import ArmPoses, check_arm, scene_figure
 from scanplan.robot import get_robot
 from scanplan.robot.base import pose_arg
+from scanplan.robot.program import axes_of
 
 
 def view_plan(
@@ -41,7 +42,9 @@ def view_plan(
     arm: ArmPoses | None = None
     if with_arm:
         name, T_base_part, T_flange_sensor = arm_of(plan, robot, part_pose, tcp, lambda _: None)
-        arm = check_arm(plan.traj, name, T_base_part, T_flange_sensor, the_part, cell)
+        arm = check_arm(
+            plan.traj, name, T_base_part, T_flange_sensor, the_part, cell, axes_of(plan)
+        )
     title = f"{the_part.name}: {Path(plan.where.removeprefix('plan ')).name}"
     notes = [
         f"{plan.planner or 'plan'}: {plan.counts()}, {len(plan.traj)} poses; passes coloured "

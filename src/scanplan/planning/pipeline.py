@@ -23,6 +23,8 @@ from scanplan.planning.view_choice import ViewBudget, ViewSelection, choose_view
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
+from scanplan.robot.axes import ExternalAxes, with_disk
+from scanplan.robot.axes_fit import PlacedArmOnAxes, arm_on_axes, choose_values, fitted_axes_record
 from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import PlacedArm, fit_to_robot
 from scanplan.robot.links import obstacles_for
@@ -123,8 +125,7 @@ def plan_views(
             known = first.known
             _, free = join_views(part, order_views(first.plans), spec, cell)
             arm, brackets = _placed(part, free, arm, context, obstacles)
-            assert arm.T_base_part is not None
-            placed = PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
+            placed = _placed_arm(arm, context)
         selection = choose(arm=placed, known=known)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
@@ -156,32 +157,49 @@ def _choice_record(selection: ViewSelection) -> dict:
 @dataclass(frozen=True)
 class Arm:
     """The robot a plan is made for: a preset name or file, the sensor on its flange
-    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`).
+    (`T_flange_sensor`, mm) and the part's pose in its base frame (None: found by `place`);
+    the cell's external axes (a turntable, a track; `robot.axes`), None: the arm alone.
     `brackets`: several sensor mounts to choose `tcp` among (`_placed`), if given."""
 
     robot: str
     tcp: np.ndarray
     T_base_part: np.ndarray | None = None
+    axes: ExternalAxes | None = None
     brackets: tuple[np.ndarray, ...] = ()
+
+
+def _placed_arm(arm: Arm, context: PlanContext) -> PlacedArm:
+    """The placed `arm` as the view choice flies a candidate with it."""
+    assert arm.T_base_part is not None
+    if arm.axes is not None:
+        return PlacedArmOnAxes(arm.robot, arm.tcp, arm.T_base_part, context, arm.axes)
+    return PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
 
 
 def _placed(
     part: Part, free: Trajectory, arm: Arm, context: PlanContext, obstacles: CellObstacles | None
 ) -> tuple[Arm, list[dict]]:
-    """`arm` placed (by `place`, unless it is) for the plan made without it (`free`); with
-    several `brackets`, each placed and judged by the in-spec coverage the arm flies of
-    `free` from there (`PlacedArm.flown`, the view choice's fan), the best kept. Returns the
-    arm and, with brackets, what each flew (`tcp`, `part_pose`, `in_spec_flown`)."""
+    """`arm` placed (by `place`, or with its axes by `arm_on_axes`, unless it is) for the
+    plan made without it (`free`); with several `brackets`, each placed and judged by the
+    in-spec coverage the arm flies of `free` from there (`PlacedArm.flown`, the view
+    choice's fan), the best kept. Returns the arm and, with brackets, what each flew
+    (`tcp`, `part_pose`, `in_spec_flown`)."""
     tried: list[tuple[float, Arm]] = []
     brackets: list[dict] = []
     for tcp in arm.brackets or (arm.tcp,):
         T_base_part = arm.T_base_part
-        if T_base_part is None:
-            T_base_part = place(free, arm.robot, tcp, obstacles=obstacles).T_base_part
-        candidate = replace(arm, tcp=tcp, T_base_part=T_base_part)
+        if arm.axes is not None:
+            T_base_part, axes = arm_on_axes(
+                free, arm.robot, tcp, T_base_part, arm.axes, part, obstacles
+            )
+            candidate = replace(arm, tcp=tcp, T_base_part=T_base_part, axes=axes)
+        else:
+            if T_base_part is None:
+                T_base_part = place(free, arm.robot, tcp, obstacles=obstacles).T_base_part
+            candidate = replace(arm, tcp=tcp, T_base_part=T_base_part)
         if len(arm.brackets) < 2:
             return candidate, []
-        flown = PlacedArm(arm.robot, tcp, T_base_part, context).flown(part, free)
+        flown = _placed_arm(candidate, context).flown(part, free)
         try:
             held = in_spec_samples(part, context.spec, flown, 0, VIEW_CHOICE_FAN_POINTS, context)
             share = float(held.mean()) if len(held) else 0.0
@@ -217,8 +235,26 @@ def fit_arm(
     if obstacles is None:
         spec = context.spec
         obstacles = obstacles_for(part, planned_cell(context, part), spec.sensor, spec.clearance_mm)
-    fit = fit_to_robot(traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles)
+    if arm.axes is not None:  # the axes' settings chosen view by view (`robot.axes_fit`)
+        if arm.T_base_part is None or not arm.axes.resolved:
+            T0, axes = arm_on_axes(
+                traj, arm.robot, arm.tcp, arm.T_base_part, arm.axes, part, obstacles
+            )
+            arm = replace(arm, T_base_part=T0, axes=axes)
+        assert arm.T_base_part is not None and arm.axes is not None
+        spec = context.spec
+        cell = with_disk(planned_cell(context, part), arm.axes)
+        obstacles = obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
+        centre = part.bounds.mean(axis=0)
+        traj, _ = choose_values(
+            traj, arm.robot, arm.tcp, arm.T_base_part, arm.axes, obstacles, centre
+        )
+    fit = fit_to_robot(
+        traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles, axes=arm.axes
+    )
     record = fit.record(arm.tcp)
+    if arm.axes is not None:
+        record["external_axes"] = fitted_axes_record(arm.axes, fit.traj)
     # Judged view by view (a sample's in-spec state depends on one pass): the union is the
     # plan's figure, and what a view held that nothing flown holds is what the arm cost.
     planned, flown = _held_by_view(part, traj, context), _held_by_view(part, fit.traj, context)

@@ -15,6 +15,7 @@ import numpy as np
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
+from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.place import (
@@ -115,6 +116,7 @@ def fit_to_robot(
     T_base_part: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
     obstacles: CellObstacles | None = None,
+    axes: ExternalAxes | None = None,
 ) -> RobotFit:
     """`traj` (part frame) made flyable by `robot` with the sensor at `tcp`
     (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
@@ -124,14 +126,16 @@ def fit_to_robot(
     beam where the arm keeps more of its poses that way. In a cell (`obstacles`), poses that
     put an arm link into the part, a fixture or the table are given up too; a pass whose
     joint move in would sweep a link through them is flown the other way, and given up if
-    that move does too."""
+    that move does too. With external `axes`, each pose is flown with the part where its
+    values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
         placement = place(traj, arm, tcp, height_range_mm, obstacles=obstacles)
         T_base_part = placement.T_base_part
     inv_tcp = np.linalg.inv(tcp)
-    traj, turned = _turned(traj, arm, T_base_part, inv_tcp, obstacles)
+    T_all = part_poses(T_base_part, traj.external, axes)
+    traj, turned = _turned(traj, arm, T_all, inv_tcp, obstacles)
     keep = np.ones(len(traj), bool)
     cause = np.full(len(traj), -1)  # why each pose given up was: an index into CAUSES
     swath = traj.swath.copy()
@@ -139,8 +143,9 @@ def fit_to_robot(
     flipped = np.zeros(len(traj), bool)  # the poses of passes flown the other way
     for _ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
+        T_now = kept(T_all, keep)
         report = check_reach(
-            T_base_part @ current.poses @ inv_tcp,
+            T_now @ current.poses @ inv_tcp,
             arm,
             swath=current.swath,
             scanning=current.scanning,
@@ -153,9 +158,11 @@ def fit_to_robot(
         # move: the pass is split there, as at a flip, and the arm moves between the pieces.
         swings = report.pass_jumps
         if report.reachable and obstacles is not None:
-            starts = pass_starts(current.swath, current.scanning)
-            in_cell = check_links(arm, report.joints, obstacles, T_base_part, starts)
+            starts = pass_starts(current.swath, current.scanning) | axis_steps(current, axes)
+            in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
             traj, reversed_now = _reversed(traj, current, index, in_cell.moves, why, flipped)
+            if reversed_now:
+                T_all = part_poses(T_base_part, traj.external, axes)
             hit = in_cell.colliding
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
@@ -170,8 +177,8 @@ def fit_to_robot(
         cut[index[report.config_flips]] = True
         cut[index[swings]] = True
         splits += int(len(np.union1d(report.config_flips, swings)))
-        swath = _renumbered(traj, keep, swath, cut)
-    beyond_mm = _beyond_reach_mm(traj, arm, T_base_part, inv_tcp, cause)
+        swath = renumbered_passes(traj, keep, swath, cut)
+    beyond_mm = _beyond_reach_mm(traj, arm, T_all, inv_tcp, cause)
     given_up: dict[int, int] = {}
     by_cause: dict[int, dict[str, int]] = {}
     lost = ~keep & traj.scanning
@@ -187,13 +194,14 @@ def fit_to_robot(
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
+    T_now = kept(T_all, keep)
     report = check_reach(
-        T_base_part @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
+        T_now @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
     )
     links: LinkReport | None = None
     if obstacles is not None:
-        starts = pass_starts(fitted.swath, fitted.scanning)
-        links = check_links(arm, report.joints, obstacles, T_base_part, starts)
+        starts = pass_starts(fitted.swath, fitted.scanning) | axis_steps(fitted, axes)
+        links = check_links(arm, report.joints, obstacles, T_now, starts)
     return RobotFit(
         fitted,
         T_base_part,
@@ -211,14 +219,14 @@ def fit_to_robot(
 
 
 def _beyond_reach_mm(
-    traj: Trajectory, arm: Robot, T_base_part: np.ndarray, inv_tcp: np.ndarray, cause: np.ndarray
+    traj: Trajectory, arm: Robot, T_all: np.ndarray, inv_tcp: np.ndarray, cause: np.ndarray
 ) -> float | None:
     """How much farther from the base axis than the arm reaches the farthest scanning pose
-    given up for reach lies; None if none was."""
+    given up for reach lies (`T_all`: the part's pose, or one per pose); None if none was."""
     far = (cause == CAUSES.index("reach")) & traj.scanning
     if not far.any():
         return None
-    flange_xy = (T_base_part @ traj.poses[far] @ inv_tcp)[:, :2, 3]
+    flange_xy = (kept(T_all, far) @ traj.poses[far] @ inv_tcp)[:, :2, 3]
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
@@ -235,7 +243,7 @@ def _reversed(
     from their other end, the moves that led to their first pose given up (the arm makes
     a joint move instead); a pass already flown so is given up (in `why`). `flipped` marks
     the poses reversed. Returns `traj` with those passes reversed, and whether any was."""
-    poses = traj.poses
+    poses, external = traj.poses, traj.external
     reversed_any = False
     for i in moves:
         in_pass = current.swath == current.swath[i]
@@ -246,11 +254,16 @@ def _reversed(
             continue
         if not reversed_any:
             poses = poses.copy()
+            external = None if external is None else external.copy()
         poses[slots] = poses[slots[::-1]]
+        if external is not None:  # the axes' values go with their poses
+            external[slots] = external[slots[::-1]]
         flipped[slots] = True
         why[in_pass & ~current.scanning] = CAUSES.index("joint move into a pass")
         reversed_any = True
-    return (replace(traj, poses=poses) if reversed_any else traj), reversed_any
+    if not reversed_any:
+        return traj, False
+    return replace(traj, poses=poses, external=external), True
 
 
 def _turned(
@@ -280,7 +293,7 @@ def _turned(
     return replace(traj, poses=poses), len(better)
 
 
-def _renumbered(
+def renumbered_passes(
     traj: Trajectory, keep: np.ndarray, swath: np.ndarray, cut: np.ndarray
 ) -> np.ndarray:
     """Swath indices in order, consecutive over the kept poses: a new one wherever a pass
@@ -356,7 +369,7 @@ class PlacedArm:
         if keep.all() and not turn.any():
             return traj  # flown as planned: the caller may reuse what it knows of it
         poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
-        swath = _renumbered(traj, keep, traj.swath, np.zeros(len(traj), bool))
+        swath = renumbered_passes(traj, keep, traj.swath, np.zeros(len(traj), bool))
         return replace(traj, poses=poses).subset(keep, swath)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 from scanplan.core.plan import Plan
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
+from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses
 from scanplan.robot.base import Robot
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
@@ -63,21 +64,25 @@ def check_flyable(
     cell: Cell,
     sensor: SensorSpec,
     obstacles: CellObstacles | None = None,
+    axes: ExternalAxes | None = None,
 ) -> Flyability:
     """The arm's reach along the flange poses of `traj` (part frame, sensor poses) with the
     part at `T_base_part` and the sensor at `T_flange_sensor` (mm), its links along that
     path and every joint move into a pass, and the sensor body, against `part` in `cell`.
     obstacles: `obstacles_for(part, cell)` if the caller has it (a fit just built it);
-    None: built here."""
+    None: built here. axes: the external axes the plan's values per pose (`traj.external`)
+    are of (the part moved pose by pose; `robot.axes`), None: the arm alone."""
     clearance = Plan.of(traj).spec.clearance_mm  # the links keep the plan's
-    flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    T_all = part_poses(T_base_part, traj.external, axes)
+    flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
     reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(
         arm,
         reach.joints,
         obstacles_for(part, cell, sensor, clearance) if obstacles is None else obstacles,
-        T_base_part,
-        pass_starts(traj.swath, traj.scanning),
+        T_all,
+        # The joint moves into each pass, and those on which the turntable turns.
+        pass_starts(traj.swath, traj.scanning) | axis_steps(traj, axes),
     )
     touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []

@@ -105,10 +105,15 @@ def _capsules_hit(
     pose goes to FCL: a checked pose stands for the poses after it whose capsule ends all
     lie within `LINK_STRIDE_MM` of its own, each link's capsule grown by the furthest its
     ends moved among them (a point of a capsule moves no further than its ends do), and a
-    hit is charged to all of them."""
+    hit is charged to all of them. T_base_part: (4, 4), or (m, 4, 4) one per row (the part
+    moved by external axes)."""
     ends, radii, _ = robot.link_capsules(joints)
     T_part_base = inv_rigid(np.asarray(T_base_part, dtype=np.float64))
-    ends = ends @ T_part_base[:3, :3].T + T_part_base[:3, 3]
+    if T_part_base.ndim == 2:
+        ends = ends @ T_part_base[:3, :3].T + T_part_base[:3, 3]
+    else:
+        R, t = T_part_base[:, :3, :3], T_part_base[:, :3, 3]
+        ends = np.einsum("mij,mkej->mkei", R, ends) + t[:, None, None, :]
     m = len(ends)
     checked: list[int] = []
     grown: list[np.ndarray] = []
@@ -143,15 +148,23 @@ def check_links(
     part at `T_base_part`: at every pose, and, where `pass_start` (n,) is True, along the
     joint move from the previous pose's joints into that pose's (the move a program makes
     into each pass), at steps of `JOINT_MOVE_STEP_RAD`. exact=False: without FCL, a few mm
-    too cautious (`CellObstacles.capsules_hit`)."""
+    too cautious (`CellObstacles.capsules_hit`). T_base_part: (4, 4), or (n, 4, 4) one per
+    pose (external axes; a joint move between two is checked with the part at both)."""
     clearance_mm = obstacles.clearance_mm if clearance_mm is None else clearance_mm
     joints = np.asarray(joints, dtype=np.float64)
     n = len(joints)
     link, obstacle = np.full(n, -1), np.full(n, -1)
     known = np.flatnonzero(~np.isnan(joints).any(axis=1))
+    T_all = np.asarray(T_base_part, dtype=np.float64)
+    per_pose = T_all.ndim == 3
     if len(known):
         link[known], obstacle[known] = _capsules_hit(
-            robot, joints[known], obstacles, T_base_part, clearance_mm, exact
+            robot,
+            joints[known],
+            obstacles,
+            T_all[known] if per_pose else T_all,
+            clearance_mm,
+            exact,
         )
     moves: dict[int, tuple[int, int]] = {}
     starts = np.flatnonzero(np.zeros(n, bool) if pass_start is None else pass_start)
@@ -165,10 +178,13 @@ def check_links(
         if steps < 2:
             continue
         path = q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
-        m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T_base_part, clearance_mm)
-        if (m_link >= 0).any():
-            first = int(np.argmax(m_link >= 0))
-            moves[int(i)] = (int(m_link[first]), int(m_obstacle[first]))
+        ends = (T_all[before[-1]], T_all[i]) if per_pose else (T_all,)
+        for T in ends[: 1 if len(ends) == 1 or np.array_equal(*ends) else 2]:
+            m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm)
+            if (m_link >= 0).any():
+                first = int(np.argmax(m_link >= 0))
+                moves[int(i)] = (int(m_link[first]), int(m_obstacle[first]))
+                break
     names = robot.link_capsules(np.zeros(6))[2]
     return LinkReport(names, link, obstacle, moves, float(clearance_mm))
 

@@ -118,8 +118,11 @@ def flyable_poses(
     default) of `traj` the arm reaches within its limits with its links clear, and (the
     body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
     last verdict for both, if known (it does not depend on the placement). exact=False: the
-    links' quick, slightly cautious verdict (`links.check_links`)."""
+    links' quick, slightly cautious verdict (`links.check_links`). T_base_part: (4, 4), or
+    (len(traj), 4, 4) one per pose (external axes)."""
     index = np.arange(len(traj)) if index is None else index
+    if np.ndim(T_base_part) == 3:  # one per pose of `traj` (external axes)
+        T_base_part = np.asarray(T_base_part)[index]
     if sensor_ok is None and obstacles is not None:
         sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
     out = []
@@ -173,7 +176,7 @@ def _groups(traj: Trajectory, keep: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.r_[True, ~same])
 
 
-def _subsample(traj: Trajectory, m: int) -> np.ndarray:
+def sample_poses(traj: Trajectory, m: int) -> np.ndarray:
     """Indices of at most 2m poses: m evenly spaced, and the first and last poses of the
     passes and moves (m of them evenly spaced among those, when there are more: a plan of
     many views has hundreds, which made the search's sample ten times its `m`)."""
@@ -346,7 +349,7 @@ def place(
     centre = T_part_flange[:, :2, 3].mean(axis=0)
 
     # Coarse: a grid along a line out to the arm's reach, every yaw step, a few heights.
-    coarse = _subsample(traj, coarse_poses)
+    coarse = sample_poses(traj, coarse_poses)
     step = reach / 6
     grid, heights = _coarse_grid(reach, step / 2, lo, hi, yaw_step_deg)
     placements = _placements(grid, centre)
@@ -360,7 +363,7 @@ def place(
     evaluated = 2 * len(grid)
 
     # Fine: pattern search from the best few, on more poses; all candidates move at once.
-    fine = _subsample(traj, fine_poses)
+    fine = sample_poses(traj, fine_poses)
     starts = _groups(traj, fine)
     # Seeds: the best few, and in a cell the best at each height too, since the margins
     # favour heights from which the links may not clear the table (ranked at the end).
@@ -376,7 +379,7 @@ def place(
     # cell the arm's links too (on a subsample while ranking): the candidate that keeps
     # the most scanning poses flyable wins, a fully flyable one first.
     ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
-    sample = _subsample(traj, _LINK_RANK_POSES)
+    sample = sample_poses(traj, _LINK_RANK_POSES)
     inv_tcp = np.linalg.inv(tcp)
     sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses[sample], obstacles)
     for rank, i in enumerate(np.argsort(-best_scores)):

@@ -12,6 +12,7 @@ import numpy as np
 
 from scanplan.core.cycle import NOMINAL, CycleTime, MotionLimits, cycle_time
 from scanplan.core.plan import Plan
+from scanplan.robot.axes import ExternalAxes, axes_seconds, part_poses, plan_axes
 from scanplan.robot.export import DIRECTORY_FORMATS, FORMATS, ExportOptions, plan_motion
 from scanplan.robot.presets import get_robot, motion_limits
 from scanplan.robot.reach import check_reach
@@ -75,7 +76,8 @@ def arm_joints(plan: Plan) -> np.ndarray | None:
     except (ValueError, OSError):  # an arm file gone since: timed without its joints
         return None
     # As `flyable.check_flyable` computes them, so export's joints are these to the bit.
-    T_base_flange = arm.T_base_part @ plan.traj.poses @ np.linalg.inv(arm.T_flange_sensor)
+    T_base_part = part_poses(arm.T_base_part, plan.traj.external, axes_of(plan))
+    T_base_flange = T_base_part @ plan.traj.poses @ np.linalg.inv(arm.T_flange_sensor)
     report = check_reach(T_base_flange, robot, swath=plan.traj.swath, scanning=plan.traj.scanning)
     return report.joints
 
@@ -94,10 +96,16 @@ def arm_limits(robot: str | None) -> MotionLimits:
 def program_options(plan: Plan) -> ExportOptions:
     """The export options a plan's program is written with by default: its ScanSpec (sensor,
     spacing, rates), and its arm's part pose and TCP (identity without an arm)."""
-    options = ExportOptions(scan=plan.spec)
+    options = ExportOptions(scan=plan.spec, axes=axes_of(plan))
     if plan.arm is not None:
         options = replace(options, part_pose=plan.arm.T_base_part, tcp=plan.arm.T_flange_sensor)
     return options
+
+
+def axes_of(plan: Plan) -> ExternalAxes | None:
+    """The external axes a plan was made with (`robot.axes.plan_axes`), None: the arm alone."""
+    record = None if plan.arm is None else plan.arm.record
+    return plan_axes(record, plan.traj.external, plan.where)
 
 
 def program_cycle(
@@ -117,7 +125,7 @@ def program_cycle(
         options = replace(options, joints_rad=joints_rad)
     # Planned with the joints: a joint move into a pass starts from an exact stop.
     motion = plan_motion(plan.traj, options)
-    return cycle_time(
+    cycle = cycle_time(
         plan.traj,
         options.scan,
         arm_limits(robot),
@@ -125,3 +133,7 @@ def program_cycle(
         motion.source,
         motion.blend_mm > 0,
     )
+    if options.axes is None:
+        return cycle
+    extra = axes_seconds(plan.traj, options.axes, options.scan, options.scan_speed)
+    return replace(cycle, total_s=cycle.total_s + extra, axes_s=extra)

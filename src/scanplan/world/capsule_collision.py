@@ -182,6 +182,19 @@ class CellObstacles:
             lo, hi = block
             box = fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform(0.5 * (lo + hi)))
             self._objects.append((2, box, np.array([lo, hi]), None))
+        if (disk := cell.disk) is not None:  # a turntable's disk and body, axis along z
+            top = np.asarray(disk.top_mm, dtype=np.float64)
+            centre = top - [0.0, 0.0, disk.height_mm / 2]
+            cylinder = fcl.Cylinder(disk.radius_mm, disk.height_mm)
+            reach = np.array([disk.radius_mm, disk.radius_mm, disk.height_mm / 2])
+            self._objects.append(
+                (
+                    2,
+                    fcl.CollisionObject(cylinder, fcl.Transform(centre)),
+                    np.array([centre - reach, centre + reach]),
+                    None,
+                )
+            )
         self.table_block = block
 
     def sensor_clear(self, poses: np.ndarray) -> np.ndarray:

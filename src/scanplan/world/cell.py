@@ -46,13 +46,25 @@ class Table:
 
 
 @dataclass(frozen=True)
+class Disk:
+    """A turntable the part lies on, in part coordinates (it turns with the part): the
+    centre of its top, its radius, and how far its body reaches down from the top (mm)."""
+
+    top_mm: tuple[float, float, float]
+    radius_mm: float
+    height_mm: float
+
+
+@dataclass(frozen=True)
 class Cell:
     """The table (None: the part is held in the air) at the height `table_z_mm` of the part
-    frame, and the fixtures (each a Part, in part coordinates)."""
+    frame, the fixtures (each a Part, in part coordinates), and the turntable's disk the
+    part lies on, if any (an obstacle the arm keeps clear of, as of the table block)."""
 
     table: Table | None = None
     fixtures: tuple[Part, ...] = ()
     table_z_mm: float | None = None
+    disk: Disk | None = None
 
     @classmethod
     def around(
@@ -93,6 +105,8 @@ class Cell:
             mesh.apply_transform(R)
             fixtures.append(Part(mesh, name=fixture.name, source=fixture.source))
         table = None if self.table is None else self.table.rotated(R)
+        # The disk is what the arm's links keep clear of, in the part frame only (a view's
+        # frame may tilt; the sensor keeps clear of the table plane, over the disk too).
         return Cell(table, tuple(fixtures), self.table_z_mm)
 
     def occluding(self, part: Part) -> Part:

@@ -14,7 +14,14 @@ import numpy as np
 from scanplan.core.plan import Plan, view_of_pose, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.report import view_groups
+from scanplan.judging.report.scene_axes import (
+    CAPSULE_SIDES,
+    axes_traces,
+    axis_capsules,
+    capsule_mesh,
+)
 from scanplan.robot import check_reach, get_robot
+from scanplan.robot.axes import ExternalAxes, part_poses, plan_axes, with_disk
 from scanplan.robot.links import check_links, obstacles_for
 from scanplan.robot.reach import pass_starts
 from scanplan.world.cell import Cell, planned_cell
@@ -26,7 +33,6 @@ MAX_PATH_POINTS = 20_000
 # The arm is drawn at each pass's first, middle and last pose, at most this many poses in
 # all (passes taken evenly when a plan has more): beyond that the arms hide the part.
 MAX_ARM_POSES = 48
-CAPSULE_SIDES = 12
 # One colour per side the views look from (plotly's D3 palette).
 VIEW_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
                 "#7f7f7f", "#bcbd22", "#17becf")  # fmt: skip
@@ -55,7 +61,9 @@ class ArmPoses:
     colliding: (n,) a link within the clearance of the part, the table or a fixture;
     shown: (m,) indices of the poses drawn; capsules_part: (m, k, 2, 3) their links'
     segment ends in the part frame (mm), the last one flange to sensor origin; radii: (k,)
-    mm; summaries: the reach and link checks' one-line summaries.
+    mm; summaries: the reach and link checks' one-line summaries. axes: the external axes
+    (None: the arm alone), their values at the poses drawn `shown_axes` (m, k), and the
+    part's pose at each pose drawn `T_base_part_shown` (m, 4, 4).
     """
 
     robot: str
@@ -66,6 +74,8 @@ class ArmPoses:
     capsules_part: np.ndarray
     radii: np.ndarray
     summaries: tuple[str, ...]
+    axes: ExternalAxes | None = None
+    shown_axes: np.ndarray | None = None
 
     @property
     def base_part(self) -> np.ndarray:
@@ -105,19 +115,23 @@ def check_arm(
     T_flange_sensor: np.ndarray,
     part: Part,
     cell: Cell,
+    axes: ExternalAxes | None = None,
 ) -> ArmPoses:
     """The arm `robot` along `traj` (the part at `T_base_part`, the sensor at
-    `T_flange_sensor` on the flange): its reach and link checks and the poses to draw."""
+    `T_flange_sensor` on the flange; with external `axes`, the part where their values per
+    pose put it): its reach and link checks and the poses to draw."""
     arm = get_robot(robot)
     T_base_part = np.asarray(T_base_part, dtype=np.float64)
-    T_base_flange = T_base_part @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    T_all = part_poses(T_base_part, traj.external, axes)
+    T_base_flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    cell = with_disk(cell, axes)
     reach = check_reach(T_base_flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(
         arm,
         reach.joints,
         # The links keep the clearance the plan was made with, as the sensor does.
         obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm),
-        T_base_part,
+        T_all,
         pass_starts(traj.swath, traj.scanning),
     )
     unreachable = np.zeros(len(traj), dtype=bool)
@@ -126,13 +140,20 @@ def check_arm(
     shown = shown_poses(traj, unreachable | colliding)
     shown = shown[~np.isnan(reach.joints[shown]).any(axis=1)]  # no joints, no arm to draw
     ends, radii, _ = arm.link_capsules(reach.joints[shown])
-    T_part_base = np.linalg.inv(T_base_part)
-    ends_part = ends @ T_part_base[:3, :3].T + T_part_base[:3, 3]
+    T_part_base = np.linalg.inv(np.broadcast_to(T_all, (len(traj), 4, 4))[shown])
+    ends_part = np.einsum("mij,mkej->mkei", T_part_base[:, :3, :3], ends)
+    ends_part = ends_part + T_part_base[:, None, None, :3, 3]
     # The sensor on the flange, flange to sensor origin: the arm visibly reaches its pose.
     flange_part = (traj.poses[shown] @ np.linalg.inv(T_flange_sensor))[:, :3, 3]
     tool = np.stack([flange_part, traj.poses[shown, :3, 3]], axis=1)[:, None]
     ends_part = np.concatenate([ends_part.reshape(len(shown), len(radii), 2, 3), tool], 1)
     radii = np.r_[radii, SENSOR_RADIUS_MM]
+    shown_axes = None
+    if axes is not None and traj.external is not None:
+        shown_axes = traj.external[shown]
+        extra = axis_capsules(axes, T_part_base)
+        ends_part = np.concatenate([ends_part, extra[0]], 1)
+        radii = np.r_[radii, extra[1]]
     return ArmPoses(
         arm.name,
         T_base_part,
@@ -142,6 +163,8 @@ def check_arm(
         ends_part,
         np.asarray(radii, dtype=np.float64),
         (reach.summary(), links.summary()),
+        axes,
+        shown_axes,
     )
 
 
@@ -154,7 +177,8 @@ def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]
     if plan.arm is None:
         return cell, None
     arm = plan.arm
-    return cell, check_arm(traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell)
+    axes = plan_axes(arm.record, traj.external, plan.where)
+    return cell, check_arm(traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell, axes)
 
 
 # ---- traces -------------------------------------------------------------------------------
@@ -278,39 +302,6 @@ def cell_traces(part: Part, cell: Cell) -> list:
     return traces
 
 
-def capsule_mesh(ends: np.ndarray, radii: np.ndarray, sides: int = CAPSULE_SIDES):
-    """(vertices (c·(2·sides+2), 3), faces (c·4·sides, 3)) of closed cylinders round the
-    segments `ends` (c, 2, 3) with `radii` (c,): the capsules drawn without their caps'
-    domes (a joint's neighbour covers them)."""
-    a, b = ends[:, 0], ends[:, 1]
-    axis = b - a
-    length = np.linalg.norm(axis, axis=1, keepdims=True)
-    d = np.where(length > 1e-9, axis / np.maximum(length, 1e-9), [0.0, 0.0, 1.0])
-    helper = np.where(np.abs(d[:, [0]]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    u = np.cross(d, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    w = np.cross(d, u)
-    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
-    ring = np.cos(t)[None, :, None] * u[:, None] + np.sin(t)[None, :, None] * w[:, None]
-    ring *= radii[:, None, None]
-    # Per capsule: ring at a, ring at b, then the two cap centres.
-    verts = np.concatenate([a[:, None] + ring, b[:, None] + ring, a[:, None], b[:, None]], axis=1)
-    j = np.arange(sides)
-    k = (j + 1) % sides
-    ca, cb = 2 * sides, 2 * sides + 1
-    local = np.concatenate(
-        [
-            np.stack([j, k, sides + k], axis=1),
-            np.stack([j, sides + k, sides + j], axis=1),
-            np.stack([np.full(sides, ca), k, j], axis=1),
-            np.stack([np.full(sides, cb), sides + j, sides + k], axis=1),
-        ]
-    )
-    per = verts.shape[1]
-    faces = local[None] + (np.arange(len(ends)) * per)[:, None, None]
-    return verts.reshape(-1, 3), faces.reshape(-1, 3)
-
-
 def _arm_mesh(capsules: np.ndarray, radii: np.ndarray, name: str, colour: str, **kwargs: Any):
     import plotly.graph_objects as go
 
@@ -346,7 +337,13 @@ def add_arm(fig, traj: Trajectory, arm: ArmPoses) -> None:
     for j, i in enumerate(arm.shown):
         run = runs[pass_of[i]] if pass_of[i] >= 0 else np.array([i])
         where = "first" if i == run[0] else "last" if i == run[-1] else "middle"
-        labels.append(f"pose {i} (view {view[i]}, pass {pass_of[i]}, {where})")
+        setting = ""
+        if arm.axes is not None and arm.shown_axes is not None:
+            setting = ", " + ", ".join(
+                f"{n.rsplit('_', 1)[0]} {v:.0f} {n.rsplit('_', 1)[1]}"
+                for n, v in zip(arm.axes.names, arm.shown_axes[j], strict=True)
+            )
+        labels.append(f"pose {i} (view {view[i]}, pass {pass_of[i]}, {where}{setting})")
         bad = bool(arm.colliding[i])
         fig.add_trace(
             _arm_mesh(
@@ -431,6 +428,8 @@ def scene_figure(
     if cell is not None:
         traces += cell_traces(part, cell)
     traces += passes_traces(traj, max_points)
+    if arm is not None:
+        traces += axes_traces(arm.axes, arm.shown_axes, arm.T_base_part)
     fig = go.Figure(traces)
     if arm is not None:
         add_arm(fig, traj, arm)

@@ -87,6 +87,11 @@ def export_rosbag(
 ) -> None:
     """Write the ROS 2 YAML export's messages as the rosbag2 directory `path` (atomically)."""
     options = options or ExportOptions()
+    if options.axes is not None:
+        raise ValueError(
+            "rosbag2 does not carry external axes yet: export the plan as ros (its YAML holds "
+            "the axes' joint trajectory)"
+        )
     rosbag.write_rosbag(plan_motion(traj, options), options, path)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory, pass_bounds
+from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.export.thinning import thin
 
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,23}")  # KRL allows 24 characters, RAPID 32
@@ -97,6 +98,8 @@ class ExportOptions:
     scan_output: the output that switches the sensor's acquisition on over each pass: a
                digital output number (URScript standard output 0-7, KRL $OUT 1-4096) or a
                RAPID signal name; None: each dialect's default (`DEFAULT_SCAN_OUTPUT`).
+    axes:      the cell's external axes (`robot.axes`), their values the trajectory's
+               (`Trajectory.external`); `part_pose` is then the part at every axis at 0.
     """
 
     part_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -116,6 +119,7 @@ class ExportOptions:
     chord_tol_mm: float | None = None
     angle_tol_deg: float | None = None
     scan_output: str | None = None
+    axes: ExternalAxes | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "part_pose", _check_rigid("part pose", self.part_pose))
@@ -214,6 +218,10 @@ class Motion:
     source:     (n,) int, the index of each target among the planned poses.
     n_planned:  how many planned poses the targets were thinned from.
     standoff_mm: the TCP's offset from the sensor's origin along its beam (`TCP_STANDOFF`).
+    external:   (n, k) the external axes' values at each target (None: the arm alone);
+    axis_step:  (n,) bool, targets reached by a joint move on which the turntable turns (the
+                arm stands still before it; the first target of each view).
+    axes:       the external axes (None: none).
     """
 
     poses: np.ndarray
@@ -228,6 +236,15 @@ class Motion:
     source: np.ndarray
     n_planned: int
     standoff_mm: float
+    external: np.ndarray | None = None
+    axis_step: np.ndarray | None = None
+    axes: ExternalAxes | None = None
+
+    def part_poses(self) -> np.ndarray:
+        """(n, 4, 4) `T_base_part` at each target (the part moved by the axes)."""
+        return np.broadcast_to(
+            part_poses(self.part_pose, self.external, self.axes), (len(self.poses), 4, 4)
+        )
 
 
 def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
@@ -238,16 +255,30 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     # them, scanning or not, keeps the fewest poses within the tolerances.
     # Thinned on the TCP's path: the one the controller interpolates linearly.
     tcp_part = traj.poses @ options.scan.T_sensor_line
-    keep = thin(tcp_part, start | end, options.chord_tol, options.angle_tol_rad)
+    if (traj.external is None) != (options.axes is None):
+        raise ValueError(
+            "the plan's external axis values and the program's axes do not match (a plan "
+            "made with a positioner or track exports with them)"
+        )
+    step = axis_steps(traj, options.axes)
+    keep = thin(
+        tcp_part,
+        start | end | step | np.r_[step[1:], False],
+        options.chord_tol,
+        options.angle_tol_rad,
+    )
     poses_part = tcp_part[keep]
-    poses = options.part_pose @ poses_part
+    poses = kept(part_poses(options.part_pose, traj.external, options.axes), keep) @ poses_part
     scanning, start, end = traj.scanning[keep], start[keep], end[keep]
+    step = step[keep]
     # Entering a pass is still a travel move; only moves between two recorded poses scan.
     speed = np.where(scanning & ~start, options.scan_speed, options.travel_speed_mm_s)
     # Exact stops where the acquisition switches, at the ends of the program, and where a
     # joint move into a pass starts (its swept path is checked from a standing arm).
     n = len(keep)
-    stop = start | end | (np.arange(n) == 0) | (np.arange(n) == n - 1)
+    stop = (
+        start | end | step | np.r_[step[1:], False] | (np.arange(n) == 0) | (np.arange(n) == n - 1)
+    )
     if options.joints_rad is not None:
         joints = np.asarray(options.joints_rad, dtype=np.float64)[keep]
         into = start[1:] & np.isfinite(joints[1:]).all(axis=1)
@@ -265,6 +296,9 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
         keep,
         len(traj),
         options.standoff_mm,
+        None if traj.external is None else traj.external[keep],
+        step,
+        options.axes,
     )
 
 
@@ -297,7 +331,8 @@ def blend_radii(
 def flange_poses(traj: Trajectory, options: ExportOptions) -> np.ndarray:
     """(n, 4, 4) `T_base_flange` in mm, the input of `scanplan.robot.check_reach`: the same
     whichever TCP the program flies (`T_base_tcp @ inv(tool)` is this)."""
-    return options.part_pose @ traj.poses @ np.linalg.inv(options.tcp)
+    T = part_poses(options.part_pose, traj.external, options.axes)
+    return T @ traj.poses @ np.linalg.inv(options.tcp)
 
 
 # --- reading programs back -----------------------------------------------------------------
@@ -334,14 +369,16 @@ def sensor_poses(poses_tcp: np.ndarray, standoff_mm: float | np.ndarray) -> np.n
 class Parsed:
     """What a dialect's parser recovers from a program: enough to check it against `Motion`.
 
-    poses: (n, 4, 4) `T_base_sensor`, mm; scanning: (n,) bool; speed_mm_s: (n,);
-    blended: (n,) bool (None where the format holds no blending, e.g. ROS).
+    poses: (n, 4, 4) `T_base_sensor`, mm (with external axes: at their values); scanning:
+    (n,) bool; speed_mm_s: (n,); blended: (n,) bool (None where the format holds no
+    blending, e.g. ROS); external: (n, k) the external axes' values (None: none).
     """
 
     poses: np.ndarray
     scanning: np.ndarray
     speed_mm_s: np.ndarray
     blended: np.ndarray | None
+    external: np.ndarray | None = None
 
 
 class PassTracker:
@@ -389,7 +426,8 @@ def joint_move_targets(motion: Motion, options: ExportOptions) -> dict[int, np.n
     joints = target_joints(motion, options)
     if joints is None:
         return {}
-    where = np.flatnonzero(motion.pass_start | (np.arange(len(motion.poses)) == 0))
+    step = np.zeros(len(motion.poses), bool) if motion.axis_step is None else motion.axis_step
+    where = np.flatnonzero(motion.pass_start | step | (np.arange(len(motion.poses)) == 0))
     return {int(i): joints[i] for i in where if np.isfinite(joints[i]).all()}
 
 

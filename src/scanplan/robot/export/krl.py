@@ -8,6 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.export.axes_lines import axes_note, on_axes, read_axes
 from scanplan.robot.export.common import (
     ExportOptions,
     Kinematics,
@@ -56,8 +57,31 @@ def status_turn(q_rad: np.ndarray, arm: Kinematics) -> tuple[int, int]:
     return status, turn
 
 
+def _external(motion: Motion) -> list[str]:
+    """`,E1 v,E2 w` per target: the external axes' values (degrees, mm); '' without axes."""
+    if motion.external is None:
+        return [""] * len(motion.poses)
+    return ["".join(f",E{j + 1} {v:.6f}" for j, v in enumerate(row)) for row in motion.external]
+
+
+def _axes_header(motion: Motion) -> list[str]:
+    """What the header says of the external axes: which E is which, and the axes' record."""
+    if motion.axes is None:
+        return []
+    names = ", ".join(f"E{j + 1} {n}" for j, n in enumerate(motion.axes.labels))
+    out = [
+        f"; External axes on every target: {names}, moved with the arm.",
+        "; $BASE is the part with every external axis at 0. A turntable: declare that base",
+        "; as coupled to the turntable's kinematics (BASE_TYPE #EK on its flange), so the",
+        "; controller turns it with E1. A track: $ROBROOT rides it (a ROBROOT kinematic),",
+        "; its travel along the track direction below.",
+    ]
+    return out + [f"; {axes_note(motion)}"]
+
+
 def write(motion: Motion, options: ExportOptions) -> str:
     name = options.program_name
+    ext = _external(motion)
     out_n = scan_output(options, DEFAULT_SCAN_OUTPUT, "number 1-4096")
     joint_moves = joint_move_targets(motion, options)
     e6pos = options.arm is not None
@@ -93,6 +117,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"; Acquisition: $OUT[{out_n}] = TRUE at each run's first target, FALSE at its last; wire",
         "; it to the sensor's acquisition enable. Setting $OUT stops the advance run, so it",
         "; switches with the robot standing on that target.",
+        *_axes_header(motion),
         "  BAS(#INITMOV, 0)",
         f"  $BASE = {_frames(motion.part_pose[None])[0]}",
         f"  $TOOL = {_frames(options.tool[None])[0]}",
@@ -115,13 +140,13 @@ def write(motion: Motion, options: ExportOptions) -> str:
         if i in joint_moves and e6pos:  # into the run's configuration
             assert options.arm is not None
             status, turn = status_turn(joint_moves[i], options.arm)
-            out.append(f"  PTP {frame[:-1]},S 'B{status:03b}',T 'B{turn:06b}'}}")
+            out.append(f"  PTP {frame[:-1]}{ext[i]},S 'B{status:03b}',T 'B{turn:06b}'}}")
         else:
             if i in joint_moves:  # no arm to say the configuration: axis angles, degrees
                 deg = np.degrees(joint_moves[i])
                 axes = ",".join(f"A{j + 1} {v:.4f}" for j, v in enumerate(deg))
-                out.append(f"  PTP {{{axes}}}")
-            out.append(f"  LIN {frame}" + (" C_DIS" if blend > 0 else ""))
+                out.append(f"  PTP {{{axes}{ext[i]}}}")
+            out.append(f"  LIN {frame[:-1]}{ext[i]}}}" + (" C_DIS" if blend > 0 else ""))
         if motion.pass_start[i]:
             out.append(f"  $OUT[{out_n}] = TRUE  ; acquisition on")
         if motion.pass_end[i]:
@@ -133,6 +158,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
 
 def parse(text: str) -> Parsed:
     rows: list[list[float]] = []
+    external: list[list[float]] = []
     speeds: list[float] = []
     blended: list[bool] = []
     tracker = PassTracker()
@@ -148,8 +174,12 @@ def parse(text: str) -> Parsed:
         elif m := _VEL.match(s):
             speed = float(m.group(1)) * 1000.0
         elif m := _MOVE.match(s):
-            items = dict(item.split() for item in m.group(2).split(","))
+            items = dict(item.split()[:2] for item in m.group(2).split(",") if item.strip())
             rows.append([float(items[k]) for k in _AXES])
+            ext = sorted(
+                (int(k[1:]), float(v)) for k, v in items.items() if re.fullmatch(r"E\d", k)
+            )
+            external.append([v for _, v in ext])
             speeds.append(speed)
             blended.append(m.group(3) is not None)
             tracker.move()
@@ -159,5 +189,9 @@ def parse(text: str) -> Parsed:
     poses = np.tile(np.eye(4), (len(arr), 1, 1))
     poses[:, :3, :3] = Rotation.from_euler("ZYX", arr[:, 3:], degrees=True).as_matrix()
     poses[:, :3, 3] = arr[:, :3]
-    poses = sensor_poses(base @ poses, read_standoff(text))
-    return Parsed(poses, np.array(tracker.flags), np.array(speeds), np.array(blended))
+    axes = read_axes(text)
+    values = np.array(external, dtype=np.float64) if axes is not None else None
+    if values is not None and values.shape != (len(rows), len(axes.names)):  # type: ignore[union-attr]
+        raise ValueError("KRL program: a target without its external axis values (E1..)")
+    poses = sensor_poses(on_axes(base, poses, values, axes), read_standoff(text))
+    return Parsed(poses, np.array(tracker.flags), np.array(speeds), np.array(blended), values)

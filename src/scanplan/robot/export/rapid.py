@@ -8,6 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.export.axes_lines import axes_note, on_axes, read_axes
 from scanplan.robot.export.common import (
     ExportOptions,
     Kinematics,
@@ -32,6 +33,23 @@ _SPEED = re.compile(r"CONST\s+speeddata\s+(\w+)\s*:=\s*\[([^,\]]+)")
 # The work object's user frame: wobjdata [robhold, ufprog, ufmec, uframe, oframe].
 _WOBJ = re.compile(r"wobjdata\s+\w+\s*:=\s*\[\w+,\w+,\"[^\"]*\",\[\[([^\]]*)\],\[([^\]]*)\]\]")
 _MOVEL = re.compile(r"MoveL\s+(\w+)\s*,\s*(\w+)\s*,\s*(\w+)\s*,")
+# A robtarget's extax: [eax_a, ..., eax_f] after its confdata.
+_TARGET_EXTAX = re.compile(
+    r"CONST\s+robtarget\s+(\w+)\s*:=\s*\[\[[^\]]*\],\s*\[[^\]]*\],\s*\[[^\]]*\],\s*\[([^\]]*)\]"
+)
+_UNUSED = 9e9  # an external axis a robtarget does not use
+
+
+def _extax(motion: Motion) -> list[str]:
+    """`[eax_a,...,eax_f]` per target: the external axes' values (degrees, mm), 9E+09
+    where unused."""
+    if motion.external is None:
+        return [_EXTAX] * len(motion.poses)
+    k = motion.external.shape[1]
+    return [
+        "[" + ",".join([*(f"{v:.6f}" for v in row), *(["9E+09"] * (6 - k))]) + "]"
+        for row in motion.external
+    ]
 
 
 def _frames(T: np.ndarray) -> list[str]:
@@ -80,6 +98,17 @@ def write(motion: Motion, options: ExportOptions) -> str:
         for b in motion.blend_mm
         if np.floor(b * 100.0 + 1e-9) > 0
     }
+    extax = _extax(motion)
+    axes_lines = []
+    if motion.axes is not None:
+        which = ", ".join(f"eax_{'abcdef'[j]} {n}" for j, n in enumerate(motion.axes.labels))
+        axes_lines = [
+            f"  ! External axes in every robtarget's extax: {which}. wobjPart is",
+            "  ! the part with every axis at 0: with a turntable, make it a coordinated work",
+            "  ! object moved by the turntable's mechanical unit (ufmec), so it turns with",
+            "  ! eax_a; with a track, the robot's base rides it (a track unit).",
+            f"  ! {axes_note(motion)}",
+        ]
     out = [
         f"MODULE {options.program_name}",
         "  ! Laser-profilometer scan path written by scanplan.",
@@ -105,6 +134,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"  ! Acquisition: SetDO {signal}, 1 at each run's first target, 0 at its last (after a",
         "  ! fine point, so it switches with the robot standing there): define the signal in",
         "  ! the I/O configuration and wire it to the sensor's acquisition enable.",
+        *axes_lines,
         f"  PERS tooldata tSensor := [TRUE,[{_frames(options.tool[None])[0]}],"
         "[1,[0,0,50],[1,0,0,0],0,0,0]];",
         f'  PERS wobjdata wobjPart := [FALSE,TRUE,"",[{_frames(motion.part_pose[None])[0]}],'
@@ -118,7 +148,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         out.append(f"  CONST zonedata {zname} := [FALSE,{b},{z},{z},{o},{z},{o}];")
     for i, frame in enumerate(_frames(motion.poses_part)):
         cf = ",".join(str(int(c)) for c in conf[i])
-        out.append(f"  CONST robtarget p{i:0{width}d} := [{frame},[{cf}],{_EXTAX}];")
+        out.append(f"  CONST robtarget p{i:0{width}d} := [{frame},[{cf}],{extax[i]}];")
     out += ["", "  PROC main()", "    ConfL\\Off;"]
     joint_moves = joint_move_targets(motion, options)
     for i in range(n):
@@ -127,7 +157,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
             out.append(f"    ! pass {k} start")
         if i in joint_moves:  # into the pass's configuration (axis angles, degrees)
             q = ",".join(f"{v:.4f}" for v in np.degrees(joint_moves[i]))
-            out.append(f"    MoveAbsJ [[{q}],{_EXTAX}], vTravel, fine, tSensor\\WObj:=wobjPart;")
+            out.append(f"    MoveAbsJ [[{q}],{extax[i]}], vTravel, fine, tSensor\\WObj:=wobjPart;")
         speed = "vScan" if motion.scanning[i] and not motion.pass_start[i] else "vTravel"
         zname = _zone_name(motion.blend_mm[i])
         z_i = zname if zname in zones else "fine"
@@ -143,6 +173,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
 
 def parse(text: str) -> Parsed:
     targets: dict[str, tuple[list[float], list[float]]] = {}
+    extaxes: dict[str, list[float]] = {}
     speeds: dict[str, float] = {}
     names: list[str] = []
     moves: list[tuple[str, bool]] = []
@@ -158,6 +189,8 @@ def parse(text: str) -> Parsed:
             uframe = poses_from_parts(np.array([origin]), turn)[0]
         elif m := _TARGET.search(s):
             targets[m.group(1)] = (floats(m.group(2)), floats(m.group(3)))
+            if e := _TARGET_EXTAX.search(s):
+                extaxes[m.group(1)] = [float(v) for v in e.group(2).split(",")]
         elif m := _SPEED.search(s):
             speeds[m.group(1)] = float(m.group(2))
         elif m := _MOVEL.search(s):
@@ -173,9 +206,19 @@ def parse(text: str) -> Parsed:
     wxyz = np.array([targets[t][1] for t in names])
     rot = Rotation.from_quat(np.concatenate([wxyz[:, 1:], wxyz[:, :1]], axis=1))
     speed = np.array([speeds[v] for v, _ in moves])
+    axes = read_axes(text)
+    values = None
+    if axes is not None:
+        k = len(axes.names)
+        values = np.array([extaxes.get(t, [_UNUSED] * 6)[:k] for t in names], dtype=np.float64)
+        if (np.abs(values) >= _UNUSED * 0.99).any():
+            raise ValueError("RAPID robtarget without its external axis values (extax)")
     return Parsed(
-        sensor_poses(uframe @ poses_from_parts(xyz, rot), read_standoff(text)),
+        sensor_poses(
+            on_axes(uframe, poses_from_parts(xyz, rot), values, axes), read_standoff(text)
+        ),
         np.array(tracker.flags),
         speed,
         np.array([b for _, b in moves]),
+        values,
     )

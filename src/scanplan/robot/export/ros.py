@@ -15,10 +15,14 @@ directory: `scanplan.robot.export.rosbag`, built on `ros_poses` and `arrival_tim
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.axes import ExternalAxes
+from scanplan.robot.export.axes_lines import on_axes
 from scanplan.robot.export.common import (
     ExportOptions,
     Motion,
@@ -92,6 +96,35 @@ def arrival_times(motion: Motion) -> np.ndarray:
     return np.r_[0.0, np.cumsum(seg / motion.speed_mm_s[1:])]
 
 
+# The external axes' joints in `joint_trajectory` (radians, metres, as ROS counts them).
+JOINT_NAMES = {"turntable_deg": "turntable_joint", "track_mm": "track_joint"}
+
+
+def _joint_trajectory(motion: Motion, t: np.ndarray) -> list[str]:
+    """`joint_trajectory`, a `trajectory_msgs/JointTrajectory` of the external axes at each
+    pose's arrival time, and their record under `scanplan`; none without axes. The part's
+    transform in `tf_static` is then the part with every axis at 0."""
+    if motion.axes is None or motion.external is None:
+        return []
+    names = motion.axes.names
+    scale = np.where(motion.axes.rotary, np.pi / 180.0, 1e-3)
+    out = [
+        "joint_trajectory:",
+        "  header:",
+        "    stamp: {sec: 0, nanosec: 0}",
+        "    frame_id: ''",
+        f"  joint_names: [{', '.join(JOINT_NAMES[n] for n in names)}]",
+        "  points:",
+    ]
+    for row, ti in zip(motion.external * scale, t, strict=True):
+        sec, nanosec = split_stamp(float(ti))
+        positions = ", ".join(f"{v:.9f}" for v in row)
+        out.append(
+            f"  - {{positions: [{positions}], time_from_start: {{sec: {sec}, nanosec: {nanosec}}}}}"
+        )
+    return out
+
+
 def write(motion: Motion, options: ExportOptions) -> str:
     frame = options.ros_frame_id
     xyz, q = ros_poses(motion.poses_part)
@@ -118,6 +151,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"  swath: [{', '.join(str(int(k)) for k in motion.swath)}]",
         f"  speed_mm_s: [{', '.join(f'{v:g}' for v in motion.speed_mm_s)}]",
         f"  standoff_mm: {motion.standoff_mm:.9g}",
+        *([] if motion.axes is None else [f"  external_axes: {json.dumps(motion.axes.record())}"]),
         "pose_array:",
         "  header:",
         "    stamp: {sec: 0, nanosec: 0}",
@@ -131,6 +165,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
     for b, ti in zip(body, t, strict=True):
         out.append(f"  - header:\n      stamp: {_stamp(ti)}\n      frame_id: {frame}")
         out.append("    pose:\n      " + b.replace("\n", "\n      "))
+    out += _joint_trajectory(motion, t)
     out.append("tf_static:\n  transforms:")
     for parent, child, T in static_transforms(motion, options):
         out.append("  " + _transform_yaml(parent, child, T).replace("\n", "\n  "))
@@ -164,8 +199,28 @@ def parse(text: str) -> Parsed:
     if not np.allclose(path_xyz, xyz, atol=1e-6):
         raise ValueError("ROS YAML: path and pose_array hold different poses")
     # Read back in the base frame, as every dialect's parser returns them.
-    poses = base_poses(poses, frame, transforms)
+    axes, values = _external(doc, extra)
+    if axes is None:
+        poses = base_poses(poses, frame, transforms)
+    else:
+        base = base_poses(np.eye(4)[None], frame, transforms)[0]
+        poses = on_axes(base, poses, values, axes)
     poses = sensor_poses(poses, float(extra.get("standoff_mm", 0.0)))
     return Parsed(
-        poses, np.array(extra["scanning"], dtype=bool), np.array(extra["speed_mm_s"]), None
+        poses, np.array(extra["scanning"], dtype=bool), np.array(extra["speed_mm_s"]), None, values
     )
+
+
+def _external(doc: dict, extra: dict) -> tuple[ExternalAxes | None, np.ndarray | None]:
+    """The external axes and their values (degrees, mm) a ROS YAML file holds, if any."""
+    if "external_axes" not in extra:
+        return None, None
+    axes = ExternalAxes.of_record(extra["external_axes"], "ROS YAML scanplan.external_axes")
+    try:
+        points = doc["joint_trajectory"]["points"]
+        values = np.array([p["positions"] for p in points], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise ValueError("ROS YAML: external axes without a joint_trajectory of them") from None
+    if values.ndim != 2 or values.shape[1] != len(axes.names):
+        raise ValueError("ROS YAML: joint_trajectory points do not match the external axes")
+    return axes, values / np.where(axes.rotary, np.pi / 180.0, 1e-3)

@@ -8,6 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.export.axes_lines import axes_note
 from scanplan.robot.export.common import (
     JOINT_ACCEL_DEG_S2,
     JOINT_SPEED_DEG_S,
@@ -31,6 +32,37 @@ _MOVEL = re.compile(
     r"movel\(pose_trans\(feature,\s*p\[([^\]]*)\]\),\s*a=([^,]+),\s*v=([^,]+),\s*r=([^)]+)\)"
 )
 _FEATURE = re.compile(r"^feature\s*=\s*p\[([^\]]*)\]")
+# An indexed turntable (UR controllers drive no external axes): a pulse on this standard
+# digital output steps it to its next angle, this standard input says it stands there.
+TURNTABLE_OUTPUT = 7
+TURNTABLE_INPUT = 7
+_TURN = re.compile(r"#\s*turntable to ([-+0-9.eE]+) deg")
+
+
+def _check_indexed(motion: Motion) -> None:
+    """A URScript program drives a turntable indexed between views, and nothing else."""
+    if motion.axes is None:
+        return
+    if motion.axes.track is not None:
+        raise ValueError(
+            "URScript: a UR controller drives no external axes, and a track moves with the "
+            "arm: export the plan as ros or csv, or plan it without --track"
+        )
+
+
+def _turntable_lines(angle: float, feature: str) -> list[str]:
+    """Index the turntable to `angle` (its controller holds the angles in order) and set
+    the part's frame where it now stands."""
+    return [
+        f"  # turntable to {angle:.6f} deg: pulse output {TURNTABLE_OUTPUT}, wait for input "
+        f"{TURNTABLE_INPUT}",
+        f"  set_standard_digital_out({TURNTABLE_OUTPUT}, True)",
+        f"  while not get_standard_digital_in({TURNTABLE_INPUT}):",
+        "    sync()",
+        "  end",
+        f"  set_standard_digital_out({TURNTABLE_OUTPUT}, False)",
+        f"  feature = {feature}",
+    ]
 
 
 def _poses_m(T: np.ndarray) -> list[str]:
@@ -43,6 +75,7 @@ def _poses_m(T: np.ndarray) -> list[str]:
 
 
 def write(motion: Motion, options: ExportOptions) -> str:
+    _check_indexed(motion)
     name = options.program_name
     a = options.accel_mm_s2 / 1000.0
     out_n = scan_output(options, DEFAULT_SCAN_OUTPUT, "number 0-7")
@@ -70,6 +103,22 @@ def write(motion: Motion, options: ExportOptions) -> str:
         f"# Acquisition: standard digital output {out_n} is set True at each run's first target "
         "and False at its last;",
         "# wire it to the sensor's acquisition enable.",
+    ]
+    features = _poses_m(motion.part_poses())
+    steps = np.zeros(len(motion.poses), bool)
+    if motion.external is not None:
+        steps = np.r_[True, np.abs(np.diff(motion.external[:, 0])) > 1e-9]
+        angles = ", ".join(f"{a:g}" for a in motion.external[steps, 0])
+        out += [
+            "# No external axes on a UR controller: the part lies on an indexed turntable. Before",
+            f"# each view the program pulses standard digital output {TURNTABLE_OUTPUT} (the "
+            "turntable's controller steps to its",
+            f"# next angle: {angles} deg, in order) and waits for standard digital input "
+            f"{TURNTABLE_INPUT}",
+            "# (in position), the arm standing; `feature` is then the part where it stands.",
+            f"# {axes_note(motion)}",
+        ]
+    out += [
         f"def {name}():",
         f"  set_tcp({_poses_m(options.tool[None])[0]})",
         f"  feature = {_poses_m(motion.part_pose[None])[0]}",
@@ -80,6 +129,9 @@ def write(motion: Motion, options: ExportOptions) -> str:
         k = int(motion.swath[i])
         if motion.pass_start[i]:
             out.append(f"  # pass {k} start")
+        if steps[i]:
+            assert motion.external is not None
+            out += _turntable_lines(float(motion.external[i, 0]), features[i])
         if i in joint_moves:  # into the pass's configuration
             q = ", ".join(f"{v:.6f}" for v in joint_moves[i])
             out.append(f"  movej([{q}], a={qa:.6g}, v={qv:.6g})")
@@ -99,12 +151,17 @@ def write(motion: Motion, options: ExportOptions) -> str:
 
 def parse(text: str) -> Parsed:
     values: list[list[float]] = []
+    features: list[np.ndarray] = []
+    angles: list[float] = []
+    angle = None
     feature = np.eye(4)
     tracker = PassTracker()
     for line in text.splitlines():
         s = line.strip()
         if s.startswith("#"):
             tracker.line(s)
+            if t := _TURN.match(s):
+                angle = float(t.group(1))
             continue
         if f := _FEATURE.match(s):
             x = floats(f.group(1))
@@ -113,10 +170,15 @@ def parse(text: str) -> Parsed:
         m = _MOVEL.search(s)
         if m:
             values.append([*floats(m.group(1)), *(float(m.group(j)) for j in (2, 3, 4))])
+            features.append(feature)
+            angles.append(float("nan") if angle is None else angle)
             tracker.move()
     if not values:
         raise ValueError("URScript program holds no movel")
     arr = np.asarray(values)
-    poses = feature @ poses_from_parts(arr[:, :3] * 1000.0, Rotation.from_rotvec(arr[:, 3:6]))
+    poses = np.array(features) @ poses_from_parts(
+        arr[:, :3] * 1000.0, Rotation.from_rotvec(arr[:, 3:6])
+    )
     poses = sensor_poses(poses, read_standoff(text))
-    return Parsed(poses, np.array(tracker.flags), arr[:, 7] * 1000.0, arr[:, 8] > 0)
+    external = None if angle is None else np.array(angles)[:, None]
+    return Parsed(poses, np.array(tracker.flags), arr[:, 7] * 1000.0, arr[:, 8] > 0, external)

@@ -1,0 +1,95 @@
+"""A plan flown with external axes: each view's setting is where the arm flies most of it,
+the fit and export's check see the part where the axes put it."""
+
+from __future__ import annotations
+
+import numpy as np
+from typer.testing import CliRunner
+
+from scanplan.cli import app
+from scanplan.core.trajectory import Trajectory
+from scanplan.planning.swaths import Swath
+from scanplan.robot import check_reach
+from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
+from scanplan.robot.axes_fit import choose_values, values_at
+from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.fit import fit_to_robot
+
+TCP = parse_pose_arg("0,0,90,0,0,0")
+# The turntable's axis 700 mm out along the UR5e's x: its near side within reach, its far
+# side (300 mm beyond the axis) out of it until the table turns it round.
+T0 = parse_pose_arg("700,0,-150,0,0,0")
+TURNTABLE = ExternalAxes(turntable=Turntable(axis_point_mm=[0.0, 0.0, 0.0]))
+
+
+def _near_and_far(n: int = 40) -> Trajectory:
+    """Two views, one pass each, 300 mm either side of the axis (part frame), looking down."""
+    poses, swath = [], []
+    for k, x in enumerate((-300.0, 300.0)):
+        a, b = np.array([x, -60.0, 150.0]), np.array([x, 60.0, 150.0])
+        sw = Swath(k, a, b, np.array([0.0, 1.0, 0]), np.array([-1.0, 0.0, 0]))
+        poses.append(sw.poses(np.linspace(0, 120, n), np.zeros(n), np.zeros(n)))
+        swath.append(np.full(n, k))
+    views = [
+        {"index": k, "axis": [0.0, 0.0, 1.0], "first_swath": k, "last_swath": k, "passes": 1}
+        for k in range(2)
+    ]
+    return Trajectory(
+        np.concatenate(poses), np.concatenate(swath), np.ones(2 * n, bool), meta={"views": views}
+    )
+
+
+def _reached(traj: Trajectory, T: np.ndarray) -> np.ndarray:
+    flange = T @ traj.poses @ np.linalg.inv(TCP)
+    report = check_reach(flange, "ur5e", swath=traj.swath, scanning=traj.scanning)
+    return ~np.isnan(report.joints).any(axis=1)
+
+
+def test_the_far_view_is_turned_round_and_the_near_one_left():
+    traj = _near_and_far()
+    far = traj.swath == 1
+    assert not _reached(traj, T0)[far].any()  # the arm alone cannot reach the far view
+    with_axes, settings = choose_values(traj, "ur5e", TCP, T0, TURNTABLE)
+    assert with_axes.external is not None
+    angles = with_axes.external[:, 0]
+    # Each view holds one angle; the far one is turned well round towards the arm (the
+    # first angle that brings it all within reach, nearest the last view's), the near one
+    # kept near where it is.
+    assert len(np.unique(angles[far])) == 1 and len(np.unique(angles[~far])) == 1
+    assert abs(angles[far][0]) >= 60.0
+    assert abs(angles[~far][0]) <= 45.0
+    assert [float(s[0]) for s in settings] == [angles[~far][0], angles[far][0]]
+    reached = _reached(with_axes, part_poses(T0, with_axes.external, TURNTABLE))
+    assert reached.all()
+    fit = fit_to_robot(with_axes, "ur5e", TCP, T0, axes=TURNTABLE)
+    assert fit.flyable and not fit.given_up
+    assert fit.traj.external is not None and len(fit.traj.external) == len(fit.traj)
+    # The same fit without the axes gives the far view up.
+    alone = fit_to_robot(traj.subset(~far | far), "ur5e", TCP, T0)
+    assert alone.given_up.get(1, 0) > 0
+
+
+def test_the_track_follows_the_sensor_at_the_offset_held():
+    traj = _near_and_far()
+    track = ExternalAxes(track=Track(direction=[1.0, 0.0, 0.0], length_mm=1000.0))
+    values = values_at(track, np.array([200.0]), T0, traj.poses, np.linalg.inv(TCP))
+    flange_x = (T0 @ traj.poses @ np.linalg.inv(TCP))[:, 0, 3]
+    assert np.allclose(values[:, 0], np.clip(flange_x - 200.0, -500.0, 500.0))
+    with_axes, _ = choose_values(traj, "ur5e", TCP, T0, track)
+    assert with_axes.external is not None
+    assert _reached(with_axes, part_poses(T0, with_axes.external, track)).all()
+
+
+def test_plan_options_need_an_arm_and_name_a_bad_file(tmp_path):
+    runner = CliRunner()
+    out = tmp_path / "p.json"
+    result = runner.invoke(app, ["plan", "training-piece", "-o", str(out), "--track", "1000"])
+    assert result.exit_code != 0 and "--track needs --robot" in result.output
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[turntable]\nspeed_deg_s = 0.0\n")
+    result = runner.invoke(
+        app, ["plan", "training-piece", "-o", str(out), "--robot", "ur5e", "--positioner", str(bad)]
+    )
+    assert result.exit_code != 0
+    assert "turntable.speed_deg_s" in result.output
+    assert "Traceback" not in result.output and not out.exists()
