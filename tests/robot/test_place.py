@@ -152,3 +152,23 @@ def test_cli_export_krl_refuses_what_its_own_arm_cannot_fly(tmp_path) -> None:
     # No arm named: refused, never a silent default.
     result = CliRunner().invoke(app, ["export", str(path), "-o", str(tmp_path / "q.src")])
     assert result.exit_code == 2 and "--robot is required" in result.stderr
+
+
+def test_seeds_in_a_cell_take_several_yaws_per_height_searched_at_that_height() -> None:
+    """In a cell each height gives its best yaws at least 60° apart (not the near-equal yaw
+    beside its best), marked to be searched at that height; out of a cell only the best."""
+    from scanplan.robot.place import PER_HEIGHT_YAWS, _seeds
+
+    yaws = np.radians(np.arange(0.0, 360.0, 10.0))
+    heights = np.array([-200.0, 300.0])
+    grid = np.array([[400.0, 0.0, z, a] for z in heights for a in yaws])
+    # The high row scores best everywhere; within the low row, yaws near 0 score best.
+    scores = np.where(grid[:, 2] > 0, 1.0, 0.0) - np.abs(np.sin(grid[:, 3] / 2))
+    seeds, held = _seeds(grid, heights, scores, scores, keep=2, in_cell=True)
+    low = seeds[grid[seeds, 2] < 0]
+    assert len(low) == PER_HEIGHT_YAWS and held[grid[seeds, 2] < 0].all()
+    low_yaws = np.sort(np.degrees(grid[low, 3]))
+    gaps = np.diff(np.r_[low_yaws, low_yaws[0] + 360.0])
+    assert (gaps > 60.0).all() and 0.0 in low_yaws
+    alone, held_alone = _seeds(grid, heights, scores, scores, keep=2, in_cell=False)
+    assert len(alone) == 2 and not held_alone.any()
