@@ -61,6 +61,33 @@ def test_a_plan_recording_thousands_of_fixtures_is_refused_naming_it(planned, tm
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("command", "field", "value", "said"),
+    [
+        ("evaluate", "roi", "cube:1", "context: roi 'cube:1': unknown term 'cube:1'"),
+        ("defects", "roi", "cube:1", "context: roi 'cube:1': unknown term 'cube:1'"),
+        ("evaluate", "table", "tall", "context: table 'tall': expected a height in mm or none"),
+    ],
+)
+def test_a_bad_roi_or_table_in_the_plan_file_is_named_as_the_file_s(
+    planned, tmp_path, command, field, value, said
+):
+    """Text the plan file records is named as its field, not as an option never given;
+    the same text given as the option is named as the option. (`defects` builds no cell
+    from the table: only the fixtures hide the part from it.)"""
+    part, plan = planned
+    record = json.loads(plan.read_text())
+    record["context"][field] = value
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(record))
+    out = tmp_path / "out"
+    result = run_cli(command, str(part), str(bad), "-q", "-o", str(out))
+    assert_refused(result, f"plan {bad}: {said}")
+    assert not out.exists()
+    given = run_cli("evaluate", str(part), str(plan), "-q", f"--{field}", value)
+    assert given.exit_code == 2 and f"--{field} {value!r}" in given.stderr, given.output
+
+
 def test_a_fixture_that_is_a_fifo_is_said_so_as_a_fixture(planned, tmp_path):
     part, plan = planned
     fifo = tmp_path / "clamp.stl"

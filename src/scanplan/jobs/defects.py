@@ -26,7 +26,7 @@ from scanplan.core.quantities import (
     DEFECTS_PER_TRIAL,
 )
 from scanplan.core.run import counted, task_runner
-from scanplan.jobs.planned import ProgressBar, no_bar
+from scanplan.jobs.planned import ProgressBar, inspected, no_bar
 from scanplan.judging.detectability import PREDICTED, Detectability, survey
 from scanplan.judging.detection import (
     DefectRun,
@@ -95,8 +95,8 @@ def run_defects(
     detector = detector_for(traj, spec.sensor, k_sigma=study.k_sigma, min_points=study.min_points)
     if study.link_mm is not None:
         detector = replace(detector, link_mm=study.link_mm)
-    inspected = part.with_roi(context.roi)
-    surface = surface_samples(inspected, spec.sensor, context, study.seed)
+    inspected_part = inspected(plan, part, context)
+    surface = surface_samples(inspected_part, spec.sensor, context, study.seed)
     tasks = defect_tasks(
         part, spec, traj, study.kind, study.sizes_mm, study.trials, study.per_trial,
         study.seed, context, detector, surface,
@@ -107,7 +107,7 @@ def run_defects(
     if study.defect_free:
         with bar("defect-free scan") as progress:
             calls, detectability = survey(
-                part_in_cell(context, inspected), spec.sensor, traj.poses[traj.scanning],
+                part_in_cell(context, inspected_part), spec.sensor, traj.poses[traj.scanning],
                 detector, surface, study.seed, progress=progress, swath=traj.swath[traj.scanning],
             )  # fmt: skip
     predicted: dict[str, float | None] = {}

@@ -14,7 +14,15 @@ from scanplan.core.context import PlanContext
 from scanplan.core.plan import Plan
 from scanplan.core.quantities import PERTURB_TRIALS
 from scanplan.core.run import counted, task_runner
-from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
+from scanplan.jobs.planned import (
+    ProgressBar,
+    Say,
+    inspected,
+    no_bar,
+    plan_cell,
+    planned_part,
+    silent,
+)
 from scanplan.jobs.trials import (
     closed_loop_planner,
     closed_loop_robustness,
@@ -55,7 +63,7 @@ def judged_part(
     """The plan's part (checked to be the planned one) with its cell built, so that a bad
     ROI, table or fixture fails before the long part."""
     the_part = planned_part(plan, part, units, other_part=other_part, say=say)
-    plan_cell(plan, the_part.with_roi(context.roi), context)
+    plan_cell(plan, inspected(plan, the_part, context), context)
     return the_part
 
 
@@ -144,7 +152,7 @@ def write_evaluation(
             files["fragility.png"] = plot_fragility_map(robust, Path(scratch, "f.png"), title)
         write_report(
             output,
-            part.with_roi(context.roi),
+            inspected(plan, part, context),
             [Evaluated(plan.planner or Path(name).stem, plan.traj, metrics)],
             context.spec,
             files=files,

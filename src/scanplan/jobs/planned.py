@@ -85,7 +85,30 @@ def plan_cell(plan: Plan, part: Part, context: PlanContext | None = None) -> Cel
     where = "--fixture"
     if context.fixtures == plan.context.fixtures:
         where = f"{plan.where}: context: fixtures"
-    return planned_cell(context, part, where)
+    try:
+        return planned_cell(context, part, where)
+    except ValueError as exc:
+        raise _recorded(exc, "--table", plan, context.table == plan.context.table) from None
+
+
+def inspected(plan: Plan, part: Part, context: PlanContext | None = None) -> Part:
+    """`part` kept to the region of interest of `context` (the plan's, else the one with
+    what options override); a bad one the plan file records is named as the file's."""
+    context = plan.context if context is None else context
+    try:
+        return part.with_roi(context.roi)
+    except ValueError as exc:
+        raise _recorded(exc, "--roi", plan, context.roi == plan.context.roi) from None
+
+
+def _recorded(exc: ValueError, option: str, plan: Plan, from_plan: bool) -> ValueError:
+    """`exc` (a message about `option`) naming the plan file's field instead where the
+    value came `from_plan`, not from the option."""
+    said = str(exc)
+    if from_plan and said.startswith(option):
+        field = option.removeprefix("--")
+        return ValueError(f"{plan.where}: context: {field}{said.removeprefix(option)}")
+    return exc
 
 
 def judged_context(
