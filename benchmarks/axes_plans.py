@@ -9,7 +9,8 @@ cycle time `plan` records, and the planning time beside the arm alone's (a ratio
         [--no-alone]
 
 Cases: the built-in drone on a UR5e with the preset turntable; the REACH curved panel (in
-metres) on a KR 6 R900 with a 2 m track.
+metres) on a KR 6 R900 with a 2 m track, and with the turntable as well; the quadrotor (in
+metres) on a UR5e and a KR 6 R900 with the turntable.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ TRACK_MM = 2000.0
 
 def cases(parts_dir: Path) -> list[tuple[str, str, str, str, ExternalAxes]]:
     """(name, part, units, arm, axes) of each case."""
+    quadrotor = str(parts_dir / "tum_ardrone_quadrotor_4.stl")
     return [
         ("drone", "drone", "mm", "ur5e", POSITIONERS["turntable"]),
         (
@@ -49,6 +51,17 @@ def cases(parts_dir: Path) -> list[tuple[str, str, str, str, ExternalAxes]]:
             "m",
             "kr6-r900",
             ExternalAxes(track=track_of(TRACK_MM)),
+        ),
+        (
+            "reach_curved_panel_up_both",
+            str(parts_dir / "reach_curved_panel_up.ply"),
+            "m",
+            "kr6-r900",
+            ExternalAxes(POSITIONERS["turntable"].turntable, track_of(TRACK_MM)),
+        ),
+        *(
+            (f"quadrotor_{robot}", quadrotor, "m", robot, POSITIONERS["turntable"])
+            for robot in ("ur5e", "kr6-r900")
         ),
     ]
 
