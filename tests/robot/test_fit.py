@@ -241,3 +241,20 @@ def test_a_pass_whose_joint_move_in_hits_the_cell_is_flown_the_other_way_then_gi
     again, reversed_now = fit_module._reversed(out, out, index, {6: (0, 0)}, why, flipped)
     assert not reversed_now and again is out
     assert (why[5:] == fit_module.CAUSES.index("joint move into a pass")).all()
+    # After the reversing rounds a pass is given up at once, never reversed.
+    why, fresh = np.full(11, -1), np.zeros(11, bool)
+    late, reversed_now = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, fresh, False)
+    assert not reversed_now and late is traj and not fresh.any()
+    assert (why[5:] == fit_module.CAUSES.index("joint move into a pass")).all()
+
+
+def test_a_reversed_pass_takes_its_external_axis_values_along():
+    swath = np.array([0] * 5 + [1] * 6)
+    scanning = np.array([True] * 5 + [False] + [True] * 5)
+    poses = np.tile(np.eye(4), (11, 1, 1))
+    external = np.arange(11.0)[:, None]
+    traj = Trajectory(poses, swath, scanning, external=external)
+    index, flipped, why = np.arange(11), np.zeros(11, bool), np.full(11, -1)
+    out, _ = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, flipped)
+    assert out.external is not None
+    np.testing.assert_array_equal(out.external[:, 0], [0, 1, 2, 3, 4, 5, 10, 9, 8, 7, 6])

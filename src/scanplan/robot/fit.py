@@ -46,8 +46,12 @@ CAUSES = (
 )
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
-# whole pass did, and so show a flip of its own; a few rounds settle it.
-MAX_ROUNDS = 6
+# whole pass did, and so show a flip of its own; a few rounds settle it. Passes are flown
+# the other way in the first rounds only; after them a round only gives up and splits, so
+# the rounds end, but giving up a pass can leave the next one a new joint move into it
+# (the quadrotor on a UR5e with a turntable took more than six rounds).
+REVERSING_ROUNDS = 6
+MAX_ROUNDS = 40
 
 
 @dataclass(frozen=True)
@@ -141,7 +145,7 @@ def fit_to_robot(
     swath = traj.swath.copy()
     splits = 0
     flipped = np.zeros(len(traj), bool)  # the poses of passes flown the other way
-    for _ in range(MAX_ROUNDS):
+    for round_ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
         report = check_reach(
@@ -160,7 +164,10 @@ def fit_to_robot(
         if report.reachable and obstacles is not None:
             starts = pass_starts(current.swath, current.scanning) | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
-            traj, reversed_now = _reversed(traj, current, index, in_cell.moves, why, flipped)
+            reverse = round_ < REVERSING_ROUNDS
+            traj, reversed_now = _reversed(
+                traj, current, index, in_cell.moves, why, flipped, reverse
+            )
             if reversed_now:
                 T_all = part_poses(T_base_part, traj.external, axes)
             hit = in_cell.colliding
@@ -237,19 +244,21 @@ def _reversed(
     moves: Iterable[int],
     why: np.ndarray,
     flipped: np.ndarray,
+    reverse: bool = True,
 ) -> tuple[Trajectory, bool]:
     """Passes of `current` (the kept poses of `traj`, at `index`) whose joint move in
     (`moves`: their first poses) sweeps a link into the cell, flown the other way: entered
     from their other end, the moves that led to their first pose given up (the arm makes
-    a joint move instead); a pass already flown so is given up (in `why`). `flipped` marks
-    the poses reversed. Returns `traj` with those passes reversed, and whether any was."""
+    a joint move instead); a pass already flown so, or any with `reverse` off, is given up
+    (in `why`). `flipped` marks the poses reversed. Returns `traj` with those passes
+    reversed, and whether any was."""
     poses, external = traj.poses, traj.external
     reversed_any = False
     for i in moves:
         in_pass = current.swath == current.swath[i]
         piece = np.flatnonzero(in_pass & current.scanning)
         slots = index[piece]
-        if flipped[slots].any() or len(slots) < 2:
+        if not reverse or flipped[slots].any() or len(slots) < 2:
             why[in_pass] = CAUSES.index("joint move into a pass")
             continue
         if not reversed_any:
