@@ -15,6 +15,7 @@ direction (along the part's long side).
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -52,6 +53,8 @@ NEAR_BEST = 0.01
 BESIDE_DISK_MM = 150.0
 # With a track, the placement is searched across it and in height about the arm's own.
 TRACK_ACROSS_MM = np.arange(-400.0, 401.0, 100.0)
+# The stands along a track the arm's column is checked at, this far apart at most.
+RAIL_STEP_MM = 100.0
 TRACK_HEIGHTS_MM = np.arange(-300.0, 301.0, 150.0)
 
 
@@ -238,6 +241,21 @@ class PlacedArmOnAxes(PlacedArm):
         return replace(traj, poses=poses).subset(keep, swath)
 
 
+def stands_clear(
+    arm: Robot, T_base_part: np.ndarray, axes: ExternalAxes, obstacles: CellObstacles
+) -> bool:
+    """Whether the arm's column stands beside the table block or on its top
+    (`links.column_clear`) wherever its track can take it: the rail is there over its whole
+    length, so every stand along it, not only those a plan uses, is checked."""
+    T = np.asarray(T_base_part, dtype=np.float64)[None]
+    if axes.track is not None and axes.track.direction is not None:
+        half = axes.track.length_mm / 2
+        values = np.zeros((max(2, math.ceil(2 * half / RAIL_STEP_MM) + 1), len(axes.names)))
+        values[:, -1] = np.linspace(-half, half, len(values))  # the track's is the last axis
+        T = axes.base_part(T_base_part, values)
+    return bool(column_clear(arm, T, obstacles.table_block, obstacles.clearance_mm).all())
+
+
 def place_on_axes(
     traj: Trajectory,
     robot: str | Path | Robot,
@@ -273,8 +291,8 @@ def place_on_axes(
                 T = np.array(T_base_part, dtype=np.float64)
                 T[:3, 3] += u * across + [0.0, 0.0, z]
                 tries.append(T)
-    if obstacles is not None:  # the arm's column beside the table, not in it
-        clear = column_clear(arm, np.array(tries), obstacles.table_block, obstacles.clearance_mm)
+    if obstacles is not None:  # the arm's column beside the table, not in it, all along its rail
+        clear = [stands_clear(arm, T, resolved(axes, part, T, traj), obstacles) for T in tries]
         tries = [T for T, ok in zip(tries, clear, strict=True) if ok] or tries[:1]
     best, best_score = tries[0], -1.0
     for T in tries:
