@@ -4,6 +4,7 @@ the fit and export's check see the part where the axes put it."""
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 from typer.testing import CliRunner
 
 from scanplan.cli import app
@@ -11,9 +12,13 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import choose_values, values_at
+from scanplan.robot.axes_fit import choose_values, stands_clear, values_at
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.links import column_clear, obstacles_for
+from scanplan.robot.presets import get_robot
+from scanplan.world.cell import Cell
+from scanplan.world.part import Part
 
 TCP = parse_pose_arg("0,0,90,0,0,0")
 # The turntable's axis 700 mm out along the UR5e's x: its near side within reach, its far
@@ -93,3 +98,20 @@ def test_plan_options_need_an_arm_and_name_a_bad_file(tmp_path):
     assert result.exit_code != 0
     assert "turntable.speed_deg_s" in result.output
     assert "Traceback" not in result.output and not out.exists()
+
+
+def test_the_arm_stands_clear_of_the_table_all_along_its_rail():
+    """A 400 x 200 mm plate on its table, the arm's base 800 mm off its centre in x and
+    300 mm above the table (beside it, on the floor's riser): clear on a short track along
+    the table's side, not on a 2 m track running towards it, whose far stands hang over
+    the table (checked at the track's zero only, this placement passed)."""
+    plate = Part(trimesh.creation.box((400.0, 200.0, 10.0)), name="plate")
+    obstacles = obstacles_for(plate, Cell.around(plate))
+    arm = get_robot("kr6-r900")
+    T = np.eye(4)
+    T[:3, 3] = [800.0, 0.0, -295.0]  # the part's origin in the base frame: the base at x = -800
+    assert column_clear(arm, T, obstacles.table_block, obstacles.clearance_mm).all()
+    alone = ExternalAxes(track=Track(direction=[0.0, 1.0, 0.0], length_mm=200.0))
+    assert stands_clear(arm, T, alone, obstacles)
+    towards = ExternalAxes(track=Track(direction=[1.0, 0.0, 0.0], length_mm=2000.0))
+    assert not stands_clear(arm, T, towards, obstacles)

@@ -13,7 +13,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.export import ExportOptions, flange_poses, parse_pose_arg
-from scanplan.robot.place import place
+from scanplan.robot.place import PER_HEIGHT_YAWS, _seeds, place
 
 TCP = "0,0,90,0,0,0"
 
@@ -157,8 +157,6 @@ def test_cli_export_krl_refuses_what_its_own_arm_cannot_fly(tmp_path) -> None:
 def test_seeds_in_a_cell_take_several_yaws_per_height_searched_at_that_height() -> None:
     """In a cell each height gives its best yaws at least 60° apart (not the near-equal yaw
     beside its best), marked to be searched at that height; out of a cell only the best."""
-    from scanplan.robot.place import PER_HEIGHT_YAWS, _seeds
-
     yaws = np.radians(np.arange(0.0, 360.0, 10.0))
     heights = np.array([-200.0, 300.0])
     grid = np.array([[400.0, 0.0, z, a] for z in heights for a in yaws])

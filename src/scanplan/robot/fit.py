@@ -186,29 +186,14 @@ def fit_to_robot(
         splits += int(len(np.union1d(report.config_flips, swings)))
         swath = renumbered_passes(traj, keep, swath, cut)
     beyond_mm = _beyond_reach_mm(traj, arm, T_all, inv_tcp, cause)
-    given_up: dict[int, int] = {}
-    by_cause: dict[int, dict[str, int]] = {}
-    lost = ~keep & traj.scanning
-    for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
-        in_view = lost & view.holds(traj.swath)
-        if (count := int(in_view.sum())) > 0:
-            given_up[view.index] = count
-            causes = np.bincount(cause[in_view], minlength=len(CAUSES))
-            by_cause[view.index] = {CAUSES[k]: int(c) for k, c in enumerate(causes) if c}
+    given_up, by_cause = _given_up_by_view(traj, keep, cause)
     reversed_passes = len(np.unique(swath[flipped & keep & traj.scanning]))
     fitted = traj.subset(keep, swath)
     if not fitted.scanning.any():
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
-    T_now = kept(T_all, keep)
-    report = check_reach(
-        T_now @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
-    )
-    links: LinkReport | None = None
-    if obstacles is not None:
-        starts = pass_starts(fitted.swath, fitted.scanning) | axis_steps(fitted, axes)
-        links = check_links(arm, report.joints, obstacles, T_now, starts)
+    report, links = _verdict(fitted, arm, kept(T_all, keep), inv_tcp, obstacles, axes)
     return RobotFit(
         fitted,
         T_base_part,
@@ -223,6 +208,42 @@ def fit_to_robot(
         beyond_mm,
         reversed_passes,
     )
+
+
+def _verdict(
+    fitted: Trajectory,
+    arm: Robot,
+    T_now: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    axes: ExternalAxes | None,
+) -> tuple[ReachReport, LinkReport | None]:
+    """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
+    and in a cell its links along the path and the joint moves into passes."""
+    report = check_reach(
+        T_now @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
+    )
+    if obstacles is None:
+        return report, None
+    starts = pass_starts(fitted.swath, fitted.scanning) | axis_steps(fitted, axes)
+    return report, check_links(arm, report.joints, obstacles, T_now, starts)
+
+
+def _given_up_by_view(
+    traj: Trajectory, keep: np.ndarray, cause: np.ndarray
+) -> tuple[dict[int, int], dict[int, dict[str, int]]]:
+    """The scanning poses of `traj` not in `keep`, counted per view, and per view by
+    `cause` (an index into CAUSES per pose)."""
+    given_up: dict[int, int] = {}
+    by_cause: dict[int, dict[str, int]] = {}
+    lost = ~keep & traj.scanning
+    for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
+        in_view = lost & view.holds(traj.swath)
+        if (count := int(in_view.sum())) > 0:
+            given_up[view.index] = count
+            causes = np.bincount(cause[in_view], minlength=len(CAUSES))
+            by_cause[view.index] = {CAUSES[k]: int(c) for k, c in enumerate(causes) if c}
+    return given_up, by_cause
 
 
 def _beyond_reach_mm(

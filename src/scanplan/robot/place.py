@@ -338,6 +338,49 @@ def _seeds(
     return seeds, ~np.isin(seeds, best)
 
 
+def _best_judged(
+    traj: Trajectory,
+    arm: Robot,
+    tcp: np.ndarray,
+    T_part_flange: np.ndarray,
+    best: np.ndarray,
+    best_scores: np.ndarray,
+    centre: np.ndarray,
+    obstacles: CellObstacles | None,
+) -> tuple[np.ndarray, float]:
+    """The searched candidate (rows of `best`, scored `best_scores`) that keeps the most
+    scanning poses flyable, a fully flyable one first, and its score: judged on every
+    pose following the branch as a controller would, in a cell the arm's links too (on a
+    subsample). Returns `T_base_part` and the search's score of it."""
+    ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
+    sample = sample_poses(traj, _LINK_RANK_POSES)
+    inv_tcp = np.linalg.inv(tcp)
+    sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses[sample], obstacles)
+    for rank, i in enumerate(np.argsort(-best_scores)):
+        T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
+        if obstacles is None:
+            report = check_reach(
+                T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
+            )
+            good = ~np.isnan(report.joints).any(axis=1)
+            flyable = report.reachable
+        else:  # ranked on the sample by what `fit.fit_to_robot` would keep: each pass as
+            # planned or turned about the beam; the full check for the chosen one only
+            kept = flyable_poses(
+                traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False
+            )
+            good = kept_by_pass(traj.swath[sample], *kept)
+            flyable = bool(good.all())
+        # What counts is the scanning kept (a move given up is flown as a joint move).
+        scanning = traj.scanning if obstacles is None else traj.scanning[sample]
+        held = float(good[scanning].mean()) if scanning.any() else float(good.mean())
+        ranked.append((flyable, held, -rank, T_base_part, float(best_scores[i])))
+        if flyable and obstacles is None:
+            break
+    *_, T_best, score = max(ranked, key=lambda r: r[:3])
+    return T_best, score
+
+
 def place(
     traj: Trajectory,
     robot: str | Path | Robot,
@@ -405,35 +448,10 @@ def place(
     )
     evaluated += searched
 
-    # The answer is judged on every pose, following the branch as a controller would; in a
-    # cell the arm's links too (on a subsample while ranking): the candidate that keeps
-    # the most scanning poses flyable wins, a fully flyable one first.
-    ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
-    sample = sample_poses(traj, _LINK_RANK_POSES)
-    inv_tcp = np.linalg.inv(tcp)
-    sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses[sample], obstacles)
-    for rank, i in enumerate(np.argsort(-best_scores)):
-        T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
-        if obstacles is None:
-            report = check_reach(
-                T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
-            )
-            good = ~np.isnan(report.joints).any(axis=1)
-            flyable = report.reachable
-        else:  # ranked on the sample by what `fit.fit_to_robot` would keep: each pass as
-            # planned or turned about the beam; the full check for the chosen one only
-            kept = flyable_poses(
-                traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False
-            )
-            good = kept_by_pass(traj.swath[sample], *kept)
-            flyable = bool(good.all())
-        # What counts is the scanning kept (a move given up is flown as a joint move).
-        scanning = traj.scanning if obstacles is None else traj.scanning[sample]
-        held = float(good[scanning].mean()) if scanning.any() else float(good.mean())
-        ranked.append((flyable, held, -rank, T_base_part, float(best_scores[i])))
-        if flyable and obstacles is None:
-            break
-    *_, T_best, score = max(ranked, key=lambda r: r[:3])
+    # The answer is judged on every pose (in a cell the arm's links too).
+    T_best, score = _best_judged(
+        traj, arm, tcp, T_part_flange, best, best_scores, centre, obstacles
+    )
     report = check_reach(T_best @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning)
     chosen = Placement(T_best, report, score, evaluated, 0.0)
     if obstacles is not None and chosen.reachable:
