@@ -13,13 +13,13 @@ import numpy as np
 
 from scanplan.core.plan import Plan, view_of_pose, view_records
 from scanplan.core.trajectory import Trajectory
-from scanplan.judging.report import view_groups
 from scanplan.judging.report.scene_axes import (
     CAPSULE_SIDES,
     axes_traces,
     axis_capsules,
     capsule_mesh,
 )
+from scanplan.judging.report.view_groups import group_label, groups, view_name
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.axes import ExternalAxes, part_poses, plan_axes, with_disk
 from scanplan.robot.links import check_links, obstacles_for
@@ -244,7 +244,7 @@ def view_label(traj: Trajectory, k: int) -> str:
     views = view_records(traj)
     if len(views) <= 1:
         return "passes"
-    return f"view {k}: {view_groups.view_name(views[k].axis)}"
+    return f"view {k}: {view_name(views[k].axis)}"
 
 
 def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
@@ -255,11 +255,11 @@ def passes_traces(traj: Trajectory, max_points: int | None = None) -> list:
     axes = [v.axis for v in view_records(traj)] or [(0.0, 0.0, 1.0)]
     traces = [path_trace(pos, ~traj.scanning, "moves", MOVE_COLOUR, 2, max_points)]
     flown = [k for k in range(len(axes)) if (traj.scanning & (view == k)).any()]  # not given up
-    for g, (where, members) in enumerate(view_groups.groups([axes[k] for k in flown]).items()):
+    for g, (where, members) in enumerate(groups([axes[k] for k in flown]).items()):
         views = [flown[m] for m in members]
         label = (
             view_label(traj, 0) if len(axes) == 1
-            else view_groups.group_label(where, axes, views)
+            else group_label(where, axes, views)
         )  # fmt: skip
         for n, k in enumerate(views):
             traces.append(
