@@ -15,7 +15,7 @@ from helpers import listing, plate_file, run_cli, snake_trajectory
 from scanplan.cli import app
 from scanplan.core.files import output_kind
 from scanplan.core.plan_file import write_csv
-from scanplan.robot.export import ExportOptions, parse_program
+from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.robot.export.common import plan_motion
 
 TRAJ = snake_trajectory()
@@ -83,7 +83,9 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     write_csv(TRAJ, traj_path)
     out = tmp_path / "out_bag"
     args = ["export", str(traj_path), "--format", "rosbag2", "-o", str(out)]
-    poses = ["--part-pose", "500,-200,100,30,5,-10", "--tcp", "12,-3,180,0,-15,90"]
+    # The part placed so that the arm's base stands beside its table, not in it.
+    part_pose = "600,-300,100,30,5,-10"
+    poses = ["--part-pose", part_pose, "--tcp", "12,-3,180,0,-15,90"]
     runner = CliRunner()
     robot = ["--robot", "ur5e", "--allow-unreachable", "--part", plate_file(tmp_path)]
     frame = ["--ros-frame", "door"]
@@ -93,12 +95,13 @@ def test_cli_export_rosbag2(tmp_path, monkeypatch) -> None:
     motion = plan_motion(TRAJ, OPTIONS)
     assert f"rosbag2: {len(motion.poses)} targets from {len(TRAJ)} planned poses" in result.output
     contents = read_rosbag(out)
-    expected = OPTIONS.part_pose @ TRAJ.poses[motion.source]  # read back as the sensor's poses
+    # Read back as the sensor's poses.
+    expected = parse_pose_arg(part_pose) @ TRAJ.poses[motion.source]
     assert np.abs(contents.poses[:, :3, 3] - expected[:, :3, 3]).max() <= 1e-6
     np.testing.assert_array_equal(contents.speed_mm_s, plan_motion(TRAJ, OPTIONS).speed_mm_s)
     # The targets in the part's frame, which the part pose places as one static transform.
     assert contents.frame_id == "door" and contents.transforms[0][:2] == ("base_link", "door")
-    np.testing.assert_allclose(contents.transforms[0][2], OPTIONS.part_pose, atol=1e-6)
+    np.testing.assert_allclose(contents.transforms[0][2], parse_pose_arg(part_pose), atol=1e-6)
 
     # User errors: one line, exit 2, no traceback, no directory (nor staging) left behind.
     bad = tmp_path / "bad_bag"

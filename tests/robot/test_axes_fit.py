@@ -12,9 +12,10 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import choose_values, stands_clear, values_at
+from scanplan.robot.axes_fit import choose_values, values_at
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.flyable import stands_clear
 from scanplan.robot.links import column_clear, obstacles_for
 from scanplan.robot.presets import get_robot
 from scanplan.world.cell import Cell
@@ -115,3 +116,36 @@ def test_the_arm_stands_clear_of_the_table_all_along_its_rail():
     assert stands_clear(arm, T, alone, obstacles)
     towards = ExternalAxes(track=Track(direction=[1.0, 0.0, 0.0], length_mm=2000.0))
     assert not stands_clear(arm, T, towards, obstacles)
+
+
+def test_export_check_refuses_an_arm_whose_rail_runs_into_the_table():
+    """The same plate and stand: a pass over the plate flown with the arm on the short
+    track beside the table is flyable as far as the column goes, on the 2 m track running
+    towards the table it is refused, and the problem names the column and the base."""
+    from scanplan.core.sensor_spec import SensorSpec
+    from scanplan.robot.flyable import check_flyable
+
+    plate = Part(trimesh.creation.box((400.0, 200.0, 10.0)), name="plate")
+    cell = Cell.around(plate)
+    arm = get_robot("kr6-r900")
+    T = np.eye(4)
+    T[:3, 3] = [800.0, 0.0, -295.0]
+    n = 20
+    sw = Swath(
+        0,
+        np.array([-100.0, -60.0, 150.0]),
+        np.array([-100.0, 60.0, 150.0]),
+        np.array([0.0, 1.0, 0]),
+        np.array([-1.0, 0.0, 0]),
+    )
+    poses = sw.poses(np.linspace(0, 120, n), np.zeros(n), np.zeros(n))
+    traj = Trajectory(poses, np.zeros(n, int), np.ones(n, bool), external=np.zeros((n, 1)))
+    for length, direction, refused in (
+        (200.0, [0.0, 1.0, 0.0], False),
+        (2000.0, [1.0, 0.0, 0.0], True),
+    ):
+        axes = ExternalAxes(track=Track(direction=direction, length_mm=length))
+        found = check_flyable(traj, arm, T, TCP, plate, cell, SensorSpec(), axes=axes)
+        columns = [p for p in found.problems if "column" in p[1]]
+        assert bool(columns) == refused, found.problems
+    assert "(base at -800, 0, 295 mm in the part's frame)" in columns[0][1]

@@ -89,8 +89,9 @@ def test_the_voxel_test_never_clears_what_fcl_finds() -> None:
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=120.0)
     part = part_from_mesh(mesh, "sphere")
     obstacles = CellObstacles(part, Cell(), CLEARANCE)
-    centre = RNG.uniform(-250, 250, (400, 3))
-    axis = RNG.normal(size=(400, 3))
+    rng = np.random.default_rng(11)  # its own draws, whatever ran before it
+    centre = rng.uniform(-250, 250, (400, 3))
+    axis = rng.normal(size=(400, 3))
     axis = 60.0 * axis / np.linalg.norm(axis, axis=1, keepdims=True)
     ends = np.stack([centre - axis, centre + axis], axis=1)[:, None]
     radii = np.full(1, 30.0)
@@ -110,7 +111,7 @@ def test_the_voxel_test_never_clears_what_fcl_finds() -> None:
     assert 50 < (hit == 0).sum() < 350  # both verdicts are exercised
     # Without FCL the verdict is cautious: every capsule FCL finds hitting still hits.
     quick = obstacles.capsules_hit(ends, radii, CLEARANCE, exact=False)[:, 0]
-    assert (quick[hit == 0] == 0).all() and (quick == 0).sum() <= (hit == 0).sum() + 60
+    assert (quick[hit == 0] == 0).all() and (quick == 0).sum() <= (hit == 0).sum() + 15
 
 
 def _z_to(d: np.ndarray) -> np.ndarray:

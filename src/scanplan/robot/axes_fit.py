@@ -15,7 +15,6 @@ direction (along the part's long side).
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -27,7 +26,8 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
 from scanplan.robot.base import Robot
 from scanplan.robot.fit import PlacedArm, renumbered_passes
-from scanplan.robot.links import column_clear, obstacles_for
+from scanplan.robot.flyable import stands_clear
+from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import (
     HALF_TURN,
     flyable_poses,
@@ -53,8 +53,6 @@ NEAR_BEST = 0.01
 BESIDE_DISK_MM = 150.0
 # With a track, the placement is searched across it and in height about the arm's own.
 TRACK_ACROSS_MM = np.arange(-400.0, 401.0, 100.0)
-# The stands along a track the arm's column is checked at, this far apart at most.
-RAIL_STEP_MM = 100.0
 TRACK_HEIGHTS_MM = np.arange(-300.0, 301.0, 150.0)
 
 
@@ -239,21 +237,6 @@ class PlacedArmOnAxes(PlacedArm):
         poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
         swath = renumbered_passes(traj, keep, traj.swath, np.zeros(len(traj), bool))
         return replace(traj, poses=poses).subset(keep, swath)
-
-
-def stands_clear(
-    arm: Robot, T_base_part: np.ndarray, axes: ExternalAxes, obstacles: CellObstacles
-) -> bool:
-    """Whether the arm's column stands beside the table block or on its top
-    (`links.column_clear`) wherever its track can take it: the rail is there over its whole
-    length, so every stand along it, not only those a plan uses, is checked."""
-    T = np.asarray(T_base_part, dtype=np.float64)[None]
-    if axes.track is not None and axes.track.direction is not None:
-        half = axes.track.length_mm / 2
-        values = np.zeros((max(2, math.ceil(2 * half / RAIL_STEP_MM) + 1), len(axes.names)))
-        values[:, -1] = np.linspace(-half, half, len(values))  # the track's is the last axis
-        T = axes.base_part(T_base_part, values)
-    return bool(column_clear(arm, T, obstacles.table_block, obstacles.clearance_mm).all())
 
 
 def place_on_axes(

@@ -1,10 +1,12 @@
 """Whether an arm flies a plan as its program would: the one check `export` and the demo run
-before writing a program (reach, joint limits, configuration flips, the arm's links and the
-sensor body against the part, the table block and the fixtures).
+before writing a program (reach, joint limits, configuration flips, the arm's column beside
+the table or on it, its links and the sensor body against the part, the table block and the
+fixtures).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +16,7 @@ from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses
 from scanplan.robot.base import Robot
-from scanplan.robot.links import LinkReport, check_links, obstacles_for
+from scanplan.robot.links import LinkReport, check_links, column_clear, obstacles_for
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
@@ -23,6 +25,8 @@ from scanplan.world.part import Part
 
 # The sensor check asks FCL only about bodies within this of the cell (exact below it).
 _TOUCH_MM = 1e-3
+# The stands along a track the arm's column is checked at, this far apart at most.
+RAIL_STEP_MM = 100.0
 
 
 @dataclass(frozen=True, eq=False)  # array fields: == would be ambiguous
@@ -55,6 +59,22 @@ class Flyability:
         return f"pose {first} (pass {int(swath[first])}) {what}; {summary}"
 
 
+def stands_clear(
+    arm: Robot, T_base_part: np.ndarray, axes: ExternalAxes | None, obstacles: CellObstacles
+) -> bool:
+    """Whether the arm's column stands beside the table block or on its top
+    (`links.column_clear`) wherever its track can take it: the rail is there over its whole
+    length, so every stand along it, not only those a plan uses, is checked. A turntable
+    turns the part, not the table, so it does not move the column's stand."""
+    T = np.asarray(T_base_part, dtype=np.float64)[None]
+    if axes is not None and axes.track is not None and axes.track.direction is not None:
+        half = axes.track.length_mm / 2
+        values = np.zeros((max(2, math.ceil(2 * half / RAIL_STEP_MM) + 1), len(axes.names)))
+        values[:, -1] = np.linspace(-half, half, len(values))  # the track's is the last axis
+        T = axes.base_part(T_base_part, values)
+    return bool(column_clear(arm, T, obstacles.table_block, obstacles.clearance_mm).all())
+
+
 def check_flyable(
     traj: Trajectory,
     arm: Robot,
@@ -73,13 +93,15 @@ def check_flyable(
     None: built here. axes: the external axes the plan's values per pose (`traj.external`)
     are of (the part moved pose by pose; `robot.axes`), None: the arm alone."""
     clearance = Plan.of(traj).spec.clearance_mm  # the links keep the plan's
+    if obstacles is None:
+        obstacles = obstacles_for(part, cell, sensor, clearance)
     T_all = part_poses(T_base_part, traj.external, axes)
     flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
     reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
     links = check_links(
         arm,
         reach.joints,
-        obstacles_for(part, cell, sensor, clearance) if obstacles is None else obstacles,
+        obstacles,
         T_all,
         # The joint moves into each pass, and those on which the turntable turns.
         pass_starts(traj.swath, traj.scanning) | axis_steps(traj, axes),
@@ -88,6 +110,16 @@ def check_flyable(
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []
     if not links.clear:
         problems.append((links.first(), links.describe(links.first()), links.summary()))
+    if not stands_clear(arm, T_base_part, axes, obstacles):
+        base = np.linalg.inv(np.asarray(T_base_part, dtype=np.float64))[:3, 3]
+        where = ", ".join(f"{v:.0f}" for v in base)
+        problems.append(
+            (
+                0,
+                f"stands the arm's column in the table (base at {where} mm in the part's frame)",
+                "column: the arm's base stands in the table block; place it beside the table",
+            )
+        )
     if touching.any():
         first = int(np.argmax(touching))
         problems.append(

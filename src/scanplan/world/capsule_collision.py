@@ -225,7 +225,7 @@ class CellObstacles:
             if proxy is not None and len(rows):
                 # Sharpened where FCL measures what is left: a capsule sent to it cost
                 # about 30 ms near the drone, more than the exact query of its points.
-                maybe, surely = proxy.within(ends[rows, links], grown[rows, links], exact)
+                maybe, surely = proxy.within(ends[rows, links], grown[rows, links], sharpen=True)
                 if not exact:
                     surely = maybe
                 hit[rows[surely], links[surely]] = kind
