@@ -231,13 +231,13 @@ def raster(length_mm: float = 200.0, passes: int = 2, n: int = 30) -> Trajectory
 
 
 def test_export_prints_the_cycle_time_on_the_chosen_arm(tmp_path) -> None:
-    """On the KR 6 (a part pose `scanplan place` found) the move into the second pass is a
+    """On the KR 6 (standing on the table top beside the plate) the move into the second pass is a
     joint move; with --robot none the nominal arm times it, and the output says so."""
     plan = tmp_path / "t.csv"
     traj = raster()
     write_csv(traj, plan)
     args = ["export", str(plan), "--format", "krl", "--tcp", "0,0,90,0,0,0"]
-    args += ["--part-pose", "355.966,0,-200,0,0,0", "-o", str(tmp_path / "p.src")]
+    args += ["--part-pose", "355.966,0,-40,0,0,0", "-o", str(tmp_path / "p.src")]
     result = run_cli(*args, "--robot", "kr6-r900", "--part", plate_file(tmp_path))
     assert result.exit_code == 0, result.output
     (line,) = [ln for ln in result.stdout.splitlines() if ln.startswith("cycle time ")]
