@@ -8,6 +8,7 @@ import trimesh
 from typer.testing import CliRunner
 
 from scanplan.cli import app
+from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
@@ -15,7 +16,7 @@ from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
 from scanplan.robot.axes_fit import choose_values, values_at
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
-from scanplan.robot.flyable import stands_clear
+from scanplan.robot.flyable import check_flyable, stands_clear
 from scanplan.robot.links import column_clear, obstacles_for
 from scanplan.robot.presets import get_robot
 from scanplan.world.cell import Cell
@@ -122,9 +123,6 @@ def test_export_check_refuses_an_arm_whose_rail_runs_into_the_table():
     """The same plate and stand: a pass over the plate flown with the arm on the short
     track beside the table is flyable as far as the column goes, on the 2 m track running
     towards the table it is refused, and the problem names the column and the base."""
-    from scanplan.core.sensor_spec import SensorSpec
-    from scanplan.robot.flyable import check_flyable
-
     plate = Part(trimesh.creation.box((400.0, 200.0, 10.0)), name="plate")
     cell = Cell.around(plate)
     arm = get_robot("kr6-r900")

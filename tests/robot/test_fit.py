@@ -20,7 +20,7 @@ from scanplan.robot.base import pose_arg
 from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
-from scanplan.robot.place import HALF_TURN
+from scanplan.robot.flown_poses import HALF_TURN
 from scanplan.robot.ur import forward_kinematics
 
 TCP = parse_pose_arg("0,0,90,0,0,0")

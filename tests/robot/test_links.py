@@ -139,7 +139,7 @@ def test_a_turn_about_the_beam_is_checked_for_the_sensor_body() -> None:
     from scipy.spatial.transform import Rotation
 
     from scanplan.core.sensor_spec import DEFAULT_SENSOR, PRESETS
-    from scanplan.robot.place import HALF_TURN
+    from scanplan.robot.flown_poses import HALF_TURN
 
     part = _box_part((300, 300, 20), (0, 0, 10))
     obstacles = obstacles_for(part, Cell.around(part), PRESETS[DEFAULT_SENSOR], 20.0)

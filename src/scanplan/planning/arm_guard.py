@@ -18,10 +18,10 @@ import numpy as np
 from scanplan.planning.online import pass_state
 from scanplan.planning.swaths import Swath, frame_poses
 from scanplan.robot.base import Robot, wrap
+from scanplan.robot.flown_poses import HALF_TURN
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach, fit_limits
 
-HALF_TURN = np.diag([-1.0, -1.0, 1.0, 1.0])  # the sensor turned half a turn about its beam
 # The shares of a refused correction tried in turn before the plan's own pose (0).
 CORRECTION_SHARES = (0.5, 0.25, 0.0)
 # The most a joint may turn between two poses of a pass (`reach.check_reach`'s jump).

@@ -3,7 +3,7 @@ following the sensor at an offset held per view.
 
 For each view (a block of passes in `meta['views']`, with the moves into it) the axis setting
 is chosen at which the placed arm flies most of that view's scanning poses (reach, joint
-limits, links; `place.flyable_poses`, as `fit.fit_to_robot` keeps poses). The turntable
+limits, links; `flown_poses.flyable_poses`, as `fit.fit_to_robot` keeps poses). The turntable
 holds its angle over the view and turns on the joint move into it (at the move's pose
 farthest from the part, so the arm swings where it is clear); the track holds the arm at a
 fixed offset along it from the sensor (s = d·flange - offset, clipped to its travel), so a
@@ -26,17 +26,10 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
 from scanplan.robot.base import Robot
 from scanplan.robot.fit import PlacedArm, renumbered_passes
+from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, kept_by_pass, turned_passes
 from scanplan.robot.flyable import stands_clear
 from scanplan.robot.links import obstacles_for
-from scanplan.robot.place import (
-    HALF_TURN,
-    flyable_poses,
-    kept_by_pass,
-    place,
-    reach_mm,
-    sample_poses,
-    turned_passes,
-)
+from scanplan.robot.place import place, reach_mm, sample_poses
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles

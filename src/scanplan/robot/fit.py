@@ -17,16 +17,9 @@ from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
+from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
 from scanplan.robot.links import LinkReport, check_links, obstacles_for
-from scanplan.robot.place import (
-    HALF_TURN,
-    Placement,
-    flyable_poses,
-    place,
-    reach_mm,
-    sensor_clear_both,
-    turned_passes,
-)
+from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles

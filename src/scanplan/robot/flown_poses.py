@@ -1,0 +1,78 @@
+"""Which of a plan's poses an arm flies from a placement: each pose as planned and turned half
+a turn about the sensor's beam (reach and limits, the arm's links, the sensor body), and
+each pass flown the way that keeps more of it. What `place` ranks placements by and `fit`
+and the external axes' choice keep poses by.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scanplan.core.trajectory import Trajectory
+from scanplan.robot.base import Robot
+from scanplan.robot.links import check_links
+from scanplan.robot.reach import check_reach
+from scanplan.world.capsule_collision import CellObstacles
+
+# Half a turn about the sensor's beam (z_s): the laser line lands where it did, the camera
+# looks from the other side, and the wrist gets another way to reach the pose.
+HALF_TURN = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def flyable_poses(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    index: np.ndarray | None = None,
+    sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
+    exact: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
+    default) of `traj` the arm reaches within its limits with its links clear, and (the
+    body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
+    last verdict for both, if known (it does not depend on the placement). exact=False: the
+    links' quick, slightly cautious verdict (`links.check_links`). T_base_part: (4, 4), or
+    (len(traj), 4, 4) one per pose (external axes)."""
+    index = np.arange(len(traj)) if index is None else index
+    if np.ndim(T_base_part) == 3:  # one per pose of `traj` (external axes)
+        T_base_part = np.asarray(T_base_part)[index]
+    if sensor_ok is None and obstacles is not None:
+        sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
+    out = []
+    for k, poses in enumerate((traj.poses[index], traj.poses[index] @ HALF_TURN)):
+        report = check_reach(
+            T_base_part @ poses @ inv_tcp,
+            arm,
+            swath=traj.swath[index],
+            scanning=traj.scanning[index],
+        )
+        good = ~np.isnan(report.joints).any(axis=1)
+        if obstacles is not None:
+            links = check_links(arm, report.joints, obstacles, T_base_part, exact=exact)
+            good &= ~links.colliding
+        if sensor_ok is not None:
+            good &= sensor_ok[k]
+        out.append(good)
+    return out[0], out[1]
+
+
+def sensor_clear_both(poses: np.ndarray, obstacles: CellObstacles) -> tuple[np.ndarray, np.ndarray]:
+    """Whether the sensor body keeps its clearance at `poses` as planned and turned."""
+    return obstacles.sensor_clear(poses), obstacles.sensor_clear(poses @ HALF_TURN)
+
+
+def turned_passes(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> np.ndarray:
+    """The swath indices whose poses are kept more often turned than as planned."""
+    passes = np.unique(swath)
+    gain = np.bincount(np.searchsorted(passes, swath), turned.astype(int) - planned, len(passes))
+    return passes[gain > 0]
+
+
+def kept_by_pass(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> np.ndarray:
+    """(m,) bool: the poses kept, each pass flown the better way."""
+    return np.where(np.isin(swath, turned_passes(swath, planned, turned)), turned, planned)
+
+
+__all__ = ["HALF_TURN", "flyable_poses", "kept_by_pass", "sensor_clear_both", "turned_passes"]
