@@ -27,7 +27,9 @@ from scanplan.robot.export import (
     parse_pose_arg,
     parse_program_details,
 )
+from scanplan.robot.export.axes_lines import HUNG_WORLD_BASE
 from scanplan.robot.export.common import plan_motion
+from scanplan.robot.export.krl import _frames as krl_frames
 
 T0 = parse_pose_arg("600,100,-200,0,0,30")
 TURNTABLE = ExternalAxes(turntable=Turntable(axis_point_mm=[50.0, -20.0, 0.0]))
@@ -178,31 +180,41 @@ def _turntable_traj() -> Trajectory:
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
-@pytest.mark.parametrize("which", ["turntable", "track"])
+@pytest.mark.parametrize("which", ["turntable", "track", "overhead track"])
 def test_programs_carry_the_axes_and_read_back_to_the_planned_poses(fmt, which):
+    part_pose = T0
     if which == "turntable":
         axes, traj = TURNTABLE, _turntable_traj()
     else:
         axes = TRACK
+        if which == "overhead track":  # the arm hung upside down: its base's z points down
+            axes = ExternalAxes(track=TRACK.track.model_copy(update={"mount": "overhead"}))
+            part_pose = HUNG_WORLD_BASE @ T0
         base = _views_traj()
         traj = Trajectory(
             base.poses, base.swath, base.scanning, meta=base.meta,
             external=base.positions_mm[:, :1] * 0.5 - 30.0,
         )  # fmt: skip
-    options = ExportOptions(part_pose=T0, scan=ScanSpec(), axes=axes)
-    if fmt == "urscript" and which == "track":
+    options = ExportOptions(part_pose=part_pose, scan=ScanSpec(), axes=axes)
+    if fmt == "urscript" and which != "turntable":
         with pytest.raises(ValueError, match="drives no external axes"):
             export_program(traj, fmt, options)
         return
     motion = plan_motion(traj, options)
-    parsed = parse_program_details(export_program(traj, fmt, options), fmt)
+    text = export_program(traj, fmt, options)
+    parsed = parse_program_details(text, fmt)
     assert traj.external is not None
-    expected = axes.base_part(T0, traj.external) @ traj.poses
+    expected = axes.base_part(part_pose, traj.external) @ traj.poses
     assert np.allclose(parsed.poses, expected[motion.source], atol=1e-4)
     assert parsed.external is not None
     assert np.allclose(parsed.external, traj.external[motion.source], atol=1e-5)
+    if which == "overhead track" and fmt == "krl":  # $BASE in the upright $WORLD
+        assert "$ROBROOT = {X 0.000000,Y 0.000000,Z 0.000000,A 0.000000,B 0.000000,C 180" in text
+        assert f"$BASE = {krl_frames(T0[None])[0]}" in text
+    if which == "overhead track" and fmt == "rapid":
+        assert "ceiling-mounted (gravity beta 180 deg" in text
     # Read as if the part stood still, the targets of the turned view would be elsewhere.
-    still = T0 @ traj.poses[motion.source]
+    still = part_pose @ traj.poses[motion.source]
     moved = np.abs(traj.external[motion.source, 0]) > 1e-9
     assert not np.allclose(parsed.poses[moved], still[moved], atol=1.0)
 

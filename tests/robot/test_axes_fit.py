@@ -13,7 +13,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import choose_values, values_at
+from scanplan.robot.axes_fit import choose_values, hangs, place_on_axes, values_at
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flyable import check_flyable, stands_clear
@@ -147,3 +147,53 @@ def test_export_check_refuses_an_arm_whose_rail_runs_into_the_table():
         columns = [p for p in found.problems if "column" in p[1]]
         assert bool(columns) == refused, found.problems
     assert "(base at -800, 0, 295 mm in the part's frame)" in columns[0][1]
+
+
+def _raster(width_x: float, length_y: float, z: float, step: float = 100.0) -> Trajectory:
+    """Passes along y over a width_x x length_y plate centred on the origin, looking down
+    from z, `step` apart (one view)."""
+    poses, swath = [], []
+    xs = np.arange(-width_x / 2 + step / 2, width_x / 2, step)
+    for k, x in enumerate(xs):
+        a, b = np.array([x, -length_y / 2, z]), np.array([x, length_y / 2, z])
+        sw = Swath(k, a, b, np.array([0.0, 1.0, 0]), np.array([-1.0, 0.0, 0]))
+        poses.append(sw.poses(np.linspace(0, length_y, 30), np.zeros(30), np.zeros(30)))
+        swath.append(np.full(30, k))
+    n = sum(len(p) for p in poses)
+    return Trajectory(np.concatenate(poses), np.concatenate(swath), np.ones(n, bool))
+
+
+def test_a_panel_beyond_a_floor_track_is_flown_from_an_overhead_one():
+    """A 1.4 x 1.6 m panel: from a floor track beside its table a KR 6 reaches less than
+    half of it, hung from an overhead track over it nearly all; the tool hangs the arm
+    (its base's z down, the track's mount 'overhead') unless the track is given as a floor
+    one, and a small plate keeps the floor track."""
+    arm = get_robot("kr6-r900")
+    for size, traj_z in (((1400.0, 1600.0), 300.0), ((400.0, 200.0), 300.0)):
+        plate = Part(trimesh.creation.box((*size, 10.0)), name="plate")
+        obstacles = obstacles_for(plate, Cell.around(plate))
+        traj = _raster(size[0] - 100.0, size[1] - 100.0, traj_z)
+        beside = np.eye(4)
+        beside[:3, 3] = [size[0] / 2 + 600.0, 0.0, -295.0]
+        chosen = {}
+        for mount in (None, "floor"):
+            axes = ExternalAxes(track=Track(length_mm=2000.0, mount=mount))
+            T, resolved = place_on_axes(traj, arm, TCP, axes, plate, beside, obstacles)
+            assert resolved.track is not None
+            assert resolved.track.mount == ("overhead" if hangs(T) else "floor")
+            assert stands_clear(arm, T, resolved, obstacles)
+            chosen[mount] = resolved.track.mount
+        assert chosen["floor"] == "floor"
+        assert chosen[None] == ("overhead" if size[0] > 1000 else "floor")
+
+
+def test_a_hung_arm_clears_the_table_above_it_not_in_it():
+    plate = Part(trimesh.creation.box((400.0, 200.0, 10.0)), name="plate")
+    obstacles = obstacles_for(plate, Cell.around(plate))
+    arm = get_robot("kr6-r900")
+    ok = []
+    for height in (900.0, 100.0):  # the base above the table's top
+        T_part_base = np.diag([1.0, -1.0, -1.0, 1.0])
+        T_part_base[:3, 3] = [0.0, 0.0, -5.0 + height]
+        ok.append(column_clear(arm, np.linalg.inv(T_part_base), obstacles.table_block, 20.0)[0])
+    assert ok == [True, False]

@@ -24,7 +24,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -72,10 +72,13 @@ class Turntable(BaseModel):
 class Track(BaseModel):
     """A linear track the arm's base rides: its unit direction in the base frame (None:
     chosen by the tool), its travel `length_mm` (the arm from -length/2 to +length/2 about
-    the placement), its speed and acceleration."""
+    the placement), its speed and acceleration, and how it is mounted (None: chosen by the
+    tool): on the floor beside the table, the arm standing on its carriage, or overhead
+    (a gantry over the table), the arm hanging from its carriage upside down."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
     direction: Vector | None = None
+    mount: Literal["floor", "overhead"] | None = None
     length_mm: Annotated[float, Field(gt=0, le=MAX_TRACK_MM, allow_inf_nan=False)]
     speed_mm_s: Positive = 500.0
     accel_mm_s2: Positive = 1000.0
@@ -159,10 +162,16 @@ class ExternalAxes:
 
     @property
     def resolved(self) -> bool:
-        """Whether what the tool chooses (the turntable's point, the track's direction) is set."""
+        """Whether what the tool chooses and the axes' motion needs (the turntable's point,
+        the track's direction) is set; the track's mount follows from the placement."""
         return (self.turntable is None or self.turntable.axis_point_mm is not None) and (
             self.track is None or self.track.direction is not None
         )
+
+    @property
+    def overhead(self) -> bool:
+        """Whether the arm hangs upside down from an overhead track."""
+        return self.track is not None and self.track.mount == "overhead"
 
     def base_part(self, T_base_part0: np.ndarray, values: np.ndarray) -> np.ndarray:
         """(n, 4, 4) `T_base_part` with the axes at `values` (n, k) (module docstring)."""
@@ -187,7 +196,10 @@ class ExternalAxes:
         return T
 
     def with_choices(
-        self, axis_point_mm: np.ndarray | None = None, direction: np.ndarray | None = None
+        self,
+        axis_point_mm: np.ndarray | None = None,
+        direction: np.ndarray | None = None,
+        mount: str | None = None,
     ) -> ExternalAxes:
         """These axes with what the tool chose filled in where the user left it open."""
         turntable, track = self.turntable, self.track
@@ -196,6 +208,8 @@ class ExternalAxes:
             turntable = turntable.model_copy(update={"axis_point_mm": point})
         if track is not None and track.direction is None and direction is not None:
             track = track.model_copy(update={"direction": [float(v) for v in _unit(direction)]})
+        if track is not None and track.mount is None and mount is not None:
+            track = track.model_copy(update={"mount": mount})
         return ExternalAxes(turntable, track)
 
     def record(self) -> dict[str, Any]:
@@ -229,7 +243,8 @@ class ExternalAxes:
             lo, hi = t.limits_deg
             said.append(f"turntable {lo:g}..{hi:g} deg at {t.speed_deg_s:g} deg/s")
         if (k := self.track) is not None:
-            said.append(f"track {k.length_mm:g} mm at {k.speed_mm_s:g} mm/s")
+            mount = "" if k.mount is None else f" {k.mount}"
+            said.append(f"track {k.length_mm:g} mm{mount} at {k.speed_mm_s:g} mm/s")
         return ", ".join(said)
 
 
@@ -266,7 +281,8 @@ def load_positioner(arg: str | Path) -> ExternalAxes:
 
 
 def track_of(length_mm: float) -> Track:
-    """`--track LENGTH_MM`: a track of that travel, its direction chosen by the tool."""
+    """`--track LENGTH_MM`: a track of that travel, its direction and mount chosen by the
+    tool."""
     try:
         return Track(length_mm=float(length_mm))
     except ValidationError:

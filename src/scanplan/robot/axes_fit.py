@@ -47,22 +47,53 @@ BESIDE_DISK_MM = 150.0
 # With a track, the placement is searched across it and in height about the arm's own.
 TRACK_ACROSS_MM = np.arange(-400.0, 401.0, 100.0)
 TRACK_HEIGHTS_MM = np.arange(-300.0, 301.0, 150.0)
+# Hung from an overhead track: the base this far above the part's top, and beside the part's
+# centre line across the track.
+OVERHEAD_HEIGHTS_MM = np.array([300.0, 450.0, 600.0, 800.0, 1000.0])
+OVERHEAD_ACROSS_MM = np.array([-300.0, -150.0, 0.0, 150.0, 300.0])
+# An overhead track (a gantry over the table) is chosen over a floor one only when it keeps
+# this much more of the sampled scanning poses: a floor track is the simpler cell.
+OVERHEAD_GAIN = 0.05
+# The placements judged again with the arm's links: those within this share of the best
+# on reach alone (many tie there; the links tell them apart).
+LINK_CHECKED_WITHIN = 0.1
 
 
 def resolved(axes: ExternalAxes, part: Part, T_base_part: np.ndarray, traj: Trajectory):
     """`axes` with what the tool chooses filled in: the turntable's axis through the centre
     of the part's footprint at its lowest point (the part centred on the disk), the track
-    along the longer horizontal side of the scanning path in the base frame."""
+    along the longer horizontal side of the scanning path in the base frame, mounted as the
+    placement has it (overhead when the arm's base faces down). ValueError when a track's
+    mount given contradicts the placement."""
     lo, hi = part.bounds
     point = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
-    xy = (np.asarray(T_base_part) @ traj.poses[traj.scanning])[:, :2, 3]
-    xy = xy - xy.mean(axis=0)
-    direction = None
-    if len(xy) >= 2:
-        _, _, vt = np.linalg.svd(xy, full_matrices=False)
-        direction = np.array([vt[0, 0], vt[0, 1], 0.0])
-        direction *= np.sign(direction[np.argmax(np.abs(direction))])
-    return axes.with_choices(point, direction if direction is not None else np.array([1, 0, 0]))
+    T = np.asarray(T_base_part)
+    direction = long_side(traj, T)
+    mount = "overhead" if hangs(T) else "floor"
+    if axes.track is not None and axes.track.mount not in (None, mount):
+        raise ValueError(
+            f"the track is mounted {axes.track.mount}, but the part's pose puts the arm "
+            f"{'upside down' if mount == 'overhead' else 'upright'}"
+        )
+    if direction is None:
+        direction = np.array([1.0, 0.0, 0.0])
+    return axes.with_choices(point, direction, mount)
+
+
+def hangs(T_base_part: np.ndarray) -> bool:
+    """Whether the arm's base faces down in the part's frame (hung from an overhead track)."""
+    return bool(np.asarray(T_base_part)[2, 2] < 0.0)
+
+
+def long_side(traj: Trajectory, T_frame_part: np.ndarray) -> np.ndarray | None:
+    """The unit horizontal direction (in the frame `T_frame_part` maps the part into) along
+    which the scanning path is longest, its largest component positive; None for < 2 poses."""
+    xy = (np.asarray(T_frame_part) @ traj.poses[traj.scanning])[:, :2, 3]
+    if len(xy) < 2:
+        return None
+    _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
+    direction = np.array([vt[0, 0], vt[0, 1], 0.0])
+    return direction * np.sign(direction[np.argmax(np.abs(direction))])
 
 
 def candidates(axes: ExternalAxes, robot: Robot) -> np.ndarray:
@@ -245,12 +276,17 @@ def place_on_axes(
     `traj`'s scanning: from `T_base_part` (the arm's own placement for the plan), for a
     turntable also the part's axis at distances and heights around the arm's reach (the
     arm's column outside the disk), for a track the part moved across the track and up or
-    down; each judged by the scanning poses the best per-view settings keep (reach and
-    limits, on a sample), the arm's column clear of the table."""
+    down, and the arm hung from an overhead track over the part (`overhead_tries`, unless
+    the track is given as a floor one); each judged by the scanning poses the best per-view
+    settings keep (reach and limits, on a sample), the arm's column clear of the table. An
+    overhead track is taken only when it keeps `OVERHEAD_GAIN` more than the floor's best."""
     arm = get_robot(robot)
     inv_tcp = np.linalg.inv(tcp)
-    tries = [np.asarray(T_base_part, dtype=np.float64)]
-    if axes.turntable is not None:
+    floor: list[np.ndarray] = []
+    mount = None if axes.track is None else axes.track.mount
+    if mount != "overhead":
+        floor.append(np.asarray(T_base_part, dtype=np.float64))
+    if axes.turntable is not None and mount != "overhead":
         reach, z_mid = reach_mm(arm)
         point = resolved(axes, part, T_base_part, traj).turntable.axis_point_mm  # type: ignore[union-attr]
         beside = axes.turntable.radius_mm + BESIDE_DISK_MM
@@ -258,36 +294,115 @@ def place_on_axes(
             for z in z_mid + np.linspace(-0.5, 0.2, 5) * reach:
                 T = np.eye(4)
                 T[:3, 3] = np.array([r, 0.0, z]) - np.asarray(point)
-                tries.append(T)
-    if axes.track is not None:  # the part nearer or farther across the track, higher, lower
+                floor.append(T)
+    if axes.track is not None and mount != "overhead":  # nearer or farther, higher, lower
         d = np.asarray(resolved(axes, part, T_base_part, traj).track.direction)  # type: ignore[union-attr]
         across = np.array([-d[1], d[0], 0.0])
         for u in TRACK_ACROSS_MM:
             for z in TRACK_HEIGHTS_MM:
                 T = np.array(T_base_part, dtype=np.float64)
                 T[:3, 3] += u * across + [0.0, 0.0, z]
-                tries.append(T)
+                floor.append(T)
+    overhead = [] if axes.track is None or mount == "floor" else overhead_tries(traj, part)
     if obstacles is not None:  # the arm's column beside the table, not in it, all along its rail
-        clear = [stands_clear(arm, T, resolved(axes, part, T, traj), obstacles) for T in tries]
-        tries = [T for T, ok in zip(tries, clear, strict=True) if ok] or tries[:1]
-    best, best_score = tries[0], -1.0
+
+        def clear(tries: list[np.ndarray]) -> list[np.ndarray]:
+            return [
+                T for T in tries if stands_clear(arm, T, resolved(axes, part, T, traj), obstacles)
+            ]
+
+        # None clear: the arm's own placement, which export will refuse with its reason.
+        floor, overhead = clear(floor), clear(overhead)
+        if not floor and not overhead:
+            floor = [np.asarray(T_base_part, dtype=np.float64)]
+    best, best_score = _best_placement(traj, arm, inv_tcp, axes, part, floor, obstacles)
+    if overhead:
+        high, high_score = _best_placement(traj, arm, inv_tcp, axes, part, overhead, obstacles)
+        if best is None or high_score > best_score + OVERHEAD_GAIN:
+            best = high
+    assert best is not None
+    return best, resolved(axes, part, best, traj)
+
+
+def overhead_tries(traj: Trajectory, part: Part) -> list[np.ndarray]:
+    """Placements (`T_base_part`) of the arm hung upside down from an overhead track over
+    the part: its base `OVERHEAD_HEIGHTS_MM` above the part's top, over the part's centre
+    line along its long side and `OVERHEAD_ACROSS_MM` beside it, its x axis along or
+    across that side."""
+    lo, hi = part.bounds
+    d = long_side(traj, np.eye(4))
+    d = np.array([1.0, 0.0, 0.0]) if d is None else d
+    across = np.array([-d[1], d[0], 0.0])
+    down = np.array([0.0, 0.0, -1.0])
+    out = []
+    for x in (d, across):
+        R = np.column_stack([x, np.cross(down, x), down])
+        for h in OVERHEAD_HEIGHTS_MM:
+            for u in OVERHEAD_ACROSS_MM:
+                T_part_base = np.eye(4)
+                T_part_base[:3, :3] = R
+                T_part_base[:3, 3] = (lo + hi) / 2 + u * across
+                T_part_base[2, 3] = hi[2] + h
+                out.append(np.linalg.inv(T_part_base))
+    return out
+
+
+def _best_placement(
+    traj: Trajectory,
+    arm: Robot,
+    inv_tcp: np.ndarray,
+    axes: ExternalAxes,
+    part: Part,
+    tries: list[np.ndarray],
+    obstacles: CellObstacles | None,
+) -> tuple[np.ndarray | None, float]:
+    """(the placement among `tries` whose best per-view settings keep most of a sample of
+    `traj`'s scanning poses, that share); (None, -1) when none is tried. Each is judged
+    on reach and limits, then those near the best also with the arm's links (the quick
+    test) against `obstacles`: an arm standing amid the part, or hung low over it,
+    reaches it all."""
+    best, best_score = None, -1.0
+    sample = sample_poses(traj, 4 * SAMPLE_POSES)
+    sub = traj.subset(np.isin(np.arange(len(traj)), sample))
+    scored: list[tuple[float, np.ndarray]] = []
     for T in tries:
         choice = resolved(axes, part, T, traj)
         if (t := choice.turntable) is not None and t.axis_point_mm is not None:
             base = np.linalg.inv(T)[:3, 3]
             if np.hypot(*(base - t.axis_point_mm)[:2]) < t.radius_mm + BESIDE_DISK_MM:
                 continue  # the arm's column in the turntable
-        sample = sample_poses(traj, 4 * SAMPLE_POSES)
-        settings = candidates(choice, arm)
-        sub = traj.subset(np.isin(np.arange(len(traj)), sample))
-        score = 0.0
-        for block in _blocks(sub):
-            index = np.flatnonzero(block & sub.scanning)
-            if len(index):
-                score += _score(sub, arm, T, inv_tcp, None, choice, settings, index).max()
+        scored.append((_kept_share(sub, arm, T, inv_tcp, None, choice), T))
+    scored.sort(key=lambda st: -st[0])
+    if obstacles is not None and scored:  # the links on those near the best
+        top = scored[0][0]
+        scored = [
+            (_kept_share(sub, arm, T, inv_tcp, obstacles, resolved(axes, part, T, traj)), T)
+            for score, T in scored
+            if score >= top - LINK_CHECKED_WITHIN
+        ]
+    for score, T in scored:
         if score > best_score + 1e-9:
             best, best_score = T, score
-    return best, resolved(axes, part, best, traj)
+    return best, best_score
+
+
+def _kept_share(
+    sub: Trajectory,
+    arm: Robot,
+    T: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    axes: ExternalAxes,
+) -> float:
+    """The share of `sub`'s scanning poses the best per-view settings of `axes` keep with
+    the arm at `T` (`_score`)."""
+    settings = candidates(axes, arm)
+    score = 0.0
+    for block in _blocks(sub):
+        index = np.flatnonzero(block & sub.scanning)
+        if len(index):
+            score += _score(sub, arm, T, inv_tcp, obstacles, axes, settings, index).max()
+    return score / max(int(sub.scanning.sum()), 1)
 
 
 def arm_on_axes(
@@ -321,6 +436,9 @@ __all__ = [
     "arm_on_axes",
     "candidates",
     "choose_values",
+    "hangs",
+    "long_side",
+    "overhead_tries",
     "fitted_axes_record",
     "kept",
     "place_on_axes",

@@ -196,11 +196,12 @@ def column_clear(
     clearance_mm: float,
 ) -> np.ndarray:
     """(P,) whether the arm can stand where placements T_base_part (P, 4, 4; turning the
-    part about the vertical only) put it, beside the table block (lo, hi in part
-    coordinates) or on the table: the links that turn with joint 1 only (the first two
-    capsules, column and shoulder), swept about the vertical, keep `clearance_mm` from
-    the block, and an arm over the block stands on its top (within `ON_TABLE_MM`), not on a
-    riser nothing models. A cheap test the placement search runs on every candidate."""
+    part about the vertical only, or also upside down for an arm hung from above) put it,
+    beside the table block (lo, hi in part coordinates) or on the table: the links that
+    turn with joint 1 only (the first two capsules, column and shoulder), swept about the
+    vertical, keep `clearance_mm` from the block, and an upright arm over the block stands
+    on its top (within `ON_TABLE_MM`), not on a riser nothing models; a hung arm over it
+    hangs above its top. A cheap test the placement search runs on every candidate."""
     T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
     if block is None:
         return np.ones(len(T), bool)
@@ -212,10 +213,14 @@ def column_clear(
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
     gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
     base_z = axis_in_part[:, 2]
-    gap_z = np.maximum(lo[2] - (base_z + z_hi), (base_z + z_lo) - hi[2])
+    hung = T[:, 2, 2] < 0.0  # the base's z axis points down in the part frame
+    bottom = np.where(hung, base_z - z_hi, base_z + z_lo)  # the column's lowest point
+    top = np.where(hung, base_z - z_lo, base_z + z_hi)
+    gap_z = np.maximum(lo[2] - top, bottom - hi[2])
     beside = np.linalg.norm(gap_xy, axis=1) > sweep + clearance_mm
     on_top = (gap_z > clearance_mm) & (base_z - hi[2] <= ON_TABLE_MM)
-    return beside | on_top
+    hangs_above = hung & (bottom - hi[2] > clearance_mm)
+    return beside | np.where(hung, hangs_above, on_top)
 
 
 __all__ = ["LinkReport", "check_links", "column_clear", "obstacles_for"]

@@ -24,6 +24,27 @@ def axes_note(motion: Motion) -> str:
     return "scanplan external axes: " + json.dumps(motion.axes.record(), separators=(",", ":"))
 
 
+# An arm hung from an overhead track stands upside down: the upright frame a controller
+# calls its world is the arm's base frame turned half a turn about X (a ceiling mount).
+HUNG_WORLD_BASE = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def world_base(axes: ExternalAxes | None) -> np.ndarray:
+    """(4, 4) T_world_base: the upright world from the arm's base, turned half a turn about
+    X for an arm hung from an overhead track, else the base itself."""
+    return HUNG_WORLD_BASE if axes is not None and axes.overhead else np.eye(4)
+
+
+def mount_note(motion: Motion) -> str:
+    """'The arm hangs upside down ...' for an arm on an overhead track, '' otherwise."""
+    if motion.axes is None or not motion.axes.overhead:
+        return ""
+    return (
+        "The arm hangs upside down from an overhead track (a gantry over the table): "
+        "configure it as ceiling-mounted"
+    )
+
+
 def read_axes(text: str) -> ExternalAxes | None:
     """The external axes a program's header records (`axes_note`), None when none."""
     m = AXES_NOTE.search(text)

@@ -8,7 +8,14 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from scanplan.robot.export.axes_lines import axes_note, on_axes, read_axes
+from scanplan.robot.export.axes_lines import (
+    HUNG_WORLD_BASE,
+    axes_note,
+    mount_note,
+    on_axes,
+    read_axes,
+    world_base,
+)
 from scanplan.robot.export.common import (
     ExportOptions,
     Kinematics,
@@ -76,6 +83,11 @@ def _axes_header(motion: Motion) -> list[str]:
         "; controller turns it with E1. A track: $ROBROOT rides it (a ROBROOT kinematic),",
         "; its travel along the track direction below.",
     ]
+    if motion.axes.overhead:
+        out += [
+            f"; {mount_note(motion)}: $ROBROOT = {_frames(HUNG_WORLD_BASE[None])[0]}",
+            "; in $WORLD (set in the machine data); $BASE below is in that upright $WORLD.",
+        ]
     return out + [f"; {axes_note(motion)}"]
 
 
@@ -92,8 +104,9 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "; Laser-profilometer scan path written by scanplan. Save as "
         f"{name}.src (KRL wants the file named after the DEF).",
         "; Targets are T_part_tcp, the TCP's pose in the part's frame: $BASE is the part",
-        "; (T_base_part; assumes $WORLD = $ROBROOT; calibrate it as a BASE_DATA and nothing",
-        "; else changes) and $TOOL the TCP (T_flange_sensor moved along the beam).",
+        "; (T_base_part; assumes $WORLD = $ROBROOT, but for an arm hung upside down; calibrate",
+        "; it as a BASE_DATA and nothing else changes) and $TOOL the TCP (T_flange_sensor",
+        "; moved along the beam).",
         f"; {standoff_note(motion)}.",
         "; X,Y,Z in mm; A,B,C in degrees, A about Z, B about Y', "
         "C about X''. $VEL.CP in m/s, $APO.CDIS in mm.",
@@ -119,7 +132,7 @@ def write(motion: Motion, options: ExportOptions) -> str:
         "; switches with the robot standing on that target.",
         *_axes_header(motion),
         "  BAS(#INITMOV, 0)",
-        f"  $BASE = {_frames(motion.part_pose[None])[0]}",
+        f"  $BASE = {_frames((world_base(motion.axes) @ motion.part_pose)[None])[0]}",
         f"  $TOOL = {_frames(options.tool[None])[0]}",
         "  $ADVANCE = 3",
         f"  $ACC.CP = {options.accel_mm_s2 / 1000.0:.6g}",
@@ -193,5 +206,6 @@ def parse(text: str) -> Parsed:
     values = np.array(external, dtype=np.float64) if axes is not None else None
     if values is not None and values.shape != (len(rows), len(axes.names)):  # type: ignore[union-attr]
         raise ValueError("KRL program: a target without its external axis values (E1..)")
+    base = np.linalg.inv(world_base(axes)) @ base  # $BASE is in the upright $WORLD
     poses = sensor_poses(on_axes(base, poses, values, axes), read_standoff(text))
     return Parsed(poses, np.array(tracker.flags), np.array(speeds), np.array(blended), values)

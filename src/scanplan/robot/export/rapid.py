@@ -8,7 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from scanplan.robot.export.axes_lines import axes_note, on_axes, read_axes
+from scanplan.robot.export.axes_lines import axes_note, mount_note, on_axes, read_axes
 from scanplan.robot.export.common import (
     ExportOptions,
     Kinematics,
@@ -107,6 +107,11 @@ def write(motion: Motion, options: ExportOptions) -> str:
             "  ! the part with every axis at 0: with a turntable, make it a coordinated work",
             "  ! object moved by the turntable's mechanical unit (ufmec), so it turns with",
             "  ! eax_a; with a track, the robot's base rides it (a track unit).",
+            *(
+                [f"  ! {mount_note(motion)} (gravity beta 180 deg, the base frame the world)."]
+                if motion.axes.overhead
+                else []
+            ),
             f"  ! {axes_note(motion)}",
         ]
     out = [
