@@ -197,3 +197,22 @@ def test_a_hung_arm_clears_the_table_above_it_not_in_it():
         T_part_base[:3, 3] = [0.0, 0.0, -5.0 + height]
         ok.append(column_clear(arm, np.linalg.inv(T_part_base), obstacles.table_block, 20.0)[0])
     assert ok == [True, False]
+
+
+def test_a_turntable_and_a_track_are_placed_together():
+    """A turntable with a track (mount open) on the small plate: a placement whose column
+    stands clear and, upright, outside the disk (a hung arm may hang over it)."""
+    plate = Part(trimesh.creation.box((400.0, 200.0, 10.0)), name="plate")
+    obstacles = obstacles_for(plate, Cell.around(plate))
+    arm = get_robot("kr6-r900")
+    axes = ExternalAxes(Turntable(limits_deg=[-30.0, 30.0]), Track(length_mm=2000.0))
+    beside = np.eye(4)
+    beside[:3, 3] = [800.0, 0.0, -295.0]
+    T, resolved = place_on_axes(
+        _raster(300.0, 100.0, 300.0), arm, TCP, axes, plate, beside, obstacles
+    )
+    assert stands_clear(arm, T, resolved, obstacles)
+    assert resolved.turntable is not None and resolved.turntable.axis_point_mm is not None
+    base = np.linalg.inv(T)[:3, 3]
+    off_axis = np.hypot(*(base - resolved.turntable.axis_point_mm)[:2])
+    assert hangs(T) or off_axis >= resolved.turntable.radius_mm

@@ -320,7 +320,8 @@ def place_on_axes(
         high, high_score = _best_placement(traj, arm, inv_tcp, axes, part, overhead, obstacles)
         if best is None or high_score > best_score + OVERHEAD_GAIN:
             best = high
-    assert best is not None
+    if best is None:  # every stand in the turntable: the arm's own, which export will refuse
+        best = np.asarray(T_base_part, dtype=np.float64)
     return best, resolved(axes, part, best, traj)
 
 
@@ -367,7 +368,8 @@ def _best_placement(
     scored: list[tuple[float, np.ndarray]] = []
     for T in tries:
         choice = resolved(axes, part, T, traj)
-        if (t := choice.turntable) is not None and t.axis_point_mm is not None:
+        t = choice.turntable
+        if t is not None and t.axis_point_mm is not None and not hangs(T):
             base = np.linalg.inv(T)[:3, 3]
             if np.hypot(*(base - t.axis_point_mm)[:2]) < t.radius_mm + BESIDE_DISK_MM:
                 continue  # the arm's column in the turntable
