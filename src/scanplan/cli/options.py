@@ -319,7 +319,7 @@ TrackOpt = Annotated[
         help="a linear track under the arm, this long (mm), its direction chosen by the tool: "
         "the arm rides with the sensor along it; on the floor beside the table, or overhead "
         "(the arm hung upside down from a gantry) when that flies clearly more; a positioner "
-        "file's [track] mount = \"floor\" fixes it; needs --robot",
+        'file\'s [track] mount = "floor" fixes it; needs --robot',
     ),
 ]
 
