@@ -229,7 +229,10 @@ def _arm_notes(plan: Plan) -> Lines:
             f"{name.rsplit('_', 1)[0]} {t:g} {name.rsplit('_', 1)[1]}"
             for name, t in zip(axes.get("names", []), axes.get("travel", []), strict=False)
         )
-        lines.append((f"external axes: {', '.join(axes.get('names', []))}; travel {travel}", False))
+        mount = (axes.get("track") or {}).get("mount")
+        hung = " (the track overhead: the arm hung upside down)" if mount == "overhead" else ""
+        names = ", ".join(axes.get("names", []))
+        lines.append((f"external axes: {names}{hung}; travel {travel}", False))
     lost = record.get("in_spec_lost_by_view", {})
     causes = record.get("given_up_by_cause", {})
     worst = sorted(lost, key=lambda k: -lost[k])[:5]
