@@ -28,7 +28,7 @@ from scanplan.robot.base import Robot
 from scanplan.robot.fit import PlacedArm, renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, kept_by_pass, turned_passes
 from scanplan.robot.flyable import stands_clear
-from scanplan.robot.links import obstacles_for
+from scanplan.robot.links import hung, obstacles_for
 from scanplan.robot.place import place, reach_mm, sample_poses
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach
@@ -82,7 +82,7 @@ def resolved(axes: ExternalAxes, part: Part, T_base_part: np.ndarray, traj: Traj
 
 def hangs(T_base_part: np.ndarray) -> bool:
     """Whether the arm's base faces down in the part's frame (hung from an overhead track)."""
-    return bool(np.asarray(T_base_part)[2, 2] < 0.0)
+    return bool(hung(T_base_part)[0])
 
 
 def long_side(traj: Trajectory, T_frame_part: np.ndarray) -> np.ndarray | None:

@@ -189,6 +189,12 @@ def check_links(
     return LinkReport(names, link, obstacle, moves, float(clearance_mm))
 
 
+def hung(T_base_part: np.ndarray) -> np.ndarray:
+    """(P,) whether each placement (P, 4, 4) hangs the arm upside down: its base's z axis
+    points down in the part's frame (an arm hung from an overhead track)."""
+    return np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)[:, 2, 2] < 0.0
+
+
 def column_clear(
     robot: Robot,
     T_base_part: np.ndarray,
@@ -213,14 +219,14 @@ def column_clear(
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
     gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
     base_z = axis_in_part[:, 2]
-    hung = T[:, 2, 2] < 0.0  # the base's z axis points down in the part frame
-    bottom = np.where(hung, base_z - z_hi, base_z + z_lo)  # the column's lowest point
-    top = np.where(hung, base_z - z_lo, base_z + z_hi)
+    down = hung(T)
+    bottom = np.where(down, base_z - z_hi, base_z + z_lo)  # the column's lowest point
+    top = np.where(down, base_z - z_lo, base_z + z_hi)
     gap_z = np.maximum(lo[2] - top, bottom - hi[2])
     beside = np.linalg.norm(gap_xy, axis=1) > sweep + clearance_mm
     on_top = (gap_z > clearance_mm) & (base_z - hi[2] <= ON_TABLE_MM)
-    hangs_above = hung & (bottom - hi[2] > clearance_mm)
-    return beside | np.where(hung, hangs_above, on_top)
+    hangs_above = down & (bottom - hi[2] > clearance_mm)
+    return beside | np.where(down, hangs_above, on_top)
 
 
-__all__ = ["LinkReport", "check_links", "column_clear", "obstacles_for"]
+__all__ = ["LinkReport", "check_links", "column_clear", "hung", "obstacles_for"]
