@@ -214,6 +214,10 @@ ROTATED = np.array([[0.0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
         ("robot.T_base_part", ROTATED * 2, "robot.T_base_part: its 3x3 block is not a rotation"),
         ("robot.T_base_part.0.3", 1e300, r"T_base_part: translation x 1e\+300 is not in"),
         ("robot.T_flange_sensor.3.0", 1.0, r"T_flange_sensor: its last row is \[1.0, 0.0, 0.0"),
+        # The configuration each pass is entered with: six finite joints at a pose index.
+        ("robot.pass_entry_joints_deg", {"0": [0.0] * 5}, r"pass_entry_joints_deg.'0': List sh"),
+        ("robot.pass_entry_joints_deg", {"first": [0.0] * 6}, r"pass_entry_joints_deg.first"),
+        ("robot.pass_entry_joints_deg", [[0.0] * 6], r"pass_entry_joints_deg: expected a JSON"),
         ("views", {"index": 0}, "views: Input should be a valid list"),
         ("views", 7, "views: Input should be a valid list"),
         ("views.0", "top", r"views\[0\]: expected a JSON object"),

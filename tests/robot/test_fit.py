@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 import scanplan.robot.fit as fit_module
 from scanplan.cli import app
 from scanplan.core.context import PlanContext
+from scanplan.core.plan import Plan
 from scanplan.core.plan_file import read_json
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
@@ -21,6 +22,8 @@ from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flown_poses import HALF_TURN
+from scanplan.robot.program import arm_joints
+from scanplan.robot.reach import pass_starts
 from scanplan.robot.ur import forward_kinematics
 
 TCP = parse_pose_arg("0,0,90,0,0,0")
@@ -96,6 +99,19 @@ def test_plan_for_an_arm_then_export_with_what_the_plan_records(tmp_path):
     recorded = json.loads(plan.read_text())["robot"]
     assert recorded["robot"] == "ur3e" and recorded["reachable"]
     assert 0.0 <= recorded["in_spec"] <= recorded["in_spec_without_robot"] + 1e-9
+    # The configuration each pass is entered with is recorded, and every reader follows it.
+    planned = read_json(plan)
+    arm = Plan.of(planned).arm
+    assert arm is not None
+    entries = arm.entry_joints("ur3e", arm.T_base_part, arm.T_flange_sensor)
+    starts = np.flatnonzero(pass_starts(planned.swath, planned.scanning))
+    assert entries is not None and set(starts) <= set(entries)
+    joints = arm_joints(Plan.of(planned))
+    assert joints is not None
+    np.testing.assert_allclose(joints[starts], [entries[i] for i in starts], atol=1e-7)
+    moved = arm.T_base_part @ parse_pose_arg("0,0,10,0,0,0")
+    assert arm.entry_joints("ur5e", arm.T_base_part, arm.T_flange_sensor) is None
+    assert arm.entry_joints("ur3e", moved, arm.T_flange_sensor) is None  # another placement
     out = tmp_path / "scan.script"
     result = runner.invoke(app, ["export", str(plan), "-o", str(out)])
     assert result.exit_code == 0, result.output
@@ -104,7 +120,6 @@ def test_plan_for_an_arm_then_export_with_what_the_plan_records(tmp_path):
     # The program's first target and every pass are entered by a joint move into its
     # configuration, then flown linearly: the program parses back to the thinned targets.
     text = out.read_text()
-    planned = read_json(plan)
     passes = len(np.unique(planned.swath[planned.scanning]))
     assert text.count("movej([") == passes + int(not planned.scanning[0])
     poses, _ = parse_program(text, "urscript")

@@ -78,3 +78,62 @@ def test_follows_the_pose_by_pose_rule(robot: str, seed: int) -> None:
     np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
     assert np.isnan(got).any() and not np.isnan(got).all()  # both kinds of pose are met
     np.testing.assert_allclose(got, want, atol=1e-9, equal_nan=True)
+
+
+class _Cell:
+    """A cell as `check_reach` asks it (`reach.CellView`): links clear wherever `along`
+    says, joint moves clear except into the joints in `blocked_moves`."""
+
+    def __init__(self, along=None, blocked_moves=()):
+        self.along, self.blocked, self.moves = along, list(blocked_moves), []
+
+    def clear_along(self, i, path):
+        return np.ones(path.shape[:2], bool) if self.along is None else self.along(path)
+
+    def clear_move(self, i0, q0, i1, q1):
+        self.moves.append((i0, i1))
+        return not any(np.allclose(q1, q, atol=1e-9) for q in self.blocked)
+
+
+def _pass_after_a_move(robot: str = "ur5e"):
+    """A move's pose, then a 60-pose pass that several branches fly whole."""
+    arm = get_robot(robot)
+    s = np.linspace(0, 1, 60)[:, None]
+    q0 = np.array([0.3, -1.4, 1.6, -1.7, 0.9, 0.4])
+    q1 = np.array([0.5, -1.2, 1.4, -1.5, 1.1, 0.2])
+    poses = arm.forward(np.vstack([q0[None] - 0.3, q0 + s * (q1 - q0)]))
+    return poses, np.r_[0, np.ones(60, int)], np.r_[False, np.ones(60, bool)]
+
+
+def test_a_pass_is_entered_on_a_configuration_whose_links_are_clear() -> None:
+    poses, swath, scanning = _pass_after_a_move()
+    arm = get_robot("ur5e")
+    free = check_reach(poses, arm, swath=swath, scanning=scanning)
+    elbow = np.sign(arm.singularity_terms(free.joints[1:])[:, 1])
+    assert (elbow == elbow[0]).all()
+    # A cell where the elbow on the side the free choice took hits the table.
+    cell = _Cell(along=lambda path: np.sign(arm.singularity_terms(path)[..., 1]) != elbow[0])
+    report = check_reach(poses, arm, swath=swath, scanning=scanning, cell=cell)
+    assert report.reachable and not np.isnan(report.joints).any()
+    assert (np.sign(arm.singularity_terms(report.joints[1:])[:, 1]) == -elbow[0]).all()
+    # What the cell chose is what a reader given the entries follows, without the cell.
+    entries = {0: report.joints[0], 1: report.joints[1]}
+    again = check_reach(poses, arm, swath=swath, scanning=scanning, entries=entries)
+    np.testing.assert_allclose(again.joints, report.joints, atol=1e-9)
+
+
+def test_a_pass_is_entered_where_the_joint_move_into_it_is_clear() -> None:
+    poses, swath, scanning = _pass_after_a_move()
+    arm = get_robot("ur5e")
+    free = check_reach(poses, arm, swath=swath, scanning=scanning)
+    # The move into the free choice's first pose sweeps a link into the cell.
+    cell = _Cell(blocked_moves=[free.joints[1]])
+    report = check_reach(poses, arm, swath=swath, scanning=scanning, cell=cell)
+    assert cell.moves[0] == (0, 1)  # asked about the move from the pose before
+    assert report.reachable and not np.isnan(report.joints[1:]).any()
+    assert not np.allclose(report.joints[1], free.joints[1], atol=1e-6)
+    # A cell that blocks every move in: the move is given up by the fit, not the pass here.
+    everything = _Cell(along=None)
+    everything.clear_move = lambda *args: False  # type: ignore[method-assign]
+    blocked = check_reach(poses, arm, swath=swath, scanning=scanning, cell=everything)
+    np.testing.assert_allclose(blocked.joints, free.joints, atol=1e-9)

@@ -92,6 +92,10 @@ def view_of_pose(traj: Trajectory) -> np.ndarray:
     return out
 
 
+PoseIndex = Annotated[str, Field(pattern=r"^\d{1,9}$")]
+Joints6 = Annotated[list[Finite], Field(min_length=6, max_length=6)]
+
+
 class _ArmJson(BaseModel):
     """What a plan file must hold of its arm; the rest (what fitting gave up) is free."""
 
@@ -99,6 +103,8 @@ class _ArmJson(BaseModel):
     robot: str = Field(min_length=1)
     T_base_part: Matrix4
     T_flange_sensor: Matrix4
+    # Each pass's first pose (its index) and the arm's joints there (deg): its configuration.
+    pass_entry_joints_deg: dict[PoseIndex, Joints6] | None = None
 
 
 @dataclass(frozen=True)
@@ -125,6 +131,23 @@ class ArmRecord:
             np.asarray(model.T_flange_sensor, dtype=np.float64),
             dict(data),  # type: ignore[call-overload]
         )
+
+    def entry_joints(
+        self, robot: str, T_base_part: np.ndarray, T_flange_sensor: np.ndarray
+    ) -> dict[int, np.ndarray] | None:
+        """The joints (rad) the fit entered each pass with, by the pass's first pose: the
+        configurations chosen, for this arm standing where the plan put it and holding the
+        sensor as planned; None for another arm, pose or TCP (their own choice), or a file
+        that records none."""
+        entries = self.record.get("pass_entry_joints_deg")
+        if (
+            entries is None
+            or robot != self.robot
+            or not np.allclose(T_base_part, self.T_base_part, atol=1e-6)
+            or not np.allclose(T_flange_sensor, self.T_flange_sensor, atol=1e-6)
+        ):
+            return None
+        return {int(i): np.radians(np.asarray(q, dtype=np.float64)) for i, q in entries.items()}
 
     @property
     def flyable(self) -> bool:

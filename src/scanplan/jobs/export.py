@@ -195,6 +195,9 @@ def flyable_joints(
         result = check_flyable(
             plan.traj, get_robot(robot), options.part_pose, options.tcp, part,
             with_disk(plan_cell(plan, part), options.axes), plan.spec.sensor, axes=options.axes,
+            entries=None if plan.arm is None else plan.arm.entry_joints(
+                robot, options.part_pose, options.tcp
+            ),
         )  # fmt: skip
     report = result.reach
     if result.flyable:

@@ -42,8 +42,11 @@ def view_plan(
     arm: ArmPoses | None = None
     if with_arm:
         name, T_base_part, T_flange_sensor = arm_of(plan, robot, part_pose, tcp, lambda _: None)
+        entries = (
+            None if plan.arm is None else plan.arm.entry_joints(name, T_base_part, T_flange_sensor)
+        )
         arm = check_arm(
-            plan.traj, name, T_base_part, T_flange_sensor, the_part, cell, axes_of(plan)
+            plan.traj, name, T_base_part, T_flange_sensor, the_part, cell, axes_of(plan), entries
         )
     title = f"{the_part.name}: {Path(plan.where.removeprefix('plan ')).name}"
     notes = [

@@ -18,7 +18,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
-from scanplan.robot.links import LinkReport, check_links, obstacles_for
+from scanplan.robot.links import LinkClearance, LinkReport, check_links, obstacles_for
 from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
@@ -103,7 +103,18 @@ class RobotFit:
             "reachable": self.report.reachable,
             "links_checked": self.links is not None,
             "flyable": self.flyable,
+            "pass_entry_joints_deg": entry_joints_deg(self.traj, self.report.joints),
         }
+
+
+def entry_joints_deg(traj: Trajectory, joints: np.ndarray) -> dict[str, list[float]]:
+    """The joints (deg) at each pass's first pose and the path's first reachable one, by
+    pose index: the configurations chosen, which every reader of the plan follows
+    (`check_reach`'s `entries`) rather than choose again."""
+    reached = ~np.isnan(joints).any(axis=1)
+    first = pass_starts(traj.swath, traj.scanning) & reached
+    first[np.argmax(reached)] = reached.any()
+    return {str(i): np.round(np.degrees(joints[i]), 6).tolist() for i in np.flatnonzero(first)}
 
 
 def fit_to_robot(
@@ -146,6 +157,7 @@ def fit_to_robot(
             arm,
             swath=current.swath,
             scanning=current.scanning,
+            cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
         )
         index = np.flatnonzero(keep)
         why = np.full(len(index), -1)
@@ -214,7 +226,11 @@ def _verdict(
     """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
     and in a cell its links along the path and the joint moves into passes."""
     report = check_reach(
-        T_now @ fitted.poses @ inv_tcp, arm, swath=fitted.swath, scanning=fitted.scanning
+        T_now @ fitted.poses @ inv_tcp,
+        arm,
+        swath=fitted.swath,
+        scanning=fitted.scanning,
+        cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
     )
     if obstacles is None:
         return report, None

@@ -7,6 +7,7 @@ fixtures).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +17,13 @@ from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses
 from scanplan.robot.base import Robot
-from scanplan.robot.links import LinkReport, check_links, column_clear, obstacles_for
+from scanplan.robot.links import (
+    LinkClearance,
+    LinkReport,
+    check_links,
+    column_clear,
+    obstacles_for,
+)
 from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
@@ -85,19 +92,29 @@ def check_flyable(
     sensor: SensorSpec,
     obstacles: CellObstacles | None = None,
     axes: ExternalAxes | None = None,
+    entries: Mapping[int, np.ndarray] | None = None,
 ) -> Flyability:
     """The arm's reach along the flange poses of `traj` (part frame, sensor poses) with the
     part at `T_base_part` and the sensor at `T_flange_sensor` (mm), its links along that
     path and every joint move into a pass, and the sensor body, against `part` in `cell`.
     obstacles: `obstacles_for(part, cell)` if the caller has it (a fit just built it);
     None: built here. axes: the external axes the plan's values per pose (`traj.external`)
-    are of (the part moved pose by pose; `robot.axes`), None: the arm alone."""
+    are of (the part moved pose by pose; `robot.axes`), None: the arm alone. entries: the
+    joints each pass was entered with, as the plan records them (`ArmRecord.entry_joints`);
+    passes without are entered on the configuration that keeps the links clear."""
     clearance = Plan.of(traj).spec.clearance_mm  # the links keep the plan's
     if obstacles is None:
         obstacles = obstacles_for(part, cell, sensor, clearance)
     T_all = part_poses(T_base_part, traj.external, axes)
     flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
-    reach = check_reach(flange, arm, swath=traj.swath, scanning=traj.scanning)
+    reach = check_reach(
+        flange,
+        arm,
+        swath=traj.swath,
+        scanning=traj.scanning,
+        cell=LinkClearance(arm, obstacles, T_all),
+        entries=entries,
+    )
     links = check_links(
         arm,
         reach.joints,

@@ -180,13 +180,44 @@ def check_links(
         path = q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
         ends = (T_all[before[-1]], T_all[i]) if per_pose else (T_all,)
         for T in ends[: 1 if len(ends) == 1 or np.array_equal(*ends) else 2]:
-            m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm)
+            m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm, exact)
             if (m_link >= 0).any():
                 first = int(np.argmax(m_link >= 0))
                 moves[int(i)] = (int(m_link[first]), int(m_obstacle[first]))
                 break
     names = robot.link_capsules(np.zeros(6))[2]
     return LinkReport(names, link, obstacle, moves, float(clearance_mm))
+
+
+class LinkClearance:
+    """The arm's links in the cell as the reach check's choice of each pass's configuration
+    asks (`reach.CellView`): the quick check (`exact=False`) with the part at `T_base_part`
+    (4, 4), or (n, 4, 4) one per pose of the path checked."""
+
+    def __init__(self, robot: Robot, obstacles: CellObstacles, T_base_part: np.ndarray) -> None:
+        self.robot, self.obstacles = robot, obstacles
+        self.T = np.asarray(T_base_part, dtype=np.float64)
+
+    def _at(self, i: int, m: int = 1) -> np.ndarray:
+        return self.T[max(i, 0) : max(i, 0) + m] if self.T.ndim == 3 else self.T
+
+    def clear_along(self, i: int, path: np.ndarray) -> np.ndarray:
+        T = self._at(i, len(path))
+        return np.stack(
+            [
+                ~check_links(self.robot, path[:, k], self.obstacles, T, exact=False).colliding
+                for k in range(path.shape[1])
+            ],
+            axis=1,
+        )
+
+    def clear_move(self, i0: int, q0: np.ndarray, i1: int, q1: np.ndarray) -> bool:
+        ends = (i0 if i0 >= 0 else i1, i1)
+        T = self.T if self.T.ndim == 2 else np.stack([self._at(i)[0] for i in ends])
+        report = check_links(
+            self.robot, np.stack([q0, q1]), self.obstacles, T, np.array([False, True]), exact=False
+        )
+        return not report.moves
 
 
 def hung(T_base_part: np.ndarray) -> np.ndarray:
@@ -229,4 +260,4 @@ def column_clear(
     return beside | np.where(down, hangs_above, on_top)
 
 
-__all__ = ["LinkReport", "check_links", "column_clear", "hung", "obstacles_for"]
+__all__ = ["LinkClearance", "LinkReport", "check_links", "column_clear", "hung", "obstacles_for"]

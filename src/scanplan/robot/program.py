@@ -78,7 +78,10 @@ def arm_joints(plan: Plan) -> np.ndarray | None:
     # As `flyable.check_flyable` computes them, so export's joints are these to the bit.
     T_base_part = part_poses(arm.T_base_part, plan.traj.external, axes_of(plan))
     T_base_flange = T_base_part @ plan.traj.poses @ np.linalg.inv(arm.T_flange_sensor)
-    report = check_reach(T_base_flange, robot, swath=plan.traj.swath, scanning=plan.traj.scanning)
+    entries = arm.entry_joints(arm.robot, arm.T_base_part, arm.T_flange_sensor)
+    report = check_reach(
+        T_base_flange, robot, swath=plan.traj.swath, scanning=plan.traj.scanning, entries=entries
+    )
     return report.joints
 
 

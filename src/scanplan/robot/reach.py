@@ -6,8 +6,10 @@ Works for any `Robot`; the path is `T_base_flange` (n, 4, 4) in mm, e.g. from
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -15,6 +17,18 @@ from scanplan.robot.base import Robot, wrap
 from scanplan.robot.presets import get_robot
 
 TWO_PI = 2 * np.pi
+
+
+class CellView(Protocol):
+    """What the choice of a pass's configuration asks of the cell (`links.LinkClearance`)."""
+
+    def clear_along(self, i: int, path: np.ndarray) -> np.ndarray:
+        """(m, b) whether b branches' joints (m, b, 6) from pose i on keep the links clear."""
+        ...
+
+    def clear_move(self, i0: int, q0: np.ndarray, i1: int, q1: np.ndarray) -> bool:
+        """Whether the joint move from q0 at pose i0 to q1 at pose i1 keeps them clear."""
+        ...
 
 
 def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,6 +158,8 @@ def _pass_start(
     prev: np.ndarray | None,
     tol: np.ndarray,
     jump_deg: float,
+    cell: CellView | None = None,
+    at: tuple[int, int] = (0, -1),
 ) -> np.ndarray | None:
     """The joints to enter a pass with, from its IK `solutions` (m, 8, 6): on the branch
     that flies the most poses from the first one on without leaving the reach or the joint
@@ -173,10 +189,18 @@ def _pass_start(
     held[1:] &= step <= np.radians(jump_deg)
     signs = np.signbit(arm.singularity_terms(np.nan_to_num(path)))
     held &= (signs == signs[0]).all(axis=2)
+    if cell is not None:
+        held &= cell.clear_along(at[0], path)
     flown = np.where(held.all(axis=0), len(path), np.argmin(held, axis=0))  # (b,)
     best = branches[flown == flown.max()]
     cand = first[best]
     if prev is not None:
+        if cell is not None:  # the most flown whose joint move in keeps the links clear
+            for k in np.lexsort((((first[branches] - prev) ** 2).sum(axis=1), -flown)):
+                if flown[k] == 0:
+                    break
+                if cell.clear_move(at[1], prev, at[0], first[branches[k]]):
+                    return first[branches[k]]
         return cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
     terms = np.abs(arm.singularity_terms(cand)) / tol
     score = np.minimum(terms.min(axis=1), limit_margin(cand, limits) / np.radians(5))
@@ -237,16 +261,21 @@ def check_reach(
     elbow_tol: float = np.sin(np.radians(5.0)),
     shoulder_tol_mm: float = 20.0,
     jump_deg: float = 30.0,
+    cell: CellView | None = None,
+    entries: Mapping[int, np.ndarray] | None = None,
 ) -> ReachReport:
     """Follow the path through IK and report what would stop or upset a real arm.
 
     Each pass (and each pose outside a pass) is entered on the branch that flies the most
     of it (`_pass_start`; the first reachable pose on the solution closest to `q_start` if
-    given); each next pose of a pass takes the in-limit solution closest to the previous
-    one, as a controller executing linear moves would. A
-    configuration flip is a sign change of a singularity term (wrist, elbow, shoulder)
-    between consecutive poses of one pass (`swath`, `scanning`; without them the whole
-    path is one pass): the path went through that singularity. A jump is any joint
+    given), with the arm's links clear of the `cell` along it and on the joint move into
+    it if a cell is given; or at the solution nearest the joints `entries` records for its
+    first pose (the configurations a fit chose, as its plan records them). Each next pose
+    of a pass takes the in-limit solution closest to the previous one, as a controller
+    executing linear moves would. A configuration flip is a sign change of a singularity
+    term (wrist, elbow, shoulder) between consecutive poses of one pass (`swath`,
+    `scanning`; without them the whole path is one pass): the path went through that
+    singularity. A jump is any joint
     turning more than `jump_deg` between consecutive poses.
     """
     arm = get_robot(robot)
@@ -265,6 +294,7 @@ def check_reach(
     # joint move: the branch that flies most of it from its start.
     entered = np.r_[True, ~linked]
     pinned = q_start is not None
+    last = -1  # the pose `prev` is the joints of (-1: none, or `q_start`)
     end = _run_ends(linked)
     # Sequential by nature (each pose's branch depends on the previous choice), but within a
     # pass the choice follows one branch: checked for a whole run at once (`_follow`).
@@ -274,11 +304,17 @@ def check_reach(
             i += 1
             continue
         if prev is None or (entered[i] and not pinned):
-            start = _pass_start(arm, solutions[i : end[i]], limits, prev, tol, jump_deg)
+            if entries is not None and i in entries:  # the configuration recorded
+                found = _nearest(solutions[i : i + 1], limits, np.asarray(entries[i])[None])
+                start = None if found is None else found[1]
+            else:
+                start = _pass_start(
+                    arm, solutions[i : end[i]], limits, prev, tol, jump_deg, cell, (i, last)
+                )
             if start is None:
                 i += 1
                 continue
-            prev = start
+            prev, last = start, i
             joints[i] = prev
             i += 1
             continue
@@ -290,11 +326,11 @@ def check_reach(
             i += 1
             continue
         branch, prev = nearest
-        joints[i] = prev
+        joints[i], last = prev, i
         ran = _follow(solutions[i + 1 : end[i]], limits, prev, branch)
         if len(ran):
             joints[i + 1 : i + 1 + len(ran)] = ran
-            prev = ran[-1]
+            prev, last = ran[-1], i + len(ran)
         i += 1 + len(ran)
     reachable = ~np.isnan(joints).any(axis=1)
     terms = arm.singularity_terms(joints)

@@ -6,6 +6,7 @@ marked. Plotly traces only; `html` puts them in a page.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,8 +22,8 @@ from scanplan.judging.report.scene_axes import (
 )
 from scanplan.judging.report.view_groups import group_label, groups, view_name
 from scanplan.robot import check_reach, get_robot
-from scanplan.robot.axes import ExternalAxes, part_poses, plan_axes, with_disk
-from scanplan.robot.links import check_links, obstacles_for
+from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses, plan_axes, with_disk
+from scanplan.robot.links import LinkClearance, check_links, obstacles_for
 from scanplan.robot.reach import pass_starts
 from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.part import Part
@@ -116,23 +117,33 @@ def check_arm(
     part: Part,
     cell: Cell,
     axes: ExternalAxes | None = None,
+    entries: Mapping[int, np.ndarray] | None = None,
 ) -> ArmPoses:
     """The arm `robot` along `traj` (the part at `T_base_part`, the sensor at
     `T_flange_sensor` on the flange; with external `axes`, the part where their values per
-    pose put it): its reach and link checks and the poses to draw."""
+    pose put it; each pass entered with the joints `entries` records, as `export` checks
+    it): its reach and link checks and the poses to draw."""
     arm = get_robot(robot)
     T_base_part = np.asarray(T_base_part, dtype=np.float64)
     T_all = part_poses(T_base_part, traj.external, axes)
     T_base_flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
     cell = with_disk(cell, axes)
-    reach = check_reach(T_base_flange, arm, swath=traj.swath, scanning=traj.scanning)
+    # The links keep the clearance the plan was made with, as the sensor does.
+    obstacles = obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm)
+    reach = check_reach(
+        T_base_flange,
+        arm,
+        swath=traj.swath,
+        scanning=traj.scanning,
+        cell=LinkClearance(arm, obstacles, T_all),
+        entries=entries,
+    )
     links = check_links(
         arm,
         reach.joints,
-        # The links keep the clearance the plan was made with, as the sensor does.
-        obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm),
+        obstacles,
         T_all,
-        pass_starts(traj.swath, traj.scanning),
+        pass_starts(traj.swath, traj.scanning) | axis_steps(traj, axes),
     )
     unreachable = np.zeros(len(traj), dtype=bool)
     unreachable[np.r_[reach.unreachable, reach.limit_violations].astype(int)] = True
@@ -178,7 +189,10 @@ def recorded_scene(part: Part, traj: Trajectory) -> tuple[Cell, ArmPoses | None]
         return cell, None
     arm = plan.arm
     axes = plan_axes(arm.record, traj.external, plan.where)
-    return cell, check_arm(traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell, axes)
+    entries = arm.entry_joints(arm.robot, arm.T_base_part, arm.T_flange_sensor)
+    return cell, check_arm(
+        traj, arm.robot, arm.T_base_part, arm.T_flange_sensor, part, cell, axes, entries
+    )
 
 
 # ---- traces -------------------------------------------------------------------------------
