@@ -197,6 +197,13 @@ def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
     assert record["beyond_reach_mm"] > 0
     hints = fit_module.what_would_help(record)
     assert f"{record['beyond_reach_mm']:.0f} mm beyond the arm's horizontal reach" in hints[0]
+    assert "a linear track" in hints[0] and "a turntable" in hints[0]
+    # An axis the cell has is not suggested again.
+    with_axes = record | {"external_axes": {"track": {"length_mm": 2000.0}, "turntable": None}}
+    hint = fit_module.what_would_help(with_axes)[0]
+    assert "a longer track" in hint and "a linear track" not in hint and "turntable" in hint
+    with_axes["external_axes"] = {"turntable": {"radius_mm": 500.0}}
+    assert "turntable" not in fit_module.what_would_help(with_axes)[0]
 
 
 def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):

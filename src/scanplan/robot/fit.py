@@ -414,7 +414,11 @@ class PlacedArm:
 
 def what_would_help(record: dict) -> list[str]:
     """What the numbers of an arm's record (`RobotFit.record`) say would lift what bound:
-    the largest cause of poses given up first."""
+    the largest cause of poses given up first; an axis the cell has is not suggested."""
+    axes = record.get("external_axes") or {}
+    track, turntable = axes.get("track") is not None, axes.get("turntable") is not None
+    far = ["an arm reaching that much farther", "a longer track" if track else "a linear track"]
+    far += [] if turntable else ["a turntable bringing the far side round"]
     causes: dict[str, int] = {}
     for by in record.get("given_up_by_cause", {}).values():
         for cause, count in by.items():
@@ -426,8 +430,7 @@ def what_would_help(record: dict) -> list[str]:
             if beyond is not None and beyond > 0:
                 out.append(
                     f"{count} poses out of reach, the farthest {beyond:.0f} mm beyond the "
-                    "arm's horizontal reach: an arm reaching that much farther, a linear "
-                    "track, or a turntable bringing the far side round"
+                    f"arm's horizontal reach: {', '.join(far[:-1])} or {far[-1]}"
                 )
             else:
                 out.append(
@@ -436,9 +439,10 @@ def what_would_help(record: dict) -> list[str]:
                     "positioner tilting it"
                 )
         elif cause == "joint limits":
+            turn = "" if turntable else "a turntable turning the part, or "
             out.append(
-                f"{count} poses beyond the joint limits: a turntable turning the part, or "
-                "the arm placed elsewhere (--part-pose)"
+                f"{count} poses beyond the joint limits: {turn}the arm placed elsewhere "
+                "(--part-pose)"
             )
         elif cause.startswith("link in"):
             what = cause.removeprefix("link in ")
