@@ -100,9 +100,13 @@ def check_flyable(
     obstacles: `obstacles_for(part, cell)` if the caller has it (a fit just built it);
     None: built here. axes: the external axes the plan's values per pose (`traj.external`)
     are of (the part moved pose by pose; `robot.axes`), None: the arm alone. entries: the
-    joints each pass was entered with, as the plan records them (`ArmRecord.entry_joints`);
-    passes without are entered on the configuration that keeps the links clear."""
-    clearance = Plan.of(traj).spec.clearance_mm  # the links keep the plan's
+    joints each pass is entered with (None: as the plan records them for this arm, pose and
+    TCP, `ArmRecord.entry_joints`); passes without are entered on the configuration that
+    keeps the links clear."""
+    plan = Plan.of(traj)
+    clearance = plan.spec.clearance_mm  # the links keep the plan's
+    if entries is None and plan.arm is not None:
+        entries = plan.arm.entry_joints(arm.name, T_base_part, T_flange_sensor)
     if obstacles is None:
         obstacles = obstacles_for(part, cell, sensor, clearance)
     T_all = part_poses(T_base_part, traj.external, axes)
