@@ -13,7 +13,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import choose_values, hangs, place_on_axes, values_at
+from scanplan.robot.axes_fit import candidates, choose_values, hangs, place_on_axes, values_at
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flyable import check_flyable, stands_clear
@@ -216,3 +216,15 @@ def test_a_turntable_and_a_track_are_placed_together():
     base = np.linalg.inv(T)[:3, 3]
     off_axis = np.hypot(*(base - resolved.turntable.axis_point_mm)[:2])
     assert hangs(T) or off_axis >= resolved.turntable.radius_mm
+
+
+def test_the_placement_judges_a_turntable_with_a_track_on_a_coarser_grid():
+    arm = get_robot("kr6-r900")
+    both = ExternalAxes(Turntable(), Track(length_mm=2000.0))
+    fine, coarse = candidates(both, arm), candidates(both, arm, coarse=True)
+    assert len(fine) == 24 * 9 and len(coarse) == 8 * 5
+    # Every coarse setting is one the views may be given (the grid thinned, not moved).
+    assert all((np.abs(fine - c).sum(axis=1) < 1e-9).any() for c in coarse)
+    # One axis alone keeps its grid: the coarse one would lose settings it can afford.
+    alone = ExternalAxes(Turntable())
+    np.testing.assert_array_equal(candidates(alone, arm, coarse=True), candidates(alone, arm))

@@ -38,6 +38,9 @@ from scanplan.world.part import Part
 
 TURN_STEP_DEG = 15.0  # the turntable's candidate angles, this far apart
 TRACK_OFFSETS = 9  # the track's candidate offsets, across the arm's reach
+# With a turntable and a track, the placement search judges each stand on a coarser grid.
+COARSE_TURN_STEP_DEG = 45.0
+COARSE_TRACK_OFFSETS = 5
 SAMPLE_POSES = 96  # a view's poses a candidate setting is judged on
 # Among settings within this share of the best, the one nearest the last view's is held
 # (the axis moves less).
@@ -96,17 +99,22 @@ def long_side(traj: Trajectory, T_frame_part: np.ndarray) -> np.ndarray | None:
     return direction * np.sign(direction[np.argmax(np.abs(direction))])
 
 
-def candidates(axes: ExternalAxes, robot: Robot) -> np.ndarray:
+def candidates(axes: ExternalAxes, robot: Robot, coarse: bool = False) -> np.ndarray:
     """(c, k) settings to try: turntable angles `TURN_STEP_DEG` apart over its range; track
-    offsets (the flange's position along it relative to the base) across the arm's reach."""
+    offsets (the flange's position along it relative to the base) across the arm's reach.
+    coarse: with both axes, the grid the placement search judges each stand on (their
+    product is too many settings to score at every stand)."""
+    both = coarse and axes.turntable is not None and axes.track is not None
+    step = COARSE_TURN_STEP_DEG if both else TURN_STEP_DEG
+    offsets = COARSE_TRACK_OFFSETS if both else TRACK_OFFSETS
     columns = []
     if axes.turntable is not None:
         lo, hi = axes.turntable.limits_deg
-        span = min(hi - lo, 360.0 - TURN_STEP_DEG)
-        columns.append(lo + np.arange(0.0, span + 1e-9, TURN_STEP_DEG))
+        span = min(hi - lo, 360.0 - step)
+        columns.append(lo + np.arange(0.0, span + 1e-9, step))
     if axes.track is not None:
         reach = reach_mm(robot)[0]
-        columns.append(np.linspace(-0.6 * reach, 0.6 * reach, TRACK_OFFSETS))
+        columns.append(np.linspace(-0.6 * reach, 0.6 * reach, offsets))
     grid = np.meshgrid(*columns, indexing="ij")
     return np.stack([g.reshape(-1) for g in grid], axis=1)
 
@@ -398,7 +406,7 @@ def _kept_share(
 ) -> float:
     """The share of `sub`'s scanning poses the best per-view settings of `axes` keep with
     the arm at `T` (`_score`)."""
-    settings = candidates(axes, arm)
+    settings = candidates(axes, arm, coarse=True)
     score = 0.0
     for block in _blocks(sub):
         index = np.flatnonzero(block & sub.scanning)

@@ -164,9 +164,11 @@ def _pass_start(
     """The joints to enter a pass with, from its IK `solutions` (m, 8, 6): on the branch
     that flies the most poses from the first one on without leaving the reach or the joint
     limits, changing configuration (a sign of `singularity_terms`) or turning a joint more
-    than `jump_deg` between poses; among those that fly as many, the one nearest `prev`
-    (the joint move in), or without one the farthest from singularities and limits. None
-    where the first pose has no solution within the limits."""
+    than `jump_deg` between poses, nor, with a `cell`, bringing a link into it; among those
+    that fly as many, the one nearest `prev` (the joint move in; with a cell, the most
+    flown whose move in keeps the links clear, if any), or without one the farthest from
+    singularities and limits. at: (this pass's first pose, `prev`'s pose) for the cell.
+    None where the first pose has no solution within the limits."""
     first, inside = fit_limits(solutions[0], limits)
     ok = inside & ~np.isnan(first).any(axis=1)
     if not ok.any():
@@ -189,8 +191,9 @@ def _pass_start(
     held[1:] &= step <= np.radians(jump_deg)
     signs = np.signbit(arm.singularity_terms(np.nan_to_num(path)))
     held &= (signs == signs[0]).all(axis=2)
-    if cell is not None:
-        held &= cell.clear_along(at[0], path)
+    if cell is not None:  # the links checked only as far as each branch flies the pass
+        flying = np.cumprod(held, axis=0).astype(bool)
+        held &= cell.clear_along(at[0], np.where(flying[..., None], path, np.nan)) | ~flying
     flown = np.where(held.all(axis=0), len(path), np.argmin(held, axis=0))  # (b,)
     best = branches[flown == flown.max()]
     cand = first[best]
