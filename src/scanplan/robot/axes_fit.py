@@ -60,6 +60,8 @@ OVERHEAD_GAIN = 0.05
 # The placements judged again with the arm's links: those within this share of the best
 # on reach alone (many tie there; the links tell them apart).
 LINK_CHECKED_WITHIN = 0.1
+# Each view of those placements judged again at the settings reach alone ranked first.
+LINK_SETTINGS = 6
 
 
 def resolved(axes: ExternalAxes, part: Part, T_base_part: np.ndarray, traj: Trajectory):
@@ -373,7 +375,7 @@ def _best_placement(
     best, best_score = None, -1.0
     sample = sample_poses(traj, 4 * SAMPLE_POSES)
     sub = traj.subset(np.isin(np.arange(len(traj)), sample))
-    scored: list[tuple[float, np.ndarray]] = []
+    scored: list[tuple[float, list[np.ndarray], np.ndarray]] = []
     for T in tries:
         choice = resolved(axes, part, T, traj)
         t = choice.turntable
@@ -381,16 +383,21 @@ def _best_placement(
             base = np.linalg.inv(T)[:3, 3]
             if np.hypot(*(base - t.axis_point_mm)[:2]) < t.radius_mm + BESIDE_DISK_MM:
                 continue  # the arm's column in the turntable
-        scored.append((_kept_share(sub, arm, T, inv_tcp, None, choice), T))
+        scored.append((*_kept_share(sub, arm, T, inv_tcp, None, choice), T))
     scored.sort(key=lambda st: -st[0])
     if obstacles is not None and scored:  # the links on those near the best
         top = scored[0][0]
         scored = [
-            (_kept_share(sub, arm, T, inv_tcp, obstacles, resolved(axes, part, T, traj)), T)
-            for score, T in scored
+            (
+                *_kept_share(
+                    sub, arm, T, inv_tcp, obstacles, resolved(axes, part, T, traj), settings
+                ),
+                T,
+            )
+            for score, settings, T in scored
             if score >= top - LINK_CHECKED_WITHIN
         ]
-    for score, T in scored:
+    for score, _, T in scored:
         if score > best_score + 1e-9:
             best, best_score = T, score
     return best, best_score
@@ -403,16 +410,34 @@ def _kept_share(
     inv_tcp: np.ndarray,
     obstacles: CellObstacles | None,
     axes: ExternalAxes,
-) -> float:
+    tried: list[np.ndarray] | None = None,
+) -> tuple[float, list[np.ndarray]]:
     """The share of `sub`'s scanning poses the best per-view settings of `axes` keep with
-    the arm at `T` (`_score`)."""
-    settings = candidates(axes, arm, coarse=True)
-    score = 0.0
-    for block in _blocks(sub):
+    the arm at `T` (`_score`), and each view's `LINK_SETTINGS` best settings. tried: the
+    settings to judge each view on (all by default: those the reach alone ranked first,
+    when the links judge them again)."""
+    every = candidates(axes, arm, coarse=True)
+    score, best = 0.0, []
+    for k, block in enumerate(_blocks(sub)):
         index = np.flatnonzero(block & sub.scanning)
-        if len(index):
-            score += _score(sub, arm, T, inv_tcp, obstacles, axes, settings, index).max()
-    return score / max(int(sub.scanning.sum()), 1)
+        settings = every if tried is None else tried[k]
+        if not len(index) or not len(settings):
+            best.append(settings[:0])
+            continue
+        kept = _score(sub, arm, T, inv_tcp, obstacles, axes, settings, index)
+        score += kept.max()
+        best.append(settings[_first(kept, LINK_SETTINGS)])
+    return score / max(int(sub.scanning.sum()), 1), best
+
+
+def _first(scores: np.ndarray, n: int) -> np.ndarray:
+    """The indices of the n best `scores`; where more tie for the best, n spread evenly
+    among them (settings far apart differ most in where the links go)."""
+    order = np.argsort(-scores, kind="stable")
+    tied = order[scores[order] >= scores.max() - 1e-9]
+    if len(tied) > n:
+        return tied[np.linspace(0, len(tied) - 1, n).round().astype(int)]
+    return order[:n]
 
 
 def arm_on_axes(
