@@ -13,7 +13,8 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import candidates, choose_values, hangs, place_on_axes, values_at
+from scanplan.robot.axes_fit import candidates, choose_values, hangs, values_at
+from scanplan.robot.axes_place import place_on_axes
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flyable import check_flyable, stands_clear

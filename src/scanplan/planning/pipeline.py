@@ -24,7 +24,8 @@ from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
 from scanplan.robot.axes import ExternalAxes, with_disk
-from scanplan.robot.axes_fit import PlacedArmOnAxes, arm_on_axes, choose_values, fitted_axes_record
+from scanplan.robot.axes_fit import PlacedArmOnAxes, choose_values, fitted_axes_record
+from scanplan.robot.axes_place import arm_on_axes
 from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import PlacedArm, fit_to_robot
 from scanplan.robot.links import obstacles_for
