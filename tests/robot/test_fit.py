@@ -22,6 +22,7 @@ from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flown_poses import HALF_TURN
+from scanplan.robot.hints import what_would_help
 from scanplan.robot.program import arm_joints
 from scanplan.robot.reach import pass_starts
 from scanplan.robot.ur import forward_kinematics
@@ -195,15 +196,15 @@ def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
     assert "reach" in set().union(*by_cause.values())
     # The far end lies beyond the UR3e's reach: the hint says by how much.
     assert record["beyond_reach_mm"] > 0
-    hints = fit_module.what_would_help(record)
+    hints = what_would_help(record)
     assert f"{record['beyond_reach_mm']:.0f} mm beyond the arm's horizontal reach" in hints[0]
     assert "a linear track" in hints[0] and "a turntable" in hints[0]
     # An axis the cell has is not suggested again.
     with_axes = record | {"external_axes": {"track": {"length_mm": 2000.0}, "turntable": None}}
-    hint = fit_module.what_would_help(with_axes)[0]
+    hint = what_would_help(with_axes)[0]
     assert "a longer track" in hint and "a linear track" not in hint and "turntable" in hint
     with_axes["external_axes"] = {"turntable": {"radius_mm": 500.0}}
-    assert "turntable" not in fit_module.what_would_help(with_axes)[0]
+    assert "turntable" not in what_would_help(with_axes)[0]
 
 
 def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):

@@ -28,7 +28,7 @@ from scanplan.rl.planners import make_planner
 from scanplan.robot.axes import combined, load_positioner, track_of
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
-from scanplan.robot.fit import what_would_help
+from scanplan.robot.hints import what_would_help
 from scanplan.robot.program import program_cycle
 from scanplan.world.part import load_part
 
