@@ -22,8 +22,8 @@ from pathlib import Path
 from scanplan.core.plan_file import read_trajectory
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.run import task_runner
-from scanplan.judging.detectability import evaluate_detectable
 from scanplan.judging.robustness import robustness, run_trial, trial_tasks
+from scanplan.judging.survey import evaluate_detectable
 from scanplan.planning.pipeline import plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.sensor.perturb import Perturbation

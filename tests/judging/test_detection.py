@@ -15,7 +15,6 @@ import trimesh
 from helpers import fixture_files, loopback_cluster, straight
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import ScanSpec
-from scanplan.judging.detectability import DetectabilitySurvey, survey
 from scanplan.judging.detection import (
     DefectTask,
     defect_run,
@@ -25,6 +24,7 @@ from scanplan.judging.detection import (
 )
 from scanplan.judging.evaluation import evaluate, surface_samples
 from scanplan.judging.pod import fit_pod
+from scanplan.judging.survey import DetectabilitySurvey, survey
 from scanplan.sensor.defects import Defect
 from scanplan.world.part import part_from_mesh
 from scanplan.world.surface import VisibleSurface

@@ -27,7 +27,7 @@ from scanplan.core.quantities import (
 )
 from scanplan.core.run import counted, task_runner
 from scanplan.jobs.planned import ProgressBar, inspected, no_bar
-from scanplan.judging.detectability import PREDICTED, Detectability, survey
+from scanplan.judging.detectability import PREDICTED, Detectability
 from scanplan.judging.detection import (
     DefectRun,
     Detector,
@@ -37,6 +37,7 @@ from scanplan.judging.detection import (
     detector_for,
 )
 from scanplan.judging.evaluation import surface_samples
+from scanplan.judging.survey import survey
 from scanplan.sensor.defects import KINDS
 from scanplan.world.cell import part_in_cell
 from scanplan.world.part import Part

@@ -31,9 +31,9 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import DEMO_POINTS
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging import Metrics
-from scanplan.judging.detectability import evaluate_detectable
 from scanplan.judging.report import Evaluated, write_report
 from scanplan.judging.report.findings import Finding, Program, arm_finding
+from scanplan.judging.survey import evaluate_detectable
 from scanplan.planning.pipeline import Arm, default_views, fit_arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot import get_robot

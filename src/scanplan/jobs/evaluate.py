@@ -30,7 +30,7 @@ from scanplan.jobs.trials import (
     plan_views_of,
 )
 from scanplan.judging import Metrics, Robustness, robustness, trial_tasks
-from scanplan.judging.detectability import evaluate_detectable
+from scanplan.judging.survey import evaluate_detectable
 from scanplan.judging.verdict import Verdict
 from scanplan.robot.program import program_cycle
 from scanplan.sensor.perturb import Perturbation

@@ -9,7 +9,7 @@ found when a call has a point on it (where it displaces the surface).
 
 A trial scans only the poses whose laser plane crosses one of its defects: the rest of the
 scan is the nominal part's, whose calls are the false-call count
-(`detectability.survey`, which scans it once for the map too).
+(`survey.survey`, which scans it once for the map too).
 """
 
 from __future__ import annotations

@@ -36,7 +36,7 @@ from scanplan.world.surface import (
 
 class ScanObserver(Protocol):
     """Something more to learn from the scan `evaluate` simulates (the detectability map,
-    `metrics.detectability.DetectabilitySurvey`), fed the same chunks: no second scan."""
+    `survey.DetectabilitySurvey`), fed the same chunks: no second scan."""
 
     def start(
         self, surface: VisibleSurface, fan: SensorSpec, swath: np.ndarray | None = None
