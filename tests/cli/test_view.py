@@ -13,7 +13,8 @@ from helpers import plate_file, run_cli, straight
 from scanplan.core.context import PlanContext
 from scanplan.core.plan_file import write_csv
 from scanplan.core.quantities import ScanSpec
-from scanplan.judging.report.scene import PROBLEM_COLOUR, check_arm
+from scanplan.judging.report.scene import PROBLEM_COLOUR
+from scanplan.judging.report.scene_arm import check_arm
 from scanplan.robot.export import parse_pose_arg
 
 PART_POSE = "400,0,-300,0,0,0"  # a pass 400 mm above the plate, in reach of a UR5e

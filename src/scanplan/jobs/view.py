@@ -10,7 +10,8 @@ from scanplan.core.plan import Plan
 from scanplan.jobs.export import arm_of
 from scanplan.jobs.planned import Say, plan_cell, planned_part, silent
 from scanplan.judging.report.html import write_scene_page
-from scanplan.judging.report.scene import ArmPoses, check_arm, scene_figure
+from scanplan.judging.report.scene import scene_figure
+from scanplan.judging.report.scene_arm import ArmPoses, check_arm
 from scanplan.robot import get_robot
 from scanplan.robot.base import pose_arg
 from scanplan.robot.program import axes_of

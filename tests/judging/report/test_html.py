@@ -109,7 +109,7 @@ def test_views_get_their_own_colours_and_the_surface_its_in_spec_map(tmp_path, r
 def test_a_plan_made_for_an_arm_shows_the_arm_and_the_table(tmp_path, results):
     from dataclasses import replace
 
-    from scanplan.judging.report.scene import check_arm
+    from scanplan.judging.report.scene_arm import check_arm
     from scanplan.robot.export import parse_pose_arg
     from scanplan.world.cell import Cell
 

@@ -14,12 +14,12 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging import CoverageMap, SurfaceState
 from scanplan.judging.report.maps import COVERAGE_COLOURS
 from scanplan.judging.report.scene import (
-    ArmPoses,
     add_arm,
     cell_traces,
     passes_traces,
     path_trace,
 )
+from scanplan.judging.report.scene_arm import ArmPoses
 from scanplan.judging.report.training import CURVES
 from scanplan.sensor.cloud import PointCloud
 from scanplan.world.cell import Cell

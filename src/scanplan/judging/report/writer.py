@@ -20,7 +20,7 @@ from scanplan.world.part import Part
 if TYPE_CHECKING:
     from scanplan.judging.report.figures import PlannerResult
     from scanplan.judging.report.findings import Finding
-    from scanplan.judging.report.scene import ArmPoses
+    from scanplan.judging.report.scene_arm import ArmPoses
     from scanplan.world.cell import Cell
 
 # A directory holding one of these was written by scanplan and may be replaced.
@@ -212,7 +212,7 @@ def _scene(part: Part, result: Evaluated, notes: list[str]) -> tuple[Cell | None
     """The cell and the arm the report draws with `result`'s path; where the plan's records
     no longer rebuild them (a fixture or arm file gone), a note says so and neither is drawn."""
     # Deferred: as in write_report (the arm loads the kinematics and FCL).
-    from scanplan.judging.report.scene import recorded_scene
+    from scanplan.judging.report.scene_arm import recorded_scene
 
     try:
         return recorded_scene(part, result.trajectory)
