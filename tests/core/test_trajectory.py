@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from helpers import FAST, JSON_VALUES, one_line_or_ok
 from scanplan.core.plan_file import read_csv, read_json, read_trajectory, write_csv, write_json
-from scanplan.core.trajectory import Trajectory
+from scanplan.core.trajectory import Trajectory, pass_entries
 from scanplan.planning.swaths import Swath
 
 
@@ -144,3 +144,22 @@ def test_trajectory_json_of_arbitrary_values(tmp_path, doc):
     path = tmp_path / "t.json"
     path.write_text(json.dumps(doc))
     one_line_or_ok(read_trajectory, path)
+
+
+def test_a_pass_is_entered_at_the_top_of_the_move_into_it():
+    # Pass 0, a move up 100, over 300 in three steps and down 100 (carrying pass 1's index),
+    # pass 1; then pass 2 straight after pass 1, with no move of its own.
+    xyz = [[0, 0, 0], [200, 0, 0]]
+    xyz += [[200, 0, 100], [200, 100, 100], [200, 200, 100], [200, 300, 100]]
+    xyz += [[200, 300, 0], [0, 300, 0], [0, 400, 0], [200, 400, 0]]
+    poses = np.tile(np.eye(4), (len(xyz), 1, 1))
+    poses[:, :3, 3] = xyz
+    swath = [0, 0, 1, 1, 1, 1, 1, 1, 2, 2]
+    scanning = [True, True, False, False, False, False, True, True, True, True]
+    entry = pass_entries(Trajectory(poses, swath, scanning))
+    # The via point farthest from both passes: (200, 100, 100) and (200, 200, 100) tie at
+    # 141 mm; the first is taken. A pass no move leads into is entered at its first pose.
+    np.testing.assert_array_equal(np.flatnonzero(entry), [0, 3, 8])
+    # A plan that starts with a move: entered where the move is farthest from the pass.
+    start = Trajectory(poses[2:], swath[2:], scanning[2:])
+    np.testing.assert_array_equal(np.flatnonzero(pass_entries(start)), [0, 6])

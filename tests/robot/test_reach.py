@@ -137,3 +137,35 @@ def test_a_pass_is_entered_where_the_joint_move_into_it_is_clear() -> None:
     everything.clear_move = lambda *args: False  # type: ignore[method-assign]
     blocked = check_reach(poses, arm, swath=swath, scanning=scanning, cell=everything)
     np.testing.assert_allclose(blocked.joints, free.joints, atol=1e-9)
+
+
+def test_the_move_into_a_pass_is_flown_on_its_configuration_from_its_entry() -> None:
+    # A pose of pass 0, a via point of the move into pass 1 (carrying its index), pass 1,
+    # whose links are clear only on the elbow the free choice does not take.
+    arm = get_robot("ur5e")
+    s = np.linspace(0, 1, 60)[:, None]
+    q0 = np.array([0.3, -1.4, 1.6, -1.7, 0.9, 0.4])
+    q1 = np.array([0.5, -1.2, 1.4, -1.5, 1.1, 0.2])
+    poses = arm.forward(np.vstack([q0[None] - 0.3, q0[None] - 0.15, q0 + s * (q1 - q0)]))
+    swath = np.r_[0, 1, np.ones(60, int)]
+    scanning = np.r_[True, False, np.ones(60, bool)]
+    free = check_reach(poses, arm, swath=swath, scanning=scanning)
+    elbow = np.sign(arm.singularity_terms(free.joints)[:, 1])
+    assert elbow[0] == elbow[1] == elbow[2]
+
+    class Pass1Cell(_Cell):  # pass 1's elbow (from pose 2 on) in the table
+        def clear_along(self, i, path):
+            hit = np.sign(arm.singularity_terms(path)[..., 1]) == elbow[2]
+            return ~hit | (i + np.arange(len(path)) < 2)[:, None]
+
+    cell = Pass1Cell()
+    at_pass = check_reach(poses, arm, swath=swath, scanning=scanning, cell=cell)
+    entry = np.r_[True, True, np.zeros(60, bool)]
+    at_via = check_reach(poses, arm, swath=swath, scanning=scanning, cell=cell, entry=entry)
+    for report in (at_pass, at_via):
+        assert report.reachable
+        assert (np.sign(arm.singularity_terms(report.joints[2:])[:, 1]) == -elbow[2]).all()
+    # Entered at the pass: the via point is flown on the elbow of pass 0 and the arm turns
+    # over beside the surface; entered at the via point, it turns over there.
+    via = [np.sign(arm.singularity_terms(r.joints[1])[1]) for r in (at_pass, at_via)]
+    assert via == [elbow[0], -elbow[2]]

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory, pass_bounds
+from scanplan.core.trajectory import Trajectory, pass_bounds, pass_entries
 
 CYCLE_TIME_MODEL = (
     "trapezoidal speed profiles (accelerate, cruise, decelerate; triangular when a stretch "
@@ -247,20 +247,21 @@ def cycle_time(
     spec's scan speed, moves at its travel speed, both capped by the arm's Cartesian speed.
 
     joints_rad: (n, 6) the arm's joints at each pose (the reach check's), NaN where none was
-    found; with them each pass is entered by a joint move timed by its slowest joint, and
-    the joints bound every other segment too.
+    found; with them each pass is entered by a joint move (`pass_entries`) timed by its
+    slowest joint, and the joints bound every other segment too.
     targets: increasing indices of the poses a program flies between (a robot program's
     thinned targets, every pass's first and last pose among them); None: every pose.
     blended: (len(targets),) bool, the targets a move blends through without stopping (a
     program's blend radius > 0); None: a move stops at every target.
     """
     start, _ = pass_bounds(traj.scanning, traj.swath)  # the passes as planned
+    entry = pass_entries(traj)  # where each is entered by a joint move
     swaths = len(np.unique(traj.swath[traj.scanning]))
     # The program's TCP: its path, not the sensor origin's, is flown at the scan speed.
     poses, scanning = traj.poses @ spec.T_sensor_line, traj.scanning
     if targets is not None:
         keep = np.asarray(targets, dtype=np.intp)
-        poses, scanning, start = poses[keep], scanning[keep], start[keep]
+        poses, scanning, start, entry = poses[keep], scanning[keep], start[keep], entry[keep]
         if joints_rad is not None:
             joints_rad = np.asarray(joints_rad, dtype=np.float64)[keep]
     n = len(poses)
@@ -291,7 +292,7 @@ def cycle_time(
         trapezoid_time_s(length, travel_v, accel),
         trapezoid_time_s(turn, limits.angular_speed_deg_s, limits.angular_accel_deg_s2),
     )
-    joint_move = ~in_pass & start[1:] & has_joints
+    joint_move = ~in_pass & entry[1:] & has_joints
     segment_s = np.where(
         joint_move, joint_trap, np.where(has_joints, np.fmax(cartesian, joint_trap), cartesian)
     )

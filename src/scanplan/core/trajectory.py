@@ -135,6 +135,31 @@ def pass_bounds(scanning: np.ndarray, swath: np.ndarray) -> tuple[np.ndarray, np
     return start, end
 
 
+def pass_entries(traj: Trajectory) -> np.ndarray:
+    """(n,) bool: where a program enters each pass by a joint move into the configuration
+    it flies the pass on. The move into a pass (the non-scanning poses just before it, which
+    carry its swath index) is flown on that configuration from its pose farthest from both
+    the pass before and the pass's own first pose: the top of the lead-in, where the arm
+    reconfigures clear of the part rather than beside the surface. A pass no move leads
+    into is entered at its first pose."""
+    start, _ = pass_bounds(traj.scanning, traj.swath)
+    entry = start.copy()
+    pos = traj.positions_mm
+    for s in np.flatnonzero(start):
+        j = s
+        while j > 0 and not traj.scanning[j - 1] and traj.swath[j - 1] == traj.swath[s]:
+            j -= 1
+        if j == s:
+            continue
+        lead = np.arange(j, s)
+        clear = np.linalg.norm(pos[lead] - pos[s], axis=1)
+        if j > 0:  # and from where the pass before ended
+            clear = np.minimum(clear, np.linalg.norm(pos[lead] - pos[j - 1], axis=1))
+        entry[s] = False
+        entry[lead[int(np.argmax(clear))]] = True
+    return entry
+
+
 INT32 = np.iinfo(np.int32)
 
 

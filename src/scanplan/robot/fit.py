@@ -14,14 +14,14 @@ import numpy as np
 
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory
+from scanplan.core.trajectory import Trajectory, pass_entries
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
 from scanplan.robot.links import LinkClearance, LinkReport, check_links, obstacles_for
 from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import ReachReport, check_reach, pass_starts
+from scanplan.robot.reach import ReachReport, check_reach
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
@@ -108,11 +108,11 @@ class RobotFit:
 
 
 def entry_joints_deg(traj: Trajectory, joints: np.ndarray) -> dict[str, list[float]]:
-    """The joints (deg) at each pass's first pose and the path's first reachable one, by
-    pose index: the configurations chosen, which every reader of the plan follows
+    """The joints (deg) where each pass is entered (`pass_entries`) and at the path's first
+    reachable pose, by pose index: the configurations chosen, which every reader of the plan follows
     (`check_reach`'s `entries`) rather than choose again."""
     reached = ~np.isnan(joints).any(axis=1)
-    first = pass_starts(traj.swath, traj.scanning) & reached
+    first = pass_entries(traj) & reached
     first[np.argmax(reached)] = reached.any()
     return {str(i): np.round(np.degrees(joints[i]), 6).tolist() for i in np.flatnonzero(first)}
 
@@ -152,12 +152,14 @@ def fit_to_robot(
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
+        entry = pass_entries(current)
         report = check_reach(
             T_now @ current.poses @ inv_tcp,
             arm,
             swath=current.swath,
             scanning=current.scanning,
             cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
+            entry=entry,
         )
         index = np.flatnonzero(keep)
         why = np.full(len(index), -1)
@@ -167,7 +169,7 @@ def fit_to_robot(
         # move: the pass is split there, as at a flip, and the arm moves between the pieces.
         swings = report.pass_jumps
         if report.reachable and obstacles is not None:
-            starts = pass_starts(current.swath, current.scanning) | axis_steps(current, axes)
+            starts = entry | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
             reverse = round_ < REVERSING_ROUNDS
             traj, reversed_now = _reversed(
@@ -225,16 +227,18 @@ def _verdict(
 ) -> tuple[ReachReport, LinkReport | None]:
     """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
     and in a cell its links along the path and the joint moves into passes."""
+    entry = pass_entries(fitted)
     report = check_reach(
         T_now @ fitted.poses @ inv_tcp,
         arm,
         swath=fitted.swath,
         scanning=fitted.scanning,
         cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
+        entry=entry,
     )
     if obstacles is None:
         return report, None
-    starts = pass_starts(fitted.swath, fitted.scanning) | axis_steps(fitted, axes)
+    starts = entry | axis_steps(fitted, axes)
     return report, check_links(arm, report.joints, obstacles, T_now, starts)
 
 

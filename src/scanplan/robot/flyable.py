@@ -14,7 +14,7 @@ import numpy as np
 
 from scanplan.core.plan import Plan
 from scanplan.core.sensor_spec import SensorSpec
-from scanplan.core.trajectory import Trajectory
+from scanplan.core.trajectory import Trajectory, pass_entries
 from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses
 from scanplan.robot.base import Robot
 from scanplan.robot.links import (
@@ -24,7 +24,7 @@ from scanplan.robot.links import (
     column_clear,
     obstacles_for,
 )
-from scanplan.robot.reach import ReachReport, check_reach, pass_starts
+from scanplan.robot.reach import ReachReport, check_reach
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
 from scanplan.world.collision import checker_for
@@ -111,6 +111,7 @@ def check_flyable(
         obstacles = obstacles_for(part, cell, sensor, clearance)
     T_all = part_poses(T_base_part, traj.external, axes)
     flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    entry = pass_entries(traj)
     reach = check_reach(
         flange,
         arm,
@@ -118,6 +119,7 @@ def check_flyable(
         scanning=traj.scanning,
         cell=LinkClearance(arm, obstacles, T_all),
         entries=entries,
+        entry=entry,
     )
     links = check_links(
         arm,
@@ -125,7 +127,7 @@ def check_flyable(
         obstacles,
         T_all,
         # The joint moves into each pass, and those on which the turntable turns.
-        pass_starts(traj.swath, traj.scanning) | axis_steps(traj, axes),
+        entry | axis_steps(traj, axes),
     )
     touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []

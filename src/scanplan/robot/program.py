@@ -12,6 +12,7 @@ import numpy as np
 
 from scanplan.core.cycle import NOMINAL, CycleTime, MotionLimits, cycle_time
 from scanplan.core.plan import Plan
+from scanplan.core.trajectory import pass_entries
 from scanplan.robot.axes import ExternalAxes, axes_seconds, part_poses, plan_axes
 from scanplan.robot.export import DIRECTORY_FORMATS, FORMATS, ExportOptions, plan_motion
 from scanplan.robot.presets import get_robot, motion_limits
@@ -80,7 +81,12 @@ def arm_joints(plan: Plan) -> np.ndarray | None:
     T_base_flange = T_base_part @ plan.traj.poses @ np.linalg.inv(arm.T_flange_sensor)
     entries = arm.entry_joints(arm.robot, arm.T_base_part, arm.T_flange_sensor)
     report = check_reach(
-        T_base_flange, robot, swath=plan.traj.swath, scanning=plan.traj.scanning, entries=entries
+        T_base_flange,
+        robot,
+        swath=plan.traj.swath,
+        scanning=plan.traj.scanning,
+        entries=entries,
+        entry=pass_entries(plan.traj),
     )
     return report.joints
 

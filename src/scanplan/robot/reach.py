@@ -144,6 +144,29 @@ class ReachReport:
         )
 
 
+def _runs_linked(
+    entry: np.ndarray, swath: np.ndarray | None, scanning: np.ndarray | None, linked: np.ndarray
+) -> np.ndarray:
+    """(n - 1,) True where poses i and i+1 are flown on one branch: within a pass (`linked`),
+    or from a pass's `entry` pose on the move leading into it (the same swath index) to
+    its first pose."""
+    if swath is None or scanning is None:
+        return linked
+    n = len(entry)
+    if entry.shape != (n,) or len(swath) != n:
+        raise ValueError(f"{len(swath)} poses but {entry.shape} entry flags")
+    swath, scanning = np.asarray(swath), np.asarray(scanning, dtype=bool)
+    lead = np.zeros(n, bool)  # poses after an entry, up to its pass's first
+    on = False
+    for i in range(n):
+        if entry[i] and not scanning[i]:
+            on = True
+        elif scanning[i] or (i and swath[i] != swath[i - 1]):
+            on = False
+        lead[i] = on
+    return linked | (lead[:-1] & (lead[1:] | scanning[1:]) & ~entry[1:] & (swath[1:] == swath[:-1]))
+
+
 def _run_ends(linked: np.ndarray) -> np.ndarray:
     """(n,) one past the last pose of the pass (run of `linked` poses) each pose is in."""
     n = len(linked) + 1
@@ -266,6 +289,7 @@ def check_reach(
     jump_deg: float = 30.0,
     cell: CellView | None = None,
     entries: Mapping[int, np.ndarray] | None = None,
+    entry: np.ndarray | None = None,
 ) -> ReachReport:
     """Follow the path through IK and report what would stop or upset a real arm.
 
@@ -273,7 +297,10 @@ def check_reach(
     of it (`_pass_start`; the first reachable pose on the solution closest to `q_start` if
     given), with the arm's links clear of the `cell` along it and on the joint move into
     it if a cell is given; or at the solution nearest the joints `entries` records for its
-    first pose (the configurations a fit chose, as its plan records them). Each next pose
+    first pose (the configurations a fit chose, as its plan records them). entry: (n,)
+    where each pass is entered (`trajectory.pass_entries`: the top of the move leading into
+    it, the move's poses after it flown on the pass's configuration); None: at its first
+    pose. Each next pose
     of a pass takes the in-limit solution closest to the previous one, as a controller
     executing linear moves would. A configuration flip is a sign change of a singularity
     term (wrist, elbow, shoulder) between consecutive poses of one pass (`swath`,
@@ -294,7 +321,9 @@ def check_reach(
     joints = np.full((n, 6), np.nan)
     prev: np.ndarray | None = None if q_start is None else np.asarray(q_start, dtype=float)
     # A pass's configuration is chosen over the whole pass, where a program enters it by a
-    # joint move: the branch that flies most of it from its start.
+    # joint move: the branch that flies most of it from its start (or from its lead-in's).
+    if entry is not None:
+        linked = _runs_linked(np.asarray(entry, dtype=bool), swath, scanning, linked)
     entered = np.r_[True, ~linked]
     pinned = q_start is not None
     last = -1  # the pose `prev` is the joints of (-1: none, or `q_start`)

@@ -145,24 +145,29 @@ def test_a_move_between_passes_is_blended_but_not_into_a_joint_move() -> None:
     traj = _lifted_move()
     options = ExportOptions(scan=ScanSpec(clearance_mm=20.0))
     m = plan_motion(traj, options)
-    np.testing.assert_array_equal(m.source, [0, 2, 3, 5, 6, 8])
-    # The two 90° corners of the move: cut by the clearance's share, r·sin 45° = 5 mm.
+    # Pass 1 is entered at the top of its move, farthest from both passes: pose 4 stays.
+    assert m.entry is not None
+    np.testing.assert_array_equal(m.source[m.entry], [0, 4])
+    np.testing.assert_array_equal(m.source, [0, 2, 3, 4, 5, 6, 8])
+    # The two 90° corners of the move: cut by the clearance's share, r·sin 45° = 5 mm; the
+    # straight entry by the move blend, half the 150 mm either side at most.
     r = 5.0 / np.sin(np.pi / 4)
-    np.testing.assert_allclose(m.blend_mm, [0, 0, r, r, 0, 0])
+    np.testing.assert_allclose(m.blend_mm, [0, 0, r, MOVE_BLEND_MM, r, 0, 0])
     # Capped by the largest move blend asked for, and by default at MOVE_BLEND_MM.
     small = plan_motion(traj, ExportOptions(scan=options.scan, move_blend_mm=3.0))
-    np.testing.assert_allclose(small.blend_mm, [0, 0, 3, 3, 0, 0])
+    np.testing.assert_allclose(small.blend_mm, [0, 0, 3, 3, 3, 0, 0])
     assert options.move_blend_mm == MOVE_BLEND_MM > r
-    # With the arm's joints the program enters pass 1 by a joint move: it starts standing.
+    # With the arm's joints the program enters pass 1 by a joint move into pose 4: it
+    # starts and ends standing, then flies down into the pass linearly.
     joints = np.zeros((len(traj), 6))
     jm = plan_motion(traj, ExportOptions(scan=options.scan, joints_rad=joints))
-    np.testing.assert_allclose(jm.blend_mm, [0, 0, r, 0, 0, 0])
+    np.testing.assert_allclose(jm.blend_mm, [0, 0, 0, 0, r, 0, 0])
     # Where the joints are unknown there is no joint move, and the blend stays.
-    joints[6] = np.nan
+    joints[4] = np.nan
     np.testing.assert_allclose(
         plan_motion(traj, ExportOptions(scan=options.scan, joints_rad=joints)).blend_mm,
-        [0, 0, r, r, 0, 0],
+        [0, 0, r, MOVE_BLEND_MM, r, 0, 0],
     )
-    # No clearance, no room to cut a corner: exact stops.
+    # No clearance, no room to cut a corner: exact stops (a straight via point cuts none).
     tight = plan_motion(traj, ExportOptions(scan=ScanSpec(clearance_mm=0.0)))
-    np.testing.assert_array_equal(tight.blend_mm, 0.0)
+    np.testing.assert_array_equal(tight.blend_mm, [0, 0, 0, MOVE_BLEND_MM, 0, 0, 0])

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.core.plan import Plan
-from scanplan.core.trajectory import Trajectory
+from scanplan.core.trajectory import Trajectory, pass_entries
 from scanplan.judging.report.scene_axes import axis_capsules
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses, plan_axes, with_disk
@@ -104,6 +104,7 @@ def check_arm(
     cell = with_disk(cell, axes)
     # The links keep the clearance the plan was made with, as the sensor does.
     obstacles = obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm)
+    entry = pass_entries(traj)
     reach = check_reach(
         T_base_flange,
         arm,
@@ -111,13 +112,14 @@ def check_arm(
         scanning=traj.scanning,
         cell=LinkClearance(arm, obstacles, T_all),
         entries=entries,
+        entry=entry,
     )
     links = check_links(
         arm,
         reach.joints,
         obstacles,
         T_all,
-        pass_starts(traj.swath, traj.scanning) | axis_steps(traj, axes),
+        entry | axis_steps(traj, axes),
     )
     unreachable = np.zeros(len(traj), dtype=bool)
     unreachable[np.r_[reach.unreachable, reach.limit_violations].astype(int)] = True

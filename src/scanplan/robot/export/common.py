@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory, pass_bounds
+from scanplan.core.trajectory import Trajectory, pass_bounds, pass_entries
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.export.thinning import thin
 
@@ -222,6 +222,8 @@ class Motion:
     axis_step:  (n,) bool, targets reached by a joint move on which the turntable turns (the
                 arm stands still before it; the first target of each view).
     axes:       the external axes (None: none).
+    entry:      (n,) bool, the targets each pass is entered at by a joint move
+                (`trajectory.pass_entries`: the top of its lead-in, or its first pose).
     """
 
     poses: np.ndarray
@@ -239,6 +241,7 @@ class Motion:
     external: np.ndarray | None = None
     axis_step: np.ndarray | None = None
     axes: ExternalAxes | None = None
+    entry: np.ndarray | None = None
 
     def part_poses(self) -> np.ndarray:
         """(n, 4, 4) `T_base_part` at each target (the part moved by the axes)."""
@@ -261,16 +264,17 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
             "made with a positioner or track exports with them)"
         )
     step = axis_steps(traj, options.axes)
+    entry = pass_entries(traj)
     keep = thin(
         tcp_part,
-        start | end | step | np.r_[step[1:], False],
+        start | end | entry | step | np.r_[step[1:], False],
         options.chord_tol,
         options.angle_tol_rad,
     )
     poses_part = tcp_part[keep]
     poses = kept(part_poses(options.part_pose, traj.external, options.axes), keep) @ poses_part
     scanning, start, end = traj.scanning[keep], start[keep], end[keep]
-    step = step[keep]
+    step, entry = step[keep], entry[keep]
     # Entering a pass is still a travel move; only moves between two recorded poses scan.
     speed = np.where(scanning & ~start, options.scan_speed, options.travel_speed_mm_s)
     # Exact stops where the acquisition switches, at the ends of the program, and where a
@@ -281,8 +285,9 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
     )
     if options.joints_rad is not None:
         joints = np.asarray(options.joints_rad, dtype=np.float64)[keep]
-        into = start[1:] & np.isfinite(joints[1:]).all(axis=1)
+        into = entry[1:] & np.isfinite(joints[1:]).all(axis=1)
         stop[:-1] |= into
+        stop[1:] |= into  # the joint move ends standing, then flies the lead-in linearly
     return Motion(
         poses,
         scanning,
@@ -299,6 +304,7 @@ def plan_motion(traj: Trajectory, options: ExportOptions) -> Motion:
         None if traj.external is None else traj.external[keep],
         step,
         options.axes,
+        entry,
     )
 
 
@@ -422,12 +428,14 @@ def target_joints(motion: Motion, options: ExportOptions) -> np.ndarray | None:
 
 def joint_move_targets(motion: Motion, options: ExportOptions) -> dict[int, np.ndarray]:
     """{target index: joint angles (6,) rad} where the program moves by joint: its first
-    target and the first of every pass, when the options carry the arm's joints."""
+    target and where every pass is entered (`Motion.entry`), when the options carry the
+    arm's joints."""
     joints = target_joints(motion, options)
     if joints is None:
         return {}
     step = np.zeros(len(motion.poses), bool) if motion.axis_step is None else motion.axis_step
-    where = np.flatnonzero(motion.pass_start | step | (np.arange(len(motion.poses)) == 0))
+    entry = motion.pass_start if motion.entry is None else motion.entry
+    where = np.flatnonzero(entry | step | (np.arange(len(motion.poses)) == 0))
     return {int(i): joints[i] for i in where if np.isfinite(joints[i]).all()}
 
 
