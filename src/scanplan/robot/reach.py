@@ -300,13 +300,12 @@ def check_reach(
     first pose (the configurations a fit chose, as its plan records them). entry: (n,)
     where each pass is entered (`trajectory.pass_entries`: the top of the move leading into
     it, the move's poses after it flown on the pass's configuration); None: at its first
-    pose. Each next pose
-    of a pass takes the in-limit solution closest to the previous one, as a controller
-    executing linear moves would. A configuration flip is a sign change of a singularity
-    term (wrist, elbow, shoulder) between consecutive poses of one pass (`swath`,
-    `scanning`; without them the whole path is one pass): the path went through that
-    singularity. A jump is any joint
-    turning more than `jump_deg` between consecutive poses.
+    pose. Each next pose of a pass takes the in-limit solution closest to the previous one,
+    as a controller executing linear moves would. A configuration flip is a sign change of
+    a singularity term (wrist, elbow, shoulder) between consecutive poses of one pass
+    (`swath`, `scanning`; without them the whole path is one pass): the path went through
+    that singularity. A jump is any joint turning more than `jump_deg` between consecutive
+    poses.
     """
     arm = get_robot(robot)
     poses = np.asarray(T_base_flange, dtype=np.float64)
@@ -322,12 +321,14 @@ def check_reach(
     prev: np.ndarray | None = None if q_start is None else np.asarray(q_start, dtype=float)
     # A pass's configuration is chosen over the whole pass, where a program enters it by a
     # joint move: the branch that flies most of it from its start (or from its lead-in's).
+    # Flips and jumps count within a pass only (`linked`); a lead-in is a move.
+    followed = linked
     if entry is not None:
-        linked = _runs_linked(np.asarray(entry, dtype=bool), swath, scanning, linked)
-    entered = np.r_[True, ~linked]
+        followed = _runs_linked(np.asarray(entry, dtype=bool), swath, scanning, linked)
+    entered = np.r_[True, ~followed]
     pinned = q_start is not None
     last = -1  # the pose `prev` is the joints of (-1: none, or `q_start`)
-    end = _run_ends(linked)
+    end = _run_ends(followed)
     # Sequential by nature (each pose's branch depends on the previous choice), but within a
     # pass the choice follows one branch: checked for a whole run at once (`_follow`).
     i = 0
