@@ -103,7 +103,8 @@ class _ArmJson(BaseModel):
     robot: str = Field(min_length=1)
     T_base_part: Matrix4
     T_flange_sensor: Matrix4
-    # Each pass's first pose (its index) and the arm's joints there (deg): its configuration.
+    # Where each pass is entered (a pose index) and the arm's joints there (deg): the
+    # configuration it is flown on.
     pass_entry_joints_deg: dict[PoseIndex, Joints6] | None = None
 
 
@@ -135,10 +136,10 @@ class ArmRecord:
     def entry_joints(
         self, robot: str, T_base_part: np.ndarray, T_flange_sensor: np.ndarray
     ) -> dict[int, np.ndarray] | None:
-        """The joints (rad) the fit entered each pass with, by the pass's first pose: the
-        configurations chosen, for this arm standing where the plan put it and holding the
-        sensor as planned; None for another arm, pose or TCP (their own choice), or a file
-        that records none."""
+        """The joints (rad) the fit entered each pass with, by the pose it is entered at
+        (`trajectory.pass_entries`): the configurations chosen, for this arm standing where
+        the plan put it and holding the sensor as planned; None for another arm, pose or TCP
+        (their own choice), or a file that records none."""
         entries = self.record.get("pass_entry_joints_deg")
         if (
             entries is None

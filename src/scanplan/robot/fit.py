@@ -109,8 +109,8 @@ class RobotFit:
 
 def entry_joints_deg(traj: Trajectory, joints: np.ndarray) -> dict[str, list[float]]:
     """The joints (deg) where each pass is entered (`pass_entries`) and at the path's first
-    reachable pose, by pose index: the configurations chosen, which every reader of the plan follows
-    (`check_reach`'s `entries`) rather than choose again."""
+    reachable pose, by pose index: the configurations chosen, which every reader of the
+    plan follows (`check_reach`'s `entries`) rather than choose again."""
     reached = ~np.isnan(joints).any(axis=1)
     first = pass_entries(traj) & reached
     first[np.argmax(reached)] = reached.any()
