@@ -133,9 +133,8 @@ def test_a_move_that_turns_is_timed_by_its_rotation() -> None:
 
 
 def test_a_joint_move_is_timed_by_its_slowest_joint() -> None:
-    """With joints known, pass 1 is entered by a joint move at the top of the move into it
-    (its first via point, as far from both passes as the second): joint 2 turns 90° at
-    30°/s (accel 60°/s²), so it sets that segment's time, not the Cartesian path."""
+    """With joints known, the move into pass 1 is a joint move: joint 2 turns 90° at
+    30°/s (accel 60°/s²), so it sets the time, not the Cartesian path."""
     traj = two_passes_and_a_move()
     limits = replace(
         FAST,
@@ -143,21 +142,40 @@ def test_a_joint_move_is_timed_by_its_slowest_joint() -> None:
         joint_speed_deg_s=(180.0, 30.0, 180.0, 180.0, 180.0, 180.0),
         joint_accel_deg_s2=(360.0, 60.0, 360.0, 360.0, 360.0, 360.0),
     )
+    q = np.zeros((len(traj), 6))
+    q[5:, 1] = np.radians(90.0)  # the move's last segment turns joint 2 by 90°
+    q[5:, 0] = np.radians(10.0)  # joint 1 turns too, but faster
+    ct = cycle_time(traj, spec_at(100.0), limits, joints_rad=q)
+    a = limits.accel_mm_s2
+    cartesian_before = 100.0 / 250.0 + 250.0 / a + 300.0 / 250.0 + 250.0 / a
+    assert ct.move_s[0] == pytest.approx(cartesian_before + 90.0 / 30.0 + 30.0 / 60.0)
+    assert ct.joint_moves == 1 and "1 joint moves" in ct.line()
+    # Unknown joints (NaN) fall back to the Cartesian time.
+    q[5] = np.nan
+    fallback = cycle_time(traj, spec_at(100.0), limits, joints_rad=q)
+    assert fallback.joint_moves == 0
+    assert fallback.move_s[0] == pytest.approx(cartesian_before + 100.0 / 250.0 + 250.0 / a)
+
+
+def test_a_pass_the_plan_enters_at_the_top_of_its_move_is_timed_so() -> None:
+    """Where the plan records pass 1 entered at the first via point of the move into it
+    (the fit's choice), the joint move is the segment into that point."""
+    record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "3": [0.0] * 6}}
+    traj = replace(two_passes_and_a_move(), meta={"robot": record})
     np.testing.assert_array_equal(np.flatnonzero(pass_entries(traj)), [0, 3])
+    limits = replace(
+        FAST,
+        name="slow-j2",
+        joint_speed_deg_s=(180.0, 30.0, 180.0, 180.0, 180.0, 180.0),
+        joint_accel_deg_s2=(360.0, 60.0, 360.0, 360.0, 360.0, 360.0),
+    )
     q = np.zeros((len(traj), 6))
     q[3:, 1] = np.radians(90.0)  # the move's first segment turns joint 2 by 90°
-    q[3:, 0] = np.radians(10.0)  # joint 1 turns too, but faster
     ct = cycle_time(traj, spec_at(100.0), limits, joints_rad=q)
     a = limits.accel_mm_s2
     cartesian_after = 300.0 / 250.0 + 250.0 / a + 100.0 / 250.0 + 250.0 / a
     assert ct.move_s[0] == pytest.approx(90.0 / 30.0 + 30.0 / 60.0 + cartesian_after)
-    assert ct.joint_moves == 1 and "1 joint moves" in ct.line()
-    cartesian_before = 100.0 / 250.0 + 250.0 / a + 300.0 / 250.0 + 250.0 / a
-    # Unknown joints (NaN) fall back to the Cartesian time.
-    q[3] = np.nan
-    fallback = cycle_time(traj, spec_at(100.0), limits, joints_rad=q)
-    assert fallback.joint_moves == 0
-    assert fallback.move_s[0] == pytest.approx(cartesian_before + 100.0 / 250.0 + 250.0 / a)
+    assert ct.joint_moves == 1
 
 
 def test_a_program_stops_only_at_its_targets() -> None:

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from helpers import FAST, JSON_VALUES, one_line_or_ok
 from scanplan.core.plan_file import read_csv, read_json, read_trajectory, write_csv, write_json
-from scanplan.core.trajectory import Trajectory, pass_entries
+from scanplan.core.trajectory import Trajectory, lead_tops, pass_entries
 from scanplan.planning.swaths import Swath
 
 
@@ -146,7 +146,7 @@ def test_trajectory_json_of_arbitrary_values(tmp_path, doc):
     one_line_or_ok(read_trajectory, path)
 
 
-def test_a_pass_is_entered_at_the_top_of_the_move_into_it():
+def test_the_top_of_the_move_into_a_pass_and_where_a_plan_enters_it():
     # Pass 0, a move up 100, over 300 in three steps and down 100 (carrying pass 1's index),
     # pass 1; then pass 2 straight after pass 1, with no move of its own.
     xyz = [[0, 0, 0], [200, 0, 0]]
@@ -156,10 +156,16 @@ def test_a_pass_is_entered_at_the_top_of_the_move_into_it():
     poses[:, :3, 3] = xyz
     swath = [0, 0, 1, 1, 1, 1, 1, 1, 2, 2]
     scanning = [True, True, False, False, False, False, True, True, True, True]
-    entry = pass_entries(Trajectory(poses, swath, scanning))
+    traj = Trajectory(poses, swath, scanning)
+    top = lead_tops(traj)
     # The via point farthest from both passes: (200, 100, 100) and (200, 200, 100) tie at
-    # 141 mm; the first is taken. A pass no move leads into is entered at its first pose.
-    np.testing.assert_array_equal(np.flatnonzero(entry), [0, 3, 8])
-    # A plan that starts with a move: entered where the move is farthest from the pass.
+    # 141 mm; the first is taken. A pass no move leads into is its own top.
+    assert {int(i): int(t) for i, t in enumerate(top) if t >= 0} == {0: 0, 6: 3, 8: 8}
+    # A plan that starts with a move: its top is where the move is farthest from the pass.
     start = Trajectory(poses[2:], swath[2:], scanning[2:])
-    np.testing.assert_array_equal(np.flatnonzero(pass_entries(start)), [0, 6])
+    assert lead_tops(start)[4] == 0
+    # Entered at each pass's first pose, unless the plan's arm record says where.
+    np.testing.assert_array_equal(np.flatnonzero(pass_entries(traj)), [0, 6, 8])
+    record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "3": [0.0] * 6, "8": [0.0] * 6}}
+    entered = Trajectory(poses, swath, scanning, meta={"robot": record})
+    np.testing.assert_array_equal(np.flatnonzero(pass_entries(entered)), [0, 3, 8])

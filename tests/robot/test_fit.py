@@ -281,3 +281,24 @@ def test_a_reversed_pass_takes_its_external_axis_values_along():
     out, _ = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, flipped)
     assert out.external is not None
     np.testing.assert_array_equal(out.external[:, 0], [0, 1, 2, 3, 4, 5, 10, 9, 8, 7, 6])
+
+
+def test_a_pass_whose_move_in_hits_the_cell_is_entered_at_the_top_of_its_move_first():
+    # Pass 0 (poses 0-4), the move into pass 1 (poses 5-6, up and over), pass 1 (7-10).
+    swath = np.array([0] * 5 + [1] * 6)
+    scanning = np.array([True] * 5 + [False] * 2 + [True] * 4)
+    poses = np.tile(np.eye(4), (11, 1, 1))
+    poses[:, 0, 3] = np.arange(11.0)
+    poses[5:7, 2, 3] = 100.0
+    traj = Trajectory(poses, swath, scanning)
+    index, raised = np.arange(11), np.zeros(11, bool)
+    assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, 7]
+    # The joint move into pass 1's first pose hits: the pass is entered at its top instead.
+    left, lifted = fit_module._lifted(traj, index, {7: (0, 0)}, raised)
+    assert lifted and left == {} and np.flatnonzero(raised).tolist() == [7]
+    top = int(fit_module.lead_tops(traj)[7])
+    assert top in (5, 6)
+    assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, top]
+    # Its move in hits from the top too: left to be flown the other way or given up.
+    left, lifted = fit_module._lifted(traj, index, {top: (0, 0)}, raised)
+    assert not lifted and left == {top: (0, 0)}

@@ -135,28 +135,43 @@ def pass_bounds(scanning: np.ndarray, swath: np.ndarray) -> tuple[np.ndarray, np
     return start, end
 
 
-def pass_entries(traj: Trajectory) -> np.ndarray:
-    """(n,) bool: where a program enters each pass by a joint move into the configuration
-    it flies the pass on. The move into a pass (the non-scanning poses just before it, which
-    carry its swath index) is flown on that configuration from its pose farthest from both
-    the pass before and the pass's own first pose: the top of the lead-in, where the arm
-    reconfigures clear of the part rather than beside the surface. A pass no move leads
-    into is entered at its first pose."""
+def lead_tops(traj: Trajectory) -> np.ndarray:
+    """(n,) int: for each pass's first pose, the top of the move leading into it (its
+    non-scanning poses just before it, which carry its swath index): the via point farthest
+    from both the pass before and the pass's own first pose, where an arm reconfigures clear
+    of the part rather than beside the surface; the pass's first pose itself when no move
+    leads in. -1 at every other pose."""
     start, _ = pass_bounds(traj.scanning, traj.swath)
-    entry = start.copy()
+    top = np.full(len(traj), -1)
     pos = traj.positions_mm
     for s in np.flatnonzero(start):
         j = s
         while j > 0 and not traj.scanning[j - 1] and traj.swath[j - 1] == traj.swath[s]:
             j -= 1
+        top[s] = s
         if j == s:
             continue
         lead = np.arange(j, s)
         clear = np.linalg.norm(pos[lead] - pos[s], axis=1)
         if j > 0:  # and from where the pass before ended
             clear = np.minimum(clear, np.linalg.norm(pos[lead] - pos[j - 1], axis=1))
-        entry[s] = False
-        entry[lead[int(np.argmax(clear))]] = True
+        top[s] = lead[int(np.argmax(clear))]
+    return top
+
+
+def pass_entries(traj: Trajectory) -> np.ndarray:
+    """(n,) bool: where a program enters a pass by a joint move into the configuration it
+    flies the pass on: where the plan's arm record says (`pass_entry_joints_deg`, chosen by
+    the fit: a pass's first pose, or the top of the move into it, `lead_tops`, where a joint
+    move beside the surface would sweep a link into the part); each pass's first pose for a
+    plan that records none."""
+    start, _ = pass_bounds(traj.scanning, traj.swath)
+    recorded = (traj.meta.get("robot") or {}).get("pass_entry_joints_deg")
+    if not isinstance(recorded, dict):
+        return start
+    entry = np.zeros(len(traj), bool)
+    at = [int(k) for k in recorded if str(k).isdigit() and int(k) < len(traj)]
+    entry[at] = True
     return entry
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory, pass_entries
+from scanplan.core.trajectory import Trajectory, lead_tops
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
@@ -78,6 +78,7 @@ class RobotFit:
     given_up_by_cause: dict[int, dict[str, int]] = field(default_factory=dict)
     beyond_reach_mm: float | None = None
     reversed: int = 0
+    entry: np.ndarray | None = None  # (n,) where the path and each pass are entered
 
     @property
     def flyable(self) -> bool:
@@ -103,18 +104,34 @@ class RobotFit:
             "reachable": self.report.reachable,
             "links_checked": self.links is not None,
             "flyable": self.flyable,
-            "pass_entry_joints_deg": entry_joints_deg(self.traj, self.report.joints),
+            "pass_entry_joints_deg": entry_joints_deg(
+                entries_of(self.traj, np.zeros(len(self.traj), bool))
+                if self.entry is None
+                else self.entry,
+                self.report.joints,
+            ),
         }
 
 
-def entry_joints_deg(traj: Trajectory, joints: np.ndarray) -> dict[str, list[float]]:
-    """The joints (deg) where each pass is entered (`pass_entries`) and at the path's first
-    reachable pose, by pose index: the configurations chosen, which every reader of the
-    plan follows (`check_reach`'s `entries`) rather than choose again."""
-    reached = ~np.isnan(joints).any(axis=1)
-    first = pass_entries(traj) & reached
-    first[np.argmax(reached)] = reached.any()
-    return {str(i): np.round(np.degrees(joints[i]), 6).tolist() for i in np.flatnonzero(first)}
+def entry_joints_deg(entry: np.ndarray, joints: np.ndarray) -> dict[str, list[float]]:
+    """The joints (deg) where the path and each pass are entered (`entry`), by pose index:
+    where the program makes its joint moves and the configurations chosen, which every
+    reader of the plan follows (`trajectory.pass_entries`, `check_reach`'s `entries`)
+    rather than choose again."""
+    at = np.flatnonzero(entry & ~np.isnan(joints).any(axis=1))
+    return {str(i): np.round(np.degrees(joints[i]), 6).tolist() for i in at}
+
+
+def entries_of(traj: Trajectory, raised: np.ndarray) -> np.ndarray:
+    """(n,) bool: where the path and each of its passes are entered by a joint move: its
+    first pose, and each pass's first pose or, where `raised` (n,) marks that pose, the top
+    of the move leading into it (`lead_tops`)."""
+    top = lead_tops(traj)
+    first = np.flatnonzero(top >= 0)
+    entry = np.zeros(len(traj), bool)
+    entry[np.where(raised[first], top[first], first)] = True
+    entry[:1] = True
+    return entry
 
 
 def fit_to_robot(
@@ -133,8 +150,9 @@ def fit_to_robot(
     check of the whole path finds neither. First, each pass is turned half a turn about the
     beam where the arm keeps more of its poses that way. In a cell (`obstacles`), poses that
     put an arm link into the part, a fixture or the table are given up too; a pass whose
-    joint move in would sweep a link through them is flown the other way, and given up if
-    that move does too. With external `axes`, each pose is flown with the part where its
+    joint move in would sweep a link through them is entered at the top of the move
+    leading into it instead (the arm reconfigures there), then flown the other way, and
+    given up if that move does too. With external `axes`, each pose is flown with the part where its
     values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
@@ -149,10 +167,13 @@ def fit_to_robot(
     swath = traj.swath.copy()
     splits = 0
     flipped = np.zeros(len(traj), bool)  # the poses of passes flown the other way
+    # The first poses of passes entered at the top of the move into them, not beside the
+    # surface: those whose joint move in swept a link into the cell.
+    raised = np.zeros(len(traj), bool)
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
-        entry = pass_entries(current)
+        entry = entries_of(current, raised[keep])
         report = check_reach(
             T_now @ current.poses @ inv_tcp,
             arm,
@@ -171,17 +192,17 @@ def fit_to_robot(
         if report.reachable and obstacles is not None:
             starts = entry | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
+            moves, lifted = _lifted(current, index, in_cell.moves, raised)
             reverse = round_ < REVERSING_ROUNDS
-            traj, reversed_now = _reversed(
-                traj, current, index, in_cell.moves, why, flipped, reverse
-            )
+            traj, reversed_now = _reversed(traj, current, index, moves, why, flipped, reverse)
             if reversed_now:
                 T_all = part_poses(T_base_part, traj.external, axes)
             hit = in_cell.colliding
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
-            reversed_now = False
-        if report.reachable and not len(swings) and (why < 0).all() and not reversed_now:
+            reversed_now = lifted = False
+        done = not (len(swings) or reversed_now or lifted)
+        if report.reachable and done and (why < 0).all():
             break
         bad = np.flatnonzero(why >= 0)
         keep[index[bad]] = False
@@ -200,7 +221,8 @@ def fit_to_robot(
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
-    report, links = _verdict(fitted, arm, kept(T_all, keep), inv_tcp, obstacles, axes)
+    entry = entries_of(fitted, raised[keep])
+    report, links = _verdict(fitted, arm, kept(T_all, keep), inv_tcp, obstacles, axes, entry)
     return RobotFit(
         fitted,
         T_base_part,
@@ -214,6 +236,7 @@ def fit_to_robot(
         by_cause,
         beyond_mm,
         reversed_passes,
+        entry=entry,
     )
 
 
@@ -224,10 +247,11 @@ def _verdict(
     inv_tcp: np.ndarray,
     obstacles: CellObstacles | None,
     axes: ExternalAxes | None,
+    entry: np.ndarray,
 ) -> tuple[ReachReport, LinkReport | None]:
     """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
-    and in a cell its links along the path and the joint moves into passes."""
-    entry = pass_entries(fitted)
+    each pass entered where `entry` says, and in a cell its links along the path and the
+    joint moves into passes."""
     report = check_reach(
         T_now @ fitted.poses @ inv_tcp,
         arm,
@@ -269,6 +293,24 @@ def _beyond_reach_mm(
         return None
     flange_xy = (kept(T_all, far) @ traj.poses[far] @ inv_tcp)[:, :2, 3]
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
+
+
+def _lifted(
+    current: Trajectory, index: np.ndarray, moves: dict[int, tuple[int, int]], raised: np.ndarray
+) -> tuple[dict[int, tuple[int, int]], bool]:
+    """The joint `moves` into passes of `current` (the kept poses of the fit's plan, at
+    `index`) that sweep a link into the cell, less those of passes entered at their first
+    pose with a move leading into them: those are entered at the top of it from now on
+    (marked in `raised`, by their first pose). Returns the moves left, and whether any was
+    lifted."""
+    top = lead_tops(current)
+    left = {}
+    for i, hit in moves.items():
+        if current.scanning[i] and top[i] != i:
+            raised[index[i]] = True
+        else:
+            left[i] = hit
+    return left, len(left) < len(moves)
 
 
 def _reversed(

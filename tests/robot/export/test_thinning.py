@@ -4,6 +4,8 @@ pose; blends cut it by no more than the chord tolerance and never overlap."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -15,7 +17,12 @@ from helpers import FAST, snake_trajectory
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.export import ExportOptions
-from scanplan.robot.export.common import MOVE_BLEND_MM, MOVE_CUT_SHARE, plan_motion
+from scanplan.robot.export.common import (
+    MOVE_BLEND_MM,
+    MOVE_CUT_SHARE,
+    joint_move_targets,
+    plan_motion,
+)
 from scanplan.robot.export.thinning import interp_params, thin_run
 
 TRAJ = snake_trajectory()
@@ -145,29 +152,40 @@ def test_a_move_between_passes_is_blended_but_not_into_a_joint_move() -> None:
     traj = _lifted_move()
     options = ExportOptions(scan=ScanSpec(clearance_mm=20.0))
     m = plan_motion(traj, options)
-    # Pass 1 is entered at the top of its move, farthest from both passes: pose 4 stays.
-    assert m.entry is not None
-    np.testing.assert_array_equal(m.source[m.entry], [0, 4])
-    np.testing.assert_array_equal(m.source, [0, 2, 3, 4, 5, 6, 8])
-    # The two 90° corners of the move: cut by the clearance's share, r·sin 45° = 5 mm; the
-    # straight entry by the move blend, half the 150 mm either side at most.
+    np.testing.assert_array_equal(m.source, [0, 2, 3, 5, 6, 8])
+    # The two 90° corners of the move: cut by the clearance's share, r·sin 45° = 5 mm.
     r = 5.0 / np.sin(np.pi / 4)
-    np.testing.assert_allclose(m.blend_mm, [0, 0, r, MOVE_BLEND_MM, r, 0, 0])
+    np.testing.assert_allclose(m.blend_mm, [0, 0, r, r, 0, 0])
     # Capped by the largest move blend asked for, and by default at MOVE_BLEND_MM.
     small = plan_motion(traj, ExportOptions(scan=options.scan, move_blend_mm=3.0))
-    np.testing.assert_allclose(small.blend_mm, [0, 0, 3, 3, 3, 0, 0])
+    np.testing.assert_allclose(small.blend_mm, [0, 0, 3, 3, 0, 0])
     assert options.move_blend_mm == MOVE_BLEND_MM > r
-    # With the arm's joints the program enters pass 1 by a joint move into pose 4: it
-    # starts and ends standing, then flies down into the pass linearly.
+    # With the arm's joints the program enters pass 1 by a joint move: it starts standing.
     joints = np.zeros((len(traj), 6))
     jm = plan_motion(traj, ExportOptions(scan=options.scan, joints_rad=joints))
-    np.testing.assert_allclose(jm.blend_mm, [0, 0, 0, 0, r, 0, 0])
+    np.testing.assert_allclose(jm.blend_mm, [0, 0, r, 0, 0, 0])
     # Where the joints are unknown there is no joint move, and the blend stays.
-    joints[4] = np.nan
+    joints[6] = np.nan
     np.testing.assert_allclose(
         plan_motion(traj, ExportOptions(scan=options.scan, joints_rad=joints)).blend_mm,
-        [0, 0, r, MOVE_BLEND_MM, r, 0, 0],
+        [0, 0, r, r, 0, 0],
     )
-    # No clearance, no room to cut a corner: exact stops (a straight via point cuts none).
+    # No clearance, no room to cut a corner: exact stops.
     tight = plan_motion(traj, ExportOptions(scan=ScanSpec(clearance_mm=0.0)))
-    np.testing.assert_array_equal(tight.blend_mm, [0, 0, 0, MOVE_BLEND_MM, 0, 0, 0])
+    np.testing.assert_array_equal(tight.blend_mm, 0.0)
+
+
+def test_a_pass_the_plan_enters_at_the_top_of_its_move_is_entered_there() -> None:
+    # The fit recorded pass 1's entry at the top of the move into it (pose 4), where the arm
+    # reconfigures clear of the part: a target, where the joint move ends standing.
+    traj = _lifted_move()
+    record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "4": [0.0] * 6}}
+    traj = replace(traj, meta={"robot": record})
+    options = ExportOptions(scan=ScanSpec(clearance_mm=20.0), joints_rad=np.zeros((9, 6)))
+    m = plan_motion(traj, options)
+    assert m.entry is not None
+    np.testing.assert_array_equal(m.source, [0, 2, 3, 4, 5, 6, 8])
+    np.testing.assert_array_equal(m.source[m.entry], [0, 4])
+    r = 5.0 / np.sin(np.pi / 4)
+    np.testing.assert_allclose(m.blend_mm, [0, 0, 0, 0, r, 0, 0])
+    assert sorted(joint_move_targets(m, options)) == [0, 3]
