@@ -169,3 +169,7 @@ def test_the_top_of_the_move_into_a_pass_and_where_a_plan_enters_it():
     record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "3": [0.0] * 6, "8": [0.0] * 6}}
     entered = Trajectory(poses, swath, scanning, meta={"robot": record})
     np.testing.assert_array_equal(np.flatnonzero(pass_entries(entered)), [0, 3, 8])
+    # A part of the plan has other pose indices: it enters at each pass's first pose.
+    part = entered.subset(np.arange(len(entered)) >= 2)
+    assert "pass_entry_joints_deg" not in part.meta["robot"]
+    np.testing.assert_array_equal(np.flatnonzero(pass_entries(part)), [4, 6])

@@ -86,15 +86,22 @@ class Trajectory:
 
     def subset(self, keep: np.ndarray, swath: np.ndarray | None = None) -> Trajectory:
         """The poses where `keep` (n,) is True, with the pass indices `swath` (n,) if given
-        (renumbered ones), else their own; times and records unchanged."""
+        (renumbered ones), else their own; times and records unchanged, but for where an
+        arm record says passes are entered (by pose index: of the whole plan, not of this)."""
         swath = self.swath if swath is None else swath
         external = None if self.external is None else self.external[keep]
+        meta = self.meta
+        robot = meta.get("robot")
+        if isinstance(robot, dict) and "pass_entry_joints_deg" in robot:
+            rest = {k: v for k, v in robot.items() if k != "pass_entry_joints_deg"}
+            meta = meta | {"robot": rest}
         return replace(
             self,
             poses=self.poses[keep],
             swath=swath[keep],
             scanning=self.scanning[keep],
             external=external,
+            meta=meta,
         )
 
     def path_length_mm(self, scanning_only: bool = False) -> float:
