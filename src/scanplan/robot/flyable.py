@@ -82,6 +82,35 @@ def stands_clear(
     return bool(column_clear(arm, T, obstacles.table_block, obstacles.clearance_mm).all())
 
 
+def arm_along(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    T_flange_sensor: np.ndarray,
+    obstacles: CellObstacles,
+    axes: ExternalAxes | None = None,
+    entries: Mapping[int, np.ndarray] | None = None,
+) -> tuple[ReachReport, LinkReport]:
+    """The arm's reach along `traj` (each pass entered where the plan enters it,
+    `pass_entries`, on the joints `entries` gives or else on a configuration that keeps
+    the links clear) and its links in the cell at every pose and on every joint move: into
+    each pass, and where the turntable turns."""
+    T_all = part_poses(T_base_part, traj.external, axes)
+    flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
+    entry = pass_entries(traj)
+    reach = check_reach(
+        flange,
+        arm,
+        swath=traj.swath,
+        scanning=traj.scanning,
+        cell=LinkClearance(arm, obstacles, T_all),
+        entries=entries,
+        entry=entry,
+    )
+    links = check_links(arm, reach.joints, obstacles, T_all, entry | axis_steps(traj, axes))
+    return reach, links
+
+
 def check_flyable(
     traj: Trajectory,
     arm: Robot,
@@ -109,26 +138,7 @@ def check_flyable(
         entries = plan.arm.entry_joints(arm.name, T_base_part, T_flange_sensor)
     if obstacles is None:
         obstacles = obstacles_for(part, cell, sensor, clearance)
-    T_all = part_poses(T_base_part, traj.external, axes)
-    flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
-    entry = pass_entries(traj)
-    reach = check_reach(
-        flange,
-        arm,
-        swath=traj.swath,
-        scanning=traj.scanning,
-        cell=LinkClearance(arm, obstacles, T_all),
-        entries=entries,
-        entry=entry,
-    )
-    links = check_links(
-        arm,
-        reach.joints,
-        obstacles,
-        T_all,
-        # The joint moves into each pass, and those on which the turntable turns.
-        entry | axis_steps(traj, axes),
-    )
+    reach, links = arm_along(traj, arm, T_base_part, T_flange_sensor, obstacles, axes, entries)
     touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []
     if not links.clear:

@@ -11,11 +11,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanplan.core.plan import Plan
-from scanplan.core.trajectory import Trajectory, pass_entries
+from scanplan.core.trajectory import Trajectory
 from scanplan.judging.report.scene_axes import axis_capsules
-from scanplan.robot import check_reach, get_robot
-from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses, plan_axes, with_disk
-from scanplan.robot.links import LinkClearance, check_links, obstacles_for
+from scanplan.robot import get_robot
+from scanplan.robot.axes import ExternalAxes, part_poses, plan_axes, with_disk
+from scanplan.robot.flyable import arm_along
+from scanplan.robot.links import obstacles_for
 from scanplan.robot.reach import pass_starts
 from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.part import Part
@@ -100,27 +101,10 @@ def check_arm(
     arm = get_robot(robot)
     T_base_part = np.asarray(T_base_part, dtype=np.float64)
     T_all = part_poses(T_base_part, traj.external, axes)
-    T_base_flange = T_all @ traj.poses @ np.linalg.inv(T_flange_sensor)
     cell = with_disk(cell, axes)
     # The links keep the clearance the plan was made with, as the sensor does.
     obstacles = obstacles_for(part, cell, clearance_mm=Plan.of(traj).spec.clearance_mm)
-    entry = pass_entries(traj)
-    reach = check_reach(
-        T_base_flange,
-        arm,
-        swath=traj.swath,
-        scanning=traj.scanning,
-        cell=LinkClearance(arm, obstacles, T_all),
-        entries=entries,
-        entry=entry,
-    )
-    links = check_links(
-        arm,
-        reach.joints,
-        obstacles,
-        T_all,
-        entry | axis_steps(traj, axes),
-    )
+    reach, links = arm_along(traj, arm, T_base_part, T_flange_sensor, obstacles, axes, entries)
     unreachable = np.zeros(len(traj), dtype=bool)
     unreachable[np.r_[reach.unreachable, reach.limit_violations].astype(int)] = True
     colliding = np.asarray(links.colliding, dtype=bool)
