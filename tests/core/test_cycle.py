@@ -132,16 +132,20 @@ def test_a_move_that_turns_is_timed_by_its_rotation() -> None:
     assert flat.move_s[0] == pytest.approx(2.0 * math.sqrt(10.0 / limits.accel_mm_s2))
 
 
+# Joint 2 turns at 30°/s (accel 60°/s²), the others six times faster.
+SLOW_J2 = replace(
+    FAST,
+    name="slow-j2",
+    joint_speed_deg_s=(180.0, 30.0, 180.0, 180.0, 180.0, 180.0),
+    joint_accel_deg_s2=(360.0, 60.0, 360.0, 360.0, 360.0, 360.0),
+)
+
+
 def test_a_joint_move_is_timed_by_its_slowest_joint() -> None:
     """With joints known, the move into pass 1 is a joint move: joint 2 turns 90° at
     30°/s (accel 60°/s²), so it sets the time, not the Cartesian path."""
     traj = two_passes_and_a_move()
-    limits = replace(
-        FAST,
-        name="slow-j2",
-        joint_speed_deg_s=(180.0, 30.0, 180.0, 180.0, 180.0, 180.0),
-        joint_accel_deg_s2=(360.0, 60.0, 360.0, 360.0, 360.0, 360.0),
-    )
+    limits = SLOW_J2
     q = np.zeros((len(traj), 6))
     q[5:, 1] = np.radians(90.0)  # the move's last segment turns joint 2 by 90°
     q[5:, 0] = np.radians(10.0)  # joint 1 turns too, but faster
@@ -163,12 +167,7 @@ def test_a_pass_the_plan_enters_at_the_top_of_its_move_is_timed_so() -> None:
     record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "3": [0.0] * 6}}
     traj = replace(two_passes_and_a_move(), meta={"robot": record})
     np.testing.assert_array_equal(np.flatnonzero(pass_entries(traj)), [0, 3])
-    limits = replace(
-        FAST,
-        name="slow-j2",
-        joint_speed_deg_s=(180.0, 30.0, 180.0, 180.0, 180.0, 180.0),
-        joint_accel_deg_s2=(360.0, 60.0, 360.0, 360.0, 360.0, 360.0),
-    )
+    limits = SLOW_J2
     q = np.zeros((len(traj), 6))
     q[3:, 1] = np.radians(90.0)  # the move's first segment turns joint 2 by 90°
     ct = cycle_time(traj, spec_at(100.0), limits, joints_rad=q)
