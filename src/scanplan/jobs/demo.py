@@ -294,15 +294,7 @@ def _robot_program(
     record, T_base_part = fitted_arm.record, fitted_arm.T_base_part
     arm = get_robot(DEMO_ROBOT)
     checked = check_flyable(
-        fitted,
-        arm,
-        T_base_part,
-        tcp,
-        part,
-        planned_cell(context, part),
-        spec.sensor,
-        obstacles,
-        entries=fitted_arm.entry_joints(DEMO_ROBOT, T_base_part, tcp),
+        fitted, arm, T_base_part, tcp, part, planned_cell(context, part), spec.sensor, obstacles
     )
     if not checked.flyable:  # fit_arm gives up what the arm cannot fly: a bug if not
         raise ValueError(

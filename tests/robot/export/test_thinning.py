@@ -17,12 +17,8 @@ from helpers import FAST, snake_trajectory
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.export import ExportOptions
-from scanplan.robot.export.common import (
-    MOVE_BLEND_MM,
-    MOVE_CUT_SHARE,
-    joint_move_targets,
-    plan_motion,
-)
+from scanplan.robot.export.common import MOVE_BLEND_MM, MOVE_CUT_SHARE, plan_motion
+from scanplan.robot.export.joint_moves import joint_move_targets
 from scanplan.robot.export.thinning import interp_params, thin_run
 
 TRAJ = snake_trajectory()

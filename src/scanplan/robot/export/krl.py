@@ -22,12 +22,12 @@ from scanplan.robot.export.common import (
     Motion,
     Parsed,
     PassTracker,
-    joint_move_targets,
     read_standoff,
     scan_output,
     sensor_poses,
     standoff_note,
 )
+from scanplan.robot.export.joint_moves import joint_move_targets
 from scanplan.robot.export.rotations import euler_zyx_deg, pose_from_xyzabc
 
 SUFFIX = ".src"

@@ -16,13 +16,12 @@ from scanplan.robot.export.common import (
     Parsed,
     PassTracker,
     floats,
-    joint_move_targets,
     read_standoff,
     scan_output,
     sensor_poses,
     standoff_note,
-    target_joints,
 )
+from scanplan.robot.export.joint_moves import joint_move_targets, target_joints
 from scanplan.robot.export.rotations import poses_from_parts, quat_wxyz
 
 SUFFIX = ".mod"

@@ -10,18 +10,20 @@ from scipy.spatial.transform import Rotation
 
 from scanplan.robot.export.axes_lines import axes_note
 from scanplan.robot.export.common import (
-    JOINT_ACCEL_DEG_S2,
-    JOINT_SPEED_DEG_S,
     ExportOptions,
     Motion,
     Parsed,
     PassTracker,
     floats,
-    joint_move_targets,
     read_standoff,
     scan_output,
     sensor_poses,
     standoff_note,
+)
+from scanplan.robot.export.joint_moves import (
+    JOINT_ACCEL_DEG_S2,
+    JOINT_SPEED_DEG_S,
+    joint_move_targets,
 )
 from scanplan.robot.export.rotations import poses_from_parts
 
