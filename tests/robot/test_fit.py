@@ -23,6 +23,7 @@ from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flown_poses import HALF_TURN
 from scanplan.robot.hints import what_would_help
+from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.program import arm_joints
 from scanplan.robot.reach import pass_starts
 from scanplan.robot.ur import forward_kinematics
@@ -210,7 +211,7 @@ def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
 def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):
     traj = _two_views(900.0)
     T_base_part = parse_pose_arg("450,0,-200,0,0,0")
-    arm = fit_module.PlacedArm("ur3e", TCP, T_base_part, PlanContext(ScanSpec()))
+    arm = PlacedArm("ur3e", TCP, T_base_part, PlanContext(ScanSpec()))
     flown = arm.flown(plate, traj)
     assert 0 < flown.scanning.sum() < traj.scanning.sum()
     # What it keeps (each pass as planned or turned about the beam) the arm reaches.

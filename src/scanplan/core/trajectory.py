@@ -151,10 +151,13 @@ def lead_tops(traj: Trajectory) -> np.ndarray:
     start, _ = pass_bounds(traj.scanning, traj.swath)
     top = np.full(len(traj), -1)
     pos = traj.positions_mm
+    # Where each run of moves of one swath index begins (a pass's lead-in is such a run).
+    moving, swath = ~traj.scanning, traj.swath
+    fresh = moving & np.r_[True, traj.scanning[:-1] | (swath[1:] != swath[:-1])]
+    run_start = np.maximum.accumulate(np.where(fresh, np.arange(len(traj)), 0))
     for s in np.flatnonzero(start):
-        j = s
-        while j > 0 and not traj.scanning[j - 1] and traj.swath[j - 1] == traj.swath[s]:
-            j -= 1
+        led = s > 0 and moving[s - 1] and swath[s - 1] == swath[s]
+        j = int(run_start[s - 1]) if led else s
         top[s] = s
         if j == s:
             continue

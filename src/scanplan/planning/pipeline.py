@@ -27,9 +27,10 @@ from scanplan.robot.axes import ExternalAxes, with_disk
 from scanplan.robot.axes_fit import PlacedArmOnAxes, choose_values, fitted_axes_record
 from scanplan.robot.axes_place import arm_on_axes
 from scanplan.robot.base import pose_arg
-from scanplan.robot.fit import PlacedArm, fit_to_robot
+from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import place
+from scanplan.robot.placed_arm import PlacedArm
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part, geometry_digest

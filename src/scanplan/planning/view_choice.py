@@ -26,7 +26,7 @@ from scanplan.core.quantities import (
 from scanplan.judging import coverage_spacing_mm
 from scanplan.planning.view_workers import KnownViews, ViewJudge, ViewWorkers
 from scanplan.planning.views import PlanView, View, ViewPlan, candidate_views, missed_views
-from scanplan.robot.fit import PlacedArm
+from scanplan.robot.placed_arm import PlacedArm
 from scanplan.world.part import Part
 from scanplan.world.surface import VisibleSurface, hemisphere_visible_samples, reachable_samples
 
@@ -157,7 +157,7 @@ def choose_views(
     (`view_workers.view_worker_count`), candidates are planned on that many processes, each
     the next one the choice would try: the same views, sooner; with `scheduler`, as Dask
     tasks on that cluster. With a placed `arm`, each view is judged by what that arm flies
-    of it (`fit.PlacedArm.flown`), so the cover is of what the arm can scan; `known`, the
+    of it (`placed_arm.PlacedArm.flown`), so the cover is of what the arm can scan; `known`, the
     views a choice without the arm planned (`ViewSelection.known`), are not planned again."""
 
     spent = _Spent(ViewBudget() if budget is None else budget)

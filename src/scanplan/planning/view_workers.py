@@ -29,7 +29,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.core.run import scheduler_client
 from scanplan.judging import in_spec_samples
 from scanplan.planning.views import PlanView, View, ViewPlan, plan_view
-from scanplan.robot.fit import PlacedArm
+from scanplan.robot.placed_arm import PlacedArm
 from scanplan.world.part import Part
 
 # Views kept asked for per worker: one running and one queued behind it, so a worker that

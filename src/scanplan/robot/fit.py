@@ -12,19 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
-from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory, lead_tops
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
-from scanplan.robot.links import LinkClearance, LinkReport, check_links, obstacles_for
+from scanplan.robot.links import LinkClearance, LinkReport, check_links
 from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach
 from scanplan.world.capsule_collision import CellObstacles
-from scanplan.world.cell import planned_cell
-from scanplan.world.part import Part
 
 # Why a pose is given up: out of the arm's reach, beyond its joint limits, an arm link
 # within the clearance of the part, a fixture or the table (in `CellObstacles.NAMES`'
@@ -174,14 +171,7 @@ def fit_to_robot(
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
         entry = entries_of(current, raised[keep])
-        report = check_reach(
-            T_now @ current.poses @ inv_tcp,
-            arm,
-            swath=current.swath,
-            scanning=current.scanning,
-            cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
-            entry=entry,
-        )
+        report = _reach(current, arm, T_now, inv_tcp, obstacles, entry)
         index = np.flatnonzero(keep)
         why = np.full(len(index), -1)
         why[report.limit_violations] = CAUSES.index("joint limits")
@@ -240,6 +230,26 @@ def fit_to_robot(
     )
 
 
+def _reach(
+    traj: Trajectory,
+    arm: Robot,
+    T_now: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    entry: np.ndarray,
+) -> ReachReport:
+    """The reach check of `traj` with the part at `T_now`, each pass entered where `entry`
+    says on a configuration whose links keep clear of the cell (`obstacles`), if given."""
+    return check_reach(
+        T_now @ traj.poses @ inv_tcp,
+        arm,
+        swath=traj.swath,
+        scanning=traj.scanning,
+        cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
+        entry=entry,
+    )
+
+
 def _verdict(
     fitted: Trajectory,
     arm: Robot,
@@ -252,14 +262,7 @@ def _verdict(
     """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
     each pass entered where `entry` says, and in a cell its links along the path and the
     joint moves into passes."""
-    report = check_reach(
-        T_now @ fitted.poses @ inv_tcp,
-        arm,
-        swath=fitted.swath,
-        scanning=fitted.scanning,
-        cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
-        entry=entry,
-    )
+    report = _reach(fitted, arm, T_now, inv_tcp, obstacles, entry)
     if obstacles is None:
         return report, None
     starts = entry | axis_steps(fitted, axes)
@@ -407,52 +410,3 @@ def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:
             view.record | {"first_swath": first, "last_swath": last, "passes": last - first + 1}
         )
     return out
-
-
-class PlacedArm:
-    """An arm standing where `T_base_part` puts the part, as the view choice asks of each
-    candidate view what the arm flies of it (`flown`). Picklable (sent to the view
-    workers): the cell's obstacles are built where they are first needed, once per part."""
-
-    def __init__(
-        self, robot: str | Path, tcp: np.ndarray, T_base_part: np.ndarray, context: PlanContext
-    ) -> None:
-        self.robot, self.context = robot, context
-        self.tcp, self.T_base_part = np.asarray(tcp), np.asarray(T_base_part)
-        self._obstacles: tuple[int, CellObstacles] | None = None
-
-    def __getstate__(self) -> dict:
-        return self.__dict__ | {"_obstacles": None}
-
-    def obstacles(self, part: Part) -> CellObstacles:
-        if self._obstacles is None or self._obstacles[0] != id(part):
-            spec = self.context.spec
-            cell = planned_cell(self.context, part)
-            self._obstacles = (
-                id(part),
-                obstacles_for(part, cell, spec.sensor, spec.clearance_mm),
-            )
-        return self._obstacles[1]
-
-    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
-        """`traj` as this arm flies it, quickly judged: each pass as planned or turned half
-        a turn about the beam (whichever keeps more), its scanning poses that are out of
-        reach or beyond the limits, or put a link or the sensor body into the cell, given
-        up (a pass goes on after them as a new pass). Configuration flips are left to
-        `fit_to_robot`, which splits a pass there and keeps its poses. `traj` itself when
-        the arm flies all of it as planned."""
-        arm = get_robot(self.robot)
-        obstacles = self.obstacles(part)
-        inv_tcp = np.linalg.inv(self.tcp)
-        planned, turned = flyable_poses(
-            traj, arm, self.T_base_part, inv_tcp, obstacles, exact=False
-        )
-        scanning = traj.scanning
-        better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
-        turn = np.isin(traj.swath, better)
-        keep = np.where(turn, turned, planned) | ~scanning
-        if keep.all() and not turn.any():
-            return traj  # flown as planned: the caller may reuse what it knows of it
-        poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
-        swath = renumbered_passes(traj, keep, traj.swath, np.zeros(len(traj), bool))
-        return replace(traj, poses=poses).subset(keep, swath)

@@ -156,14 +156,14 @@ def _runs_linked(
     if entry.shape != (n,) or len(swath) != n:
         raise ValueError(f"{len(swath)} poses but {entry.shape} entry flags")
     swath, scanning = np.asarray(swath), np.asarray(scanning, dtype=bool)
-    lead = np.zeros(n, bool)  # poses after an entry, up to its pass's first
-    on = False
-    for i in range(n):
-        if entry[i] and not scanning[i]:
-            on = True
-        elif scanning[i] or (i and swath[i] != swath[i - 1]):
-            on = False
-        lead[i] = on
+    # Poses after an entry up to its pass's first: in a run of moves of one swath index,
+    # those at or after an entry among them.
+    moving = ~scanning
+    fresh = moving & np.r_[True, scanning[:-1] | (swath[1:] != swath[:-1])]
+    seen = np.cumsum(entry & moving)
+    before = seen - (entry & moving)  # entries before each pose
+    at_run = np.maximum.accumulate(np.where(fresh, np.arange(n), 0))
+    lead = moving & (seen > before[at_run])
     return linked | (lead[:-1] & (lead[1:] | scanning[1:]) & ~entry[1:] & (swath[1:] == swath[:-1]))
 
 
@@ -365,6 +365,22 @@ def check_reach(
             joints[i + 1 : i + 1 + len(ran)] = ran
             prev, last = ran[-1], i + len(ran)
         i += 1 + len(ran)
+    return _report(arm, joints, exists, linked, tol, jump_deg)
+
+
+def _report(
+    arm: Robot,
+    joints: np.ndarray,
+    exists: np.ndarray,
+    linked: np.ndarray,
+    tol: np.ndarray,
+    jump_deg: float,
+) -> ReachReport:
+    """What the joints `check_reach` followed say: poses without a solution (`exists` (n, 8)
+    none) or beyond the limits, near-singular ones (`tol`: wrist, elbow, shoulder), flips
+    and jumps, those within a pass (`linked`) apart."""
+    limits = arm.joint_limits
+    wrist_tol, elbow_tol, shoulder_tol_mm = tol
     reachable = ~np.isnan(joints).any(axis=1)
     terms = arm.singularity_terms(joints)
     margins = np.abs(terms)
