@@ -138,16 +138,10 @@ def drive_passes(
     w = guards.stall_window
     while active := [run for run in runs if not run.done]:
         start_time = time.perf_counter()
-        actions, proposed = [], []
-        for run in active:
-            action = np.array(controller(run.dyn, run.start_state), dtype=np.float64)
-            p = run.progress
-            if w and len(p) > w and p[-1] - p[-1 - w] < 0.25 * ds_opt * w:
-                action[0], action[2] = hold, 0.0
-                run.stall_overrides += 1
-            actions.append(action)
-            proposed.append(run.dyn.propose(action))
-        proposed = admitted(active, proposed)
+        actions = [_action(run, controller, w, hold, ds_opt) for run in active]
+        proposed = admitted(
+            active, [run.dyn.propose(a) for run, a in zip(active, actions, strict=True)]
+        )
         profiles = measure(list(zip(active, proposed, strict=True)))
         # The accepted profile's advance, where already known.
         advances: list[float | None] = [None] * len(active)
@@ -178,6 +172,20 @@ def drive_passes(
             run.plan_time_s += share
             run.done = run.dyn.progress_mm >= run.s_last_mm or run.steps >= run.step_limit
     return [_trajectory_of(run, name) for run in runs]
+
+
+def _action(
+    run: _Run, controller: Controller, window: int, hold: float, ds_opt: float
+) -> np.ndarray:
+    """The controller's action for `run`'s next step; overridden to "advance Δs_opt, level"
+    (`hold`) where the pass advanced less than a quarter of Δs_opt a step over the last
+    `window` steps (stalled)."""
+    action = np.array(controller(run.dyn, run.start_state), dtype=np.float64)
+    p = run.progress
+    if window and len(p) > window and p[-1] - p[-1 - window] < 0.25 * ds_opt * window:
+        action[0], action[2] = hold, 0.0
+        run.stall_overrides += 1
+    return action
 
 
 def _start_run(dyn: PassDynamics, arm: PoseGuard | None = None) -> _Run:
