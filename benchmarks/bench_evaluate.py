@@ -20,7 +20,7 @@ import statistics
 import time
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.judging.detectability import evaluate_detectable
+from scanplan.judging.survey import evaluate_detectable
 from scanplan.planning.pipeline import plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.sensor.profilometer import LineProfilometer
