@@ -21,30 +21,67 @@ def _sheet(rng: np.random.Generator, n: int, thickness: float):
     return np.column_stack([xy, z]), normals
 
 
-@pytest.mark.parametrize("with_normals", [False, True])
-def test_marks_the_samples_within_the_radius_on_their_side(with_normals):
-    rng = np.random.default_rng(7)
+def _scene(rng: np.random.Generator):
+    """Samples on both faces of a thin sheet, and points over both faces, most of them under
+    the sheet: the nearest point of a top sample is then often on the other side, and a
+    farther one on its own must be found."""
     samples, sample_normals = _sheet(rng, 3000, 0.3)
     surface = VisibleSurface(samples, 1600.0, np.zeros(len(samples), np.int64))
-    radius = 1.2
-    coverage = Coverage(surface, ScanSpec(), 1, radius, radius, sample_normals)
-    # Points over both faces, most of them under the sheet: the nearest point of a top
-    # sample is then often on the other side, and a farther one on its own must be found.
     points, point_normals = _sheet(rng, 1500, 0.25)
     points[:, 0] /= 2  # over half the sheet
     points = np.r_[points[1200:], points[:300]]
     point_normals = np.r_[point_normals[1200:], point_normals[:300]]
-    marked = np.zeros(len(samples), bool)
-    marked[:50] = True  # marked before: stays marked
-    coverage._mark(marked, points, point_normals if with_normals else None, radius)
+    return surface, sample_normals, points, point_normals
 
+
+def _brute(samples, sample_normals, points, point_normals, radius, usable=None):
+    """Each sample with a (usable) point within the radius on its side, one by one."""
     pairs = cKDTree(samples).query_ball_point(points, radius)
     expected = np.zeros(len(samples), bool)
-    expected[:50] = True
     for p, near in enumerate(pairs):
+        if usable is not None and not usable[p]:
+            continue
         near = np.asarray(near, np.int64)
-        if with_normals:
+        if point_normals is not None:
             near = near[sample_normals[near] @ point_normals[p] >= SAME_SIDE_COS]
         expected[near] = True
+    return expected
+
+
+def test_marks_the_samples_within_the_radius_on_their_side():
+    surface, sample_normals, points, point_normals = _scene(np.random.default_rng(7))
+    radius = 1.2
+    coverage = Coverage(surface, ScanSpec(), 1, radius, radius, sample_normals)
+    marked = np.zeros(len(surface.points), bool)
+    marked[:50] = True  # marked before: stays marked
+    coverage._mark(marked, points, point_normals, radius)
+
+    expected = _brute(surface.points, sample_normals, points, point_normals, radius)
+    expected[:50] = True
     assert marked.sum() > 500 and (~marked).sum() > 500  # neither everything nor nothing
     assert np.array_equal(marked, expected)
+
+
+@pytest.mark.parametrize("plain", [True, False])
+def test_one_query_covers_and_holds_in_spec_as_two_would(plain):
+    """A chunk's samples within the cover radius of any point are covered, those within the
+    in-spec radius of a qualifying point on their side held in spec: from one query of the
+    chunk's tree (the nearest point often does not qualify, or lies on the other side)."""
+    rng = np.random.default_rng(11)
+    surface, sample_normals, points, point_normals = _scene(rng)
+    cover, held = 1.6, 1.2
+    coverage = Coverage(surface, ScanSpec(), 1, cover, held, sample_normals, plain=plain)
+    qualifies = rng.random(len(points)) < 0.4
+    tree = cKDTree(points)
+    coverage._mark_chunk(points, point_normals, qualifies, lambda: tree)
+
+    samples = surface.points
+    in_spec = _brute(samples, sample_normals, points, point_normals, held, qualifies)
+    assert in_spec.sum() > 300 and (~in_spec).sum() > 500
+    assert np.array_equal(coverage.in_spec, in_spec)
+    if plain:
+        covered = _brute(samples, sample_normals, points, None, cover)
+        assert covered.sum() > in_spec.sum()
+        assert np.array_equal(coverage.covered, covered)
+    else:
+        assert not coverage.covered.any()

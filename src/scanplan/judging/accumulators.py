@@ -37,9 +37,12 @@ _DIST_BIN_MM = 1e-3
 _ORI_BIN_DEG = 1e-3
 
 
-def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None)) -> np.ndarray:
+def real_column_pitch(
+    scan: Scan, sensor: SensorSpec, cols: slice = slice(None), where: np.ndarray | None = None
+) -> np.ndarray:
     """The real sensor's spacing between adjacent pixel columns on the surface, where each
-    point lies, mm: (m, n) for the columns `cols` of the scan; NaN where the point is invalid.
+    point lies, mm: (m, n) for the columns `cols` of the scan, NaN where the point is
+    invalid; or (k,) at the k points `where` ((m, n) bool) marks.
 
     The columns are evenly spaced in x at z = W_d (pitch δ = line width / (N − 1)), so at depth
     z a column step sweeps the arc δ·z²/(ρ·W_d) across the beam, ρ the point's distance from
@@ -48,12 +51,15 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
     delta = sensor.line_width_mm / max(sensor.points_per_profile - 1, 1)
     points = scan.points_part[:, cols]
     normals = scan.normals_part[:, cols]
-    ray = points - scan.poses[:, None, :3, 3]
+    origin = np.broadcast_to(scan.poses[:, None, :3, 3], points.shape)
+    y_s = np.broadcast_to(scan.poses[:, None, :3, 1], points.shape)
+    z = scan.z_sensor[:, cols]
+    if where is not None:  # only the points asked about
+        points, normals, origin, y_s, z = (a[where] for a in (points, normals, origin, y_s, z))
+    ray = points - origin
     rho = norm_rows(ray)
-    y_s = scan.poses[:, None, :3, 1]
     n_plane = normals - dot_rows(normals, y_s)[..., None] * y_s
     cos_beta = np.abs(dot_rows(n_plane, ray)) / np.maximum(norm_rows(n_plane) * rho, 1e-12)
-    z = scan.z_sensor[:, cols]
     with np.errstate(divide="ignore", invalid="ignore"):
         return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
 
@@ -253,19 +259,8 @@ class Coverage:
         valid = scan.valid[:, c]
         pts = scan.points_part[:, c]
         nrm = scan.normals_part[:, c]
-        # The samples near this chunk's points and the held-back profile's: those the
-        # chunk's points (and that profile's, in spec now) may mark.
-        near = pts[valid]
-        if self._last is not None:
-            near = np.concatenate([near, self._last[0][self._last[1]]])
-        cand = self.surface.near(near, max(self.cover_radius, self.in_spec_radius))
-        if self.plain:
-            points = valid_points(scan, self.col_stride)
-            tree = lambda: valid_points_tree(scan, self.col_stride)  # noqa: E731
-            self._mark(self.covered, points, None, self.cover_radius, cand, tree)
-
         ok = in_spec(scan.z_sensor[:, c], ori_rad[:, c], valid, self.spec)
-        ok &= real_column_pitch(scan, self.spec.sensor, c) <= self.limit_mm
+        ok[ok] = real_column_pitch(scan, self.spec.sensor, c, ok) <= self.limit_mm
         if self._last is not None:
             pts_prev = np.concatenate([self._last[0][None], pts[:-1]])
             val_prev = np.concatenate([self._last[1][None], valid[:-1]])
@@ -275,89 +270,126 @@ class Coverage:
         self._last = (pts[-1], valid[-1])
         both = valid & val_prev & has_prev[:, None]
         gap_prev = np.where(both, norm_rows(pts - pts_prev), np.nan)
-        if self._pending is not None:
-            pts = np.concatenate([self._pending[0][None], pts])
-            ok = np.concatenate([self._pending[1][None], ok])
-            gap_prev = np.concatenate([self._pending[2][None], gap_prev])
-            nrm = np.concatenate([self._pending[3][None], nrm])
+        if self._pending is not None:  # the previous chunk's last profile: now its next gap
+            self._mark_in_spec(*self._pending, gap_prev[0])
+        self._pending = (pts[-1], ok[-1], gap_prev[-1], nrm[-1])
         gap_next = np.full_like(gap_prev, np.nan)
         gap_next[:-1] = gap_prev[1:]
-        self._pending = (pts[-1], ok[-1], gap_prev[-1], nrm[-1])
-        self._mark_in_spec(pts[:-1], ok[:-1], gap_prev[:-1], gap_next[:-1], nrm[:-1], cand)
+        qualifies = self._qualifies(ok, gap_prev, gap_next)
+        qualifies[-1] = False  # the last profile waits for its next gap
+        points = valid_points(scan, self.col_stride)  # pts[valid], row by row
+        self._mark_chunk(
+            points, nrm[valid], qualifies[valid], lambda: valid_points_tree(scan, self.col_stride)
+        )
+
+    def _qualifies(self, ok: np.ndarray, gap_prev: np.ndarray, gap_next: np.ndarray) -> np.ndarray:
+        """Points in spec whose profile lies close enough to its neighbours: the larger of
+        the two gaps, or the one there is; none (an isolated profile) fails."""
+        along = np.fmax(gap_prev, gap_next)
+        with np.errstate(invalid="ignore"):
+            return ok & (along <= self.limit_mm)
 
     def _mark_in_spec(
         self,
         pts: np.ndarray,
         ok: np.ndarray,
         gap_prev: np.ndarray,
-        gap_next: np.ndarray,
         nrm: np.ndarray,
-        cand: np.ndarray | None = None,
+        gap_next: np.ndarray | float,
     ) -> None:
-        # The larger of the two gaps, or the one there is; none (an isolated profile) fails.
-        along = np.fmax(gap_prev, gap_next)
-        with np.errstate(invalid="ignore"):
-            qualifies = ok & (along <= self.limit_mm)
-        good = pts[qualifies]
-        if cand is not None and self.plain and self.in_spec_radius <= self.cover_radius:
-            # A sample within the in-spec radius of a qualifying (so valid) point is covered.
-            cand = cand[self.covered[cand]]
-        self._mark(self.in_spec, good, nrm[qualifies], self.in_spec_radius, cand)
+        """The held-back profile (n, 3) judged once its next gap is known (NaN: none)."""
+        qualifies = self._qualifies(ok, gap_prev, np.broadcast_to(gap_next, gap_prev.shape))
+        self._mark(self.in_spec, pts[qualifies], nrm[qualifies], self.in_spec_radius)
 
-    def _mark(
+    def _mark_chunk(
         self,
-        marked: np.ndarray,
         points: np.ndarray,
-        normals: np.ndarray | None,
-        radius: float,
-        cand: np.ndarray | None = None,
-        tree: Callable[[], cKDTree] | None = None,
+        normals: np.ndarray,
+        qualifies: np.ndarray,
+        tree: Callable[[], cKDTree],
     ) -> None:
-        """Mark in `marked` the samples within `radius` of one of `points` (n, 3) — on the
-        sample's side where the points' `normals` are given — testing only those not marked
-        yet among `cand` (sorted sample indices, every one near the points; None: looked
-        up): from each sample its nearest point, not from each point its samples (a chunk
-        has several points per sample); tree: gives one of `points` if the caller has it."""
+        """Cover the samples within the cover radius of the chunk's valid `points` (n, 3),
+        and hold in spec those within the in-spec radius of a qualifying one on their side:
+        one query of each open sample's nearest point in the chunk's tree, which the
+        detectability survey shares (a second tree of the qualifying points alone cost
+        about as much as the first)."""
         if not len(points):
             return
-        cand = self.surface.near(points, radius) if cand is None else cand
-        cand = cand[~marked[cand]]
+        cover, held = self.cover_radius, self.in_spec_radius
+        reach = max(cover, held) if self.plain else held
+        cand = self.surface.near(points, reach)
+        cand = cand[~self.in_spec[cand]]  # a sample in spec is covered (`_mark_in_spec`)
         if not len(cand):
             return
-        if tree is None:  # built per call and queried once: unbalanced, it builds faster
-            points_tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-        else:
-            points_tree = tree()
         samples = self.surface.points[cand]
-        dist, j = points_tree.query(samples, k=1, distance_upper_bound=radius)
-        found = np.flatnonzero(np.isfinite(dist))
-        if normals is None:
-            marked[cand[found]] = True
-            return
-        same = dot_rows(normals[j[found]], self.normals[cand[found]]) >= SAME_SIDE_COS
-        marked[cand[found[same]]] = True
-        # The nearest point lies on the other side (an edge, a thin sheet): any other within
-        # the radius on this one?
-        rest = found[~same] if len(points) > 1 else found[:0]
+        dist, j = tree().query(samples, k=1, distance_upper_bound=reach)
+        if self.plain:
+            self.covered[cand[dist < cover]] = True
+        near = np.flatnonzero(dist < held)
+        j = j[near]
+        same = dot_rows(normals[j], self.normals[cand[near]]) >= SAME_SIDE_COS
+        yes = qualifies[j] & same
+        self.in_spec[cand[near[yes]]] = True
+        # The nearest point does not qualify or lies on the other side (an edge, a thin
+        # sheet): any other within the radius that does?
+        self._mark_among(self.in_spec, cand[near[~yes]], points, normals, held, tree(), qualifies)
+
+    def _mark_among(
+        self,
+        marked: np.ndarray,
+        cand: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray,
+        radius: float,
+        points_tree: cKDTree,
+        usable: np.ndarray | None = None,
+    ) -> None:
+        """Mark those of the samples `cand` with a `usable` point (all: None) on their side
+        within `radius`: their nearest points in `points_tree`, four times more each round
+        while all of them lie within the radius."""
+        samples = self.surface.points[cand]
+        rest = np.arange(len(cand))
         k = 8
         while len(rest):
             k = min(k, len(points))
             dist, j = points_tree.query(samples[rest], k=k, distance_upper_bound=radius)
             near = np.isfinite(dist)
-            cos = np.einsum("ijk,ik->ij", normals[np.where(near, j, 0)], self.normals[cand[rest]])
-            hit = (near & (cos >= SAME_SIDE_COS)).any(axis=1)
+            j = np.where(near, j, 0)
+            cos = np.einsum("ijk,ik->ij", normals[j], self.normals[cand[rest]])
+            good = near & (cos >= SAME_SIDE_COS)
+            if usable is not None:
+                good &= usable[j]
+            hit = good.any(axis=1)
             marked[cand[rest[hit]]] = True
-            # Still undecided: all k within the radius and on the other side; look further.
+            # Still undecided: all k within the radius and none usable; look further.
             rest = rest[~hit & near[:, -1]] if k < len(points) else rest[:0]
             k *= 4
+
+    def _mark(
+        self, marked: np.ndarray, points: np.ndarray, normals: np.ndarray, radius: float
+    ) -> None:
+        """Mark in `marked` the samples within `radius` of one of `points` (n, 3) on the
+        sample's side (the points' `normals`): from each open sample its nearest point."""
+        if not len(points):
+            return
+        cand = self.surface.near(points, radius)
+        cand = cand[~marked[cand]]
+        if not len(cand):
+            return
+        # Built per call and queried once: unbalanced, it builds faster.
+        points_tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        dist, j = points_tree.query(self.surface.points[cand], k=1, distance_upper_bound=radius)
+        found = np.flatnonzero(np.isfinite(dist))
+        same = dot_rows(normals[j[found]], self.normals[cand[found]]) >= SAME_SIDE_COS
+        marked[cand[found[same]]] = True
+        other = found[~same]
+        if len(other) and len(points) > 1:
+            self._mark_among(marked, cand[other], points, normals, radius, points_tree)
 
     def finish(self) -> tuple[float, float, CoverageMap]:
         """(coverage fraction, in-spec fraction, the map)."""
         if self._pending is not None:
-            p, ok, gap, nrm = self._pending
-            self._mark_in_spec(
-                p[None], ok[None], gap[None], np.full_like(gap[None], np.nan), nrm[None]
-            )
+            self._mark_in_spec(*self._pending, np.nan)
             self._pending = None
         state = np.where(
             self.in_spec,
