@@ -37,12 +37,9 @@ _DIST_BIN_MM = 1e-3
 _ORI_BIN_DEG = 1e-3
 
 
-def real_column_pitch(
-    scan: Scan, sensor: SensorSpec, cols: slice = slice(None), where: np.ndarray | None = None
-) -> np.ndarray:
+def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None)) -> np.ndarray:
     """The real sensor's spacing between adjacent pixel columns on the surface, where each
-    point lies, mm: (m, n) for the columns `cols` of the scan, NaN where the point is
-    invalid; or (k,) at the k points `where` ((m, n) bool) marks.
+    point lies, mm: (m, n) for the columns `cols` of the scan; NaN where the point is invalid.
 
     The columns are evenly spaced in x at z = W_d (pitch δ = line width / (N − 1)), so at depth
     z a column step sweeps the arc δ·z²/(ρ·W_d) across the beam, ρ the point's distance from
@@ -51,15 +48,12 @@ def real_column_pitch(
     delta = sensor.line_width_mm / max(sensor.points_per_profile - 1, 1)
     points = scan.points_part[:, cols]
     normals = scan.normals_part[:, cols]
-    origin = np.broadcast_to(scan.poses[:, None, :3, 3], points.shape)
-    y_s = np.broadcast_to(scan.poses[:, None, :3, 1], points.shape)
-    z = scan.z_sensor[:, cols]
-    if where is not None:  # only the points asked about
-        points, normals, origin, y_s, z = (a[where] for a in (points, normals, origin, y_s, z))
-    ray = points - origin
+    ray = points - scan.poses[:, None, :3, 3]
     rho = norm_rows(ray)
+    y_s = scan.poses[:, None, :3, 1]
     n_plane = normals - dot_rows(normals, y_s)[..., None] * y_s
     cos_beta = np.abs(dot_rows(n_plane, ray)) / np.maximum(norm_rows(n_plane) * rho, 1e-12)
+    z = scan.z_sensor[:, cols]
     with np.errstate(divide="ignore", invalid="ignore"):
         return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
 
@@ -260,7 +254,7 @@ class Coverage:
         pts = scan.points_part[:, c]
         nrm = scan.normals_part[:, c]
         ok = in_spec(scan.z_sensor[:, c], ori_rad[:, c], valid, self.spec)
-        ok[ok] = real_column_pitch(scan, self.spec.sensor, c, ok) <= self.limit_mm
+        ok &= real_column_pitch(scan, self.spec.sensor, c) <= self.limit_mm
         if self._last is not None:
             pts_prev = np.concatenate([self._last[0][None], pts[:-1]])
             val_prev = np.concatenate([self._last[1][None], valid[:-1]])
