@@ -8,7 +8,6 @@ points for the maps. D, α, Δs, the in-spec test and the rewards come from `qua
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -58,37 +57,28 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
         return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
 
 
-class _LastPoints(threading.local):
-    """The last chunk's valid points and their tree, per thread: `valid_points`' memo."""
-
-    scan: Scan | None = None
-    stride = 0
-    points: np.ndarray | None = None
-    tree: cKDTree | None = None
-
-
-_LAST = _LastPoints()
-
-
 def valid_points(scan: Scan, stride: int) -> np.ndarray:
     """(k, 3) the valid points of every `stride`-th column of `scan`, row by row: gathered
     once per chunk, though the coverage and the detectability survey both ask (the same
     points where their strides agree)."""
-    memo = _LAST
-    if memo.scan is not scan or memo.stride != stride or memo.points is None:
+    key = ("valid points", stride)
+    if key not in scan.memo:
         cols = slice(None, None, stride)
-        memo.points = scan.points_part[:, cols][scan.valid[:, cols]]
-        memo.scan, memo.stride, memo.tree = scan, stride, None
-    return memo.points
+        scan.memo[key] = scan.points_part[:, cols][scan.valid[:, cols]]
+    points: np.ndarray = scan.memo[key]
+    return points
 
 
 def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
-    """A k-d tree of `valid_points(scan, stride)`, built once per chunk. Unbalanced: built
-    per chunk and queried a few times, it builds in half the time."""
-    points = valid_points(scan, stride)
-    if _LAST.tree is None:
-        _LAST.tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-    return _LAST.tree
+    """A k-d tree of `valid_points(scan, stride)`, built once per chunk (the first to ask
+    builds it; `evaluate` has its coverage ask before the survey, on another thread, does).
+    Unbalanced: built per chunk and queried a few times, it builds in half the time."""
+    key = ("valid points tree", stride)
+    if key not in scan.memo:
+        points = valid_points(scan, stride)
+        scan.memo[key] = cKDTree(points, balanced_tree=False, compact_nodes=False)
+    tree: cKDTree = scan.memo[key]
+    return tree
 
 
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:

@@ -9,7 +9,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, Protocol
 
 import numpy as np
@@ -155,6 +155,11 @@ def _collision_summary(
     }
 
 
+def _observe(observers: Sequence[ScanObserver], lo: int, scan: Scan) -> None:
+    for observer in observers:
+        observer.add(lo, scan)
+
+
 def _out_of_reach(part: Part) -> ValueError:
     hidden = " or hidden by its fixtures" if part.occluders else ""
     return ValueError(
@@ -282,19 +287,31 @@ def evaluate(
     for observer in observers:
         observer.start(surface, spec, swath)
     profiler = LineProfilometer(in_cell, spec, seed=seed)
-    for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
-        ori = point_orientation_error(scan.normals_part, scan.poses)
-        errors.add(scan, ori)
-        spacing.add(lo, scan)
-        coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
-        sample.add(lo, scan, ori, swath[lo : lo + len(scan)], wd)
-        for observer in observers:
-            observer.add(lo, scan)
+    # Beside the scan (measured a chunk ahead on a thread of its own): the ceiling, and the
+    # observers on the chunk before the one judged here, each in chunk order.
+    with ThreadPoolExecutor(max_workers=1) as beside:
+        ceiling_job = (
+            beside.submit(_visibility_ceiling, in_cell, surface, scan_spec, seed)
+            if ceiling
+            else None
+        )
+        observed: Future[None] | None = None
+        for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
+            ori = point_orientation_error(scan.normals_part, scan.poses)
+            errors.add(scan, ori)
+            spacing.add(lo, scan)
+            coverage.add(scan, ori, has_prev[lo : lo + len(scan)])  # builds the shared tree
+            sample.add(lo, scan, ori, swath[lo : lo + len(scan)], wd)
+            if observed is not None:
+                observed.result()  # at most one chunk waits: memory stays bounded
+            observed = beside.submit(_observe, observers, lo, scan) if observers else None
+        if observed is not None:
+            observed.result()
+        ceiling_share = ceiling_job.result() if ceiling_job is not None else None
 
     if errors.n_valid == 0:
         raise _out_of_reach(in_cell)
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
-    ceiling_share = _visibility_ceiling(in_cell, surface, scan_spec, seed) if ceiling else None
     collided = _collision_summary(part, sensor, cell, traj, scan_spec)
     return Metrics(
         part=part.name,

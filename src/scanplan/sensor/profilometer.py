@@ -9,9 +9,10 @@ import math
 import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -42,6 +43,8 @@ class Scan:
     normals_part: (m, N, 3) float64, face normals flipped towards the incoming ray (0 if no hit).
     face:         (m, N) int64, hit face index, -1 where no hit.
     status:       (m, N) uint8, `PointStatus` of each column.
+    memo:         what those judging the scan derive from it once and share (its valid
+                  points' k-d tree: `judging.accumulators.valid_points_tree`).
     """
 
     poses: np.ndarray
@@ -52,6 +55,7 @@ class Scan:
     normals_part: np.ndarray
     face: np.ndarray
     status: np.ndarray
+    memo: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def valid(self) -> np.ndarray:
