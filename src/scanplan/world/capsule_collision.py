@@ -44,11 +44,14 @@ def _surface_points(mesh, spacing_mm: float) -> np.ndarray:
     k1 = np.ceil(np.linalg.norm(e1, axis=1) / spacing_mm).astype(np.int64)
     k2 = np.ceil(np.linalg.norm(e2, axis=1) / spacing_mm).astype(np.int64)
     points = [np.asarray(mesh.vertices, dtype=np.float64)]
-    big = (k1 > 1) | (k2 > 1)
-    for a, b in set(zip(k1[big].tolist(), k2[big].tolist(), strict=True)):
-        pick = big & (k1 == a) & (k2 == b)
+    big = np.flatnonzero((k1 > 1) | (k2 > 1))
+    # The larger triangles grouped by their grid's shape (one sort, not a mask per shape).
+    shapes, group = np.unique(np.column_stack([k1[big], k2[big]]), axis=0, return_inverse=True)
+    by_shape = np.split(big[np.argsort(group, kind="stable")], np.cumsum(np.bincount(group))[:-1])
+    for (a, b), pick in zip(shapes.tolist(), by_shape, strict=True):
         i, j = np.meshgrid(np.arange(a + 1) / a, np.arange(b + 1) / b, indexing="ij")
         inside = i + j <= 1 + 1e-9
+        inside[0, 0] = inside[a, 0] = inside[0, b] = False  # its corners: the vertices above
         u, v = i[inside], j[inside]
         grid = (
             tri[pick, None, 0]
