@@ -88,8 +88,8 @@ def run_demo(
     spec = spec or ScanSpec()
     out_dir = Path(out_dir)
     step(f"loading part {part_name}")
-    # The rl plan is fitted to the arm and evaluated in a second process, beside the other
-    # plans and evaluations here (threads would share one interpreter). It loads the part
+    # The rl plan is fitted to the arm in a second process, beside the other plans, their
+    # evaluations and the maps here (threads would share one interpreter). It loads the part
     # meanwhile; rl is planned first so that its fit (the longest step) can start at once,
     # judged on the surface the other planners' default views will make the comparison's
     # (checked once they are planned: refitted if that guess was wrong).
@@ -115,38 +115,24 @@ def run_demo(
         # nothing.
         judged = judged_alike([recorded(t, spec) for t in trajectories.values()])
         contexts = dict(zip(trajectories, judged, strict=True))
-        refit = contexts["rl"] != guess
-        second.submit(_evaluate_here, rl, contexts["rl"], spec, seed, points_per_profile)
-        if refit:
+        if contexts["rl"] != guess:
             second.submit(_fit_here, rl, contexts["rl"], spec)
         metrics: dict[str, Metrics] = {}
         for name in PLANNER_ORDER:
             traj, context = trajectories[name], contexts[name]
             step(
                 f"evaluating {name} ({int(traj.scanning.sum())} profiles, "
-                f"{context.surface} surface){' in the second process' * (name == 'rl')}"
+                f"{context.surface} surface)"
             )
-            if name != "rl":
-                metrics[name] = _evaluate(part, spec, traj, context, seed, points_per_profile)
-        fitted, robot_line, text, error_m, program, fit_seconds = second.result()
-        metrics["rl"] = second.result()
-        if refit:
-            fitted, robot_line, text, error_m, program, fit_seconds = second.result()
-    files[PROGRAM_FILE] = text
-    # The fitted plan records the arm, part pose and TCP: `scanplan export` takes it as is.
-    files[FITTED_FILE] = dumps_json(to_json_dict(fitted), indent=1)
-    step(f"{robot_line} ({fit_seconds:.0f} s)")
-    evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
-    arm = Plan.of(fitted).arm
-    assert arm is not None  # fitted: it records its arm
-    fitted_note = (
-        f"The tables below judge the rl plan without the arm; the program flies {FITTED_FILE}."
-    )
-    program_said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP, fitted_note)
-    report = _write_report(
-        out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile, full_3d,
-        step, program_said,
-    )  # fmt: skip
+            metrics[name] = _evaluate(part, spec, traj, context, seed, points_per_profile)
+        evaluated = [Evaluated(name, trajectories[name], m) for name, m in metrics.items()]
+        fit = _FitWait(second, refit=contexts["rl"] != guess, step=step)
+        report = _write_report(
+            out_dir, part.with_roi(roi), evaluated, spec, files, seed, points_per_profile,
+            full_3d, step, fit.program_part,
+        )  # fmt: skip
+    assert fit.fitted is not None  # the report asked for it
+    fitted, robot_line, _, error_m, _, _ = fit.fitted
     return DemoResult(
         out_dir,
         metrics,
@@ -159,6 +145,34 @@ def run_demo(
     )
 
 
+class _FitWait:
+    """The second process's fit, waited for only when the report has drawn its maps: the
+    program and the fitted plan as files, what the page says of the program (`program_part`)."""
+
+    def __init__(self, second: _SecondProcess, refit: bool, step: Callable[[str], None]) -> None:
+        self.second, self.refit, self.step = second, refit, step
+        self.fitted: tuple[Trajectory, str, str, float, Program, float] | None = None
+
+    def program_part(self) -> tuple[dict[str, str | bytes | Path], list[Finding]]:
+        self.fitted = self.second.result()
+        if self.refit:  # fitted to the guessed surface first: that one is not the report's
+            self.fitted = self.second.result()
+        fitted, robot_line, text, _, program, fit_seconds = self.fitted
+        self.step(f"{robot_line} ({fit_seconds:.0f} s)")
+        arm = Plan.of(fitted).arm
+        assert arm is not None  # fitted: it records its arm
+        fitted_note = (
+            f"The tables below judge the rl plan without the arm; the program flies {FITTED_FILE}."
+        )
+        said = arm_finding(DEMO_ROBOT, arm.record, program, DEMO_TCP, fitted_note)
+        # The fitted plan records the arm, part pose and TCP: `scanplan export` takes it as is.
+        files: dict[str, str | bytes | Path] = {
+            PROGRAM_FILE: text,
+            FITTED_FILE: dumps_json(to_json_dict(fitted), indent=1),
+        }
+        return files, [said]
+
+
 def _write_report(
     out_dir: Path,
     part: Part,
@@ -169,10 +183,11 @@ def _write_report(
     points_per_profile: int | None,
     full_3d: bool,
     step: Callable[[str], None],
-    program: Finding,
+    program_part: Callable[[], tuple[dict[str, str | bytes | Path], list[Finding]]],
 ) -> Path:
     """`report.write_report` of the demo's plans, with the shipped policy's training curves
-    and log, and `files` written beside it; its path."""
+    and log, and `files` written beside it, and the program's files and finding once the
+    maps are drawn (`program_part`); its path."""
     # Deferred: the rl planner's module loads torch.
     from scanplan.rl.planner import DEFAULT_POLICY
 
@@ -198,7 +213,7 @@ def _write_report(
         files=files,
         title=f"{part.name}: scan quality by planner",
         full_3d=full_3d,
-        findings=[program],
+        later=program_part,
     )
 
 
@@ -249,16 +264,6 @@ def _loaded_part() -> Part:
     if _part_here is None:
         raise RuntimeError("no part loaded in this process")
     return _part_here
-
-
-def _evaluate_here(
-    traj: Trajectory,
-    context: PlanContext,
-    spec: ScanSpec,
-    seed: int,
-    points_per_profile: int | None,
-) -> Metrics:
-    return _evaluate(_loaded_part(), spec, traj, context, seed, points_per_profile)
 
 
 def _fit_here(

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -54,6 +54,7 @@ def write_report(
     title: str | None = None,
     full_3d: bool = False,
     findings: Sequence[Finding] = (),
+    later: Callable[[], tuple[Mapping[str, str | bytes | Path], Sequence[Finding]]] | None = None,
 ) -> Path:
     """Write the report directory of one or more evaluated trajectories; return report.html.
 
@@ -64,7 +65,9 @@ def write_report(
     relative name — text, bytes, or a Path to copy. full_3d: report.html's 3-D views at full
     resolution (every face, every sampled point) and its pictures at full size; by default
     they are decimated so the page stays a few MB. findings: what the page tells first (the
-    verdicts, the program and its arm, robustness), in plain words."""
+    verdicts, the program and its arm, robustness), in plain words. later: called once the
+    maps are drawn, for more files and findings still being made meanwhile (the demo's
+    program, fitted in a second process)."""
     # Deferred: the HTML report draws with plotly and the arm (kinematics, FCL).
     from scanplan.judging.report.html import write_html_report
 
@@ -79,7 +82,12 @@ def write_report(
         detectability = _plot_detectability(tmp, part, results)
         if detectability is not None:
             maps.append(detectability)
-        _write_files(tmp, files or {})
+        files = dict(files or {})
+        if later is not None:
+            more_files, more_findings = later()
+            files.update(more_files)
+            findings = [*findings, *more_findings]
+        _write_files(tmp, files)
         _write_metrics(tmp, part, results, title)
         notes = list(notes)
         with_cloud = _planner_results(part, results, notes)
