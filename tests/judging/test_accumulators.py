@@ -73,7 +73,8 @@ def test_one_query_covers_and_holds_in_spec_as_two_would(plain):
     coverage = Coverage(surface, ScanSpec(), 1, cover, held, sample_normals, plain=plain)
     qualifies = rng.random(len(points)) < 0.4
     tree = cKDTree(points)
-    coverage._mark_chunk(points, point_normals, qualifies, lambda: tree)
+    near = surface.near(points, max(cover, held))
+    coverage._mark_chunk(points, point_normals, qualifies, near, lambda: tree)
 
     samples = surface.points
     in_spec = _brute(samples, sample_normals, points, point_normals, held, qualifies)

@@ -81,6 +81,16 @@ def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
     return tree
 
 
+def samples_near(scan: Scan, stride: int, surface: VisibleSurface, radius: float) -> np.ndarray:
+    """`surface.near(valid_points(scan, stride), radius)`, looked up once per chunk: the
+    coverage and the detectability survey ask on the same grid."""
+    key = ("samples near", id(surface), surface.grid_cell(radius), stride)
+    if key not in scan.memo:
+        scan.memo[key] = surface.near(valid_points(scan, stride), radius)
+    near: np.ndarray = scan.memo[key]
+    return near
+
+
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:
     total = hist.sum()
     if total == 0:
@@ -261,9 +271,14 @@ class Coverage:
         gap_next[:-1] = gap_prev[1:]
         qualifies = self._qualifies(ok, gap_prev, gap_next)
         qualifies[-1] = False  # the last profile waits for its next gap
-        points = valid_points(scan, self.col_stride)  # pts[valid], row by row
+        stride = self.col_stride
+        reach = max(self.cover_radius, self.in_spec_radius) if self.plain else self.in_spec_radius
         self._mark_chunk(
-            points, nrm[valid], qualifies[valid], lambda: valid_points_tree(scan, self.col_stride)
+            valid_points(scan, stride),  # pts[valid], row by row
+            nrm[valid],
+            qualifies[valid],
+            samples_near(scan, stride, self.surface, reach),
+            lambda: valid_points_tree(scan, stride),
         )
 
     def _qualifies(self, ok: np.ndarray, gap_prev: np.ndarray, gap_next: np.ndarray) -> np.ndarray:
@@ -290,19 +305,20 @@ class Coverage:
         points: np.ndarray,
         normals: np.ndarray,
         qualifies: np.ndarray,
+        near: np.ndarray,
         tree: Callable[[], cKDTree],
     ) -> None:
         """Cover the samples within the cover radius of the chunk's valid `points` (n, 3),
         and hold in spec those within the in-spec radius of a qualifying one on their side:
         one query of each open sample's nearest point in the chunk's tree, which the
         detectability survey shares (a second tree of the qualifying points alone cost
-        about as much as the first)."""
+        about as much as the first). near: the samples that may lie within reach
+        (`VisibleSurface.near`)."""
         if not len(points):
             return
         cover, held = self.cover_radius, self.in_spec_radius
         reach = max(cover, held) if self.plain else held
-        cand = self.surface.near(points, reach)
-        cand = cand[~self.in_spec[cand]]  # a sample in spec is covered (`_mark_in_spec`)
+        cand = near[~self.in_spec[near]]  # a sample in spec is covered (`_mark_in_spec`)
         if not len(cand):
             return
         samples = self.surface.points[cand]

@@ -133,15 +133,21 @@ class Detectability:
         return np.array([pod(a).mean() for a in sizes_mm])
 
     def predicted_a(
-        self, kind: str, detector: Detector, share: float = 0.9, seed: int = 0
+        self,
+        kind: str,
+        detector: Detector,
+        share: float = 0.9,
+        seed: int = 0,
+        pod: Callable[[float | np.ndarray], np.ndarray] | None = None,
     ) -> float | None:
         """The depth at which the predicted POD reaches `share` (None if it never does
-        below 100 mm: too much of the surface unseen)."""
+        below 100 mm: too much of the surface unseen); pod: `pod_function` of the kind,
+        detector and `sampled_rows(seed)`, if the caller has it."""
         rows = self.sampled_rows(seed)
         seen = self.seen if rows is None else self.seen[rows]
         if not seen.mean() >= share:  # unseen samples never find a defect
             return None
-        pod = self.pod_function(kind, detector, rows)
+        pod = pod or self.pod_function(kind, detector, rows)
         # The POD only grows with the depth: bisect on log depth (14 halvings of 1e-4..100 mm
         # leave 0.1 % of it), not a grid walk.
         lo, hi = math.log(1e-4), math.log(100.0)
@@ -155,11 +161,17 @@ class Detectability:
         return math.exp(hi)
 
     def smallest_mm(
-        self, kind: str, detector: Detector, share: float = 0.9, rows: np.ndarray | None = None
+        self,
+        kind: str,
+        detector: Detector,
+        share: float = 0.9,
+        rows: np.ndarray | None = None,
+        pod: Callable[[float | np.ndarray], np.ndarray] | None = None,
     ) -> np.ndarray:
         """(k,) per sample (or (r,) per sorted sample index of `rows`) the smallest depth
-        found with probability `share` (inf: none below 100 mm)."""
-        pod = self.pod_function(kind, detector, rows)
+        found with probability `share` (inf: none below 100 mm); pod: `pod_function` of the
+        kind, detector and rows, if the caller has it."""
+        pod = pod or self.pod_function(kind, detector, rows)
         n = len(self.seen) if rows is None else len(rows)
         # Each sample's POD only grows with the depth: all samples bisected at once on log
         # depth, 1e-3..100 mm in 17 halvings (0.01 % apart, finer than any map shows).

@@ -16,7 +16,7 @@ import numpy as np
 from scanplan.core.quantities import DEFECT_TYPE, ScanSpec, norm_rows
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.judging.accumulators import valid_points, valid_points_tree
+from scanplan.judging.accumulators import samples_near, valid_points, valid_points_tree
 from scanplan.judging.detectability import (
     COLUMN_STRIDE,
     DENSITY_RADIUS_MM,
@@ -69,6 +69,8 @@ class DetectabilitySurvey:
         self.false_calls = false_calls
         self.swath = swath
         self.surface: VisibleSurface | None = None
+        self._whole: VisibleSurface | None = None  # the surface `start` was given
+        self._position: np.ndarray | None = None  # of each of its samples in `surface`, or -1
         self.fan = sensor
         if surface is not None:
             self.start(surface, sensor, swath)
@@ -77,9 +79,14 @@ class DetectabilitySurvey:
         self, surface: VisibleSurface, fan: SensorSpec, swath: np.ndarray | None = None
     ) -> None:
         """Begin a scan by `fan` of the samples `surface`, its poses in passes `swath`."""
+        # The samples near a chunk are looked up on the whole surface, as the coverage
+        # looks them up (once for both), then those surveyed picked out.
+        self._whole, self._position = surface, None
         if self.predicted_seed is not None:
             rows = predicted_rows(len(surface.points), self.predicted_seed)
             if rows is not None:
+                self._position = np.full(len(surface.points), -1)
+                self._position[rows] = np.arange(len(rows))
                 surface = VisibleSurface(
                     surface.points[rows], surface.area_mm2, surface.faces[rows]
                 )
@@ -106,7 +113,7 @@ class DetectabilitySurvey:
 
     def add(self, lo: int, scan: Scan) -> None:
         """The chunk of scanning poses lo, lo+1, ... measured."""
-        if self.surface is None:
+        if self.surface is None or self._whole is None:
             raise RuntimeError("DetectabilitySurvey.start was not called")
         fan, samples, k = self.fan, self.surface.points, len(self.surface.points)
         valid = scan.valid
@@ -128,7 +135,11 @@ class DetectabilitySurvey:
             return
         rows = lo + np.nonzero(v)[0]
         point_pass = np.zeros(len(pts), np.int64) if self._pass_of is None else self._pass_of[rows]
-        inside = self.surface.near(pts, self._radius)  # those within reach, and some more
+        # Those within reach, and some more.
+        inside = samples_near(scan, self._stride, self._whole, self._radius)
+        if self._position is not None:
+            inside = self._position[inside]
+            inside = inside[inside >= 0]
         if len(inside) == 0:
             return
         # One worker: the next chunk is measured on the other core meanwhile.
@@ -226,14 +237,15 @@ def evaluate_detectable(
     _, found = acc.finish()
     picked = found.sampled_rows(seed)
     rows = np.arange(len(found.seen)) if picked is None else picked
+    pod = found.pod_function(kind, detector, picked)  # the same rows for all three
     detectable = {
         "type": kind,
-        "a50_mm": found.predicted_a(kind, detector, 0.5, seed),
-        "a90_mm": found.predicted_a(kind, detector, 0.9, seed),
+        "a50_mm": found.predicted_a(kind, detector, 0.5, seed, pod),
+        "a90_mm": found.predicted_a(kind, detector, 0.9, seed, pod),
         "detector": detector.to_json_dict(),
         **found.to_json_dict(),
     }
-    smallest = found.smallest_mm(kind, detector, 0.9, rows)
+    smallest = found.smallest_mm(kind, detector, 0.9, rows, pod)
     return replace(
         metrics, detectable=detectable, detectable_map=(found.points_part[rows], smallest)
     )

@@ -154,12 +154,16 @@ class VisibleSurface:
     def _grids(self) -> dict[float, SampleGrid]:
         return {}
 
+    def grid_cell(self, radius_mm: float) -> float:
+        """The cell of the grid `near` looks within `radius_mm` on."""
+        return max(float(radius_mm), GRID_CELL_MM)
+
     def near(self, points: np.ndarray, radius_mm: float) -> np.ndarray:
         """Sorted indices of the samples that may lie within `radius_mm` of `points` (n, 3):
         every one that does, and some farther (those in the same cells of a grid at least
         `GRID_CELL_MM` wide, built once per cell size: choosing views and every trial judge
         on the same samples)."""
-        cell = max(float(radius_mm), GRID_CELL_MM)
+        cell = self.grid_cell(radius_mm)
         grid = self._grids.get(cell)
         if grid is None:
             grid = self._grids[cell] = SampleGrid(self.points, cell)
