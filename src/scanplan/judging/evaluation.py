@@ -155,11 +155,6 @@ def _collision_summary(
     }
 
 
-def _observe(observers: Sequence[ScanObserver], lo: int, scan: Scan) -> None:
-    for observer in observers:
-        observer.add(lo, scan)
-
-
 def _out_of_reach(part: Part) -> ValueError:
     hidden = " or hidden by its fixtures" if part.occluders else ""
     return ValueError(
@@ -287,26 +282,32 @@ def evaluate(
     for observer in observers:
         observer.start(surface, spec, swath)
     profiler = LineProfilometer(in_cell, spec, seed=seed)
-    # Beside the scan (measured a chunk ahead on a thread of its own): the ceiling, and the
-    # observers on the chunk before the one judged here, each in chunk order.
+
+    def beside_coverage(lo: int, scan: Scan, ori: np.ndarray) -> None:
+        errors.add(scan, ori)
+        spacing.add(lo, scan)
+        sample.add(lo, scan, ori, swath[lo : lo + len(scan)], wd)
+        for observer in observers:
+            observer.add(lo, scan)
+
+    # Three threads, on the cores: the scan measured a chunk ahead, the coverage here, and
+    # beside it the ceiling and the other accumulators on the chunk the coverage has just
+    # judged (each in chunk order; the coverage builds the tree the survey shares).
     with ThreadPoolExecutor(max_workers=1) as beside:
         ceiling_job = (
             beside.submit(_visibility_ceiling, in_cell, surface, scan_spec, seed)
             if ceiling
             else None
         )
-        observed: Future[None] | None = None
+        judged: Future[None] | None = None
         for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
             ori = point_orientation_error(scan.normals_part, scan.poses)
-            errors.add(scan, ori)
-            spacing.add(lo, scan)
-            coverage.add(scan, ori, has_prev[lo : lo + len(scan)])  # builds the shared tree
-            sample.add(lo, scan, ori, swath[lo : lo + len(scan)], wd)
-            if observed is not None:
-                observed.result()  # at most one chunk waits: memory stays bounded
-            observed = beside.submit(_observe, observers, lo, scan) if observers else None
-        if observed is not None:
-            observed.result()
+            coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
+            if judged is not None:
+                judged.result()  # at most one chunk waits: memory stays bounded
+            judged = beside.submit(beside_coverage, lo, scan, ori)
+        if judged is not None:
+            judged.result()
         ceiling_share = ceiling_job.result() if ceiling_job is not None else None
 
     if errors.n_valid == 0:
