@@ -317,6 +317,18 @@ class Coverage:
         if not len(points):
             return
         cover, held = self.cover_radius, self.in_spec_radius
+        if 2 * np.count_nonzero(qualifies) < len(points):
+            # Few qualify (a plan far off its stand-off): the nearest point would seldom be
+            # one, so many samples would look among their neighbours; a tree of those few
+            # costs less.
+            if self.plain:
+                open_ = near[~self.covered[near]]
+                dist, _ = tree().query(self.surface.points[open_], distance_upper_bound=cover)
+                self.covered[open_[dist < cover]] = True
+            if self.plain and held <= cover:  # within the in-spec radius of a point: covered
+                near = near[self.covered[near]]
+            self._mark(self.in_spec, points[qualifies], normals[qualifies], held, near)
+            return
         reach = max(cover, held) if self.plain else held
         cand = near[~self.in_spec[near]]  # a sample in spec is covered (`_mark_in_spec`)
         if not len(cand):
@@ -366,13 +378,19 @@ class Coverage:
             k *= 4
 
     def _mark(
-        self, marked: np.ndarray, points: np.ndarray, normals: np.ndarray, radius: float
+        self,
+        marked: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray,
+        radius: float,
+        near: np.ndarray | None = None,
     ) -> None:
         """Mark in `marked` the samples within `radius` of one of `points` (n, 3) on the
-        sample's side (the points' `normals`): from each open sample its nearest point."""
+        sample's side (the points' `normals`): from each open sample its nearest point.
+        near: the samples that may lie within the radius (None: looked up)."""
         if not len(points):
             return
-        cand = self.surface.near(points, radius)
+        cand = self.surface.near(points, radius) if near is None else near
         cand = cand[~marked[cand]]
         if not len(cand):
             return
