@@ -295,11 +295,31 @@ def test_a_pass_whose_move_in_hits_the_cell_is_entered_at_the_top_of_its_move_fi
     index, raised = np.arange(11), np.zeros(11, bool)
     assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, 7]
     # The joint move into pass 1's first pose hits: the pass is entered at its top instead.
-    left, lifted = fit_module._lifted(traj, index, {7: (0, 0)}, raised)
+    low = np.zeros(11, bool)
+    left, lifted = fit_module._lifted(traj, index, {7: (0, 0)}, raised, low)
     assert lifted and left == {} and np.flatnonzero(raised).tolist() == [7]
     top = int(fit_module.lead_tops(traj)[7])
     assert top in (5, 6)
     assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, top]
     # Its move in hits from the top too: left to be flown the other way or given up.
-    left, lifted = fit_module._lifted(traj, index, {top: (0, 0)}, raised)
+    left, lifted = fit_module._lifted(traj, index, {top: (0, 0)}, raised, low)
     assert not lifted and left == {top: (0, 0)}
+
+
+def test_a_pass_whose_move_down_from_the_top_flips_is_entered_beside_the_surface_again():
+    # Pass 0, the move into pass 1 (its swath index), pass 1 entered at the top of it, and
+    # the move into pass 2 (not raised). A flip on the move down into pass 1 lowers it for
+    # good; flips in a pass, or on a move into a pass entered at its first pose, do not.
+    swath = np.array([0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2])
+    scanning = np.array([1, 1, 1, 0, 0, 0, 1, 1, 1, 0, 0, 1, 1], bool)
+    traj = Trajectory(np.tile(np.eye(4), (13, 1, 1)), swath, scanning)
+    index = np.arange(13) + 100  # the kept poses of a longer plan
+    raised, low = np.zeros(113, bool), np.zeros(113, bool)
+    raised[106] = True
+    flips = np.array([1, 4, 7, 10])
+    lowered = fit_module._lowered(traj, index, flips, raised, low)
+    assert lowered.tolist() == [False, True, False, False]
+    assert not raised.any() and np.flatnonzero(low).tolist() == [106]
+    # Lowered for good: its joint move in is not raised again.
+    left, lifted = fit_module._lifted(traj, index, {6: (0, 1)}, raised, low)
+    assert left == {6: (0, 1)} and not lifted and not raised.any()

@@ -169,3 +169,28 @@ def test_the_move_into_a_pass_is_flown_on_its_configuration_from_its_entry() -> 
     # over beside the surface; entered at the via point, it turns over there.
     via = [np.sign(arm.singularity_terms(r.joints[1])[1]) for r in (at_pass, at_via)]
     assert via == [elbow[0], -elbow[2]]
+
+
+def test_a_flip_on_the_linear_move_into_a_pass_stops_the_arm() -> None:
+    # On the configuration it is entered with (as a plan records it), the move into pass 1
+    # crosses the wrist singularity (q5 through 0), the pass itself does not: a controller
+    # flies that move linearly and cannot change configuration in it.
+    arm = get_robot("ur5e")
+    lead = np.linspace(0, 1, 20)[:, None]
+    q0 = np.array([0.3, -1.4, 1.6, -1.7, 0.35, 0.4])
+    qm = np.array([0.4, -1.3, 1.5, -1.6, -0.35, 0.3])
+    q1 = np.array([0.5, -1.2, 1.4, -1.5, -0.7, 0.2])
+    run = np.linspace(0, 1, 40)[:, None]
+    poses = arm.forward(np.vstack([q0 + lead * (qm - q0), qm + run[1:] * (q1 - qm)]))
+    n = len(poses)
+    swath = np.ones(n, int)
+    scanning = np.r_[np.zeros(20, bool), np.ones(n - 20, bool)]
+    at_top = np.r_[True, np.zeros(n - 1, bool)]
+    flown = check_reach(poses, arm, swath=swath, scanning=scanning, entry=at_top, entries={0: q0})
+    np.testing.assert_allclose(flown.joints[:20], (q0 + lead * (qm - q0)), atol=1e-8)
+    assert len(flown.config_flips) == 1 and 1 <= flown.config_flips[0] < 20
+    assert not flown.reachable
+    assert "linear move" in flown.first_problem()[1]
+    # Entered at the pass, the poses before it are moves of their own: nothing flips.
+    at_pass = check_reach(poses, arm, swath=swath, scanning=scanning, entries={0: q0})
+    assert len(at_pass.config_flips) == 0 and at_pass.reachable

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory, lead_tops
+from scanplan.core.trajectory import Trajectory, lead_tops, pass_bounds
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
@@ -167,6 +167,7 @@ def fit_to_robot(
     # The first poses of passes entered at the top of the move into them, not beside the
     # surface: those whose joint move in swept a link into the cell.
     raised = np.zeros(len(traj), bool)
+    low = np.zeros(len(traj), bool)  # passes whose move down from the top flips the arm
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
@@ -182,7 +183,7 @@ def fit_to_robot(
         if report.reachable and obstacles is not None:
             starts = entry | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
-            moves, lifted = _lifted(current, index, in_cell.moves, raised)
+            moves, lifted = _lifted(current, index, in_cell.moves, raised, low)
             reverse = round_ < REVERSING_ROUNDS
             traj, reversed_now = _reversed(traj, current, index, moves, why, flipped, reverse)
             if reversed_now:
@@ -191,7 +192,10 @@ def fit_to_robot(
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
             reversed_now = lifted = False
-        done = not (len(swings) or reversed_now or lifted)
+        flips = report.config_flips
+        lowered = _lowered(current, index, flips, raised, low)
+        flips = flips[current.scanning[flips] | ~lowered]
+        done = not (len(swings) or reversed_now or lifted or lowered.any())
         if report.reachable and done and (why < 0).all():
             break
         bad = np.flatnonzero(why >= 0)
@@ -199,9 +203,9 @@ def fit_to_robot(
         cause[index[bad]] = why[bad]
         # A pass goes on after a gap or a flip as a new pass: the arm reconfigures between.
         cut = np.zeros(len(traj), bool)
-        cut[index[report.config_flips]] = True
+        cut[index[flips]] = True
         cut[index[swings]] = True
-        splits += int(len(np.union1d(report.config_flips, swings)))
+        splits += int(len(np.union1d(flips, swings)))
         swath = renumbered_passes(traj, keep, swath, cut)
     beyond_mm = _beyond_reach_mm(traj, arm, T_all, inv_tcp, cause)
     given_up, by_cause = _given_up_by_view(traj, keep, cause)
@@ -299,21 +303,47 @@ def _beyond_reach_mm(
 
 
 def _lifted(
-    current: Trajectory, index: np.ndarray, moves: dict[int, tuple[int, int]], raised: np.ndarray
+    current: Trajectory,
+    index: np.ndarray,
+    moves: dict[int, tuple[int, int]],
+    raised: np.ndarray,
+    low: np.ndarray,
 ) -> tuple[dict[int, tuple[int, int]], bool]:
     """The joint `moves` into passes of `current` (the kept poses of the fit's plan, at
     `index`) that sweep a link into the cell, less those of passes entered at their first
     pose with a move leading into them: those are entered at the top of it from now on
-    (marked in `raised`, by their first pose). Returns the moves left, and whether any was
-    lifted."""
+    (marked in `raised`, by their first pose), unless `low` marks them (that move down
+    flips the arm). Returns the moves left, and whether any was lifted."""
     top = lead_tops(current)
     left = {}
     for i, hit in moves.items():
-        if current.scanning[i] and top[i] != i:
+        if current.scanning[i] and top[i] != i and not low[index[i]]:
             raised[index[i]] = True
         else:
             left[i] = hit
     return left, len(left) < len(moves)
+
+
+def _lowered(
+    current: Trajectory, index: np.ndarray, flips: np.ndarray, raised: np.ndarray, low: np.ndarray
+) -> np.ndarray:
+    """Of the configuration `flips` (pose indices into `current`, the kept poses of the
+    fit's plan at `index`), those on the move down into a pass entered at its top: no
+    controller flips in a linear move, so that pass is entered at its first pose again
+    and for good (`raised` cleared, `low` set, by its first pose). (len(flips),) bool."""
+    lowered = np.zeros(len(flips), bool)
+    starts, _ = pass_bounds(current.scanning, current.swath)
+    first = np.flatnonzero(starts)
+    for k, f in enumerate(flips):
+        if current.scanning[f]:
+            continue
+        after = first[first > f]
+        if not len(after) or current.swath[after[0]] != current.swath[f]:
+            continue
+        s = index[after[0]]
+        if raised[s]:
+            raised[s], low[s], lowered[k] = False, True, True
+    return lowered
 
 
 def _reversed(

@@ -77,7 +77,9 @@ class ReachReport:
 
     joints: (n, 6) rad along the followed IK branch (closest solution to the previous pose),
             NaN where unreachable or beyond the joint limits. Index arrays are pose indices;
-            a jump or flip at i is between poses i-1 and i.
+            a jump or flip at i is between poses i-1 and i. Flips count within a pass and
+            on the linear move down into it from where it is entered: no controller changes
+            configuration in a linear move.
     margins: (n, 3) |wrist|, |elbow| (sines) and shoulder (mm) singularity distances;
     limit_margin_rad: (n,) to the nearest joint limit. NaN where `joints` is.
     """
@@ -106,7 +108,8 @@ class ReachReport:
 
     @property
     def reachable(self) -> bool:
-        """Every pose reachable inside the joint limits, no configuration flip in a pass."""
+        """Every pose reachable inside the joint limits, no configuration flip in a pass
+        or on the move into it."""
         return not (len(self.unreachable) or len(self.limit_violations) or len(self.config_flips))
 
     @property
@@ -121,7 +124,7 @@ class ReachReport:
             for a, what in (
                 (self.unreachable, "is unreachable"),
                 (self.limit_violations, "is beyond the joint limits"),
-                (self.config_flips, "flips the arm's configuration within its pass"),
+                (self.config_flips, "flips the arm's configuration in a linear move"),
             )
             if len(a)
         ]
@@ -329,7 +332,8 @@ def check_reach(
     prev: np.ndarray | None = None if q_start is None else np.asarray(q_start, dtype=float)
     # A pass's configuration is chosen over the whole pass, where a program enters it by a
     # joint move: the branch that flies most of it from its start (or from its lead-in's).
-    # Flips and jumps count within a pass only (`linked`); a lead-in is a move.
+    # Jumps count within a pass only (`linked`); flips also on the linear move down into a
+    # pass from where it is entered (`followed`): a controller cannot flip in a linear move.
     followed = linked
     if entry is not None:
         followed = _runs_linked(np.asarray(entry, dtype=bool), swath, scanning, linked)
@@ -373,7 +377,7 @@ def check_reach(
             joints[i + 1 : i + 1 + len(ran)] = ran
             prev, last = ran[-1], i + len(ran)
         i += 1 + len(ran)
-    return _report(arm, joints, exists, linked, tol, jump_deg)
+    return _report(arm, joints, exists, linked, tol, jump_deg, followed)
 
 
 def _report(
@@ -383,10 +387,12 @@ def _report(
     linked: np.ndarray,
     tol: np.ndarray,
     jump_deg: float,
+    followed: np.ndarray,
 ) -> ReachReport:
     """What the joints `check_reach` followed say: poses without a solution (`exists` (n, 8)
     none) or beyond the limits, near-singular ones (`tol`: wrist, elbow, shoulder), flips
-    and jumps, those within a pass (`linked`) apart."""
+    where the arm flies linearly (`followed`: a pass and the move into it) and jumps, those
+    within a pass (`linked`) apart."""
     limits = arm.joint_limits
     wrist_tol, elbow_tol, shoulder_tol_mm = tol
     reachable = ~np.isnan(joints).any(axis=1)
@@ -396,7 +402,7 @@ def _report(
     step = np.abs(np.diff(joints, axis=0))  # NaN across unreachable poses: never flagged
     jumps = np.nanmax(np.where(np.isnan(step), 0.0, step), axis=1) > np.radians(jump_deg)
     config = np.where(reachable[:, None], terms >= 0, np.nan)
-    flips = (np.abs(np.diff(config, axis=0)) == 1) & linked[:, None]  # NaN: never a flip
+    flips = (np.abs(np.diff(config, axis=0)) == 1) & followed[:, None]  # NaN: never a flip
     return ReachReport(
         model=arm.name,
         joints=joints,
