@@ -292,33 +292,61 @@ def _best_judged(
     scanning poses flyable, a fully flyable one first, and its score: judged on every
     pose following the branch as a controller would, in a cell the arm's links too (on a
     subsample). Returns `T_base_part` and the search's score of it."""
-    ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
+    ranked: list[tuple[bool, int, int, np.ndarray, float]] = []
     sample = sample_poses(traj, _LINK_RANK_POSES)
     inv_tcp = np.linalg.inv(tcp)
-    sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses[sample], obstacles)
-    for rank, i in enumerate(np.argsort(-best_scores)):
-        T_base_part = _as_printed(_placements(best[i : i + 1], centre)[0])
-        if obstacles is None:
+    order = np.argsort(-best_scores)
+    placed = [_as_printed(_placements(best[i : i + 1], centre)[0]) for i in order]
+    if obstacles is None:
+        for rank, T_base_part in enumerate(placed):
             report = check_reach(
                 T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
             )
             good = ~np.isnan(report.joints).any(axis=1)
-            flyable = report.reachable
-        else:  # ranked on the sample by what `fit.fit_to_robot` would keep: each pass as
-            # planned or turned about the beam; the full check for the chosen one only
-            kept = flyable_poses(
-                traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False
+            held = int(good[traj.scanning].sum()) if traj.scanning.any() else int(good.sum())
+            ranked.append(
+                (report.reachable, held, -rank, T_base_part, float(best_scores[order[rank]]))
             )
-            good = kept_by_pass(traj.swath[sample], *kept)
-            flyable = bool(good.all())
-        # What counts is the scanning kept (a move given up is flown as a joint move).
-        scanning = traj.scanning if obstacles is None else traj.scanning[sample]
-        held = float(good[scanning].mean()) if scanning.any() else float(good.mean())
-        ranked.append((flyable, held, -rank, T_base_part, float(best_scores[i])))
-        if flyable and obstacles is None:
+            if report.reachable:
+                break
+        *_, T_best, score = max(ranked, key=lambda r: r[:3])
+        return T_best, score
+    # Ranked on the sample by what `fit.fit_to_robot` would keep: each pass as planned or
+    # turned about the beam; the full check for the chosen one only. What counts is the
+    # scanning kept (a move given up is flown as a joint move).
+    sensor_ok = sensor_clear_both(traj.poses[sample], obstacles)
+    swath, scanning = traj.swath[sample], traj.scanning[sample]
+    counted = scanning if scanning.any() else np.ones(len(sample), bool)
+    # The links only take poses away: what reach and the sensor keep bounds what a
+    # placement can keep, so those that cannot beat the best found are not judged (the
+    # links cost 20x the reach).
+    bounds = []
+    for T_base_part in placed:
+        planned, turned = flyable_poses(traj, arm, T_base_part, inv_tcp, None, sample)
+        bounds.append(_most_kept(swath, counted, planned & sensor_ok[0], turned & sensor_ok[1]))
+    for rank in sorted(range(len(placed)), key=lambda r: (-bounds[r], r)):
+        if ranked and bounds[rank] < max(r[1] for r in ranked):
             break
+        T_base_part = placed[rank]
+        kept = flyable_poses(
+            traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False
+        )
+        good = kept_by_pass(swath, *kept)
+        held = int(good[counted].sum())
+        ranked.append((bool(good.all()), held, -rank, T_base_part, float(best_scores[order[rank]])))
     *_, T_best, score = max(ranked, key=lambda r: r[:3])
     return T_best, score
+
+
+def _most_kept(
+    swath: np.ndarray, counted: np.ndarray, planned: np.ndarray, turned: np.ndarray
+) -> int:
+    """The most `counted` poses a placement could keep, each pass flown the better way:
+    per pass, the larger of the counts kept as planned and turned."""
+    passes, at = np.unique(swath, return_inverse=True)
+    as_planned = np.bincount(at, planned & counted, len(passes))
+    as_turned = np.bincount(at, turned & counted, len(passes))
+    return int(np.maximum(as_planned, as_turned).sum())
 
 
 def place(
