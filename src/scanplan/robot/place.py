@@ -33,6 +33,7 @@ from scanplan.robot.reach import (
     fit_limits,
     limit_margin,
     pass_starts,
+    reduce_last_axis,
 )
 from scanplan.world.capsule_collision import CellObstacles
 
@@ -165,7 +166,9 @@ def _scores(
         q, inside = fit_limits(q, limits)
         inside &= ~np.isnan(q).any(axis=-1)
         margin = np.abs(robot.singularity_terms(q)) / _MARGIN_REF
-        value = np.minimum(margin.min(axis=-1), limit_margin(q, limits) / _LIMIT_REF_RAD)
+        value = np.minimum(
+            reduce_last_axis(margin, np.minimum), limit_margin(q, limits) / _LIMIT_REF_RAD
+        )
         value = np.where(inside, value, -np.inf).reshape(p, m, 8)
         per_run = np.minimum.reduceat(value, starts, axis=1).max(axis=2)  # (p, runs)
         worst = per_run.min(axis=1)

@@ -36,19 +36,23 @@ def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarra
     Ranges wider than ±180° (KUKA A6 ±350°, UR ±360°) make several turns legal: the one
     closest to the given q is kept."""
     lo, hi = limits[:, 0], limits[:, 1]
-    q = np.where(q > hi, q - TWO_PI, np.where(q < lo, q + TWO_PI, q))
-    q = np.where(q > hi, q - TWO_PI, np.where(q < lo, q + TWO_PI, q))
-    return q, _all_joints((q >= lo - 1e-12) & (q <= hi + 1e-12), np.logical_and)
+    # A turn down where above the range, up where below (never both: lo < hi), by
+    # arithmetic on the tests: the same values as choosing with `np.where`, at a third of
+    # its cost.
+    for _ in range(2):
+        q = q - TWO_PI * (q > hi) + TWO_PI * (q < lo)
+    return q, reduce_last_axis((q >= lo - 1e-12) & (q <= hi + 1e-12), np.logical_and)
 
 
 def limit_margin(q: np.ndarray, limits: np.ndarray) -> np.ndarray:
     """(…,) rad to the nearest joint limit (negative beyond it)."""
-    return _all_joints(np.minimum(q - limits[:, 0], limits[:, 1] - q), np.minimum)
+    return reduce_last_axis(np.minimum(q - limits[:, 0], limits[:, 1] - q), np.minimum)
 
 
-def _all_joints(per_joint: np.ndarray, combine: np.ufunc) -> np.ndarray:
-    """`combine` reduced over the last axis joint by joint: numpy's reduction over a short
-    last axis costs twice as much, and the placement search reduces millions of solutions."""
+def reduce_last_axis(per_joint: np.ndarray, combine: np.ufunc) -> np.ndarray:
+    """`combine` reduced over the last axis (joints, singularity terms) column by column:
+    numpy's reduction over a short last axis costs twice to ten times as much, and the
+    placement search reduces millions of solutions."""
     out = combine(per_joint[..., 0], per_joint[..., 1])
     for j in range(2, per_joint.shape[-1]):
         combine(out, per_joint[..., j], out=out)
