@@ -64,15 +64,24 @@ def test_marks_the_samples_within_the_radius_on_their_side():
 
 @pytest.mark.parametrize("plain", [True, False])
 @pytest.mark.parametrize("qualifying", [0.3, 0.8])
-def test_a_chunk_covers_and_holds_in_spec_the_samples_its_definition_names(plain, qualifying):
+@pytest.mark.parametrize("cover_held", [(1.6, 1.2), (1.2, 1.6)])
+def test_a_chunk_covers_and_holds_in_spec_the_samples_its_definition_names(
+    plain, qualifying, cover_held
+):
     """A chunk's samples within the cover radius of any point are covered, those within the
     in-spec radius of a qualifying point on their side held in spec, whether most points
     qualify (one query of the chunk's tree, where the nearest point often does not qualify
     or lies on the other side) or few do (a tree of those)."""
     rng = np.random.default_rng(11)
     surface, sample_normals, points, point_normals = _scene(rng)
-    cover, held = 1.6, 1.2
+    cover, held = cover_held
     coverage = Coverage(surface, ScanSpec(), 1, cover, held, sample_normals, plain=plain)
+    # Some samples in spec already, some covered already, from chunks before (in spec
+    # and not covered only where the in-spec radius is the larger).
+    before = np.zeros(len(surface.points), bool)
+    before[0 if held <= cover else 40 : 80] = plain
+    coverage.in_spec[:40] = True
+    coverage.covered[:] = before
     qualifies = rng.random(len(points)) < qualifying
     tree = cKDTree(points)
     near = surface.near(points, max(cover, held))
@@ -80,11 +89,13 @@ def test_a_chunk_covers_and_holds_in_spec_the_samples_its_definition_names(plain
 
     samples = surface.points
     in_spec = _brute(samples, sample_normals, points, point_normals, held, qualifies)
+    in_spec[:40] = True
     assert in_spec.sum() > 200 and (~in_spec).sum() > 500
     assert np.array_equal(coverage.in_spec, in_spec)
     if plain:
         covered = _brute(samples, sample_normals, points, None, cover)
-        assert covered.sum() > in_spec.sum()
+        covered |= before
+        assert (covered & ~in_spec).any() and (in_spec & ~covered).any() == (held > cover)
         assert np.array_equal(coverage.covered, covered)
     else:
         assert not coverage.covered.any()

@@ -330,7 +330,10 @@ class Coverage:
             self._mark(self.in_spec, points[qualifies], normals[qualifies], held, near)
             return
         reach = max(cover, held) if self.plain else held
-        cand = near[~self.in_spec[near]]  # a sample in spec is covered (`_mark_in_spec`)
+        settled = self.in_spec[near]
+        if self.plain and held > cover:  # in spec farther than a point covers: not settled
+            settled &= self.covered[near]
+        cand = near[~settled]
         if not len(cand):
             return
         samples = self.surface.points[cand]
