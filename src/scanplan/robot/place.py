@@ -228,20 +228,27 @@ def _pattern_search(
     evaluated = 0
     moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
     held = np.zeros(len(best), bool) if held_height is None else held_height
+    # A candidate that did not improve at these steps would try the same placements again
+    # (the same scores) until the steps change: only the others are scored.
+    stale = np.zeros(len(best), bool)
+    best, best_scores = best.copy(), best_scores.copy()
     for _ in range(24):
-        trial = best[:, None] + moves[None] * delta
+        rows = np.flatnonzero(~stale)
+        trial = best[rows, None] + moves[None] * delta
         trial[..., 2] = np.clip(trial[..., 2], lo, hi)
-        trial[held, :, 2] = best[held, None, 2]
+        trial[held[rows], :, 2] = best[rows[held[rows]], None, 2]
         flat = trial.reshape(-1, 4)
         s = _scores(robot, T_part_flange, starts, _placements(flat, centre), obstacles)
         evaluated += len(flat)
-        s = s.reshape(len(best), len(moves))
+        s = s.reshape(len(rows), len(moves))
         pick = s.argmax(axis=1)
-        improved = s[np.arange(len(best)), pick] > best_scores + 1e-9
-        best = np.where(improved[:, None], trial[np.arange(len(best)), pick], best)
-        best_scores = np.maximum(best_scores, s.max(axis=1))
+        improved = s[np.arange(len(rows)), pick] > best_scores[rows] + 1e-9
+        best[rows] = np.where(improved[:, None], trial[np.arange(len(rows)), pick], best[rows])
+        best_scores[rows] = np.maximum(best_scores[rows], s.max(axis=1))
+        stale[rows[~improved]] = True
         if not improved.any():
             delta = delta / 2
+            stale[:] = False
             if delta[0] < 4.0:  # a few mm move no pose in or out of reach worth the rounds
                 break
     return best, best_scores, evaluated
