@@ -176,3 +176,52 @@ def test_the_table_block_is_measured_as_fcl_measures_a_capsule_against_a_box() -
         else:  # touching or inside: within the radius
             assert d <= radius + 1e-6
     assert (far == 0).any() and (far > 50).any()
+
+
+def test_a_pass_that_could_not_gain_by_turning_is_not_checked_turned_and_chosen_alike() -> None:
+    # Passes over a plate, tilted pass by pass, a UR5e placed beside it: the per-pass choice
+    # between planned and turned is the same whether the turned poses of passes that cannot
+    # gain are checked or not, and some are not.
+    from scipy.spatial.transform import Rotation
+
+    from scanplan.core.sensor_spec import DEFAULT_SENSOR, PRESETS
+    from scanplan.core.trajectory import Trajectory
+    from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, turned_passes
+
+    part = _box_part((400, 400, 20), (0, 0, 10))
+    obstacles = obstacles_for(part, Cell.around(part), PRESETS[DEFAULT_SENSOR], 20.0)
+    rng = np.random.default_rng(5)
+    blocks, swath, scanning = [], [], []
+    for k in range(10):
+        tilt = rng.uniform(-0.6, 0.6, 2)
+        # Every other pass flown with the sensor turned the other way about the vertical.
+        yaw = Rotation.from_euler("z", np.pi * (k % 2))
+        R = (yaw * Rotation.from_euler("xy", tilt) * Rotation.from_euler("x", np.pi)).as_matrix()
+        T = np.tile(np.eye(4), (30, 1, 1))
+        T[:, :3, :3] = R
+        T[:, 0, 3] = np.linspace(-180, 180, 30)
+        T[:, 1, 3] = -180 + 40 * k
+        T[:, 2, 3] = 300.0
+        blocks.append(T)
+        swath += [k] * 30
+        scanning += [True] * 30
+    traj = Trajectory(np.concatenate(blocks), np.array(swath), np.array(scanning))
+    arm = get_robot("ur5e")
+    tcp = np.eye(4)
+    tcp[:3, 3] = 120.0, 0.0, 90.0  # a bracket off to the side: turned, the flange moves
+    T_base_part = np.eye(4)
+    T_base_part[:3, 3] = 600.0, 0.0, -200.0  # the far passes at the edge of the reach
+    inv_tcp = np.linalg.inv(tcp)
+    full = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, exact=False)
+    every = np.ones(len(traj), bool)
+    both = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, exact=False, choosing=every)
+    np.testing.assert_array_equal(both[0], full[0])
+    np.testing.assert_array_equal(kept_by_pass(traj.swath, *both), kept_by_pass(traj.swath, *full))
+    scan = flyable_poses(
+        traj, arm, T_base_part, inv_tcp, obstacles, exact=False, choosing=traj.scanning
+    )
+    np.testing.assert_array_equal(
+        turned_passes(traj.swath, *scan), turned_passes(traj.swath, *full)
+    )
+    assert len(turned_passes(traj.swath, *full))  # some passes are better turned
+    assert (full[1] & ~both[1]).any()  # and some turned poses were left unchecked

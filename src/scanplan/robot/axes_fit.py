@@ -157,7 +157,11 @@ def kept_at(
                 for p in (sub.poses, sub.poses @ HALF_TURN)
             ]
         else:
-            good = list(flyable_poses(sub, arm, T, inv_tcp, obstacles, exact=False))
+            good = list(
+                flyable_poses(
+                    sub, arm, T, inv_tcp, obstacles, exact=False, choosing=np.ones(len(sub), bool)
+                )
+            )
         out[c] = kept_by_pass(sub.swath, good[0], good[1])[scanning].sum()
     return out
 
@@ -243,7 +247,9 @@ class PlacedArmOnAxes(PlacedArm):
         with_axes, _ = choose_values(single, arm, self.tcp, self.T_base_part, self.axes, obstacles)
         T = part_poses(self.T_base_part, with_axes.external, self.axes)
         inv_tcp = np.linalg.inv(self.tcp)
-        planned, turned = flyable_poses(with_axes, arm, T, inv_tcp, obstacles, exact=False)
+        planned, turned = flyable_poses(
+            with_axes, arm, T, inv_tcp, obstacles, exact=False, choosing=traj.scanning
+        )
         scanning = traj.scanning
         turn = np.isin(
             traj.swath, turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])

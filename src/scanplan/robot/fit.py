@@ -395,7 +395,9 @@ def _turned(
     half a turn about the beam where more of its poses are reachable and clear that way,
     and how many were."""
     sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses, obstacles)
-    planned, turned = flyable_poses(traj, arm, T_base_part, inv_tcp, obstacles, sensor_ok=sensor_ok)
+    planned, turned = flyable_poses(
+        traj, arm, T_base_part, inv_tcp, obstacles, sensor_ok=sensor_ok, choosing=traj.scanning
+    )
     scanning = traj.scanning
     better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
     if sensor_ok is not None and len(better):

@@ -28,13 +28,17 @@ def flyable_poses(
     index: np.ndarray | None = None,
     sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
     exact: bool = True,
+    choosing: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
     default) of `traj` the arm reaches within its limits with its links clear, and (the
     body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
     last verdict for both, if known (it does not depend on the placement). exact=False: the
     links' quick, slightly cautious verdict (`links.check_links`). T_base_part: (4, 4), or
-    (len(traj), 4, 4) one per pose (external axes)."""
+    (len(traj), 4, 4) one per pose (external axes). choosing: (m,) bool, for a caller that
+    only chooses per pass the way that keeps more of these poses: a pass whose turned poses
+    could not keep more of them than its planned ones keep (on reach and the sensor alone)
+    reads as turned nowhere, its links unchecked."""
     index = np.arange(len(traj)) if index is None else index
     if np.ndim(T_base_part) == 3:  # one per pose of `traj` (external axes)
         T_base_part = np.asarray(T_base_part)[index]
@@ -48,12 +52,23 @@ def flyable_poses(
             swath=traj.swath[index],
             scanning=traj.scanning[index],
         )
-        good = ~np.isnan(report.joints).any(axis=1)
-        if obstacles is not None:
-            links = check_links(arm, report.joints, obstacles, T_base_part, exact=exact)
-            good &= ~links.colliding
+        joints = report.joints
+        good = ~np.isnan(joints).any(axis=1)
         if sensor_ok is not None:
             good &= sensor_ok[k]
+        if k == 1 and choosing is not None and obstacles is not None:
+            # The links only take poses away: where even reach and the sensor keep no
+            # more of the pass turned than its links leave as planned, it is not turned.
+            swath = traj.swath[index]
+            passes, at = np.unique(swath, return_inverse=True)
+            kept_planned = np.bincount(at, out[0] & choosing, len(passes))
+            could_turned = np.bincount(at, good & choosing, len(passes))
+            beaten = (could_turned <= kept_planned)[at]
+            good &= ~beaten
+            joints = np.where(beaten[:, None], np.nan, joints)  # not checked
+        if obstacles is not None:
+            links = check_links(arm, joints, obstacles, T_base_part, exact=exact)
+            good &= ~links.colliding
         out.append(good)
     return out[0], out[1]
 

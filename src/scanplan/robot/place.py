@@ -339,8 +339,9 @@ def _best_judged(
             break
         T_base_part = placed[rank]
         kept = flyable_poses(
-            traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False
-        )
+            traj, arm, T_base_part, inv_tcp, obstacles, sample, sensor_ok, exact=False,
+            choosing=np.ones(len(sample), bool),
+        )  # fmt: skip
         good = kept_by_pass(swath, *kept)
         held = int(good[counted].sum())
         ranked.append((bool(good.all()), held, -rank, T_base_part, float(best_scores[order[rank]])))

@@ -58,7 +58,7 @@ class PlacedArm:
         obstacles = self.obstacles(part)
         inv_tcp = np.linalg.inv(self.tcp)
         planned, turned = flyable_poses(
-            traj, arm, self.T_base_part, inv_tcp, obstacles, exact=False
+            traj, arm, self.T_base_part, inv_tcp, obstacles, exact=False, choosing=traj.scanning
         )
         scanning = traj.scanning
         better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
