@@ -16,7 +16,7 @@ import scanplan.jobs.demo
 from scanplan.cli import app
 from scanplan.core.plan_file import read_csv, read_json
 from scanplan.core.quantities import ScanSpec
-from scanplan.jobs.demo import _SecondProcess
+from scanplan.jobs.second_process import SecondProcess
 from scanplan.robot.export import ExportOptions, parse_program
 from scanplan.robot.export.common import plan_motion
 
@@ -114,7 +114,7 @@ def test_the_second_process_returns_results_in_order_and_raises_as_here():
     # The rl plan's evaluation and fit run there: its answers and its errors must come back
     # as if computed here (a ValueError stays one clear line), and a process that dies is
     # said to have died, not waited for.
-    with _SecondProcess(int, "0") as second:
+    with SecondProcess(int, "0") as second:
         second.submit(divmod, 7, 2)
         second.submit(math.sqrt, -1.0)
         second.submit(divmod, 9, 4)
@@ -128,7 +128,7 @@ def test_the_second_process_returns_results_in_order_and_raises_as_here():
 
 
 def test_a_failing_setup_of_the_second_process_fails_its_calls():
-    with _SecondProcess(int, "not a number") as second:
+    with SecondProcess(int, "not a number") as second:
         second.submit(divmod, 7, 2)
         with pytest.raises(ValueError, match="invalid literal for int"):
             second.result()

@@ -44,7 +44,7 @@ def flyable_poses(
         T_base_part = np.asarray(T_base_part)[index]
     if sensor_ok is None and obstacles is not None:
         sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
-    out = []
+    out: list[np.ndarray] = []
     for k, poses in enumerate((traj.poses[index], traj.poses[index] @ HALF_TURN)):
         report = check_reach(
             T_base_part @ poses @ inv_tcp,
