@@ -317,8 +317,8 @@ def test_a_pass_whose_move_down_from_the_top_flips_is_entered_beside_the_surface
     raised, low = np.zeros(113, bool), np.zeros(113, bool)
     raised[106] = True
     flips = np.array([1, 4, 7, 10])
-    lowered = fit_module._lowered(traj, index, flips, raised, low)
-    assert lowered.tolist() == [False, True, False, False]
+    left, lowered = fit_module._lowered(traj, index, flips, raised, low)
+    assert left.tolist() == [1, 7, 10] and lowered
     assert not raised.any() and np.flatnonzero(low).tolist() == [106]
     # Lowered for good: its joint move in is not raised again.
     left, lifted = fit_module._lifted(traj, index, {6: (0, 1)}, raised, low)

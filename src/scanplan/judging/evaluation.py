@@ -8,8 +8,9 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from typing import Any, Protocol
 
 import numpy as np
@@ -155,6 +156,33 @@ def _collision_summary(
     }
 
 
+def _judge(
+    chunks: Iterator[tuple[int, Scan]],
+    coverage: Coverage,
+    has_prev: np.ndarray,
+    beside_coverage: Callable[[int, Scan, np.ndarray], None],
+    the_ceiling: Callable[[], float | None],
+    ceiling: bool,
+) -> float | None:
+    """Judge the scan's `chunks` on three threads, on the cores: the scan measured a chunk
+    ahead (`measure_in_chunks`), the `coverage` here, and beside it the `ceiling` and the
+    other accumulators (`beside_coverage`) on the chunk the coverage has just judged, each
+    in chunk order (the coverage builds the tree the survey shares). Returns the ceiling
+    (`the_ceiling`, None unless `ceiling`)."""
+    with ThreadPoolExecutor(max_workers=1) as beside:
+        ceiling_job = beside.submit(the_ceiling) if ceiling else None
+        judged: Future[None] | None = None
+        for lo, scan in chunks:
+            ori = point_orientation_error(scan.normals_part, scan.poses)
+            coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
+            if judged is not None:
+                judged.result()  # at most one chunk waits: memory stays bounded
+            judged = beside.submit(beside_coverage, lo, scan, ori)
+        if judged is not None:
+            judged.result()
+        return ceiling_job.result() if ceiling_job is not None else None
+
+
 def _out_of_reach(part: Part) -> ValueError:
     hidden = " or hidden by its fixtures" if part.occluders else ""
     return ValueError(
@@ -248,12 +276,10 @@ def evaluate(
     limits, targets, blended: the arm's motion limits the cycle time is timed with, the poses
     a program flies between and those it blends through (`cycle.cycle_time`; None: every
     planned pose, each an exact stop).
-    ceiling: also measure the visibility ceiling of the surface to inspect (about a second
-    on the door); off where only the in-spec set is wanted (choosing views, fitting an arm).
+    ceiling: also measure the visibility ceiling of the surface to inspect (beside the scan).
     observers: each started on the surface samples, the fan and the scanning poses' passes,
-    then fed every chunk of the scan.
-    Raises ValueError if no scanning pose returns a valid point.
-    """
+    then fed every chunk of the scan. Raises ValueError if no scanning pose returns a valid
+    point."""
     start_time = time.perf_counter()
     sensor = scan_spec.sensor
     spec = sensor.with_points(points_per_profile) if points_per_profile else sensor
@@ -268,7 +294,6 @@ def evaluate(
     # The scan direction y_s says which way is forward (only the sign of Δs uses it): on a
     # side view's pass up a wall the horizontal has no forward.
     u_dir = poses[:, :3, 1].copy()
-
     context = recorded(traj, scan_spec) if context is None else context
     part = part.with_roi(context.roi)
     surface = surface_samples(part, spec, context, seed)
@@ -281,7 +306,6 @@ def evaluate(
     sample = CloudSample(m * n_cols, max_map_points, seed)
     for observer in observers:
         observer.start(surface, spec, swath)
-    profiler = LineProfilometer(in_cell, spec, seed=seed)
 
     def beside_coverage(lo: int, scan: Scan, ori: np.ndarray) -> None:
         errors.add(scan, ori)
@@ -290,26 +314,11 @@ def evaluate(
         for observer in observers:
             observer.add(lo, scan)
 
-    # Three threads, on the cores: the scan measured a chunk ahead, the coverage here, and
-    # beside it the ceiling and the other accumulators on the chunk the coverage has just
-    # judged (each in chunk order; the coverage builds the tree the survey shares).
-    with ThreadPoolExecutor(max_workers=1) as beside:
-        ceiling_job = (
-            beside.submit(_visibility_ceiling, in_cell, surface, scan_spec, seed)
-            if ceiling
-            else None
-        )
-        judged: Future[None] | None = None
-        for lo, scan in profiler.measure_in_chunks(poses, chunk_poses, progress):
-            ori = point_orientation_error(scan.normals_part, scan.poses)
-            coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
-            if judged is not None:
-                judged.result()  # at most one chunk waits: memory stays bounded
-            judged = beside.submit(beside_coverage, lo, scan, ori)
-        if judged is not None:
-            judged.result()
-        ceiling_share = ceiling_job.result() if ceiling_job is not None else None
-
+    chunks = LineProfilometer(in_cell, spec, seed=seed).measure_in_chunks(
+        poses, chunk_poses, progress
+    )
+    the_ceiling = partial(_visibility_ceiling, in_cell, surface, scan_spec, seed)
+    ceiling_found = _judge(chunks, coverage, has_prev, beside_coverage, the_ceiling, ceiling)
     if errors.n_valid == 0:
         raise _out_of_reach(in_cell)
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
@@ -325,7 +334,7 @@ def evaluate(
         surface=context.surface,
         visible_area_mm2=surface.area_mm2,
         in_spec_coverage=in_spec_fraction,
-        visibility_ceiling=ceiling_share,
+        visibility_ceiling=ceiling_found,
         in_spec_radius_mm=coverage.in_spec_radius,
         in_spec_cell_mm=2.0 * scan_spec.delta_s_opt_mm,
         tolerance_mm=scan_spec.tolerance_mm,

@@ -192,10 +192,8 @@ def fit_to_robot(
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
             reversed_now = lifted = False
-        flips = report.config_flips
-        lowered = _lowered(current, index, flips, raised, low)
-        flips = flips[current.scanning[flips] | ~lowered]
-        done = not (len(swings) or reversed_now or lifted or lowered.any())
+        flips, lowered = _lowered(current, index, report.config_flips, raised, low)
+        done = not (len(swings) or reversed_now or lifted or lowered)
         if report.reachable and done and (why < 0).all():
             break
         bad = np.flatnonzero(why >= 0)
@@ -326,11 +324,12 @@ def _lifted(
 
 def _lowered(
     current: Trajectory, index: np.ndarray, flips: np.ndarray, raised: np.ndarray, low: np.ndarray
-) -> np.ndarray:
+) -> tuple[np.ndarray, bool]:
     """Of the configuration `flips` (pose indices into `current`, the kept poses of the
     fit's plan at `index`), those on the move down into a pass entered at its top: no
     controller flips in a linear move, so that pass is entered at its first pose again
-    and for good (`raised` cleared, `low` set, by its first pose). (len(flips),) bool."""
+    and for good (`raised` cleared, `low` set, by its first pose). Returns the other
+    flips (where the pass is cut) and whether any pass was lowered."""
     lowered = np.zeros(len(flips), bool)
     starts, _ = pass_bounds(current.scanning, current.swath)
     first = np.flatnonzero(starts)
@@ -343,7 +342,7 @@ def _lowered(
         s = index[after[0]]
         if raised[s]:
             raised[s], low[s], lowered[k] = False, True, True
-    return lowered
+    return flips[~lowered], bool(lowered.any())
 
 
 def _reversed(
