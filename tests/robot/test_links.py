@@ -225,3 +225,24 @@ def test_a_pass_that_could_not_gain_by_turning_is_not_checked_turned_and_chosen_
     )
     assert len(turned_passes(traj.swath, *full))  # some passes are better turned
     assert (full[1] & ~both[1]).any()  # and some turned poses were left unchecked
+
+
+@pytest.mark.parametrize("subdivisions", [1, 5])
+def test_the_surface_cloud_holds_every_point_of_a_coarse_or_fine_mesh_within_its_bound(
+    subdivisions,
+) -> None:
+    # A coarse sphere gets a grid on each triangle; a fine one (every edge shorter than the
+    # spacing) is its vertices alone. Either way each surface point lies within 2 spacings.
+    from scipy.spatial import cKDTree
+
+    from scanplan.world.capsule_collision import _surface_points
+
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=20.0)
+    spacing = 1.0
+    edges = np.linalg.norm(np.diff(mesh.vertices[mesh.edges_unique], axis=1)[:, 0], axis=1)
+    assert (edges.max() > spacing) == (subdivisions == 1)
+    cloud = _surface_points(mesh, spacing)
+    if subdivisions == 5:
+        assert len(cloud) == len(mesh.vertices)
+    probe, _ = trimesh.sample.sample_surface(mesh, 5000, seed=1)
+    assert cKDTree(cloud).query(probe)[0].max() <= 2 * spacing

@@ -45,6 +45,8 @@ def _surface_points(mesh, spacing_mm: float) -> np.ndarray:
     k2 = np.ceil(np.linalg.norm(e2, axis=1) / spacing_mm).astype(np.int64)
     points = [np.asarray(mesh.vertices, dtype=np.float64)]
     big = np.flatnonzero((k1 > 1) | (k2 > 1))
+    if not len(big):  # a fine mesh: its vertices are close enough
+        return points[0]
     # The larger triangles grouped by their grid's shape (one sort, not a mask per shape).
     shapes, group = np.unique(np.column_stack([k1[big], k2[big]]), axis=0, return_inverse=True)
     by_shape = np.split(big[np.argsort(group, kind="stable")], np.cumsum(np.bincount(group))[:-1])
