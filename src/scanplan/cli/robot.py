@@ -137,8 +137,8 @@ AllowUnreachableOpt = Annotated[
     typer.Option(
         "--allow-unreachable",
         help="write the program even if the arm cannot fly it (unreachable poses, joint "
-        "limits, configuration flips in a pass, links or sensor in the part, table or "
-        "fixtures); the problems are still printed",
+        "limits, configuration flips in a pass or the move into it, links or sensor in "
+        "the part, table or fixtures); the problems are still printed",
     ),
 ]
 

@@ -78,7 +78,7 @@ class Placement:
         counts = [
             (len(r.unreachable), "poses out of the arm's reach"),
             (len(r.limit_violations), "poses beyond its joint limits"),
-            (len(r.config_flips), "configuration flips within a pass"),
+            (len(r.config_flips), "configuration flips in a pass or the move into it"),
         ]
         if self.links is not None:
             counts.append((int(self.links.colliding.sum()), "poses with an arm link in the cell"))

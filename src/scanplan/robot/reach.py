@@ -153,7 +153,7 @@ class ReachReport:
             f"{len(self.limit_violations)} beyond joint limits, "
             f"{len(self.near_singular)} near-singular (wrist {len(self.wrist_singular)}, "
             f"elbow {len(self.elbow_singular)}, shoulder {len(self.shoulder_singular)}), "
-            f"{len(self.config_flips)} configuration flips in a pass "
+            f"{len(self.config_flips)} configuration flips in a linear move "
             f"({len(self.wrist_flips)} wrist), {len(self.joint_jumps)} joint jumps "
             f"> {self.jump_deg:g}° ({len(self.pass_jumps)} inside a pass)"
         )
