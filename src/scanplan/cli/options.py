@@ -384,6 +384,21 @@ PitchPivotOpt = Annotated[
         "the footprint; beyond the paper, recorded in policy.json)"
     ),
 ]
+TrainPerturbOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--perturb",
+        metavar="SPEC",
+        help="train for a part that is not the CAD: each episode draws its own placement "
+        "error, as-built warp and scale, e.g. 'place:5mm,2deg;warp:1mm@200mm' (each a "
+        "standard deviation, as evaluate --perturb takes them); the pass is the CAD's, the "
+        "profiles the part's as it is (beyond the paper)",
+        show_default=False,
+    ),
+]
+TrainNoiseOpt = Annotated[
+    bool, typer.Option("--noise", help="train with the sensor's depth noise (default: without)")
+]
 BcSamplesOpt = Annotated[
     int,
     typer.Option(

@@ -27,6 +27,8 @@ from scanplan.cli.options import (
     RewardDistanceScaleOpt,
     StartOffsetOpt,
     StateOpt,
+    TrainNoiseOpt,
+    TrainPerturbOpt,
     bounded,
     parse_floats,
 )
@@ -60,6 +62,8 @@ def training_config(ctx: typer.Context, **own: Any) -> TrainConfig:
         reward_distance_scale=shared["reward_distance_scale"],
         pitch_pivot=shared["pitch_pivot"],
         bc_samples=shared["bc_samples"],
+        perturb=shared["perturb"],
+        noise=shared["noise"],
         command=shlex.join(["scanplan", *sys.argv[1:]]),
         **own,
     )
@@ -113,6 +117,8 @@ def train_cmd(
     reward_distance_scale: RewardDistanceScaleOpt = None,
     pitch_pivot: PitchPivotOpt = None,
     bc_samples: BcSamplesOpt = 0,
+    perturb: TrainPerturbOpt = None,
+    noise: TrainNoiseOpt = False,
     no_progress: NoProgressOpt = False,
 ):
     """Train the pass agent with PPO (the paper's hyperparameters) and write a policy.
@@ -285,6 +291,8 @@ def sweep_cmd(
     reward_distance_scale: RewardDistanceScaleOpt = None,
     pitch_pivot: PitchPivotOpt = None,
     bc_samples: BcSamplesOpt = 0,
+    perturb: TrainPerturbOpt = None,
+    noise: TrainNoiseOpt = False,
     n_envs: NEnvsOpt = 16,
 ):
     """Train seeds x a grid of configs as Dask tasks, evaluate each policy on unseen parts,

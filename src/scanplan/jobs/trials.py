@@ -23,7 +23,6 @@ from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.evaluation import scanning_steps
 from scanplan.judging.robustness import (
-    PlacedProfilometer,
     Robustness,
     TrialMap,
     TrialTask,
@@ -40,6 +39,7 @@ from scanplan.planning.planners import FeedbackPlanner
 from scanplan.planning.swaths import Swath, swath_from_record
 from scanplan.planning.views import View, rotation_to_up
 from scanplan.sensor.perturb import Perturbation
+from scanplan.sensor.placed import PlacedProfilometer
 from scanplan.world.cell import Cell, Table, planned_cell
 from scanplan.world.part import Part
 

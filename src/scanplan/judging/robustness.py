@@ -22,7 +22,7 @@ from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.evaluation import coverage_of, scanning_steps, surface_samples
 from scanplan.judging.summary import SurfaceState
-from scanplan.sensor.perturb import Perturbation, Trial
+from scanplan.sensor.perturb import Perturbation, Trial, bounds_centre
 from scanplan.sensor.profilometer import LineProfilometer, Scan
 from scanplan.world.cell import part_in_cell
 from scanplan.world.part import Part
@@ -74,7 +74,7 @@ class TrialWorld:
 def trial_world(task: TrialTask) -> TrialWorld:
     """The part of trial `task.index` as built and where it really sits."""
     trial = task.model.trial(task.seed, task.index)
-    centre = task.vertices.min(axis=0) / 2 + task.vertices.max(axis=0) / 2
+    centre = bounds_centre(task.vertices)
     built = trial.as_built(task.vertices, task.normals, centre)
     mesh = trimesh.Trimesh(built, task.faces, process=False)  # same faces, same order
     part = Part(mesh, name=task.name, source=task.name, inspect_faces=task.inspect_faces)
@@ -87,33 +87,6 @@ def trial_world(task: TrialTask) -> TrialWorld:
         for v, f in task.occluders
     ]
     return TrialWorld(trial, part.among(fixtures), built, T_part_placed)
-
-
-class PlacedProfilometer(LineProfilometer):
-    """A sensor on a part lying at `T_part_placed` in the frame the poses are given in: poses
-    in, profiles out in that frame (points, normals and poses), as a sensor on a cell sees
-    a part that is not where the CAD says. What a controller run in the loop of a trial
-    measures (`closed_loop.SensorFactory`)."""
-
-    def __init__(
-        self, part: Part, spec: SensorSpec, T_part_placed: np.ndarray, seed: int = 0
-    ) -> None:
-        super().__init__(part, spec, seed)
-        self.T_part_placed = np.asarray(T_part_placed, dtype=np.float64)
-        self._T_placed_part = np.linalg.inv(self.T_part_placed)
-
-    def measure_many(self, poses: np.ndarray, rng: np.random.Generator | None = None) -> Scan:
-        poses = np.asarray(poses, dtype=np.float64)
-        if np.array_equal(self.T_part_placed, np.eye(4)):
-            return super().measure_many(poses, rng)
-        scan = super().measure_many(self._T_placed_part @ poses, rng)
-        R, t = self.T_part_placed[:3, :3], self.T_part_placed[:3, 3]
-        return replace(
-            scan,
-            poses=poses,
-            points_part=scan.points_part @ R.T + t,  # NaN stays NaN
-            normals_part=scan.normals_part @ R.T,  # 0 (no hit) stays 0
-        )
 
 
 def run_trial(task: TrialTask) -> np.ndarray:

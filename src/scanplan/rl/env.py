@@ -15,6 +15,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import trimesh
 from gymnasium import spaces
 
 from scanplan.core.quantities import TRAINING_FAN_POINTS, ScanSpec, StepLimits
@@ -24,6 +25,8 @@ from scanplan.planning.dynamics import Step as PassStep
 from scanplan.planning.observation import OBS_LIMIT, observation_size, observe
 from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
 from scanplan.planning.swaths import Swath, plan_swaths
+from scanplan.sensor.perturb import Perturbation, bounds_centre
+from scanplan.sensor.placed import PlacedProfilometer
 from scanplan.sensor.profilometer import LineProfilometer, Profile
 from scanplan.world.part import Part, load_part, part_from_mesh
 from scanplan.world.parts import heightfield_solid
@@ -170,6 +173,7 @@ class SwathScanEnv(gym.Env):
         start_pitch_deg: float = 0.0,
         reward_distance_scale_mm: float | None = None,
         pitch_pivot: str = DEFAULT_PITCH_PIVOT,
+        perturb: str | None = None,
     ) -> None:
         """parts: parts to draw passes over (default: the training piece). swaths: fixed
         passes over `parts[0]` instead of drawn ones (planning; no jitter, no reversal).
@@ -182,8 +186,12 @@ class SwathScanEnv(gym.Env):
         (beyond the paper, which is silent on the start; 0 = the aligned start, v0 only).
         reward_distance_scale_mm: R_D's scale (`ScanSpec.reward_distance_scale_mm`; None keeps
         the scan spec's, by default the paper's Z_r/2). pitch_pivot: where Δθ turns,
-        "sensor" (its origin) or "footprint" (W_d along the beam; v0 only)."""
+        "sensor" (its origin) or "footprint" (W_d along the beam; v0 only). perturb: the
+        real part is not the CAD (training, beyond the paper): a `Perturbation` spec
+        (placement, warp, scale; `training_perturbation`) drawn afresh each episode; the
+        pass is the CAD's, every profile is measured on the part as built and placed."""
         super().__init__()
+        self.perturbation = training_perturbation(perturb)
         if (start_offset_mm or start_pitch_deg) and roll:
             raise ValueError("start_offset_mm / start_pitch_deg: env v0 only")
         if not (0.0 <= start_offset_mm < 1e4 and 0.0 <= start_pitch_deg <= 60.0):
@@ -263,6 +271,7 @@ class SwathScanEnv(gym.Env):
             swath = swaths[int(options["swath"])]
         else:
             part, swath, sim = self._draw_swath()
+        sim = self._perturbed(part, sim)
         self.dynamics = dyn = PassDynamics(
             part,
             swath,
@@ -287,6 +296,26 @@ class SwathScanEnv(gym.Env):
         self.steps = 0
         self.invalid_run = 0
         return self._observation(), {"d_mm": dyn.d_mm, "alpha_rad": dyn.alpha_rad}
+
+    def _perturbed(self, part: Part, sim: LineProfilometer) -> LineProfilometer:
+        """The sensor of this episode: on `part` as built, lying where this episode's draw
+        of the perturbation puts it (`sim` itself without one). A part only placed keeps its
+        ray engine (the batched env measures every episode on it in one call)."""
+        if self.perturbation is None:
+            return sim
+        trial = self.perturbation.trial(int(self.np_random.integers(2**63)), 0)
+        mesh = part.mesh
+        vertices = np.asarray(mesh.vertices)
+        centre = bounds_centre(vertices)
+        built = part
+        if self.perturbation.warp_mm or trial.scale:
+            shape = trial.as_built(vertices, np.asarray(mesh.vertex_normals), centre)
+            built = Part(
+                trimesh.Trimesh(shape, mesh.faces, process=False),
+                name=part.name,
+                source=part.source,
+            )
+        return PlacedProfilometer(built, self.scan_spec.sensor, trial.T_part_placed(centre))
 
     def _offset_start(self, dyn: PassDynamics, aligned: np.ndarray) -> np.ndarray:
         """The aligned start moved by the random start offsets (if any): pitched about the
@@ -370,6 +399,20 @@ class SwathScanEnv(gym.Env):
 
     def _observation(self) -> np.ndarray:
         return observe(self.dynamics, self.start_state, self.use_position, self.lookahead)
+
+
+def training_perturbation(text: str | None) -> Perturbation | None:
+    """The perturbation an env trains under (None: the CAD); ValueError (one line) for a
+    path error, which a controller never sees (the robot flies it after the policy acts)."""
+    if text is None:
+        return None
+    model = Perturbation.parse(text)
+    if model.path_mm.size or model.path_deg.size:
+        raise ValueError(
+            "--perturb: a robot's path error is not seen by the controller it trains; "
+            "train with place, warp and scale"
+        )
+    return None if model.is_zero else model
 
 
 def register() -> None:

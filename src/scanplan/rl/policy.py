@@ -32,6 +32,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.planning.observation import observation_size
 from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
+from scanplan.sensor.perturb import Perturbation
 
 FORMAT: Literal["scanplan-policy/2"] = "scanplan-policy/2"
 POLICY_JSON = "policy.json"
@@ -115,12 +116,21 @@ class EnvOptions(_Model):
     ) = None
     # Where a pitch step turns (step_model.PITCH_PIVOTS): planning steps the same way.
     pitch_pivot: StrictStr = DEFAULT_PITCH_PIVOT
+    # Training only (the perturbation each episode was drawn from, a `Perturbation` spec).
+    perturb: StrictStr | None = None
 
     @field_validator("segment_mm")
     @classmethod
     def _ordered(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
         if v is not None and v[0] > v[1]:
             raise ValueError(f"[lo, hi] needs lo <= hi, got {list(v)}")
+        return v
+
+    @field_validator("perturb")
+    @classmethod
+    def _known_perturbation(cls, v: str | None) -> str | None:
+        if v is not None:
+            Perturbation.parse(v)
         return v
 
     @field_validator("pitch_pivot")

@@ -183,6 +183,11 @@ def _parse_term(key: str, value: str) -> dict[str, object]:
     raise ValueError(f"unknown term {_shown(key)!r} (place, warp, scale, path)")
 
 
+def bounds_centre(vertices: np.ndarray) -> np.ndarray:
+    """(3,) the centre of (v, 3) vertices' bounds: where a part is turned and scaled about."""
+    return vertices.min(axis=0) / 2 + vertices.max(axis=0) / 2
+
+
 def rotation_matrix(rotvec_rad: np.ndarray) -> np.ndarray:
     """(..., 3) rotation vectors -> (..., 3, 3) rotation matrices (Rodrigues)."""
     rotvec_rad = np.asarray(rotvec_rad, float)

@@ -45,13 +45,24 @@ def test_batched_vec_env_reports_episodes_through_sb3_vec_monitor():
     assert ended and all(e["l"] >= 1 and e["r"] <= 0 for e in ended)
 
 
-@pytest.mark.parametrize("roll", [False, True])
-def test_batched_vec_env_steps_as_its_envs_do_one_by_one(roll):
+@pytest.mark.parametrize(
+    ("roll", "perturb"),
+    [
+        (False, None),
+        (True, None),
+        (False, "place:5mm,2deg"),
+        (False, "place:2mm,1deg;warp:1mm@200mm"),
+    ],
+)
+def test_batched_vec_env_steps_as_its_envs_do_one_by_one(roll, perturb):
     """The batch computes poses, D, α, Δs and rewards as arrays over its envs: the numbers
-    each env's own `step` gives, bit for bit (noise-free, as training runs), resets included."""
+    each env's own `step` gives, bit for bit (noise-free, as training runs), resets included;
+    perturbed episodes too (their parts placed apart, measured in one call)."""
     from scanplan.rl.learn.vec_env import make_env, make_vec_env
 
     env = {"fan_points": 32, "noise": False, "segment_mm": (8.0, 15.0), "roll": roll}
+    if perturb is not None:
+        env["perturb"] = perturb
     vec = make_vec_env(TrainConfig(n_envs=3, seed=5, env=env))
     singles = [make_env(["training-piece"], env) for _ in range(3)]
     obs = vec.reset()

@@ -25,7 +25,7 @@ from scanplan.world.part import Part
 Controller = Callable[[PassDynamics, np.ndarray], np.ndarray]
 # (the part planned on, the planning sensor) -> the sensor whose profiles the controller acts
 # on: None in a planner is that sensor on the part itself; a robustness trial gives one on the
-# part as built and placed (`metrics.robustness.PlacedProfilometer`), the closed loop online.
+# part as built and placed (`sensor.placed.PlacedProfilometer`), the closed loop online.
 SensorFactory = Callable[[Part, SensorSpec], LineProfilometer]
 
 

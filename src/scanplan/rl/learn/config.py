@@ -25,7 +25,7 @@ from scanplan.core.limits import (
 )
 from scanplan.core.quantities import TRAINING_FAN_POINTS
 from scanplan.planning.step_model import DEFAULT_PITCH_PIVOT, check_pitch_pivot
-from scanplan.rl.env import TRAINING_SEGMENT_MM, SwathScanEnv
+from scanplan.rl.env import TRAINING_SEGMENT_MM, SwathScanEnv, training_perturbation
 from scanplan.rl.policy import EnvOptions, first_error
 
 VEC_ENVS = ("batched", "subproc")
@@ -168,6 +168,8 @@ def recipe_config(
     reward_distance_scale: float | None = None,
     pitch_pivot: str | None = None,
     bc_samples: int = 0,
+    perturb: str | None = None,
+    noise: bool = False,
     resume: str | None = None,
     progress_bar: bool = True,
     command: str = "",
@@ -212,6 +214,9 @@ def recipe_config(
     pitch_pivot = check_pitch_pivot(pitch_pivot or DEFAULT_PITCH_PIVOT, roll, "--pitch-pivot")
     # Recorded only when set, as the start offsets.
     pivot = {"pitch_pivot": pitch_pivot} if pitch_pivot != DEFAULT_PITCH_PIVOT else {}
+    # Recorded only when set, in its canonical form, as the start offsets.
+    model = training_perturbation(perturb)
+    perturbed = {"perturb": model.text()} if model is not None else {}
     use_position, lookahead = STATES[state]
     return TrainConfig(
         output_dir=output_dir,
@@ -226,7 +231,7 @@ def recipe_config(
         bc_samples=bc_samples,
         env={
             "fan_points": TRAINING_FAN_POINTS if fan_points is None else fan_points,
-            "noise": False,
+            "noise": noise,
             "use_position": use_position,
             "lookahead": lookahead,
             "segment_mm": TRAINING_SEGMENT_MM,
@@ -235,6 +240,7 @@ def recipe_config(
             **start,
             **scale,
             **pivot,
+            **perturbed,
         },
         resume=resume,
         progress_bar=progress_bar,

@@ -23,6 +23,7 @@ from scanplan.core.quantities import StepLimits
 from scanplan.planning.dynamics import PassDynamics
 from scanplan.rl.env import SwathScanEnv, random_part
 from scanplan.rl.learn.config import TrainConfig
+from scanplan.sensor.placed import measure_together
 from scanplan.world.part import Part, load_part
 
 _LIMIT_FIELDS = tuple(f.name for f in dataclasses.fields(StepLimits))
@@ -93,16 +94,19 @@ class BatchedVecEnv(VecEnv):
         proposed = []
         for i, (env, a) in enumerate(zip(self.envs, self._actions, strict=True)):
             proposed.append(env.dynamics.propose(a))
-            groups.setdefault(id(env.dynamics.part), []).append(i)  # one simulator per part
+            # One ray engine per part measured (as built: perturbed episodes place it apart).
+            groups.setdefault(id(env.dynamics.sim.part), []).append(i)
         terms: dict[str, np.ndarray] = {}
         for idx in groups.values():
-            # The envs on one part as arrays: their poses, one measure_many, D, α, Δs and the
+            # The envs on one part as arrays: their poses, one measurement, D, α, Δs and the
             # reward terms in one call each (per-env numpy calls cost more than the rays).
             first = self.envs[idx[0]]
             dyns = [self.envs[i].dynamics for i in idx]
             steps = [proposed[i] for i in idx]
-            scan = first.dynamics.sim.measure_many(
-                PassDynamics.poses_of(dyns, [p.state for p in steps]), first.np_random
+            scan = measure_together(
+                [d.sim for d in dyns],
+                PassDynamics.poses_of(dyns, [p.state for p in steps]),
+                first.np_random,
             )
             PassDynamics.accept_many(dyns, steps, scan)
             for key, values in first.reward_terms(dyns).items():
