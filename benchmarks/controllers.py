@@ -20,6 +20,10 @@ noise; `nominal` is each controller on the unperturbed part. Usage:
 
     python benchmarks/controllers.py --summary results.jsonl   # the table and the verdict
 
+--policy takes a shipped policy's name or a policy folder (`scanplan train -o FOLDER`);
+folders named NAME_s0, NAME_s1, ... (one per seed) are also summarized together, as the
+mean and spread over the seeds of their p5 less feedback's.
+
 A part is a built-in name, a mesh file (`:m`, `:in` for its units) or `kinds:NAME`, a part
 of `benchmarks/kinds.py` (e.g. `kinds:housing`). Prints one markdown row per part,
 perturbation and controller (nominal, mean, p5, worst), the seconds each took in an HTML
@@ -180,6 +184,28 @@ def summary(path: str) -> None:
                 f"- {label}: p5 at least {MARGIN} above feedback's on {len(wins[label])} of "
                 f"{done[label]} parts ({', '.join(wins[label]) or 'none'})"
             )
+        for stem, seeds in seed_groups(policies).items():
+            print(f"- {stem} over seeds {', '.join(seeds)}: p5 less feedback's, mean ± sd")
+            for part in parts:
+                feedback = at.get((part, spec, "feedback"))
+                gaps = [
+                    at[(part, spec, label)]["p5"] - feedback["p5"]
+                    for label in seeds
+                    if feedback is not None and (part, spec, label) in at
+                ]
+                if gaps:
+                    print(f"  - {part}: {np.mean(gaps):+.3f} ± {np.std(gaps, ddof=1):.3f}")
+
+
+def seed_groups(labels: list[str]) -> dict[str, list[str]]:
+    """Policies trained with several seeds, by their common name: labels ending in _sK
+    (e.g. `rl robust_s0`, `rl robust_s1`) grouped under `rl robust`, two or more each."""
+    groups: dict[str, list[str]] = {}
+    for label in labels:
+        stem, sep, seed = label.rpartition("_s")
+        if sep and seed.isdigit():
+            groups.setdefault(stem, []).append(label)
+    return {stem: seeds for stem, seeds in groups.items() if len(seeds) > 1}
 
 
 def main() -> None:

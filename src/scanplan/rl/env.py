@@ -132,6 +132,9 @@ class SwathScanEnv(gym.Env):
     more, shorter episodes per update. `segment_mm=None` runs whole passes (planning).
     The sensor starts aligned at W_d (the paper's start); with `start_offset_mm` /
     `start_pitch_deg` (training, beyond the paper) off it by a random depth and pitch error.
+    With `perturb` (training, beyond the paper) the part each episode measures is drawn
+    from that perturbation: as built and where it lies (the start aligned on it, as a
+    closed loop starts on a cell), while the pass and any look-ahead are the CAD's.
 
     ## Episode end
 
@@ -145,7 +148,7 @@ class SwathScanEnv(gym.Env):
     |---------|--------|
     | v0      | the paper's state, action, reward; options: look-ahead, no-P state,    |
     |         | sub-segments of passes, procedural parts, start offsets, R_D's scale,   |
-    |         | the pitch pivot                                                         |
+    |         | the pitch pivot, perturbed parts                                        |
     | v1      | roll: Δφ (about the point W_d along the beam), φ and β observed,        |
     |         | orientation reward on the full angle; v0 unchanged                      |
     """
