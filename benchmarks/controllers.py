@@ -96,6 +96,8 @@ def run_part(args: argparse.Namespace, text: str, out: Any) -> None:
     rows: list[tuple[str, Any, bool]] = [("geometric, replayed", None, False)]
     rows += [(label, planner, False) for label, planner in controllers(args.policy, args.roll)]
     rows.append(("ceiling (geometric re-planned)", geometric, True))
+    if args.no_baselines:  # the policies alone: the seeded baselines of another run stand
+        rows = [row for row in rows if row[0].startswith("rl ")]
 
     def judged(planner: Any, knows: bool, model: Perturbation, trials: int) -> Robustness:
         if planner is None:
@@ -220,6 +222,12 @@ def main() -> None:
     parser.add_argument("--policy", action="append", default=None)
     parser.add_argument(
         "--roll", action="store_true", help="every planner and controller rolls (policy v1)"
+    )
+    parser.add_argument(
+        "--no-baselines",
+        action="store_true",
+        help="run the policies only (no replay, feedback or re-plan); --summary a file that "
+        "joins these records to a run's with the same parts, seed and trials",
     )
     parser.add_argument("--json", default=None, help="append the records here, a line each")
     args = parser.parse_args()
