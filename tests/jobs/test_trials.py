@@ -257,18 +257,48 @@ def test_a_two_view_closed_loop_repeats_seeded(ramp, two_views):
     assert not np.array_equal(a.per_trial, _closed(ramp, two_views, text, seed=2).per_trial)
 
 
-def test_a_look_ahead_policy_is_refused_on_a_tilted_view(ramp, two_views, monkeypatch):
-    import scanplan.jobs.trials as trials
+def test_each_tilted_view_records_its_region_and_is_flown_on_it(ramp, two_views):
+    tilted = two_views.meta["views"][1]
+    assert "region" not in two_views.meta["views"][0]  # the top view: the whole surface
+    views = plan_views_of(two_views, "plan", len(ramp.mesh.faces))
+    faces = views[1].view.faces
+    assert faces is not None and 0 < len(faces) < len(ramp.mesh.faces)
+    # The region is the surface the view was planned for: faces facing its axis.
+    normals = np.asarray(ramp.mesh.face_normals)[faces]
+    assert (normals @ views[1].view.axis).min() > 0.5
+    assert tilted["region"]["faces"] == len(ramp.mesh.faces)
+    with pytest.raises(ValueError, match=r"views\[1\]: the view's region is of a part of"):
+        plan_views_of(two_views, "plan", len(ramp.mesh.faces) + 1)
 
-    class LooksAhead:  # an rl planner whose observation probes the view's region ahead
-        config = {"env": {"lookahead": True}}
-        source = "policy ahead"
 
-    monkeypatch.setattr(trials, "closed_loop_planner", lambda *_: LooksAhead())
-    with pytest.raises(ValueError, match="policy ahead looks ahead on each view's region"):
-        closed_loop_tasks(
-            ramp, two_views, recorded(two_views, SPEC), Perturbation.parse("place:1mm"), 1
-        )
+def test_a_look_ahead_policy_flies_tilted_views_on_their_regions(ramp, two_views, tmp_path):
+    from helpers import tiny_config
+    from scanplan.rl.learn.train import train
+    from scanplan.rl.planner import RLPlanner
+
+    env = {"fan_points": 64, "noise": False, "segment_mm": (20.0, 40.0), "lookahead": True}
+    train(tiny_config(tmp_path / "ahead", env=env | {"use_position": False}))
+    ahead = RLPlanner.from_file(tmp_path / "ahead")
+    context = recorded(two_views, SPEC)
+    zero = Perturbation.parse("place:0mm")
+    tasks = controller_tasks(ramp, two_views, context, ahead, zero, 1, 0, POINTS)
+    flown = fly_trial(tasks[0])
+    assert flown is not None  # both views flown, none lost
+    assert set(np.unique(flown.swath[flown.scanning])) == set(
+        np.unique(two_views.swath[two_views.scanning])
+    )
+    # A plan from before regions were recorded: the look-ahead could not probe as planned.
+    old = replace(
+        two_views,
+        meta=two_views.meta
+        | {
+            "views": [
+                {k: v for k, v in r.items() if k != "region"} for r in two_views.meta["views"]
+            ]
+        },
+    )
+    with pytest.raises(ValueError, match="looks ahead on each view's region, which plan does not"):
+        controller_tasks(ramp, old, context, ahead, zero, 1, 0, POINTS, where="plan")
 
 
 def test_a_view_the_loop_cannot_join_is_lost_for_the_trial(ramp, two_views, monkeypatch):

@@ -6,7 +6,10 @@ checked where they are typed (`context`, `plan`); a view's pass lines here, befo
 
 from __future__ import annotations
 
+import base64
+import binascii
 import math
+import zlib
 from typing import Annotated, Any
 
 import numpy as np
@@ -15,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from scanplan.core.limits import (
     DURATION_S,
     MAX_PASSES,
+    MAX_TRIANGLES,
     MAX_VIEWS,
     PASS_LENGTH_MM,
     POSITION_MM,
@@ -68,9 +72,51 @@ class _SwathJson(BaseModel):
         return self
 
 
+def region_record(faces: np.ndarray, n_faces: int) -> dict[str, Any]:
+    """A view's region as its record holds it: the part's face count and the mask of its
+    faces, one bit a face, deflated and in base64 (a connected region deflates to little)."""
+    mask = np.zeros(n_faces, bool)
+    mask[np.asarray(faces, dtype=np.int64)] = True
+    packed = zlib.compress(np.packbits(mask).tobytes(), 9)
+    return {"faces": int(n_faces), "mask": base64.b64encode(packed).decode("ascii")}
+
+
+def region_faces(record: dict[str, Any], n_faces: int, where: str) -> np.ndarray:
+    """(k,) the faces of a view's region record (`region_record`) on a part of `n_faces`
+    faces; ValueError (one line, naming `where`) for a mask that does not decode to one
+    bit a face of that part, or selects none."""
+    if int(record["faces"]) != n_faces:
+        raise ValueError(
+            f"{where}: the view's region is of a part of {record['faces']} faces; this part "
+            f"has {n_faces}"
+        )
+    size = (n_faces + 7) // 8
+    try:
+        inflate = zlib.decompressobj()
+        packed = inflate.decompress(base64.b64decode(record["mask"], validate=True), size)
+        whole = inflate.eof and not inflate.unconsumed_tail and len(packed) == size
+    except (binascii.Error, zlib.error):
+        whole = False
+    if not whole:
+        raise ValueError(f"{where}: the view's region mask is not {n_faces} faces' bits")
+    faces = np.flatnonzero(np.unpackbits(np.frombuffer(packed, np.uint8), count=n_faces))
+    if not len(faces):
+        raise ValueError(f"{where}: the view's region holds no face")
+    return faces
+
+
+class _RegionJson(BaseModel):
+    """A view's region (`region_record`): the part's face count and its faces' mask."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    faces: Annotated[int, Field(ge=1, le=MAX_TRIANGLES)]
+    # Base64 of at most one bit a face, deflated (deflate grows incompressible data little).
+    mask: Annotated[str, Field(min_length=1, max_length=MAX_TRIANGLES // 4)]
+
+
 class _ViewJson(BaseModel):
     """One view's record (`views.join_views`): its axis, its block of swath indices, the
-    passes planned in it and (where recorded) its pass lines."""
+    passes planned in it and (where recorded) its pass lines and its region."""
 
     model_config = ConfigDict(extra="allow", strict=True)
     index: Index
@@ -79,6 +125,7 @@ class _ViewJson(BaseModel):
     last_swath: int
     passes: Index = 0
     swaths: Annotated[list[_SwathJson], Field(max_length=MAX_PASSES)] | None = None
+    region: _RegionJson | None = None  # a view of part of the surface: which part
 
     @model_validator(mode="after")
     def _unit_axis_and_a_block(self) -> _ViewJson:

@@ -18,6 +18,7 @@ import trimesh
 from scanplan.core.context import PlanContext
 from scanplan.core.limits import MAX_POSES, check_count
 from scanplan.core.plan import ArmRecord, Plan, ViewRecord
+from scanplan.core.plan_records import region_faces
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
@@ -181,10 +182,11 @@ def _part_there(world: TrialWorld, judge: TrialTask, cell: Cell) -> Part:
     return cell.occluding(part)
 
 
-def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
-    """The views and pass lines a plan records, in its order, for running it in closed
-    loop (a plan fitted to an arm: its passes as pieces of those lines, `ViewLines.pieces`);
-    ValueError (one line) for a plan that records none."""
+def plan_views_of(traj: Trajectory, where: str, n_faces: int | None = None) -> list[ViewLines]:
+    """The views, their regions and pass lines a plan records, in its order, for running it
+    in closed loop (a plan fitted to an arm: its passes as pieces of those lines,
+    `ViewLines.pieces`); ValueError (one line) for a plan that records none, or a region
+    not of a part of `n_faces` faces (None: of the part it records)."""
     plan = Plan.of(traj, where)
     if not plan.views:
         raise ValueError(f"{where} records no views: plan it again to run it in closed loop")
@@ -202,7 +204,12 @@ def plan_views_of(traj: Trajectory, where: str) -> list[ViewLines]:
         swaths = tuple(
             swath_from_record(r, f"{where}: views[{k}].swaths[{i}]") for i, r in enumerate(lines)
         )
-        the_view = View(k, axis, rotation_to_up(axis))
+        region = view.record.get("region")
+        faces = None
+        if region is not None:
+            count = int(region["faces"]) if n_faces is None else n_faces
+            faces = region_faces(region, count, f"{where}: views[{k}]")
+        the_view = View(k, axis, rotation_to_up(axis), faces)
         pieces: tuple[PieceNominal, ...] = ()
         if plan.arm is not None:
             pieces = _fitted(traj, plan, view, the_view, swaths)
@@ -328,12 +335,13 @@ def controller_tasks(
     feedback or rl planner, or, with `knows_part`, planned on the part as it is (any
     planner: the re-plan ceiling). Judged as `metrics.robustness.trial_tasks` judges the
     replay of `traj`, so every planner given the same plan is judged on the same samples."""
-    views = tuple(plan_views_of(traj, where))
-    if looks_ahead(planner) and any(not np.array_equal(v.view.R, np.eye(4)) for v in views):
-        # Its look-ahead probes only the view's region, which the plan file does not keep.
+    views = tuple(plan_views_of(traj, where, len(part.mesh.faces)))
+    tilted = [v for v in views if not np.array_equal(v.view.R, np.eye(4))]
+    if looks_ahead(planner) and any(v.view.faces is None for v in tilted):
+        # Its look-ahead probes only the view's region, which an older plan file lacks.
         raise ValueError(
             f"{planner.source} looks ahead on each view's region, which {where} does not "
-            "record: only its views looking straight down could run in closed loop"
+            "record (made by an older scanplan): plan it again to run it in closed loop"
         )
     if not knows_part and getattr(planner, "name", None) not in CLOSED_LOOP_PLANNERS:
         raise ValueError(f"{planner.name} does not act on measured profiles: no closed loop")

@@ -10,6 +10,7 @@ from dataclasses import replace
 import networkx as nx
 import numpy as np
 
+from scanplan.core.plan_records import region_record
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.planning.motion import view_transition
@@ -94,6 +95,9 @@ def join_views(
             "last_swath": int(swath.max()),
             "passes": vp.passes,
         }
+        if vp.view.faces is not None:
+            # The faces it looks at: a closed loop flies it on them, as it was planned.
+            record["region"] = region_record(vp.view.faces, len(part.mesh.faces))
         if lines := traj.meta.get("swaths"):
             # The pass lines (in the view's frame) numbered as the trajectory's swaths: what
             # a controller steers along when the plan is run in closed loop (`trials`).
