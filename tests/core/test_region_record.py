@@ -52,3 +52,11 @@ def test_the_file_reader_refuses_a_malformed_region_record():
     for region in ({"faces": 0, "mask": "AA=="}, {"faces": 4}, {"faces": 4, "mask": 3}):
         with pytest.raises(ValueError, match=r"views\.0\.region|views\[0\]\.region"):
             validated_records({"views": [view | {"region": region}]}, "p")
+
+
+def test_the_file_reader_refuses_a_mask_that_does_not_decode():
+    view = {"index": 0, "axis": [0.0, 0.0, 1.0], "first_swath": 0, "last_swath": 1}
+    region = {"faces": 16, "mask": mask_of(b"\xff")}  # 8 faces' bits for 16
+    with pytest.raises(ValueError, match="is not 16 faces' bits") as err:
+        validated_records({"views": [view | {"region": region}]}, "p")
+    assert "\n" not in str(err.value)

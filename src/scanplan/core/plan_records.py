@@ -90,18 +90,26 @@ def region_faces(record: dict[str, Any], n_faces: int, where: str) -> np.ndarray
             f"{where}: the view's region is of a part of {record['faces']} faces; this part "
             f"has {n_faces}"
         )
+    try:
+        return _mask_faces(str(record["mask"]), n_faces)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _mask_faces(mask: str, n_faces: int) -> np.ndarray:
+    """The faces a region's mask selects; ValueError unless it is `n_faces` bits, some set."""
     size = (n_faces + 7) // 8
     try:
         inflate = zlib.decompressobj()
-        packed = inflate.decompress(base64.b64decode(record["mask"], validate=True), size)
+        packed = inflate.decompress(base64.b64decode(mask, validate=True), size)
         whole = inflate.eof and not inflate.unconsumed_tail and len(packed) == size
     except (binascii.Error, zlib.error):
         whole = False
     if not whole:
-        raise ValueError(f"{where}: the view's region mask is not {n_faces} faces' bits")
+        raise ValueError(f"the view's region mask is not {n_faces} faces' bits")
     faces = np.flatnonzero(np.unpackbits(np.frombuffer(packed, np.uint8), count=n_faces))
     if not len(faces):
-        raise ValueError(f"{where}: the view's region holds no face")
+        raise ValueError("the view's region holds no face")
     return faces
 
 
@@ -112,6 +120,12 @@ class _RegionJson(BaseModel):
     faces: Annotated[int, Field(ge=1, le=MAX_TRIANGLES)]
     # Base64 of at most one bit a face, deflated (deflate grows incompressible data little).
     mask: Annotated[str, Field(min_length=1, max_length=MAX_TRIANGLES // 4)]
+
+    @model_validator(mode="after")
+    def _decodes(self) -> _RegionJson:
+        # Read as every command reads the file: a broken mask is refused here, not later.
+        _mask_faces(self.mask, self.faces)
+        return self
 
 
 class _ViewJson(BaseModel):
