@@ -2,9 +2,10 @@
 `--views auto` (geometric) for a UR5e, a KUKA KR 6 R900 and an ABB IRB 2400 on a 90 mm
 bracket, each placed by the tool, against the plan made without an arm: in-spec coverage of
 the hemisphere surface free and flown (and their difference), the scanning poses given up
-by cause, passes split, whether export's check passes (`check_flyable`: reach, joint limits,
-flips, the arm's links and the sensor body against the part, fixtures and table), and the
-planning time with the arm beside the time without it (a ratio: this machine is noisy).
+by cause (of those the views chosen for the arm planned), passes split, whether export's
+check passes (`check_flyable`: reach, joint limits, flips, the arm's links and the sensor
+body against the part, fixtures and table), and the planning time with the arm beside the
+time without it (a ratio: this machine is noisy).
 
     PYTHONPATH=src python benchmarks/robot_plans.py [PARTS_DIR] [--points 256] [--only NAME]
         [--robots ur5e,kr6-r900,irb2400]
@@ -82,7 +83,7 @@ def main() -> None:
             print(
                 f"{part.name} | {robot} | {pose_arg(T_base_part)} | "
                 f"{without:.3f} / {flown:.3f} ({flown - without:+.3f}) | "
-                f"{sum(causes.values())} of {int(free.scanning.sum())}"
+                f"{sum(causes.values())} of {int(traj.scanning.sum()) + sum(causes.values())}"
                 f"{f' ({given_up})' if given_up else ''} | {fit['passes_split']} | "
                 f"{'flyable' if check.flyable else 'NOT: ' + check.first_problem(traj.swath)} | "
                 f"{t_arm:.1f} / {t_free:.1f} ({t_arm / t_free:.1f}x)",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 from typer.testing import CliRunner
 
 from helpers import plate_file
@@ -13,7 +14,18 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.export import ExportOptions, flange_poses, parse_pose_arg
-from scanplan.robot.place import PER_HEIGHT_YAWS, _seeds, place
+from scanplan.robot.links import column_clear, obstacles_for
+from scanplan.robot.place import (
+    PER_HEIGHT_YAWS,
+    _as_printed,
+    _best_judged,
+    _placements,
+    _seeds,
+    place,
+)
+from scanplan.robot.presets import get_robot
+from scanplan.world.cell import Cell
+from scanplan.world.part import part_from_mesh
 
 TCP = "0,0,90,0,0,0"
 
@@ -170,3 +182,27 @@ def test_seeds_in_a_cell_take_several_yaws_per_height_searched_at_that_height() 
     assert (gaps > 60.0).all() and 0.0 in low_yaws
     alone, held_alone = _seeds(grid, heights, scores, scores, keep=2, in_cell=False)
     assert len(alone) == 2 and not held_alone.any()
+
+
+def test_an_arm_whose_column_stands_in_the_table_is_not_chosen() -> None:
+    """The final judging keeps the candidates an arm can stand at: one floating over the
+    middle of the table (its column in the table block) loses to one beside the table, even
+    ranked first by the search and keeping as many poses."""
+    box = trimesh.creation.box((300.0, 300.0, 50.0))
+    box.apply_translation((0.0, 0.0, 25.0))
+    part = part_from_mesh(box, "box")
+    obstacles = obstacles_for(part, Cell.around(part), clearance_mm=20.0)
+    traj = _raster(200.0, 3, n=20, height_mm=200.0)
+    tcp = parse_pose_arg(TCP)
+    T_part_flange = traj.poses @ np.linalg.inv(tcp)
+    centre = T_part_flange[:, :2, 3].mean(axis=0)
+    # (x, y, z, yaw): the path's centre under the base 300 mm below it; and 650 mm out.
+    rows = np.array([[200.0, 0.0, -500.0, 0.0], [650.0, 0.0, -100.0, 0.0]])
+    clear = column_clear(get_robot("ur5e"), _placements(rows, centre), obstacles.table_block, 20.0)
+    assert list(clear) == [False, True]
+    T, _ = _best_judged(
+        traj, get_robot("ur5e"), tcp, T_part_flange, rows, np.array([1.0, 0.5]), centre,
+        obstacles,
+    )  # fmt: skip
+    assert column_clear(get_robot("ur5e"), T[None], obstacles.table_block, 20.0)[0]
+    assert np.allclose(T, _as_printed(_placements(rows[1:], centre)[0]))

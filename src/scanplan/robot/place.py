@@ -321,6 +321,13 @@ def _best_judged(
                 break
         *_, T_best, score = max(ranked, key=lambda r: r[:3])
         return T_best, score
+    # An arm whose column stands in the table cannot be set up, whatever it would keep:
+    # such candidates (the search only ranks them lower) are judged only if none stands
+    # clear.
+    clear = column_clear(arm, np.stack(placed), obstacles.table_block, obstacles.clearance_mm)
+    if clear.any():
+        placed = [T for T, ok in zip(placed, clear, strict=True) if ok]
+        order = order[clear]
     # Ranked on the sample by what `fit.fit_to_robot` would keep: each pass as planned or
     # turned about the beam; the full check for the chosen one only. What counts is the
     # scanning kept (a move given up is flown as a joint move).
