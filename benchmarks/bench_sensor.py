@@ -3,7 +3,9 @@
 Mesh: a wavy heightfield of >= 300k triangles. Prints the cost per profile (median over rounds
 in which every variant runs once) and the ratios:
 - full profile (4096 columns, occlusion, noise) vs the bare cast of the same rays, single-pose
-  calls (both on one thread);
+  calls (both on one thread), and where it goes: Embree's own work (first hit and the camera's
+  occlusion rays, cast alone), the rest (numpy, Python) and the depth noise (the same profiles
+  measured without it);
 - the same poses in one batch call (threads over the cores) vs single calls;
 - the batch vs the bare cast of all its rays in one call (and the batch on one thread).
 Run: .venv/bin/python benchmarks/bench_sensor.py
@@ -55,6 +57,7 @@ def main() -> None:
     spec = SensorSpec()
     sensor = LineProfilometer(part, spec, seed=0)
     serial = LineProfilometer(part, spec, seed=0, threads=1)
+    quiet = LineProfilometer(part, spec.without_noise(), seed=0)
     swath = Swath(0, np.array([-400.0, 0, 400]), np.array([400.0, 0, 400]),
                   np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))  # fmt: skip
     m = 64
@@ -105,6 +108,7 @@ def main() -> None:
             "embree_single": embree_work,
             "bare_single": lambda: [engine.first_hit_faces(origins[i], dirs[i]) for i in range(m)],
             "full_single": lambda: [sensor.measure(p) for p in poses],
+            "quiet_single": lambda: [quiet.measure(p) for p in poses],
             "bare_batch": lambda: engine.first_hit_faces(
                 origins.reshape(-1, 3), dirs.reshape(-1, 3)
             ),
@@ -122,6 +126,7 @@ def main() -> None:
         ("bare Embree first hit, one call per pose", "bare_single"),
         ("Embree work of a profile (first hit + occlusion)", "embree_single"),
         ("full profile, measure() per pose", "full_single"),
+        ("the same without noise", "quiet_single"),
         ("bare Embree first hit, all poses in one call", "bare_batch"),
         (f"full profile, measure_many ({sensor.threads} threads)", "full_batch"),
         ("full profile, measure_many (1 thread)", "full_batch_serial"),
@@ -132,6 +137,10 @@ def main() -> None:
     batch = t["full_batch"] / t["full_single"]
     print(f"ratio full profile / bare cast, single calls:  {single:5.2f}  (target <= 2.0; "
           f"Embree work alone: {t['embree_single'] / t['bare_single']:.2f})")  # fmt: skip
+    embree = t["embree_single"] / t["bare_single"]
+    quiet_ratio = t["quiet_single"] / t["bare_single"]
+    print(f"  of which Embree's work {embree:.2f}, the rest without noise "
+          f"{quiet_ratio - embree:.2f}, the noise {single - quiet_ratio:.2f}")  # fmt: skip
     print(f"ratio batch / single calls, per profile:       {batch:5.2f}  (target <= 1)")
     print(f"ratio batch / bare cast in one call:           "
           f"{t['full_batch'] / t['bare_batch']:5.2f}  (batch on {sensor.threads} threads, "
