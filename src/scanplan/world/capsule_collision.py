@@ -79,7 +79,9 @@ class _SurfaceProxy:
         # capsules a few mm away, coarse enough to build in well under a second.
         self.pitch = max(extent / 128.0, 2.0)
         self.bound_mm = self.pitch / 2
-        self._tree = cKDTree(_surface_points(part.mesh, self.bound_mm / 2))
+        cloud = _surface_points(part.mesh, self.bound_mm / 2)
+        self._tree = cKDTree(cloud)
+        self._lo, self._hi = cloud.min(axis=0), cloud.max(axis=0)
 
     def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
@@ -100,8 +102,16 @@ class _SurfaceProxy:
         # An approximate nearest point (at most 1 + eps times as far as the nearest) is
         # much quicker to find in a dense cloud and keeps both verdicts sound.
         eps = 1.0
-        d, _ = self._tree.query(
-            points, eps=eps, distance_upper_bound=float((1 + eps) * reach.max())
+        # A point further from the cloud's box than its capsule's bound is further from
+        # every point of it: it counts for neither verdict, and the tree is not asked (most
+        # of an arm's links stand well away from the part).
+        box = np.linalg.norm(
+            np.maximum(np.maximum(self._lo - points, points - self._hi), 0), axis=1
+        )
+        asked = np.flatnonzero(box <= (1 + eps) * reach[owner])
+        d = np.full(len(points), np.inf)
+        d[asked], _ = self._tree.query(
+            points[asked], eps=eps, distance_upper_bound=float((1 + eps) * reach.max()), workers=-1
         )
         maybe, surely = np.zeros(len(segments), bool), np.zeros(len(segments), bool)
         np.logical_or.at(maybe, owner, d <= (1 + eps) * reach[owner])
@@ -111,7 +121,9 @@ class _SurfaceProxy:
         # capsule left to FCL costs more than this query (the exact query of every
         # point cost the drone's fit on a KR 6 more than FCL saved).
         unsure = (maybe & ~surely)[owner] & (d <= (1 + eps) * reach[owner])
-        exact, _ = self._tree.query(points[unsure], distance_upper_bound=float(reach.max()))
+        exact, _ = self._tree.query(
+            points[unsure], distance_upper_bound=float(reach.max()), workers=-1
+        )
         near = np.zeros(len(segments), bool)
         np.logical_or.at(near, owner[unsure], exact <= reach[owner[unsure]])
         np.logical_or.at(surely, owner[unsure], exact <= radii[owner[unsure]])
