@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import pickle
+from dataclasses import replace
 
 import numpy as np
 from typer.testing import CliRunner
@@ -15,14 +16,16 @@ from scanplan.core.plan import Plan
 from scanplan.core.plan_file import read_json
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
+from scanplan.planning.pipeline import _not_flown
 from scanplan.planning.swaths import Swath
+from scanplan.planning.views import View, ViewPlan
 from scanplan.robot import check_reach
 from scanplan.robot.base import pose_arg
 from scanplan.robot.export import ExportOptions, parse_pose_arg, parse_program
 from scanplan.robot.export.common import plan_motion
 from scanplan.robot.fit import fit_to_robot
 from scanplan.robot.flown_poses import HALF_TURN
-from scanplan.robot.hints import what_would_help
+from scanplan.robot.hints import facing, what_would_help, why_not
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.program import arm_joints
 from scanplan.robot.reach import pass_starts
@@ -323,3 +326,35 @@ def test_a_pass_whose_move_down_from_the_top_flips_is_entered_beside_the_surface
     # Lowered for good: its joint move in is not raised again.
     left, lifted = fit_module._lifted(traj, index, {6: (0, 1)}, raised, low)
     assert left == {6: (0, 1)} and not lifted and not raised.any()
+
+
+def test_views_the_arm_flies_none_of_are_said_with_why_and_what_would_help():
+    """A view of the plan without the arm whose surface the arm's plan misses is named with
+    its side, its share and why the arm cannot fly it; one it holds is not named."""
+    traj = _two_views(900.0)
+    fit = fit_to_robot(traj, "ur3e", TCP, parse_pose_arg("450,0,-200,0,0,0"))
+    near = View.looking_along(np.array([0.0, 0.0, 1.0]), 0)
+    far = View.looking_along(np.array([0.0, 0.98, 0.17]), 1)
+    # The far view: its passes 2 m out along x, beyond any UR3e; the near one: flown.
+    out = traj.subset(traj.swath == 0)
+    out = replace(out, poses=out.poses.copy())
+    out.poses[:, 0, 3] += 2000.0
+    held = np.r_[np.ones(50, bool), np.zeros(50, bool)]
+    near_set, far_set = held.copy(), ~held
+    far_set[:10] = True  # a few samples both hold
+    views = [(ViewPlan(near, traj, 2), near_set), (ViewPlan(far, out, 1), far_set)]
+    said, share = _not_flown(views, held, "ur3e", TCP, fit)
+    assert share == 0.5 and len(said) == 1
+    (view,) = said
+    assert view["in_spec_lost"] == 0.5 and view["out_of_reach"] == view["scanning_poses"] > 0
+    assert view["beyond_reach_mm"] > 1000
+    assert facing(view["axis"]) == "+y" and "out of reach, the farthest" in why_not(view)
+    hint = what_would_help({"free_views_not_flown": said, "in_spec_not_flown": share})[0]
+    assert hint.startswith("0.500 of the surface is seen only from +y") and "turntable" in hint
+    # A turntable in the cell: not suggested again.
+    with_axes = {"free_views_not_flown": said, "in_spec_not_flown": share}
+    with_axes["external_axes"] = {"turntable": {"radius_mm": 500.0}}
+    assert "turntable" not in what_would_help(with_axes)[0]
+    # Judged on other samples: nothing is compared, nothing said.
+    assert _not_flown(views, held[:10], "ur3e", TCP, fit) == ([], 0.0)
+    assert facing([0.0, 0.0, 1.0]) == "up" and facing([-0.7, 0.1, 0.7]) == "-x (44° up)"

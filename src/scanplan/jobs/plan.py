@@ -28,7 +28,7 @@ from scanplan.rl.planners import make_planner
 from scanplan.robot.axes import combined, load_positioner, track_of
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
-from scanplan.robot.hints import what_would_help
+from scanplan.robot.hints import facing, what_would_help, why_not
 from scanplan.robot.program import program_cycle
 from scanplan.world.part import load_part
 
@@ -244,6 +244,14 @@ def _arm_notes(plan: Plan) -> Lines:
             for k in worst
         ]
         lines.append(("what the arm cost, the worst views: " + "; ".join(said), False))
+    if missed := record.get("free_views_not_flown"):
+        said = [
+            f"facing {facing(v['axis'])} -{v['in_spec_lost']:.3f} ({why_not(v)})"
+            for v in missed[:5]
+        ]
+        lines.append(
+            ("views of the plan without the arm it flies none of: " + "; ".join(said), False)
+        )
     lines += [(f"what would help: {hint}", False) for hint in what_would_help(record)[:3]]
     if not arm.flyable:
         lines.append(

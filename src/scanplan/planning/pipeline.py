@@ -27,10 +27,12 @@ from scanplan.robot.axes import ExternalAxes, with_disk
 from scanplan.robot.axes_fit import PlacedArmOnAxes, choose_values, fitted_axes_record
 from scanplan.robot.axes_place import arm_on_axes
 from scanplan.robot.base import pose_arg
-from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.fit import RobotFit, fit_to_robot
 from scanplan.robot.links import obstacles_for
-from scanplan.robot.place import place
+from scanplan.robot.place import place, reach_mm
 from scanplan.robot.placed_arm import PlacedArm
+from scanplan.robot.presets import get_robot
+from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part, geometry_digest
@@ -118,7 +120,7 @@ def plan_views(
             workers=view_worker_count(),
             scheduler=scheduler,
         )
-        placed, known = None, None
+        placed, known, first = None, None, None
         if arm is not None:
             # Views chosen for the arm: placed where it flies most of the views chosen
             # without it, then each candidate judged by what the arm flies of it there
@@ -138,7 +140,10 @@ def plan_views(
     if views != "top" and selection.exact_coverage is not None:
         traj = replace(traj, meta=traj.meta | {"view_choice": _choice_record(selection)})
     if arm is not None:
-        traj = fit_arm(part, traj, arm, context, obstacles, free)
+        # The views planned without the arm, with what each holds: what the arm's plan
+        # misses of them is said, and why (`_not_flown`).
+        free_views = None if first is None else list(zip(first.plans, first.in_spec, strict=False))
+        traj = fit_arm(part, traj, arm, context, obstacles, free, free_views)
         if brackets:
             record = traj.meta["robot"] | {"brackets": brackets}
             traj = replace(traj, meta=traj.meta | {"robot": record})
@@ -228,6 +233,7 @@ def fit_arm(
     context: PlanContext,
     obstacles: CellObstacles | None = None,
     free: Trajectory | None = None,
+    free_views: list[tuple[ViewPlan, np.ndarray]] | None = None,
 ) -> Trajectory:
     """`traj` made flyable by the arm (`robot.fit.fit_to_robot`), with `meta["robot"]`: what
     it gave up, per view, and the in-spec coverage of the surface to inspect before and after
@@ -271,6 +277,10 @@ def fit_arm(
         for k, v in planned.items()
         if (v & ~held).mean() >= 5e-4
     }
+    if free_views and arm.axes is None:
+        views, share = _not_flown(free_views, held, arm.robot, arm.tcp, fit)
+        record["free_views_not_flown"] = views
+        record["in_spec_not_flown"] = share
     if free is not None:
         held = in_spec_samples(part, context.spec, free, 0, VIEW_CHOICE_FAN_POINTS, context)
         record["in_spec_free_plan"] = float(held.mean()) if len(held) else 0.0
@@ -292,3 +302,50 @@ def _held_by_view(part: Part, traj: Trajectory, context: PlanContext) -> dict[in
         except ValueError:  # what the arm left of a view measures nothing: it holds nothing
             continue
     return out
+
+
+# A view of the plan without the arm whose surface the arm's plan misses less of than this
+# share is not said (a few samples either way).
+NOT_FLOWN_LEAST = 0.005
+
+
+def _not_flown(
+    free_views: list[tuple[ViewPlan, np.ndarray]],
+    held: np.ndarray,
+    robot: str,
+    tcp: np.ndarray,
+    fit: RobotFit,
+) -> tuple[list[dict], float]:
+    """The views of the plan made without the arm (each with its in-spec set on the view
+    choice's samples) whose surface the arm's plan (in spec on `held`) misses, largest
+    first: the view's axis, the share it misses, and why the arm at its placement cannot
+    fly its scanning poses (out of reach, the farthest how far beyond the arm's horizontal
+    reach; beyond the joint limits). The views the arm flies are chosen for it; these are
+    what no view it can fly holds from where it stands. Returns them, and the share of the
+    surface they hold and the arm's plan does not."""
+    arm = get_robot(robot)
+    out = []
+    missed = np.zeros(len(held), bool)
+    for vp, cov in free_views:
+        if len(cov) != len(held):  # not judged on the same samples: nothing to compare
+            return [], 0.0
+        lost = float((cov & ~held).mean())
+        if lost < NOT_FLOWN_LEAST:
+            continue
+        missed |= cov & ~held
+        poses = vp.traj.poses[vp.traj.scanning]
+        flange = fit.T_base_part @ poses @ np.linalg.inv(tcp)
+        report = check_reach(flange, arm)
+        far = flange[report.unreachable, :2, 3]
+        beyond = float(np.hypot(*far.T).max()) - reach_mm(arm)[0] if len(far) else None
+        out.append(
+            {
+                "axis": [round(float(v), 3) for v in vp.view.axis],
+                "in_spec_lost": round(lost, 4),
+                "scanning_poses": len(poses),
+                "out_of_reach": len(report.unreachable),
+                "beyond_joint_limits": len(report.limit_violations),
+                "beyond_reach_mm": None if beyond is None else round(beyond, 1),
+            }
+        )
+    return sorted(out, key=lambda v: -v["in_spec_lost"]), round(float(missed.mean()), 4)

@@ -4,6 +4,37 @@ by cause, how far beyond its reach) turned into what to change in the cell.
 
 from __future__ import annotations
 
+import math
+
+# The share of the surface seen only by views an arm cannot fly from where it stands
+# (`pipeline._not_flown`) from which a positioner is suggested first.
+NOT_FLOWN_HINT = 0.02
+
+
+def facing(axis: list[float]) -> str:
+    """A view's axis as the side of the part it faces: '+y', '-x (40° up)', 'up'."""
+    x, y, z = axis
+    if z >= 0.9:
+        return "up"
+    k = 0 if abs(x) >= abs(y) else 1
+    side = f"{'+' if axis[k] >= 0 else '-'}{'xy'[k]}"
+    up = round(math.degrees(math.asin(max(-1.0, min(1.0, z)))))
+    return side if abs(up) < 20 else f"{side} ({up}° up)"
+
+
+def why_not(view: dict) -> str:
+    """What keeps an arm from a view's scanning poses (`pipeline._not_flown`'s record)."""
+    parts = [f"{view['scanning_poses']} poses"]
+    if view["out_of_reach"]:
+        beyond = view.get("beyond_reach_mm")
+        far = f", the farthest {beyond:.0f} mm beyond its reach" if beyond and beyond > 0 else ""
+        parts.append(f"{view['out_of_reach']} out of reach{far}")
+    if view["beyond_joint_limits"]:
+        parts.append(f"{view['beyond_joint_limits']} beyond the joint limits")
+    if len(parts) == 1:
+        parts.append("reached within the limits: its links or the sensor body meet the cell")
+    return ": ".join([parts[0], ", ".join(parts[1:])])
+
 
 def what_would_help(record: dict) -> list[str]:
     """What the numbers of an arm's record (`fit.RobotFit.record`) say would lift what bound:
@@ -17,6 +48,19 @@ def what_would_help(record: dict) -> list[str]:
         for cause, count in by.items():
             causes[cause] = causes.get(cause, 0) + int(count)
     out = []
+    missed = record.get("free_views_not_flown") or []
+    share = float(record.get("in_spec_not_flown", 0.0))
+    if missed and share >= NOT_FLOWN_HINT:
+        sides = ", ".join(dict.fromkeys(facing(v["axis"]) for v in missed))
+        reach = sum(v["out_of_reach"] for v in missed) >= sum(
+            v["beyond_joint_limits"] for v in missed
+        )
+        bound = "out of its reach" if reach else "beyond its joint limits"
+        helps = far[-1] if not turntable else "an arm reaching farther"
+        out.append(
+            f"{share:.3f} of the surface is seen only from {sides} of the part, where the "
+            f"sensor is {bound} from where the arm stands: {helps}"
+        )
     for cause, count in sorted(causes.items(), key=lambda c: -c[1]):
         if cause == "reach":
             beyond = record.get("beyond_reach_mm")
@@ -48,4 +92,4 @@ def what_would_help(record: dict) -> list[str]:
     return out
 
 
-__all__ = ["what_would_help"]
+__all__ = ["NOT_FLOWN_HINT", "facing", "what_would_help", "why_not"]
