@@ -106,6 +106,7 @@ def plan_views(
     brackets: list[dict] = []
     obstacles = None if arm is None else obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
     free: Trajectory | None = None
+    first: ViewSelection | None = None  # the choice made without the arm, if one was
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
@@ -120,7 +121,7 @@ def plan_views(
             workers=view_worker_count(),
             scheduler=scheduler,
         )
-        placed, known, first = None, None, None
+        placed, known = None, None
         if arm is not None:
             # Views chosen for the arm: placed where it flies most of the views chosen
             # without it, then each candidate judged by what the arm flies of it there
