@@ -27,9 +27,9 @@ from scanplan.robot.axes import ExternalAxes, with_disk
 from scanplan.robot.axes_fit import PlacedArmOnAxes, choose_values, fitted_axes_record
 from scanplan.robot.axes_place import arm_on_axes
 from scanplan.robot.base import pose_arg
-from scanplan.robot.fit import RobotFit, fit_to_robot
+from scanplan.robot.fit import CAUSES, RobotFit, beyond_reach_mm, fit_to_robot
 from scanplan.robot.links import obstacles_for
-from scanplan.robot.place import place, reach_mm
+from scanplan.robot.place import place
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach
@@ -106,7 +106,7 @@ def plan_views(
     brackets: list[dict] = []
     obstacles = None if arm is None else obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
     free: Trajectory | None = None
-    first: ViewSelection | None = None  # the choice made without the arm, if one was
+    free_views: list[tuple[ViewPlan, np.ndarray]] | None = None  # chosen without the arm
     if views == "top":
         plans = [plan_view(part, View.looking_along(UP, 0), partial(plan, progress=progress))]
     else:
@@ -128,6 +128,7 @@ def plan_views(
             # (those the free choice planned are not planned again).
             first = choose()
             known = first.known
+            free_views = list(zip(first.plans, first.in_spec, strict=False))  # chosen first
             _, free = join_views(part, order_views(first.plans), spec, cell)
             arm, brackets = _placed(part, free, arm, context, obstacles)
             placed = _placed_arm(arm, context)
@@ -135,20 +136,27 @@ def plan_views(
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})
-    if views != "top" and selection.out_of_time:
-        budget = ViewBudget() if budget is None else budget
-        traj = replace(traj, meta=traj.meta | {"view_choice_out_of_budget": budget.said()})
-    if views != "top" and selection.exact_coverage is not None:
-        traj = replace(traj, meta=traj.meta | {"view_choice": _choice_record(selection)})
+    if views != "top":
+        traj = _with_choice(traj, selection, budget)
     if arm is not None:
-        # The views planned without the arm, with what each holds: what the arm's plan
-        # misses of them is said, and why (`_not_flown`).
-        free_views = None if first is None else list(zip(first.plans, first.in_spec, strict=False))
         traj = fit_arm(part, traj, arm, context, obstacles, free, free_views)
         if brackets:
             record = traj.meta["robot"] | {"brackets": brackets}
             traj = replace(traj, meta=traj.meta | {"robot": record})
     return plans, replace(traj, plan_time_s=time.perf_counter() - start, planner=planner.name)
+
+
+def _with_choice(
+    traj: Trajectory, selection: ViewSelection, budget: ViewBudget | None
+) -> Trajectory:
+    """`traj` with what its view choice records: whether its budget stopped it (and the
+    budget), and its own estimate of the cover (`_choice_record`)."""
+    if selection.out_of_time:
+        budget = ViewBudget() if budget is None else budget
+        traj = replace(traj, meta=traj.meta | {"view_choice_out_of_budget": budget.said()})
+    if selection.exact_coverage is not None:
+        traj = replace(traj, meta=traj.meta | {"view_choice": _choice_record(selection)})
+    return traj
 
 
 def _choice_record(selection: ViewSelection) -> dict:
@@ -240,7 +248,9 @@ def fit_arm(
     it gave up, per view, and the in-spec coverage of the surface to inspect before and after
     (evaluated with the view choice's fan), and of the plan made without the arm (`free`),
     if one was. obstacles: the part's cell as the links see it (`obstacles_for`; None:
-    built here), for a caller that checks the fitted plan again."""
+    built here), for a caller that checks the fitted plan again. free_views: the views that
+    plan was chosen from, each with its in-spec set on the view choice's samples: those the
+    fitted plan misses are recorded with why (`_not_flown`), for an arm without axes."""
     if obstacles is None:
         spec = context.spec
         obstacles = obstacles_for(part, planned_cell(context, part), spec.sensor, spec.clearance_mm)
@@ -325,6 +335,7 @@ def _not_flown(
     what no view it can fly holds from where it stands. Returns them, and the share of the
     surface they hold and the arm's plan does not."""
     arm = get_robot(robot)
+    inv_tcp = np.linalg.inv(tcp)
     out = []
     missed = np.zeros(len(held), bool)
     for vp, cov in free_views:
@@ -335,10 +346,11 @@ def _not_flown(
             continue
         missed |= cov & ~held
         poses = vp.traj.poses[vp.traj.scanning]
-        flange = fit.T_base_part @ poses @ np.linalg.inv(tcp)
+        flange = fit.T_base_part @ poses @ inv_tcp
         report = check_reach(flange, arm)
-        far = flange[report.unreachable, :2, 3]
-        beyond = float(np.hypot(*far.T).max()) - reach_mm(arm)[0] if len(far) else None
+        cause = np.full(len(vp.traj), -1)
+        cause[np.flatnonzero(vp.traj.scanning)[report.unreachable]] = CAUSES.index("reach")
+        beyond = beyond_reach_mm(vp.traj, arm, fit.T_base_part, inv_tcp, cause)
         out.append(
             {
                 "axis": [round(float(v), 3) for v in vp.view.axis],

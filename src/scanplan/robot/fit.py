@@ -205,7 +205,7 @@ def fit_to_robot(
         cut[index[swings]] = True
         splits += int(len(np.union1d(flips, swings)))
         swath = renumbered_passes(traj, keep, swath, cut)
-    beyond_mm = _beyond_reach_mm(traj, arm, T_all, inv_tcp, cause)
+    beyond_mm = beyond_reach_mm(traj, arm, T_all, inv_tcp, cause)
     given_up, by_cause = _given_up_by_view(traj, keep, cause)
     reversed_passes = len(np.unique(swath[flipped & keep & traj.scanning]))
     fitted = traj.subset(keep, swath)
@@ -288,7 +288,7 @@ def _given_up_by_view(
     return given_up, by_cause
 
 
-def _beyond_reach_mm(
+def beyond_reach_mm(
     traj: Trajectory, arm: Robot, T_all: np.ndarray, inv_tcp: np.ndarray, cause: np.ndarray
 ) -> float | None:
     """How much farther from the base axis than the arm reaches the farthest scanning pose

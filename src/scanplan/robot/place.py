@@ -321,9 +321,7 @@ def _best_judged(
                 break
         *_, T_best, score = max(ranked, key=lambda r: r[:3])
         return T_best, score
-    # An arm whose column stands in the table cannot be set up, whatever it would keep:
-    # such candidates (the search only ranks them lower) are judged only if none stands
-    # clear.
+    # An arm standing in the table cannot be set up: judged only if none stands clear.
     clear = column_clear(arm, np.stack(placed), obstacles.table_block, obstacles.clearance_mm)
     if clear.any():
         placed = [T for T, ok in zip(placed, clear, strict=True) if ok]
