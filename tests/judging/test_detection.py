@@ -199,3 +199,29 @@ def test_a_defect_under_a_fixture_is_never_seen(tmp_path):
     # Found, and the points landed on each (its flagged points follow the noise drawn).
     bare = run_defect_trial(replace(task, occluders=()))
     assert out[clear, 0].all() and np.array_equal(out[clear][:, [0, 2]], bare[clear][:, [0, 2]])
+
+
+def test_the_survey_asks_the_noise_and_pitch_of_the_points_a_sample_uses(plate):
+    """Found at the asked points alone, the noise along the normal and the column pitch are
+    those of the whole scan (`sigma_mm` · `cos_incidence`, the step to the next column)."""
+    from scanplan.core.quantities import norm_rows
+    from scanplan.judging.detection import cos_incidence, sigma_mm
+    from scanplan.judging.survey import _pitch_and_noise
+    from scanplan.sensor.profilometer import LineProfilometer
+
+    fan = ScanSpec().sensor.with_points(64)
+    scan = LineProfilometer(plate, fan, seed=2).measure_many(
+        straight(np.arange(300, 340, 4.0), 20.0, 0.1).poses
+    )
+    row, col = np.nonzero(scan.valid)
+    assert len(row) > 200 and not scan.valid.all()  # some columns miss: NaN pitch there
+    asked = np.arange(0, len(row), 3)
+    pitch, noise = _pitch_and_noise(scan, fan, row, col, asked)
+    want_noise = (sigma_mm(scan, fan) * cos_incidence(scan, fan))[row, col]
+    step = np.full(scan.valid.shape, np.nan)
+    step[:, :-1] = norm_rows(np.diff(scan.points_part, axis=1))
+    step[:, :-1][~(scan.valid[:, 1:] & scan.valid[:, :-1])] = np.nan
+    np.testing.assert_allclose(noise[asked], want_noise[asked], rtol=1e-12)
+    np.testing.assert_array_equal(pitch[asked], step[row, col][asked])
+    others = np.setdiff1d(np.arange(len(row)), asked)
+    assert np.isnan(noise[others]).all() and np.isnan(pitch[others]).all()

@@ -90,3 +90,19 @@ def test_a_fixture_lowers_the_ceiling_not_the_surface_to_inspect(plate, tmp_path
     lid.apply_translation((0, 0, 10.0))
     assert np.array_equal(oriented_normals(alone.among([lid])), oriented_normals(alone))
     assert (oriented_normals(alone)[:, 2] > 0.99).all()
+
+
+def test_the_ceiling_is_found_once_per_part_and_samples():
+    """Asked again of the same part and samples, the reachable samples are those found the
+    first time (read-only); another tolerance, seed or part finds them anew."""
+    part = _shelf_over_plate()
+    surface = hemisphere_visible_samples(part, 3.0)
+    tol = math.radians(15.0)
+    first = reachable_samples(part, surface, tol)
+    assert reachable_samples(part, surface, tol) is first and not first.flags.writeable
+    wider = reachable_samples(part, surface, math.radians(30.0))
+    assert wider is not first and wider.sum() > first.sum()  # a wider cone reaches more
+    other = reachable_samples(part, surface, tol, seed=1)
+    assert other is not first
+    again = reachable_samples(_shelf_over_plate(), surface, tol)  # another part, same mesh
+    assert again is not first and np.array_equal(again, first)

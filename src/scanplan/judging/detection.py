@@ -81,12 +81,18 @@ def sigma_mm(scan: Scan, sensor: SensorSpec, cos: np.ndarray | None = None) -> n
     depth and incidence, and the depth quantization (NaN where not valid); cos: the scan's
     `cos_incidence` if the caller has it already."""
     z = np.where(scan.valid, scan.z_sensor, np.nan)
+    if sensor.noise is None:
+        return np.where(scan.valid, sensor.z_resolution_mm / np.sqrt(12.0), np.nan)
+    return depth_sigma_mm(z, cos_incidence(scan, sensor) if cos is None else cos, sensor)
+
+
+def depth_sigma_mm(z: np.ndarray, cos: np.ndarray, sensor: SensorSpec) -> np.ndarray:
+    """The σ of points' depth at depths `z` and incidences `cos` (any shape): the noise
+    model and the depth quantization (`sigma_mm` of a whole scan)."""
     quant = sensor.z_resolution_mm / np.sqrt(12.0)
     if sensor.noise is None:
-        return np.where(scan.valid, quant, np.nan)
-    cos = cos_incidence(scan, sensor) if cos is None else cos
-    noise = sensor.noise.std_mm(z, cos, sensor.working_distance_mm)
-    return np.hypot(noise, quant)
+        return np.full(np.shape(z), quant)
+    return np.hypot(sensor.noise.std_mm(z, cos, sensor.working_distance_mm), quant)
 
 
 def cos_incidence(scan: Scan, sensor: SensorSpec) -> np.ndarray:
@@ -94,6 +100,14 @@ def cos_incidence(scan: Scan, sensor: SensorSpec) -> np.ndarray:
     # In the sensor frame: the ray directions dotted with the normals turned into it.
     normals_sensor = np.matmul(scan.normals_part, scan.poses[:, :3, :3])  # (m, N, 3)
     return np.abs(np.einsum("mni,ni->mn", normals_sensor, sensor.ray_directions()))
+
+
+def cos_incidence_at(
+    scan: Scan, sensor: SensorSpec, row: np.ndarray, col: np.ndarray
+) -> np.ndarray:
+    """`cos_incidence` at the points (row, col) of the scan alone, (k,)."""
+    normals_sensor = np.matmul(scan.normals_part[row, col][:, None, :], scan.poses[row, :3, :3])
+    return np.abs(np.einsum("ki,ki->k", normals_sensor[:, 0], sensor.ray_directions()[col]))
 
 
 def flagged(scan: Scan, nominal_z: np.ndarray, sensor: SensorSpec, k_sigma: float) -> np.ndarray:

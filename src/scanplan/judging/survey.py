@@ -28,10 +28,10 @@ from scanplan.judging.detection import (
     Detector,
     FalseCalls,
     calls,
-    cos_incidence,
+    cos_incidence_at,
+    depth_sigma_mm,
     detector_for,
     flagged,
-    sigma_mm,
 )
 from scanplan.judging.evaluation import evaluate
 from scanplan.judging.summary import Metrics
@@ -122,19 +122,14 @@ class DetectabilitySurvey:
             self._kept.append(scan.points_part[hit])
             self._n_flag += int(hit.sum())
         self._n_valid += int(valid.sum())
-        cos = cos_incidence(scan, fan)
-        sig_n = sigma_mm(scan, fan, cos) * cos
-        col = np.full(valid.shape, np.nan)
-        col[:, :-1] = norm_rows(np.diff(scan.points_part, axis=1))
-        col[:, :-1][~(valid[:, 1:] & valid[:, :-1])] = np.nan
-        pick = (slice(None), slice(None, None, self._stride))
-        v = valid[pick]
         # The coverage's tree where its stride is this one (the same points).
         pts = valid_points(scan, self._stride)
         if len(pts) == 0:
             return
-        rows = lo + np.nonzero(v)[0]
-        point_pass = np.zeros(len(pts), np.int64) if self._pass_of is None else self._pass_of[rows]
+        row, col = np.nonzero(valid[:, :: self._stride])
+        col *= self._stride
+        passes = self._pass_of
+        point_pass = np.zeros(len(pts), np.int64) if passes is None else passes[lo + row]
         # Those within reach, and some more.
         inside = samples_near(scan, self._stride, self._whole, self._radius)
         if self._position is not None:
@@ -152,9 +147,10 @@ class DetectabilitySurvey:
         dist, j = near_tree.query(
             samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius
         )
-        c, s = col[pick][v], sig_n[pick][v]
-        j = np.where(np.isfinite(dist), j, 0)
-        good = np.isfinite(dist) & np.isfinite(c[j]) & np.isfinite(s[j])
+        found = np.isfinite(dist)
+        j = np.where(found, j, 0)
+        c, s = _pitch_and_noise(scan, fan, row, col, np.unique(j[found]))
+        good = found & np.isfinite(c[j]) & np.isfinite(s[j])
         sample = np.broadcast_to(inside[:, None], good.shape)[good]
         j = j[good]
         keys, counts = np.unique(sample * self._n_pass + point_pass[j], return_counts=True)
@@ -192,6 +188,24 @@ class DetectabilitySurvey:
         return false, Detectability(
             self.surface.points, sigma, column, spacing, seen, pass_sample, share
         )
+
+
+def _pitch_and_noise(
+    scan: Scan, fan: SensorSpec, row: np.ndarray, col: np.ndarray, asked: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The column pitch (to the next column's point; NaN where either is not valid) and the
+    noise σ along the normal of the valid points at (`row`, `col`) of `scan`, (k,) each, at
+    the points `asked` alone (NaN elsewhere): a sample asks of its nearest few, a small
+    share of the chunk's points."""
+    pitch, noise = np.full(len(row), np.nan), np.full(len(row), np.nan)
+    r, c = row[asked], col[asked]
+    cos = cos_incidence_at(scan, fan, r, c)
+    noise[asked] = depth_sigma_mm(scan.z_sensor[r, c], cos, fan) * cos
+    inner = c + 1 < scan.valid.shape[1]
+    r, c, asked = r[inner], c[inner], asked[inner]
+    step = norm_rows(scan.points_part[r, c + 1] - scan.points_part[r, c])
+    pitch[asked] = np.where(scan.valid[r, c + 1], step, np.nan)
+    return pitch, noise
 
 
 def survey(

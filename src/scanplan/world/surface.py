@@ -159,10 +159,10 @@ class VisibleSurface:
         return max(float(radius_mm), GRID_CELL_MM)
 
     def near(self, points: np.ndarray, radius_mm: float) -> np.ndarray:
-        """Sorted indices of the samples that may lie within `radius_mm` of `points` (n, 3):
-        every one that does, and some farther (those in the same cells of a grid at least
-        `GRID_CELL_MM` wide, built once per cell size: choosing views and every trial judge
-        on the same samples)."""
+        """Indices of the samples that may lie within `radius_mm` of `points` (n, 3), in
+        their grid cells' order: every one that does, and some farther (those in the same
+        cells of a grid at least `GRID_CELL_MM` wide, built once per cell size: choosing
+        views and every trial judge on the same samples)."""
         cell = self.grid_cell(radius_mm)
         grid = self._grids.get(cell)
         if grid is None:
@@ -305,7 +305,36 @@ def reachable_samples(
     in spec was measured by such a beam. The part's fixtures (`Part.among`) block beams too.
     It ignores the depth window, the sensor body and the camera's line of sight;
     `also(samples, ray starts, beams) -> (k,) bool` adds a test a beam must pass too (a
-    benchmark's camera)."""
+    benchmark's camera). Without `also`, found once per (part, samples, tolerance, tilt,
+    beams, seed) while the part lives (read-only): it does not depend on the plan, and
+    choosing views, `evaluate`, the demo and `compare` ask it of the same part again."""
+    if also is not None:
+        return _reachable(part, surface, tol_rad, max_tilt_deg, beams, seed, also)
+    by_key = _REACHABLE.setdefault(part, {})
+    key = (id(surface), float(tol_rad), float(max_tilt_deg), int(beams), int(seed))
+    if key not in by_key or by_key[key][0] is not surface:
+        seen = _reachable(part, surface, tol_rad, max_tilt_deg, beams, seed, None)
+        seen.setflags(write=False)
+        by_key[key] = (surface, seen)  # the samples kept too: their id stays theirs
+    return by_key[key][1]
+
+
+# The reachable samples found per part while it lives (`reachable_samples`).
+_REACHABLE: weakref.WeakKeyDictionary[
+    Part, dict[tuple[int, float, float, int, int], tuple[VisibleSurface, np.ndarray]]
+] = weakref.WeakKeyDictionary()
+
+
+def _reachable(
+    part: Part,
+    surface: VisibleSurface,
+    tol_rad: float,
+    max_tilt_deg: float,
+    beams: int,
+    seed: int,
+    also: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None,
+) -> np.ndarray:
+    """`reachable_samples`, found here."""
     seen = np.zeros(len(surface.points), bool)
     if len(seen) == 0:
         return seen
