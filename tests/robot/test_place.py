@@ -23,6 +23,7 @@ from scanplan.robot.place import (
     _seeds,
     place,
 )
+from scanplan.robot.place_weights import pose_weights, view_worths, weighted_sample
 from scanplan.robot.presets import get_robot
 from scanplan.world.cell import Cell
 from scanplan.world.part import part_from_mesh
@@ -206,3 +207,67 @@ def test_an_arm_whose_column_stands_in_the_table_is_not_chosen() -> None:
     )  # fmt: skip
     assert column_clear(get_robot("ur5e"), T[None], obstacles.table_block, 20.0)[0]
     assert np.allclose(T, _as_printed(_placements(rows[1:], centre)[0]))
+
+
+def _two_views(light_passes: int, light_n: int, heavy_n: int, apart_mm: float) -> Trajectory:
+    """Two views far apart: a light one of `light_passes` passes of `light_n` poses and a
+    heavy one of a pass of `heavy_n`, their poses' centre at the origin."""
+    light = _raster(200.0, light_passes, n=light_n)
+    heavy = _raster(200.0, 1, n=heavy_n)
+    n_light, n_heavy = len(light), len(heavy)
+    light.poses[:, 0, 3] -= apart_mm * n_heavy / (n_light + n_heavy)
+    heavy.poses[:, 0, 3] += apart_mm * n_light / (n_light + n_heavy)
+    blocks = [(0, light_passes - 1), (light_passes, light_passes)]
+    views = [
+        {"index": k, "axis": [0.0, 0.0, -1.0], "first_swath": a, "last_swath": b}
+        for k, (a, b) in enumerate(blocks)
+    ]
+    return Trajectory(
+        np.concatenate([light.poses, heavy.poses]),
+        np.r_[light.swath, np.full(n_heavy, light_passes)],
+        np.ones(n_light + n_heavy, bool),
+        meta={"views": views},
+    )
+
+
+def test_view_worths_split_what_views_share():
+    held = [np.array([1, 1, 1, 1, 0, 0], bool), np.array([0, 0, 1, 1, 1, 0], bool)]
+    worths = view_worths(held)
+    assert np.allclose(worths, [3 / 6, 2 / 6]) and np.isclose(worths.sum(), 5 / 6)
+
+
+def test_weighted_placement_reaches_the_view_that_holds_most_surface():
+    """No placement of a UR3e reaches both views: by the count of poses it reaches the view
+    of many poses; with the poses weighted by what their view holds, the view of few poses
+    that holds most of the surface."""
+    traj = _two_views(2, 30, 30, 1200.0)
+    heavy = traj.swath == 2
+    tcp = parse_pose_arg(TCP)
+    weights = pose_weights(traj, np.array([0.1, 0.9]))
+    assert np.isclose(weights[heavy].sum(), 0.9) and np.isclose(weights.sum(), 1.0)
+    flange = traj.poses @ np.linalg.inv(tcp)
+
+    def reached(result):
+        report = check_reach(result.T_base_part @ flange, "ur3e", swath=traj.swath)
+        good = ~np.isnan(report.joints).any(axis=1)
+        return good[~heavy].mean(), good[heavy].mean()
+
+    by_count = reached(place(traj, "ur3e", tcp=tcp))
+    by_worth = reached(place(traj, "ur3e", tcp=tcp, weights=weights))
+    assert by_count[0] > 0.9 and by_count[1] < 0.1, by_count
+    assert by_worth[1] > 0.9, by_worth
+    with pytest.raises(ValueError, match="weights"):
+        place(traj, "ur3e", tcp=tcp, weights=np.ones(3))
+
+
+def test_weighted_sample_adds_the_views_it_misses_and_keeps_the_weight():
+    """A sample of the light view alone gets poses of the heavy one, and its poses' weights
+    add up to the whole plan's, the heavy view's mostly on its own poses."""
+    traj = _two_views(2, 30, 30, 1200.0)
+    heavy = traj.swath == 2
+    weights = pose_weights(traj, np.array([0.1, 0.9]))
+    sample, sampled = weighted_sample(traj, weights, np.array([0, 30, 59]), per_view=2)
+    assert heavy[sample].sum() == 2 and len(sample) == 5
+    assert np.isclose(sampled.sum(), weights.sum())
+    assert np.isclose(sampled[heavy[sample]].sum(), 0.9)  # none of the light view's
+    assert weighted_sample(traj, None, np.array([0, 30]), per_view=2)[1] is None

@@ -30,11 +30,12 @@ from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import CAUSES, RobotFit, beyond_reach_mm, fit_to_robot
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import place
+from scanplan.robot.place_weights import pose_weights, view_worths
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
-from scanplan.world.cell import planned_cell
+from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.part import Part, geometry_digest
 
 
@@ -123,14 +124,13 @@ def plan_views(
         )
         placed, known = None, None
         if arm is not None:
-            # Views chosen for the arm: placed where it flies most of the views chosen
-            # without it, then each candidate judged by what the arm flies of it there
+            # Views chosen for the arm: placed where it flies most of what the views chosen
+            # without it hold, then each candidate judged by what the arm flies of it there
             # (those the free choice planned are not planned again).
             first = choose()
             known = first.known
-            free_views = list(zip(first.plans, first.in_spec, strict=False))  # chosen first
-            _, free = join_views(part, order_views(first.plans), spec, cell)
-            arm, brackets = _placed(part, free, arm, context, obstacles)
+            free, free_views, weights = _free_plan(part, first, spec, cell)
+            arm, brackets = _placed(part, free, arm, context, obstacles, weights)
             placed = _placed_arm(arm, context)
         selection = choose(arm=placed, known=known)
         plans = selection.plans
@@ -192,14 +192,34 @@ def _placed_arm(arm: Arm, context: PlanContext) -> PlacedArm:
     return PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
 
 
+def _free_plan(
+    part: Part, first: ViewSelection, spec: ScanSpec, cell: Cell
+) -> tuple[Trajectory, list[tuple[ViewPlan, np.ndarray]], np.ndarray]:
+    """The plan chosen without the arm (`first`) joined; its views, each with its in-spec
+    set; and what each of its poses is worth to the arm's placement: its view's share of
+    the surface in spec, what it shares with other views split among them (`view_worths`),
+    so a view holding surface no other holds outweighs one of many poses holding what
+    others hold too."""
+    free_views = list(zip(first.plans, first.in_spec, strict=False))  # chosen first
+    joined, free = join_views(part, order_views(first.plans), spec, cell)
+    held_by = {id(vp.traj): cov for vp, cov in free_views}  # `join_views` keeps each traj
+    worths = view_worths([held_by[id(vp.traj)] for vp in joined])
+    return free, free_views, pose_weights(free, worths)
+
+
 def _placed(
-    part: Part, free: Trajectory, arm: Arm, context: PlanContext, obstacles: CellObstacles | None
+    part: Part,
+    free: Trajectory,
+    arm: Arm,
+    context: PlanContext,
+    obstacles: CellObstacles | None,
+    weights: np.ndarray | None = None,
 ) -> tuple[Arm, list[dict]]:
-    """`arm` placed (by `place`, or with its axes by `arm_on_axes`, unless it is) for the
-    plan made without it (`free`); with several `brackets`, each placed and judged by the
-    in-spec coverage the arm flies of `free` from there (`PlacedArm.flown`, the view
-    choice's fan), the best kept. Returns the arm and, with brackets, what each flew
-    (`tcp`, `part_pose`, `in_spec_flown`)."""
+    """`arm` placed (by `place`, its poses worth `weights`, or with its axes by
+    `arm_on_axes`, unless it is) for the plan made without it (`free`); with several
+    `brackets`, each placed and judged by the in-spec coverage the arm flies of `free`
+    from there (`PlacedArm.flown`, the view choice's fan), the best kept. Returns the arm
+    and, with brackets, what each flew (`tcp`, `part_pose`, `in_spec_flown`)."""
     tried: list[tuple[float, Arm]] = []
     brackets: list[dict] = []
     for tcp in arm.brackets or (arm.tcp,):
@@ -211,7 +231,8 @@ def _placed(
             candidate = replace(arm, tcp=tcp, T_base_part=T_base_part, axes=axes)
         else:
             if T_base_part is None:
-                T_base_part = place(free, arm.robot, tcp, obstacles=obstacles).T_base_part
+                placement = place(free, arm.robot, tcp, obstacles=obstacles, weights=weights)
+                T_base_part = placement.T_base_part
             candidate = replace(arm, tcp=tcp, T_base_part=T_base_part)
         if len(arm.brackets) < 2:
             return candidate, []

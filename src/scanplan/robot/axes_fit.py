@@ -26,7 +26,8 @@ from scanplan.robot.base import Robot
 from scanplan.robot.fit import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, kept_by_pass, turned_passes
 from scanplan.robot.links import hung, obstacles_for
-from scanplan.robot.place import reach_mm, sample_poses
+from scanplan.robot.place import reach_mm
+from scanplan.robot.place_weights import sample_poses
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach

@@ -22,7 +22,8 @@ from scanplan.robot.axes_fit import (
 )
 from scanplan.robot.base import Robot
 from scanplan.robot.flyable import stands_clear
-from scanplan.robot.place import place, reach_mm, sample_poses
+from scanplan.robot.place import place, reach_mm
+from scanplan.robot.place_weights import sample_poses
 from scanplan.robot.presets import get_robot
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.part import Part

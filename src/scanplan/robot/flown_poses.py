@@ -90,4 +90,23 @@ def kept_by_pass(swath: np.ndarray, planned: np.ndarray, turned: np.ndarray) -> 
     return np.where(np.isin(swath, turned_passes(swath, planned, turned)), turned, planned)
 
 
-__all__ = ["HALF_TURN", "flyable_poses", "kept_by_pass", "sensor_clear_both", "turned_passes"]
+def most_kept(
+    swath: np.ndarray, counted: np.ndarray, planned: np.ndarray, turned: np.ndarray
+) -> float:
+    """The most a placement could keep of the poses' `counted` weights (0: not counted),
+    each pass flown the better way: per pass, the larger of the sums kept as planned and
+    turned."""
+    passes, at = np.unique(swath, return_inverse=True)
+    as_planned = np.bincount(at, planned * counted, len(passes))
+    as_turned = np.bincount(at, turned * counted, len(passes))
+    return float(np.maximum(as_planned, as_turned).sum())
+
+
+__all__ = [
+    "HALF_TURN",
+    "flyable_poses",
+    "kept_by_pass",
+    "most_kept",
+    "sensor_clear_both",
+    "turned_passes",
+]

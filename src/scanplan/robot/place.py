@@ -4,7 +4,8 @@ The search runs over the part's table pose T_base_part = Tz(z) · T(x, y) · Rz(
 lies as designed, turned about the vertical and moved). A placement is feasible when every
 pose has an in-limit IK solution and each scanning pass keeps one arm configuration; among
 feasible ones the worst normalized margin (joint limits, wrist, elbow, shoulder) is
-maximized. A coarse grid on a subsample of poses, then a pattern search on more of them,
+maximized, else the share of the poses reached (weighted: of what they are worth,
+`place_weights`). A coarse grid on a subsample of poses, then a pattern search on more of them,
 then the full `check_reach` on every pose of the best. In a cell (`obstacles`), a placement
 that puts the arm's column into the table block is ranked below every other, the best
 candidate at each height of the grid is among the final ones, and those are ranked on a
@@ -24,8 +25,9 @@ import numpy as np
 from scanplan.core.limits import MAX_PLACEMENTS, check_count
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
-from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, sensor_clear_both
+from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, most_kept, sensor_clear_both
 from scanplan.robot.links import LinkReport, check_links, column_clear
+from scanplan.robot.place_weights import checked_weights, sample_poses, weighted_sample
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import (
     ReachReport,
@@ -43,6 +45,10 @@ _MARGIN_REF = np.array([np.sin(np.radians(5.0)), np.sin(np.radians(5.0)), 20.0])
 _LIMIT_REF_RAD = np.radians(5.0)
 _CHUNK_POSES = 60_000  # poses per IK call: bounds memory at ~25 MB per chunk
 _LINK_RANK_POSES = 1500  # poses whose links rank the final candidates
+# Weighted, the poses added to the samples for each view they miss: only those, and few,
+# since the coarse grid's cost grows with its sample (the quadrotor's 116 views, every one
+# added: placed in 22 s, not 12; only those missed: 16 s).
+_COARSE_PER_VIEW, _FINE_PER_VIEW = 1, 2
 
 
 @dataclass(frozen=True)
@@ -117,20 +123,6 @@ def _groups(traj: Trajectory, keep: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.r_[True, ~same])
 
 
-def sample_poses(traj: Trajectory, m: int) -> np.ndarray:
-    """Indices of at most 2m poses: m evenly spaced, and the first and last poses of the
-    passes and moves (m of them evenly spaced among those, when there are more: a plan of
-    many views has hundreds, which made the search's sample ten times its `m`)."""
-    n = len(traj)
-    s, w = traj.scanning, traj.swath
-    edge = np.r_[True, (s[1:] != s[:-1]) | (w[1:] != w[:-1])]
-    ends = np.flatnonzero(edge | np.r_[edge[1:], True])
-    if len(ends) > m:
-        ends = ends[np.linspace(0, len(ends) - 1, m).round().astype(int)]
-    even = np.linspace(0, n - 1, min(m, n)).round().astype(int)
-    return np.union1d(ends, even)
-
-
 def _placements(params: np.ndarray, centre_xy: np.ndarray) -> np.ndarray:
     """(P, 4, 4) T_base_part for rows (x, y, z, yaw rad); (x, y) is where the path's centre
     lands."""
@@ -151,10 +143,12 @@ def _scores(
     starts: np.ndarray,
     T_base_part: np.ndarray,
     obstacles: CellObstacles | None = None,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """(P,) rank of each placement: the worst normalized margin (>= 0) if every pose is
-    reachable with one configuration per run, else reachable fraction - 2 (in [-2, -1]);
-    4 less where the arm's column stands in the table block of `obstacles`."""
+    reachable with one configuration per run, else reachable fraction - 2 (in [-2, -1]),
+    the fraction of the poses' `weights` (None: of the poses); 4 less where the arm's
+    column stands in the table block of `obstacles`."""
     m = len(T_part_flange)
     limits = robot.joint_limits
     out = np.empty(len(T_base_part))
@@ -172,7 +166,8 @@ def _scores(
         value = np.where(inside, value, -np.inf).reshape(p, m, 8)
         per_run = np.minimum.reduceat(value, starts, axis=1).max(axis=2)  # (p, runs)
         worst = per_run.min(axis=1)
-        fraction = inside.reshape(p, m, 8).any(axis=2).mean(axis=1)
+        reached = inside.reshape(p, m, 8).any(axis=2)
+        fraction = reached.mean(axis=1) if weights is None else reached @ weights / weights.sum()
         out[k : k + p] = np.where(np.isfinite(worst), worst, fraction - 2.0)
     if obstacles is None:
         return out
@@ -218,12 +213,13 @@ def _pattern_search(
     delta: np.ndarray,
     height_range: tuple[float, float],
     held_height: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Improve every candidate row of `best` (scored `best_scores`) at once: each round tries
     a step of `delta` either way along x, y, z and yaw (z kept in `height_range`, and not
-    moved for the rows `held_height` marks), keeps the best that scores higher, and halves
-    the steps when none does, until they are under 4 mm or 24 rounds have run. Returns the
-    candidates, their scores and how many were scored."""
+    moved for the rows `held_height` marks; the poses weighted by `weights`), keeps the best
+    that scores higher, and halves the steps when none does, until they are under 4 mm or 24
+    rounds have run. Returns the candidates, their scores and how many were scored."""
     lo, hi = height_range
     evaluated = 0
     moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
@@ -238,7 +234,7 @@ def _pattern_search(
         trial[..., 2] = np.clip(trial[..., 2], lo, hi)
         trial[held[rows], :, 2] = best[rows[held[rows]], None, 2]
         flat = trial.reshape(-1, 4)
-        s = _scores(robot, T_part_flange, starts, _placements(flat, centre), obstacles)
+        s = _scores(robot, T_part_flange, starts, _placements(flat, centre), obstacles, weights)
         evaluated += len(flat)
         s = s.reshape(len(rows), len(moves))
         pick = s.argmax(axis=1)
@@ -297,13 +293,14 @@ def _best_judged(
     best_scores: np.ndarray,
     centre: np.ndarray,
     obstacles: CellObstacles | None,
+    weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """The searched candidate (rows of `best`, scored `best_scores`) that keeps the most
-    scanning poses flyable, a fully flyable one first, and its score: judged on every
-    pose following the branch as a controller would, in a cell the arm's links too (on a
-    subsample). Returns `T_base_part` and the search's score of it."""
-    ranked: list[tuple[bool, int, int, np.ndarray, float]] = []
-    sample = sample_poses(traj, _LINK_RANK_POSES)
+    scanning poses flyable (the most of their `weights`), a fully flyable one first, and
+    its score: judged on every pose following the branch as a controller would, in a cell
+    the arm's links too (on a subsample). Returns `T_base_part` and the search's score."""
+    ranked: list[tuple[bool, float, int, np.ndarray, float]] = []
+    worth = np.ones(len(traj)) if weights is None else weights
     inv_tcp = np.linalg.inv(tcp)
     order = np.argsort(-best_scores)
     placed = [_as_printed(_placements(best[i : i + 1], centre)[0]) for i in order]
@@ -313,7 +310,8 @@ def _best_judged(
                 T_base_part @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning
             )
             good = ~np.isnan(report.joints).any(axis=1)
-            held = int(good[traj.scanning].sum()) if traj.scanning.any() else int(good.sum())
+            counted = traj.scanning if traj.scanning.any() else np.ones(len(traj), bool)
+            held = float(worth[good & counted].sum())
             ranked.append(
                 (report.reachable, held, -rank, T_base_part, float(best_scores[order[rank]]))
             )
@@ -329,6 +327,10 @@ def _best_judged(
     # Ranked on the sample by what `fit.fit_to_robot` would keep: each pass as planned or
     # turned about the beam; the full check for the chosen one only. What counts is the
     # scanning kept (a move given up is flown as a joint move).
+    sample, sampled = weighted_sample(
+        traj, weights, sample_poses(traj, _LINK_RANK_POSES), _FINE_PER_VIEW
+    )
+    sampled = np.ones(len(sample)) if sampled is None else sampled
     sensor_ok = sensor_clear_both(traj.poses[sample], obstacles)
     swath, scanning = traj.swath[sample], traj.scanning[sample]
     counted = scanning if scanning.any() else np.ones(len(sample), bool)
@@ -338,7 +340,9 @@ def _best_judged(
     bounds = []
     for T_base_part in placed:
         planned, turned = flyable_poses(traj, arm, T_base_part, inv_tcp, None, sample)
-        bounds.append(_most_kept(swath, counted, planned & sensor_ok[0], turned & sensor_ok[1]))
+        bounds.append(
+            most_kept(swath, counted * sampled, planned & sensor_ok[0], turned & sensor_ok[1])
+        )
     for rank in sorted(range(len(placed)), key=lambda r: (-bounds[r], r)):
         if ranked and bounds[rank] < max(r[1] for r in ranked):
             break
@@ -348,21 +352,10 @@ def _best_judged(
             choosing=np.ones(len(sample), bool),
         )  # fmt: skip
         good = kept_by_pass(swath, *kept)
-        held = int(good[counted].sum())
+        held = float(sampled[good & counted].sum())
         ranked.append((bool(good.all()), held, -rank, T_base_part, float(best_scores[order[rank]])))
     *_, T_best, score = max(ranked, key=lambda r: r[:3])
     return T_best, score
-
-
-def _most_kept(
-    swath: np.ndarray, counted: np.ndarray, planned: np.ndarray, turned: np.ndarray
-) -> int:
-    """The most `counted` poses a placement could keep, each pass flown the better way:
-    per pass, the larger of the counts kept as planned and turned."""
-    passes, at = np.unique(swath, return_inverse=True)
-    as_planned = np.bincount(at, planned & counted, len(passes))
-    as_turned = np.bincount(at, turned & counted, len(passes))
-    return int(np.maximum(as_planned, as_turned).sum())
 
 
 def place(
@@ -375,18 +368,21 @@ def place(
     fine_poses: int = 256,
     keep: int = 6,
     obstacles: CellObstacles | None = None,
+    weights: np.ndarray | None = None,
 ) -> Placement:
     """The part pose on the table from which `robot` reaches every pose of `traj` with the
-    most margin (or, when none does, the one reaching the most). `tcp` is `T_flange_sensor`
-    (mm); `height_range_mm` bounds the part origin's z in the base frame (default: the
-    arm's reach around the workspace centre); `obstacles` the cell the links must keep
-    clear of (None: links not checked)."""
+    most margin (or, when none does, the one reaching the most of the poses' `weights`,
+    (n,): what each is worth, e.g. `place_weights.pose_weights`; None: each the same).
+    `tcp` is `T_flange_sensor` (mm); `height_range_mm` bounds the part origin's z in the
+    base frame (default: the arm's reach around the workspace centre); `obstacles` the cell
+    the links must keep clear of (None: links not checked)."""
     started = time.perf_counter()
     arm = get_robot(robot)
     if len(traj) == 0:
         raise ValueError("cannot place an empty trajectory")
     if not (np.isfinite(yaw_step_deg) and 0 < yaw_step_deg <= 360):
         raise ValueError(f"yaw step must be in (0, 360] degrees, got {yaw_step_deg}")
+    weights = checked_weights(weights, len(traj))
     tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=np.float64)
     T_part_flange = traj.poses @ np.linalg.inv(tcp)
     reach, z_mid = reach_mm(arm)
@@ -396,27 +392,29 @@ def place(
     centre = T_part_flange[:, :2, 3].mean(axis=0)
 
     # Coarse: a grid along a line out to the arm's reach, every yaw step, a few heights.
-    coarse = sample_poses(traj, coarse_poses)
+    coarse, w = weighted_sample(traj, weights, sample_poses(traj, coarse_poses), _COARSE_PER_VIEW)
     step = reach / 6
     grid, heights = _coarse_grid(reach, step / 2, lo, hi, yaw_step_deg)
     placements = _placements(grid, centre)
-    scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), placements, obstacles)
+    scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), placements, obstacles, w)
     # And on evenly spaced poses alone: the first and last pose of every pass and move can
     # outweigh the scanning in the sample above, and the seeds of either may be the better
     # (the drone on a UR5e kept 0.87 of its scanning poses from the one, 0.75 from the
     # other; on a KR 6 0.92 and 0.88).
     even = np.linspace(0, len(traj) - 1, min(coarse_poses, len(traj))).round().astype(int)
-    even_scores = _scores(arm, T_part_flange[even], _groups(traj, even), placements, obstacles)
+    even, w = weighted_sample(traj, weights, even, _COARSE_PER_VIEW)
+    even_scores = _scores(arm, T_part_flange[even], _groups(traj, even), placements, obstacles, w)
     evaluated = 2 * len(grid)
 
     # Fine: pattern search from the best few, on more poses; all candidates move at once.
-    fine = sample_poses(traj, fine_poses)
+    fine, w = weighted_sample(traj, weights, sample_poses(traj, fine_poses), _FINE_PER_VIEW)
     starts = _groups(traj, fine)
     # Seeds: the best few, and in a cell the best yaws at each height too, since the margins
     # favour heights from which the links may not clear the table (ranked at the end).
     seeds, held_height = _seeds(grid, heights, scores, even_scores, keep, obstacles is not None)
     best = grid[seeds]
-    best_scores = _scores(arm, T_part_flange[fine], starts, _placements(best, centre), obstacles)
+    placed = _placements(best, centre)
+    best_scores = _scores(arm, T_part_flange[fine], starts, placed, obstacles, w)
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
     best, best_scores, searched = _pattern_search(
         arm,
@@ -429,12 +427,13 @@ def place(
         delta,
         (lo, hi),
         held_height,
+        w,
     )
     evaluated += searched
 
     # The answer is judged on every pose (in a cell the arm's links too).
     T_best, score = _best_judged(
-        traj, arm, tcp, T_part_flange, best, best_scores, centre, obstacles
+        traj, arm, tcp, T_part_flange, best, best_scores, centre, obstacles, weights
     )
     report = check_reach(T_best @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning)
     chosen = Placement(T_best, report, score, evaluated, 0.0)
