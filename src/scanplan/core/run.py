@@ -197,7 +197,14 @@ def scheduler_client(address: str, **checks: Any) -> Iterator[Any]:
 @contextmanager
 def _quiet_dask() -> Iterator[None]:
     """Dask's loggers (each with its own handler on stderr) raised to CRITICAL for the block:
-    scanplan says what matters in one line."""
+    scanplan says what matters in one line. Tornado's, which Dask logs through too, stay
+    raised after it: a Ctrl-C inside the client's event loop is reported by that loop's
+    thread once the block is left (a traceback from `tornado.application`)."""
+    if importlib.util.find_spec("distributed") is not None:
+        import distributed  # noqa: F401  its import sets these loggers' levels: ours after
+
+    for name in ("tornado", "tornado.application", "tornado.general"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
     names = ["distributed"] + [
         name for name in list(logging.root.manager.loggerDict) if name.startswith("distributed.")
     ]
