@@ -14,18 +14,21 @@ import trimesh
 
 from helpers import fixture_files, loopback_cluster, straight
 from scanplan.core.context import PlanContext
-from scanplan.core.quantities import ScanSpec
+from scanplan.core.quantities import ScanSpec, norm_rows
 from scanplan.judging.detection import (
     DefectTask,
+    cos_incidence,
     defect_run,
     defect_tasks,
     detector_for,
     run_defect_trial,
+    sigma_mm,
 )
 from scanplan.judging.evaluation import evaluate, surface_samples
 from scanplan.judging.pod import fit_pod
-from scanplan.judging.survey import DetectabilitySurvey, survey
+from scanplan.judging.survey import DetectabilitySurvey, _pitch_and_noise, survey
 from scanplan.sensor.defects import Defect
+from scanplan.sensor.profilometer import LineProfilometer
 from scanplan.world.part import part_from_mesh
 from scanplan.world.surface import VisibleSurface
 
@@ -204,11 +207,6 @@ def test_a_defect_under_a_fixture_is_never_seen(tmp_path):
 def test_the_survey_asks_the_noise_and_pitch_of_the_points_a_sample_uses(plate):
     """Found at the asked points alone, the noise along the normal and the column pitch are
     those of the whole scan (`sigma_mm` · `cos_incidence`, the step to the next column)."""
-    from scanplan.core.quantities import norm_rows
-    from scanplan.judging.detection import cos_incidence, sigma_mm
-    from scanplan.judging.survey import _pitch_and_noise
-    from scanplan.sensor.profilometer import LineProfilometer
-
     fan = ScanSpec().sensor.with_points(64)
     scan = LineProfilometer(plate, fan, seed=2).measure_many(
         straight(np.arange(300, 340, 4.0), 20.0, 0.1).poses

@@ -81,33 +81,41 @@ def sigma_mm(scan: Scan, sensor: SensorSpec, cos: np.ndarray | None = None) -> n
     depth and incidence, and the depth quantization (NaN where not valid); cos: the scan's
     `cos_incidence` if the caller has it already."""
     z = np.where(scan.valid, scan.z_sensor, np.nan)
-    if sensor.noise is None:
-        return np.where(scan.valid, sensor.z_resolution_mm / np.sqrt(12.0), np.nan)
-    return depth_sigma_mm(z, cos_incidence(scan, sensor) if cos is None else cos, sensor)
+    if sensor.noise is not None and cos is None:
+        cos = cos_incidence(scan, sensor)
+    return np.where(scan.valid, depth_sigma_mm(z, cos, sensor), np.nan)
 
 
-def depth_sigma_mm(z: np.ndarray, cos: np.ndarray, sensor: SensorSpec) -> np.ndarray:
-    """The σ of points' depth at depths `z` and incidences `cos` (any shape): the noise
-    model and the depth quantization (`sigma_mm` of a whole scan)."""
+def depth_sigma_mm(z: np.ndarray, cos: np.ndarray | None, sensor: SensorSpec) -> np.ndarray:
+    """The σ of points' depth at depths `z` and incidences `cos` (any shape; None only for a
+    sensor without a noise model): the noise model and the depth quantization (`sigma_mm`
+    of a whole scan)."""
     quant = sensor.z_resolution_mm / np.sqrt(12.0)
     if sensor.noise is None:
         return np.full(np.shape(z), quant)
+    assert cos is not None, "a noise model needs the incidence"
     return np.hypot(sensor.noise.std_mm(z, cos, sensor.working_distance_mm), quant)
+
+
+def _cos_to_rays(normals: np.ndarray, rotations: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """|cos| between sensor-frame `rays` (..., 3) and part-frame `normals` (..., 3) turned
+    into the sensor frame by the poses' `rotations` (matmul-broadcast against the normals)."""
+    normals_sensor = np.matmul(normals, rotations)
+    return np.abs(np.einsum("...i,...i->...", normals_sensor, rays))
 
 
 def cos_incidence(scan: Scan, sensor: SensorSpec) -> np.ndarray:
     """(m, N) |cos| of the angle between each column's ray and the surface normal it hit."""
-    # In the sensor frame: the ray directions dotted with the normals turned into it.
-    normals_sensor = np.matmul(scan.normals_part, scan.poses[:, :3, :3])  # (m, N, 3)
-    return np.abs(np.einsum("mni,ni->mn", normals_sensor, sensor.ray_directions()))
+    return _cos_to_rays(scan.normals_part, scan.poses[:, :3, :3], sensor.ray_directions())
 
 
 def cos_incidence_at(
     scan: Scan, sensor: SensorSpec, row: np.ndarray, col: np.ndarray
 ) -> np.ndarray:
     """`cos_incidence` at the points (row, col) of the scan alone, (k,)."""
-    normals_sensor = np.matmul(scan.normals_part[row, col][:, None, :], scan.poses[row, :3, :3])
-    return np.abs(np.einsum("ki,ki->k", normals_sensor[:, 0], sensor.ray_directions()[col]))
+    normals = scan.normals_part[row, col][:, None, :]  # (k, 1, 3) against (k, 3, 3)
+    rays = sensor.ray_directions()[col][:, None, :]
+    return _cos_to_rays(normals, scan.poses[row, :3, :3], rays)[:, 0]
 
 
 def flagged(scan: Scan, nominal_z: np.ndarray, sensor: SensorSpec, k_sigma: float) -> np.ndarray:
