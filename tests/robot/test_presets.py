@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 
 from scanplan.core.cycle import NOMINAL
 from scanplan.robot import MOTION_LIMITS, ROBOT_NAMES, get_robot, motion_limits
+from scanplan.robot.export.rotations import pose_from_xyzabc
+from scanplan.robot.hints import across_flange
 
 ARM = """
 name = "my-arm"
@@ -76,3 +79,34 @@ def test_a_robot_file_that_is_not_a_file_is_said_so(tmp_path) -> None:
         get_robot(str(big))
     (tmp_path / "arm.toml").write_text(ARM)
     assert get_robot(str(tmp_path / "arm.toml")).name == "my-arm"
+
+
+@pytest.mark.parametrize("name", ROBOT_NAMES)
+def test_the_flange_axis_points_out_of_the_flange(name) -> None:
+    """Checked against the kinematics: turning joint 6 spins the flange about that axis (the
+    flange's origin and the axis stay put), and the last link runs along it to the flange."""
+    arm = get_robot(name)
+    q = np.random.default_rng(1).uniform(-1.0, 1.0, (20, 6))
+    T = arm.forward(q)
+    spun = arm.forward(q + np.array([0, 0, 0, 0, 0, 1.0]))
+    out = np.einsum("nij,j->ni", T[:, :3, :3], arm.flange_axis)
+    assert np.allclose(T[:, :3, 3], spun[:, :3, 3], atol=1e-9)
+    assert np.allclose(out, np.einsum("nij,j->ni", spun[:, :3, :3], arm.flange_axis), atol=1e-9)
+    ends = arm.link_capsules(q)[0][:, -1]  # the last link: (n, 2, 3) from the wrist
+    along = ends[:, 1] - ends[:, 0]
+    assert np.allclose(ends[:, 1], T[:, :3, 3], atol=1e-9)
+    assert np.allclose(along / np.linalg.norm(along, axis=1)[:, None], out, atol=1e-9)
+
+
+def test_a_sensor_mounted_across_the_flange_is_said_with_the_straight_tcp() -> None:
+    """On a KUKA the flange's x points out of it: `0,0,90,0,0,0` looks across it."""
+    sideways = pose_from_xyzabc([0, 0, 90, 0, 0, 0])
+    kuka = across_flange("kr6-r900", get_robot("kr6-r900").flange_axis, sideways)
+    assert kuka is not None
+    assert "90° off" in kuka and "x axis points out" in kuka
+    assert kuka.endswith("--tcp 90,0,0,0,90,0")
+    straight = pose_from_xyzabc([90, 0, 0, 0, 90, 0])
+    assert across_flange("kr6-r900", get_robot("kr6-r900").flange_axis, straight) is None
+    assert across_flange("ur5e", get_robot("ur5e").flange_axis, sideways) is None
+    tilted = pose_from_xyzabc([0, 0, 90, 0, 30, 0])  # an angled bracket is not across
+    assert across_flange("ur5e", get_robot("ur5e").flange_axis, tilted) is None

@@ -8,6 +8,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from scanplan.core.context import LOWEST
 from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
@@ -28,7 +30,8 @@ from scanplan.rl.planners import make_planner
 from scanplan.robot.axes import combined, load_positioner, track_of
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
-from scanplan.robot.hints import facing, what_would_help, why_not
+from scanplan.robot.hints import across_flange, facing, what_would_help, why_not
+from scanplan.robot.presets import get_robot
 from scanplan.robot.program import program_cycle
 from scanplan.world.part import load_part
 
@@ -200,6 +203,15 @@ def plan_notes(plan: Plan) -> Lines:
     return lines
 
 
+def _across_flange(robot: str, tcp: np.ndarray) -> str | None:
+    """`hints.across_flange` for the plan's arm (None if its file is no longer there)."""
+    try:
+        arm = get_robot(robot)
+    except (OSError, ValueError):
+        return None
+    return across_flange(robot, arm.flange_axis, tcp)
+
+
 def _arm_notes(plan: Plan) -> Lines:
     assert plan.arm is not None
     arm, record = plan.arm, plan.arm.record
@@ -218,6 +230,8 @@ def _arm_notes(plan: Plan) -> Lines:
             False,
         )
     ]
+    if across := _across_flange(arm.robot, arm.T_flange_sensor):
+        lines.append((f"note: {across}", False))
     if brackets := record.get("brackets"):
         said = [
             f"--tcp {b['tcp']} flies {b['in_spec_flown']:.3f}" + (" (used)" if b["used"] else "")

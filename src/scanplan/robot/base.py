@@ -6,6 +6,7 @@ it (mm); joint vectors `q` are the controller's joint angles in rad.
 
 from __future__ import annotations
 
+import warnings
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -38,6 +39,12 @@ class Robot(Protocol):
         """(…, 3) signed distances from the wrist, elbow and shoulder singularities:
         wrist and elbow as sines (unitless), shoulder in mm. |terms| are the margins; their
         signs are the arm configuration, so a sign change along a pass is a flip."""
+        ...
+
+    @property
+    def flange_axis(self) -> np.ndarray:
+        """(3,) the unit direction out of the flange, in the flange frame as the controller
+        shows it (a UR's and an ABB's z, a KUKA's x): a sensor straight out looks along it."""
         ...
 
     def link_capsules(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
@@ -75,12 +82,20 @@ def as_poses(T: np.ndarray) -> np.ndarray:
     return T.reshape(-1, 4, 4)
 
 
+def euler_zyx_deg(R: np.ndarray) -> np.ndarray:
+    """(…, 3) KUKA A, B, C: intrinsic Z-Y'-X'' Euler angles in degrees."""
+    with warnings.catch_warnings():
+        # At B = ±90° scipy warns and sets C = 0; the angles still reproduce the rotation.
+        warnings.simplefilter("ignore", UserWarning)
+        return Rotation.from_matrix(R).as_euler("ZYX", degrees=True)
+
+
 def pose_arg(T: np.ndarray) -> str:
     """x,y,z (mm), A,B,C (deg, KUKA ZYX) as `--part-pose` and `--tcp` read them, to µm and
     millidegrees: a pose rounded coarser can tip a pass that skirts a singularity onto the
     other branch when `export` checks it again."""
     T = np.asarray(T, dtype=np.float64)
-    abc = Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)
+    abc = euler_zyx_deg(T[:3, :3])
     # round(..) + 0.0 turns -0.0 into 0.0, so nothing prints as "-0".
     return ",".join(
         f"{round(float(v), 3) + 0.0:.3f}".rstrip("0").rstrip(".") for v in (*T[:3, 3], *abc)

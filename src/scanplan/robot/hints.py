@@ -6,9 +6,17 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from scanplan.robot.base import pose_arg
+
 # The share of the surface seen only by views an arm cannot fly from where it stands
 # (`pipeline._not_flown`) from which a positioner is suggested first.
 NOT_FLOWN_HINT = 0.02
+# A sensor whose beam is this far off the flange's axis is mounted across it: said, since
+# on a KUKA (x out of the flange) `--tcp 0,0,90,0,0,0` is a sideways bracket.
+ACROSS_FLANGE_DEG = 45.0
 
 
 def facing(axis: list[float]) -> str:
@@ -20,6 +28,26 @@ def facing(axis: list[float]) -> str:
     side = f"{'+' if axis[k] >= 0 else '-'}{'xy'[k]}"
     up = round(math.degrees(math.asin(max(-1.0, min(1.0, z)))))
     return side if abs(up) < 20 else f"{side} ({up}° up)"
+
+
+def across_flange(robot: str, flange_axis: np.ndarray, tcp: np.ndarray) -> str | None:
+    """A note when the sensor on `tcp` (T_flange_sensor, mm) looks more than
+    ACROSS_FLANGE_DEG off the flange's axis (`Robot.flange_axis`), giving the --tcp of the
+    sensor as far out straight along it; None when it looks along it."""
+    tcp, axis = np.asarray(tcp, dtype=np.float64), np.asarray(flange_axis, dtype=np.float64)
+    off = math.degrees(math.acos(float(np.clip(tcp[:3, 2] @ axis, -1.0, 1.0))))
+    if off <= ACROSS_FLANGE_DEG:
+        return None
+    straight = np.eye(4)
+    straight[:3, :3] = Rotation.align_vectors([axis], [[0.0, 0.0, 1.0]])[0].as_matrix()
+    out = float(np.linalg.norm(tcp[:3, 3]))
+    straight[:3, 3] = out * axis
+    name = "xyz"[int(np.argmax(np.abs(axis)))] if np.abs(axis).max() > 0.999 else None
+    which = f"its flange's {name} axis points out of it" if name else "its flange's axis"
+    return (
+        f"the sensor's beam is {off:.0f}° off the flange's axis ({robot}: {which}); the "
+        f"sensor {out:g} mm straight out, looking along it, is --tcp {pose_arg(straight)}"
+    )
 
 
 def why_not(view: dict) -> str:

@@ -155,6 +155,12 @@ class OPWRobot:
         q[np.isnan(q).any(axis=2)] = np.nan
         return q
 
+    @property
+    def flange_axis(self) -> np.ndarray:
+        # The paper's tool z (out of the flange) in the controller's flange frame.
+        axis: np.ndarray = self.flange[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        return axis
+
     def link_capsules(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
         """Capsules along the kinematic chain: the column from a third of the shoulder height
         to joint 2, the upper arm (joint 2 to 3), the forearm through its offset a2 to the

@@ -46,6 +46,10 @@ class URModel:
     def singularity_terms(self, q: np.ndarray) -> np.ndarray:
         return _singularity_terms(q, self)
 
+    @property
+    def flange_axis(self) -> np.ndarray:
+        return np.array([0.0, 0.0, 1.0])
+
     def link_capsules(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
         return _link_capsules(q, self)
 

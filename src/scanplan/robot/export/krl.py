@@ -8,6 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scanplan.robot.base import euler_zyx_deg
 from scanplan.robot.export.axes_lines import (
     HUNG_WORLD_BASE,
     axes_note,
@@ -28,7 +29,7 @@ from scanplan.robot.export.common import (
     standoff_note,
 )
 from scanplan.robot.export.joint_moves import joint_move_targets
-from scanplan.robot.export.rotations import euler_zyx_deg, pose_from_xyzabc
+from scanplan.robot.export.rotations import pose_from_xyzabc
 
 SUFFIX = ".src"
 DEFAULT_SCAN_OUTPUT = "1"  # $OUT[1]

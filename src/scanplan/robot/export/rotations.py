@@ -5,21 +5,12 @@ Z-Y'-X'' Euler angles), scalar-first quaternions, poses from positions and rotat
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterable
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scanplan.core.limits import POSE_ANGLE_DEG, POSITION_MM, Limit
-
-
-def euler_zyx_deg(R: np.ndarray) -> np.ndarray:
-    """(…, 3) KUKA A, B, C: intrinsic Z-Y'-X'' Euler angles in degrees."""
-    with warnings.catch_warnings():
-        # At B = ±90° scipy warns and sets C = 0; the angles still reproduce the rotation.
-        warnings.simplefilter("ignore", UserWarning)
-        return Rotation.from_matrix(R).as_euler("ZYX", degrees=True)
 
 
 def pose_from_xyzabc(values: Iterable[float]) -> np.ndarray:
