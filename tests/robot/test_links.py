@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from scanplan.robot import ROBOT_NAMES, get_robot
-from scanplan.robot.links import check_links, column_clear, obstacles_for
+from scanplan.robot.links import check_links, column_clear, obstacles_for, on_table_z
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import TABLE_MARGIN_MM, Cell
 from scanplan.world.part import part_from_mesh
@@ -246,3 +246,25 @@ def test_the_surface_cloud_holds_every_point_of_a_coarse_or_fine_mesh_within_its
         assert len(cloud) == len(mesh.vertices)
     probe, _ = trimesh.sample.sample_surface(mesh, 5000, seed=1)
     assert cKDTree(cloud).query(probe)[0].max() <= 2 * spacing
+
+
+@pytest.mark.parametrize("name", ROBOT_NAMES)
+def test_the_on_table_height_stands_the_arm_on_the_tables_top(name) -> None:
+    """At `on_table_z` an upright arm over the table block stands on its top (column_clear
+    says so); 400 mm lower its column is in the table, 60 mm higher it floats over it; an
+    arm it gives no height for stands on the top at none."""
+    arm = get_robot(name)
+    block = (np.array([-300.0, -300.0, -1000.0]), np.array([300.0, 300.0, 0.0]))
+    z = on_table_z(arm, block, 20.0)
+
+    def at(height: float) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, 3] = 0.0, 200.0, height  # the base over the block, 200 mm from its middle
+        return T
+
+    if z is None:  # its column reaches too far below its base frame: no height stands it
+        assert not any(column_clear(arm, at(-h), block, 20.0)[0] for h in range(-400, 400, 5))
+        return
+    assert column_clear(arm, at(z), block, 20.0).all()
+    assert not column_clear(arm, at(z + 400.0), block, 20.0).any()
+    assert not column_clear(arm, at(z - 60.0), block, 20.0).any()

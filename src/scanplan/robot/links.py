@@ -226,6 +226,29 @@ def hung(T_base_part: np.ndarray) -> np.ndarray:
     return np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)[:, 2, 2] < 0.0
 
 
+def _column(robot: Robot) -> tuple[float, float, float]:
+    """The links that turn with joint 1 only (column and shoulder) swept about the vertical:
+    their radius and lowest and highest points in the base frame (mm)."""
+    ends, radii, _ = robot.link_capsules(np.zeros(6))
+    sweep = float((np.hypot(ends[:2, :, 0], ends[:2, :, 1]) + radii[:2, None]).max())
+    z_lo = float((ends[:2, :, 2] - radii[:2, None]).min())
+    z_hi = float((ends[:2, :, 2] + radii[:2, None]).max())
+    return sweep, z_lo, z_hi
+
+
+def on_table_z(
+    robot: Robot, block: tuple[np.ndarray, np.ndarray], clearance_mm: float
+) -> float | None:
+    """The part's height in the base frame (T_base_part's z, the part level) that stands an
+    upright arm on the table block's top as `column_clear` lets it: its column 1 mm above
+    the clearance (placements at a few heights apart seldom land in that slab); None for
+    an arm whose column reaches below its base frame too far for that (its base frame is
+    `ON_TABLE_MM` at most above the top)."""
+    _, z_lo, _ = _column(robot)
+    lift = max(clearance_mm - z_lo, 0.0) + 1.0
+    return -(float(block[1][2]) + lift) if lift <= ON_TABLE_MM else None
+
+
 def column_clear(
     robot: Robot,
     T_base_part: np.ndarray,
@@ -242,10 +265,7 @@ def column_clear(
     T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
     if block is None:
         return np.ones(len(T), bool)
-    ends, radii, _ = robot.link_capsules(np.zeros(6))
-    sweep = float((np.hypot(ends[:2, :, 0], ends[:2, :, 1]) + radii[:2, None]).max())
-    z_lo = float((ends[:2, :, 2] - radii[:2, None]).min())
-    z_hi = float((ends[:2, :, 2] + radii[:2, None]).max())
+    sweep, z_lo, z_hi = _column(robot)
     axis_in_part = inv_rigid(T)[:, :3, 3]  # the base origin, on the joint-1 axis
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
     gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
@@ -260,4 +280,12 @@ def column_clear(
     return beside | np.where(down, hangs_above, on_top)
 
 
-__all__ = ["LinkClearance", "LinkReport", "check_links", "column_clear", "hung", "obstacles_for"]
+__all__ = [
+    "LinkClearance",
+    "LinkReport",
+    "check_links",
+    "column_clear",
+    "hung",
+    "obstacles_for",
+    "on_table_z",
+]

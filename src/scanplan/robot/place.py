@@ -26,7 +26,7 @@ from scanplan.core.limits import MAX_PLACEMENTS, check_count
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, most_kept, sensor_clear_both
-from scanplan.robot.links import LinkReport, check_links, column_clear
+from scanplan.robot.links import LinkReport, check_links, column_clear, on_table_z
 from scanplan.robot.place_weights import checked_weights, sample_poses, weighted_sample
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import (
@@ -175,18 +175,14 @@ def _scores(
     return np.where(clear, out, out - 4.0)
 
 
-def _coarse_grid(
-    reach: float, step: float, lo: float, hi: float, yaw_step_deg: float
-) -> tuple[np.ndarray, np.ndarray]:
+def _coarse_grid(reach: float, step: float, heights: np.ndarray, yaw_step_deg: float) -> np.ndarray:
     """(P, 4) rows (x, y, z, yaw rad): `step` apart along the base's +x axis out to `reach`,
-    every yaw step, 7 heights from `lo` to `hi` (one where they meet); and those heights.
-    One line, not the disc: the part and its cell (table, fixtures) turned with it about the
-    base's vertical axis give the arm the same joints but the first, turned as much, so the
-    disc only repeats the line with that joint's margin changed (the pattern search moves
-    off the line); the line on +x keeps that joint mid-range on arms whose first joint turns
-    ±170-180°."""
+    every yaw step, at each of `heights`. One line, not the disc: the part and its cell
+    (table, fixtures) turned with it about the base's vertical axis give the arm the same
+    joints but the first, turned as much, so the disc only repeats the line with that
+    joint's margin changed (the pattern search moves off the line); the line on +x keeps
+    that joint mid-range on arms whose first joint turns ±170-180°."""
     radii = np.arange(0.0, reach + 1e-9, step)
-    heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
     n_yaws = math.ceil(3 * 360.0 / yaw_step_deg - 1e-9)
     check_count(  # before the grid is allocated
         len(radii) * len(heights) * n_yaws,
@@ -198,8 +194,7 @@ def _coarse_grid(
     # the arm in between its yaw steps, which the line does not.
     yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg / 3))
     r, z, a = np.meshgrid(radii, heights, yaws, indexing="ij")
-    grid = np.stack([r.ravel(), np.zeros(r.size), z.ravel(), a.ravel()], axis=1)
-    return grid, heights
+    return np.stack([r.ravel(), np.zeros(r.size), z.ravel(), a.ravel()], axis=1)
 
 
 def _pattern_search(
@@ -394,7 +389,11 @@ def place(
     # Coarse: a grid along a line out to the arm's reach, every yaw step, a few heights.
     coarse, w = weighted_sample(traj, weights, sample_poses(traj, coarse_poses), _COARSE_PER_VIEW)
     step = reach / 6
-    grid, heights = _coarse_grid(reach, step / 2, lo, hi, yaw_step_deg)
+    heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
+    if obstacles is not None and obstacles.table_block is not None:  # and on the table's top
+        top = on_table_z(arm, obstacles.table_block, obstacles.clearance_mm)
+        heights = np.union1d(heights, [top] if top is not None and lo <= top <= hi else [])
+    grid = _coarse_grid(reach, step / 2, heights, yaw_step_deg)
     placements = _placements(grid, centre)
     scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), placements, obstacles, w)
     # And on evenly spaced poses alone: the first and last pose of every pass and move can
