@@ -11,13 +11,8 @@ from scipy.spatial import cKDTree
 
 from helpers import WD, straight
 from scanplan.core.quantities import ScanSpec, dot_rows, norm_rows
-from scanplan.judging.accumulators import (
-    SAME_SIDE_COS,
-    Coverage,
-    real_column_pitch,
-    valid_cells,
-    valid_points,
-)
+from scanplan.judging.accumulators import SAME_SIDE_COS, Coverage, real_column_pitch
+from scanplan.judging.chunks import valid_cells, valid_points
 from scanplan.sensor.profilometer import LineProfilometer
 from scanplan.world.part import part_from_mesh
 from scanplan.world.surface import VisibleSurface

@@ -28,6 +28,14 @@ from scanplan.core.quantities import (
 )
 from scanplan.core.reward import reward_terms
 from scanplan.core.sensor_spec import SensorSpec
+from scanplan.judging.chunks import (
+    rows,
+    samples_near,
+    valid_cells,
+    valid_index,
+    valid_points,
+    valid_points_tree,
+)
 from scanplan.judging.summary import CoverageMap, SurfaceState
 from scanplan.sensor.cloud import PointCloud
 from scanplan.sensor.profilometer import PointStatus, Scan
@@ -55,64 +63,6 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
     # On the flat (m, n) arrays: ρ = z / cos(ray to the axis), cos β = cos / |n in the plane|.
     with np.errstate(divide="ignore", invalid="ignore"):
         return delta * z * rays[:, 2] * in_plane / (sensor.working_distance_mm * cos)
-
-
-def valid_index(scan: Scan, stride: int) -> np.ndarray:
-    """(k,) flat indices into the scan's (m, N) columns of the valid points of every
-    `stride`-th column, row by row: found once per chunk, though the coverage, the
-    detectability survey and the cloud sample all ask (do not write to it)."""
-    key = ("valid index", stride)
-    if key not in scan.memo:
-        valid = scan.valid
-        if stride > 1:
-            valid = valid & (np.arange(valid.shape[1]) % stride == 0)
-        scan.memo[key] = np.flatnonzero(valid)
-    index: np.ndarray = scan.memo[key]
-    return index
-
-
-def valid_points(scan: Scan, stride: int) -> np.ndarray:
-    """(k, 3) the points at `valid_index(scan, stride)`: gathered once per chunk, though the
-    coverage and the detectability survey both ask (the same points where their strides
-    agree). A flat gather costs a third of a boolean mask's."""
-    key = ("valid points", stride)
-    if key not in scan.memo:
-        scan.memo[key] = np.take(scan.points_part.reshape(-1, 3), valid_index(scan, stride), 0)
-    points: np.ndarray = scan.memo[key]
-    return points
-
-
-def valid_cells(scan: Scan, stride: int) -> tuple[np.ndarray, np.ndarray]:
-    """(row, column) (k,) each of `valid_points(scan, stride)`: found once per chunk for the
-    survey and the cloud sample (do not write to them)."""
-    key = ("valid cells", stride)
-    if key not in scan.memo:
-        scan.memo[key] = np.divmod(valid_index(scan, stride), scan.valid.shape[1])
-    cells: tuple[np.ndarray, np.ndarray] = scan.memo[key]
-    return cells
-
-
-def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
-    """A k-d tree of `valid_points(scan, stride)`, built once per chunk (the first to ask
-    builds it; `evaluate` has its coverage ask before the survey, on another thread, does).
-    Unbalanced: built per chunk and queried a few times, it builds in half the time; leaves
-    of 32 points (not 16) build a fifth faster and answer as fast (the door, 256 columns)."""
-    key = ("valid points tree", stride)
-    if key not in scan.memo:
-        points = valid_points(scan, stride)
-        scan.memo[key] = cKDTree(points, leafsize=32, balanced_tree=False, compact_nodes=False)
-    tree: cKDTree = scan.memo[key]
-    return tree
-
-
-def samples_near(scan: Scan, stride: int, surface: VisibleSurface, radius: float) -> np.ndarray:
-    """`surface.near(valid_points(scan, stride), radius)`, looked up once per chunk: the
-    coverage and the detectability survey ask on the same grid."""
-    key = ("samples near", id(surface), surface.grid_cell(radius), stride)
-    if key not in scan.memo:
-        scan.memo[key] = surface.near(valid_points(scan, stride), radius)
-    near: np.ndarray = scan.memo[key]
-    return near
 
 
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:
@@ -299,7 +249,7 @@ class Coverage:
         reach = max(self.cover_radius, self.in_spec_radius) if self.plain else self.in_spec_radius
         self._mark_chunk(
             valid_points(scan, stride),  # pts[valid], row by row
-            np.take(scan.normals_part.reshape(-1, 3), valid_index(scan, stride), 0),
+            rows(scan.normals_part.reshape(-1, 3), valid_index(scan, stride)),
             qualifies[valid],
             samples_near(scan, stride, self.surface, reach),
             lambda: valid_points_tree(scan, stride),
@@ -347,7 +297,7 @@ class Coverage:
             # costs less.
             if self.plain:
                 open_ = near[~self.covered[near]]
-                dist, _ = tree().query(self.surface.points[open_], distance_upper_bound=cover)
+                dist, _ = tree().query(rows(self.surface.points, open_), distance_upper_bound=cover)
                 self.covered[open_[dist < cover]] = True
             if self.plain and held <= cover:  # within the in-spec radius of a point: covered
                 near = near[self.covered[near]]
@@ -360,13 +310,13 @@ class Coverage:
         cand = near[~settled]
         if not len(cand):
             return
-        samples = self.surface.points[cand]
+        samples = rows(self.surface.points, cand)
         dist, j = tree().query(samples, k=1, distance_upper_bound=reach)
         if self.plain:
             self.covered[cand[dist < cover]] = True
         near = np.flatnonzero(dist < held)
         j = j[near]
-        same = dot_rows(normals[j], self.normals[cand[near]]) >= SAME_SIDE_COS
+        same = dot_rows(rows(normals, j), rows(self.normals, cand[near])) >= SAME_SIDE_COS
         yes = qualifies[j] & same
         self.in_spec[cand[near[yes]]] = True
         # The nearest point does not qualify or lies on the other side (an edge, a thin
@@ -386,7 +336,7 @@ class Coverage:
         """Mark those of the samples `cand` with a `usable` point (all: None) on their side
         within `radius`: their nearest points in `points_tree`, four times more each round
         while all of them lie within the radius."""
-        samples = self.surface.points[cand]
+        samples = rows(self.surface.points, cand)
         rest = np.arange(len(cand))
         k = 8
         while len(rest):
@@ -394,7 +344,7 @@ class Coverage:
             dist, j = points_tree.query(samples[rest], k=k, distance_upper_bound=radius)
             near = np.isfinite(dist)
             j = np.where(near, j, 0)
-            cos = np.einsum("ijk,ik->ij", normals[j], self.normals[cand[rest]])
+            cos = np.einsum("ijk,ik->ij", rows(normals, j), rows(self.normals, cand[rest]))
             good = near & (cos >= SAME_SIDE_COS)
             if usable is not None:
                 good &= usable[j]
@@ -423,9 +373,11 @@ class Coverage:
             return
         # Built per call and queried once: unbalanced, it builds faster.
         points_tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-        dist, j = points_tree.query(self.surface.points[cand], k=1, distance_upper_bound=radius)
+        dist, j = points_tree.query(
+            rows(self.surface.points, cand), k=1, distance_upper_bound=radius
+        )
         found = np.flatnonzero(np.isfinite(dist))
-        same = dot_rows(normals[j[found]], self.normals[cand[found]]) >= SAME_SIDE_COS
+        same = dot_rows(rows(normals, j[found]), rows(self.normals, cand[found])) >= SAME_SIDE_COS
         marked[cand[found[same]]] = True
         other = found[~same]
         if len(other) and len(points) > 1:

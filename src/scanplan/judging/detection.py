@@ -114,8 +114,9 @@ def cos_incidence_at(
     scan: Scan, sensor: SensorSpec, row: np.ndarray, col: np.ndarray
 ) -> np.ndarray:
     """`cos_incidence` at the points (row, col) of the scan alone, (k,)."""
-    # A flat gather of the rows costs half of numpy's two-index one.
-    normals = scan.normals_part.reshape(-1, 3)[row * scan.normals_part.shape[1] + col]
+    # A flat take of the rows costs a third of numpy's two-index gather.
+    flat = row * scan.normals_part.shape[1] + col
+    normals = np.take(scan.normals_part.reshape(-1, 3), flat, 0)
     n_x, n_z = normal_in_laser_plane(normals, scan.poses[row])
     return cos_to_rays(n_x, n_z, sensor.ray_directions()[col])
 

@@ -16,7 +16,8 @@ import numpy as np
 from scanplan.core.quantities import DEFECT_TYPE, ScanSpec, norm_rows
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.judging.accumulators import (
+from scanplan.judging.chunks import (
+    rows,
     samples_near,
     valid_cells,
     valid_points,
@@ -143,14 +144,13 @@ class DetectabilitySurvey:
             return
         # One worker: the next chunk is measured on the other core meanwhile.
         near_tree = valid_points_tree(scan, self._stride)
+        asking = rows(samples, inside)
         self._count[inside] += self._stride * np.asarray(
-            near_tree.query_ball_point(samples[inside], self._radius, return_length=True)
+            near_tree.query_ball_point(asking, self._radius, return_length=True)
         )
         # Each sample's noise, pitch and passes from its nearest points (not each point's
         # nearest sample: a sub-sampled fan's columns may lie farther apart than the samples).
-        dist, j = near_tree.query(
-            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius
-        )
+        dist, j = near_tree.query(asking, k=NEAREST_POINTS, distance_upper_bound=self._radius)
         found = np.isfinite(dist)
         j = np.where(found, j, 0)
         asked = np.zeros(len(pts), bool)  # the points asked, in order: no sort
@@ -209,9 +209,9 @@ def _pitch_and_noise(
     noise[asked] = depth_sigma_mm(scan.z_sensor[r, c], cos, fan) * cos
     n = scan.valid.shape[1]
     inner = c + 1 < n
-    at, asked = r[inner] * n + c[inner], asked[inner]  # flat: a third of the gathers' cost
+    at, asked = r[inner] * n + c[inner], asked[inner]  # flat takes: a third of the cost
     points = scan.points_part.reshape(-1, 3)
-    step = norm_rows(points[at + 1] - points[at])
+    step = norm_rows(np.take(points, at + 1, 0) - np.take(points, at, 0))
     pitch[asked] = np.where(scan.valid.ravel()[at + 1], step, np.nan)
     return pitch, noise
 
