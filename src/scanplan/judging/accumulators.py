@@ -90,13 +90,14 @@ class PointErrors:
         self.n_valid += int(valid.sum())
         self.n_hit += int(hit.sum())
         self.n_in_range += int((hit & (scan.status != PointStatus.OUT_OF_RANGE)).sum())
-        err = scan.z_sensor[valid] - self.wd
+        index = valid_index(scan, 1)  # flat takes, not boolean masks
+        err = np.take(scan.z_sensor, index) - self.wd
         abs_err = np.abs(err)
         self.sum_abs += float(abs_err.sum())
         self.sum_sq += float((err**2).sum())
         self.sum_signed += float(err.sum())
         self.dist_hist += self._bincount(abs_err / _DIST_BIN_MM, self.dist_hist)
-        ori = np.degrees(ori_rad[valid])
+        ori = np.degrees(np.take(ori_rad, index))
         self.sum_ori += float(ori.sum())
         self.ori_hist += self._bincount(ori / _ORI_BIN_DEG, self.ori_hist)
 
@@ -301,7 +302,8 @@ class Coverage:
                 self.covered[open_[dist < cover]] = True
             if self.plain and held <= cover:  # within the in-spec radius of a point: covered
                 near = near[self.covered[near]]
-            self._mark(self.in_spec, points[qualifies], normals[qualifies], held, near)
+            few = np.flatnonzero(qualifies)
+            self._mark(self.in_spec, rows(points, few), rows(normals, few), held, near)
             return
         reach = max(cover, held) if self.plain else held
         settled = self.in_spec[near]
@@ -407,13 +409,13 @@ class CloudSample:
         self.parts: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
 
     def add(self, lo: int, scan: Scan, ori_rad: np.ndarray, swath: np.ndarray, wd: float) -> None:
-        rows, cols = valid_cells(scan, 1)
+        index = valid_index(scan, 1)
         # Seeded random pick: a stride over row-major points would draw moire on the maps.
-        pick = np.flatnonzero(self.rng.random(len(rows)) * self.stride < 1.0)
-        r, c = rows[pick], cols[pick]
-        self.parts["points_part"].append(scan.points_part[r, c])
-        self.parts["distance_error_mm"].append(scan.z_sensor[r, c] - wd)
-        self.parts["orientation_error_rad"].append(ori_rad[r, c])
+        pick = np.flatnonzero(self.rng.random(len(index)) * self.stride < 1.0)
+        at, r = index[pick], valid_cells(scan, 1)[0][pick]
+        self.parts["points_part"].append(rows(scan.points_part.reshape(-1, 3), at))
+        self.parts["distance_error_mm"].append(np.take(scan.z_sensor, at) - wd)
+        self.parts["orientation_error_rad"].append(np.take(ori_rad, at))
         self.parts["profile"].append(lo + r)
         self.parts["swath"].append(swath[r])
 
