@@ -1,15 +1,23 @@
 """The coverage accumulator marks exactly the samples its definition names: those within the
-radius of a point, on the sample's side (the brute-force answer)."""
+radius of a point, on the sample's side (the brute-force answer); the real column pitch it
+judges density with is the row formula's; a chunk's valid points are its masked ones."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 from scipy.spatial import cKDTree
 
-from scanplan.core.quantities import ScanSpec
-from scanplan.judging.accumulators import SAME_SIDE_COS, Coverage
+from helpers import WD, straight
+from scanplan.core.quantities import ScanSpec, dot_rows, norm_rows
+from scanplan.judging.accumulators import SAME_SIDE_COS, Coverage, real_column_pitch
+from scanplan.judging.chunks import valid_cells, valid_points
+from scanplan.sensor.profilometer import LineProfilometer
+from scanplan.world.part import part_from_mesh
 from scanplan.world.surface import VisibleSurface
+
+SENSOR = ScanSpec().sensor
 
 
 def _sheet(rng: np.random.Generator, n: int, thickness: float):
@@ -99,3 +107,63 @@ def test_a_chunk_covers_and_holds_in_spec_the_samples_its_definition_names(
         assert np.array_equal(coverage.covered, covered)
     else:
         assert not coverage.covered.any()
+
+
+def _sphere_scan(points_per_profile: int, stride_poses: int = 40):
+    """A sub-sampled fan looking at a sphere from random directions, at random rolls and
+    stand-offs: points at every incidence, some columns missing the sphere."""
+    rng = np.random.default_rng(3)
+    fan = SENSOR.with_points(points_per_profile)
+    part = part_from_mesh(trimesh.creation.icosphere(4, 60.0), "sphere")
+    poses = np.zeros((stride_poses, 4, 4))
+    for i, (look, up) in enumerate(
+        zip(rng.normal(size=(stride_poses, 3)), rng.normal(size=(stride_poses, 3)), strict=True)
+    ):
+        z_s = -look / np.linalg.norm(look)
+        x_s = np.cross(up, z_s)
+        x_s /= np.linalg.norm(x_s)
+        poses[i, :3, :3] = np.column_stack([x_s, np.cross(z_s, x_s), z_s])
+        poses[i, :3, 3] = -z_s * (60.0 + WD + rng.uniform(-20, 20))
+        poses[i, 3, 3] = 1.0
+    return LineProfilometer(part, fan, seed=1).measure_many(poses)
+
+
+def test_the_column_pitch_is_the_row_formula_on_every_point():
+    """From the laser-plane components of the normals (flat (m, n) arrays): the pitch the
+    point's ray, its distance and its normal projected into the laser plane give."""
+    scan = _sphere_scan(96)
+    assert scan.valid.sum() > 500 and not scan.valid.all()
+    delta = SENSOR.line_width_mm / (SENSOR.points_per_profile - 1)
+    ray = scan.points_part - scan.poses[:, None, :3, 3]
+    rho = norm_rows(ray)
+    y_s = scan.poses[:, None, :3, 1]
+    normals = scan.normals_part
+    n_plane = normals - dot_rows(normals, y_s)[..., None] * y_s
+    cos_beta = np.abs(dot_rows(n_plane, ray)) / (norm_rows(n_plane) * rho)
+    want = delta * scan.z_sensor**2 / (rho * WD * cos_beta)
+    for cols in (slice(None), slice(None, None, 5)):
+        got = real_column_pitch(scan, SENSOR, cols)
+        assert np.array_equal(np.isnan(got), ~scan.valid[:, cols])
+        np.testing.assert_allclose(got, want[:, cols], rtol=1e-12)
+        assert (got[scan.valid[:, cols]] > 1.5 * delta).any()  # oblique points: wider
+
+
+def test_a_plate_square_to_the_beam_has_the_column_pitch_scaled_by_depth(plate):
+    """Flat, square to the beam: δ·z/W_d at every point (δ at the working distance)."""
+    fan = SENSOR.without_noise().with_points(64)
+    scan = LineProfilometer(plate, fan).measure_many(straight(np.arange(300, 320.0), 15.0).poses)
+    pitch = real_column_pitch(scan, SENSOR)
+    assert scan.valid.sum() > 500 and np.array_equal(np.isnan(pitch), ~scan.valid)
+    delta = SENSOR.line_width_mm / (SENSOR.points_per_profile - 1)
+    np.testing.assert_allclose(pitch[scan.valid], (delta * scan.z_sensor / WD)[scan.valid])
+
+
+@pytest.mark.parametrize("stride", [1, 3])
+def test_the_valid_points_of_a_chunk_are_its_masked_points_row_by_row(stride):
+    scan = _sphere_scan(64, 12)
+    valid = scan.valid[:, ::stride]
+    row, col = valid_cells(scan, stride)
+    np.testing.assert_array_equal(valid_points(scan, stride), scan.points_part[:, ::stride][valid])
+    np.testing.assert_array_equal(row, np.nonzero(valid)[0])
+    np.testing.assert_array_equal(col, np.nonzero(valid)[1] * stride)
+    assert valid_points(scan, stride) is valid_points(scan, stride)  # gathered once

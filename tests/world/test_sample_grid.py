@@ -33,3 +33,18 @@ def test_near_outside_the_grid_and_without_points():
     edge = grid.near(np.array([[11.5, 5.0, 5.0]]))  # beyond the edge, within a cell of it
     assert set(_within(binned, np.array([[11.5, 5.0, 5.0]]), 2.0)) <= set(edge)
     assert len(SampleGrid(np.zeros((0, 3)), 2.0).near(binned)) == 0
+
+
+def test_near_is_exactly_the_points_of_the_neighbouring_cells_even_past_the_border():
+    """The samples of the 27 cells around each asked point's cell (clipped into the grid),
+    no more: a point past any face of the grid finds only what lies along that face."""
+    rng = np.random.default_rng(5)
+    binned = rng.uniform(0, 30, (3000, 3))
+    grid = SampleGrid(binned, 3.0)
+    asked = np.r_[rng.uniform(-40, 70, (60, 3)), [[-50, 15, 15], [15, 80, 15], [31, -1, 31]]]
+    shape = tuple(grid.shape)
+    own = np.stack(np.unravel_index(grid._keys(asked), shape), -1)
+    cells = np.stack(np.unravel_index(grid._keys(binned), shape), -1)
+    touching = (np.abs(cells[:, None, :] - own[None]) <= 1).all(axis=-1).any(axis=1)
+    assert 0 < touching.sum() < len(binned)
+    np.testing.assert_array_equal(np.sort(grid.near(asked)), np.flatnonzero(touching))

@@ -166,7 +166,10 @@ def mean_distance(z_sensor: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 def mean_normal(normals_part: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Unit mean of the valid points' normals. (..., N, 3) -> (..., 3); NaN if none valid."""
-    total = np.where(valid[..., None], normals_part, 0.0).sum(axis=-2)
+    kept = np.where(valid[..., None], normals_part, 0.0)
+    # Summed over contiguous rows, column after column: numpy's order along axis -2, to the
+    # last bit, at 0.6x the cost (its reduction there steps three values at a time).
+    total = np.moveaxis(kept, -2, 0).copy().sum(axis=0)
     norm = norm_rows(total)[..., None]
     return np.where(norm > 0, total / np.where(norm > 0, norm, 1.0), np.nan)
 
@@ -217,6 +220,22 @@ def point_orientation_error(normals_part: np.ndarray, poses: np.ndarray) -> np.n
     (..., N, 3), (..., 4, 4) -> (..., N)."""
     z_s = poses[..., None, :3, 2]
     return np.arccos(np.clip(-dot_rows(normals_part, z_s), -1.0, 1.0))
+
+
+def normal_in_laser_plane(
+    normals_part: np.ndarray, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(n·x_s, n·z_s): the normals' components in the laser plane, the sensor's x-z plane.
+    (..., 3) part-frame normals and (..., 4, 4) poses, broadcast -> (...) each; added in
+    the order numpy's `n @ R` adds one normal's (the same bits here)."""
+    return dot_rows(normals_part, poses[..., :3, 0]), dot_rows(normals_part, poses[..., :3, 2])
+
+
+def cos_to_rays(n_x: np.ndarray, n_z: np.ndarray, rays_sensor: np.ndarray) -> np.ndarray:
+    """|cos| of the angle between sensor-frame rays (..., 3) in the laser plane (y_s = 0)
+    and the normals whose laser-plane components are n_x, n_z (`normal_in_laser_plane`),
+    broadcast -> (...)."""
+    return np.abs(n_x * rays_sensor[..., 0] + n_z * rays_sensor[..., 2])
 
 
 def in_spec(

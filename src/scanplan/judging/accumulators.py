@@ -18,14 +18,24 @@ from scanplan.core.quantities import (
     ScanSpec,
     advance,
     beam_angle,
+    cos_to_rays,
     dot_rows,
     in_spec,
     mean_distance,
     norm_rows,
+    normal_in_laser_plane,
     signed_alpha,
 )
 from scanplan.core.reward import reward_terms
 from scanplan.core.sensor_spec import SensorSpec
+from scanplan.judging.chunks import (
+    rows,
+    samples_near,
+    valid_cells,
+    valid_index,
+    valid_points,
+    valid_points_tree,
+)
 from scanplan.judging.summary import CoverageMap, SurfaceState
 from scanplan.sensor.cloud import PointCloud
 from scanplan.sensor.profilometer import PointStatus, Scan
@@ -45,50 +55,14 @@ def real_column_pitch(scan: Scan, sensor: SensorSpec, cols: slice = slice(None))
     the emitter; on the surface that arc grows by 1/cos β, β the angle between the beam and
     the surface's normal within the laser plane."""
     delta = sensor.line_width_mm / max(sensor.points_per_profile - 1, 1)
-    points = scan.points_part[:, cols]
-    normals = scan.normals_part[:, cols]
-    ray = points - scan.poses[:, None, :3, 3]
-    rho = norm_rows(ray)
-    y_s = scan.poses[:, None, :3, 1]
-    n_plane = normals - dot_rows(normals, y_s)[..., None] * y_s
-    cos_beta = np.abs(dot_rows(n_plane, ray)) / np.maximum(norm_rows(n_plane) * rho, 1e-12)
+    rays = sensor.ray_directions(scan.z_sensor.shape[1])[cols]  # the scan's fan: same line
+    n_x, n_z = normal_in_laser_plane(scan.normals_part[:, cols], scan.poses[:, None])
+    cos = cos_to_rays(n_x, n_z, rays)
+    in_plane = np.sqrt(n_x * n_x + n_z * n_z)
     z = scan.z_sensor[:, cols]
+    # On the flat (m, n) arrays: ρ = z / cos(ray to the axis), cos β = cos / |n in the plane|.
     with np.errstate(divide="ignore", invalid="ignore"):
-        return delta * z**2 / (rho * sensor.working_distance_mm * cos_beta)
-
-
-def valid_points(scan: Scan, stride: int) -> np.ndarray:
-    """(k, 3) the valid points of every `stride`-th column of `scan`, row by row: gathered
-    once per chunk, though the coverage and the detectability survey both ask (the same
-    points where their strides agree)."""
-    key = ("valid points", stride)
-    if key not in scan.memo:
-        cols = slice(None, None, stride)
-        scan.memo[key] = scan.points_part[:, cols][scan.valid[:, cols]]
-    points: np.ndarray = scan.memo[key]
-    return points
-
-
-def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
-    """A k-d tree of `valid_points(scan, stride)`, built once per chunk (the first to ask
-    builds it; `evaluate` has its coverage ask before the survey, on another thread, does).
-    Unbalanced: built per chunk and queried a few times, it builds in half the time."""
-    key = ("valid points tree", stride)
-    if key not in scan.memo:
-        points = valid_points(scan, stride)
-        scan.memo[key] = cKDTree(points, balanced_tree=False, compact_nodes=False)
-    tree: cKDTree = scan.memo[key]
-    return tree
-
-
-def samples_near(scan: Scan, stride: int, surface: VisibleSurface, radius: float) -> np.ndarray:
-    """`surface.near(valid_points(scan, stride), radius)`, looked up once per chunk: the
-    coverage and the detectability survey ask on the same grid."""
-    key = ("samples near", id(surface), surface.grid_cell(radius), stride)
-    if key not in scan.memo:
-        scan.memo[key] = surface.near(valid_points(scan, stride), radius)
-    near: np.ndarray = scan.memo[key]
-    return near
+        return delta * z * rays[:, 2] * in_plane / (sensor.working_distance_mm * cos)
 
 
 def _percentile_from_hist(hist: np.ndarray, bin_width: float, q: float) -> float:
@@ -116,13 +90,14 @@ class PointErrors:
         self.n_valid += int(valid.sum())
         self.n_hit += int(hit.sum())
         self.n_in_range += int((hit & (scan.status != PointStatus.OUT_OF_RANGE)).sum())
-        err = scan.z_sensor[valid] - self.wd
+        index = valid_index(scan, 1)  # flat takes, not boolean masks
+        err = np.take(scan.z_sensor, index) - self.wd
         abs_err = np.abs(err)
         self.sum_abs += float(abs_err.sum())
         self.sum_sq += float((err**2).sum())
         self.sum_signed += float(err.sum())
         self.dist_hist += self._bincount(abs_err / _DIST_BIN_MM, self.dist_hist)
-        ori = np.degrees(ori_rad[valid])
+        ori = np.degrees(np.take(ori_rad, index))
         self.sum_ori += float(ori.sum())
         self.ori_hist += self._bincount(ori / _ORI_BIN_DEG, self.ori_hist)
 
@@ -275,7 +250,7 @@ class Coverage:
         reach = max(self.cover_radius, self.in_spec_radius) if self.plain else self.in_spec_radius
         self._mark_chunk(
             valid_points(scan, stride),  # pts[valid], row by row
-            nrm[valid],
+            rows(scan.normals_part.reshape(-1, 3), valid_index(scan, stride)),
             qualifies[valid],
             samples_near(scan, stride, self.surface, reach),
             lambda: valid_points_tree(scan, stride),
@@ -323,11 +298,12 @@ class Coverage:
             # costs less.
             if self.plain:
                 open_ = near[~self.covered[near]]
-                dist, _ = tree().query(self.surface.points[open_], distance_upper_bound=cover)
+                dist, _ = tree().query(rows(self.surface.points, open_), distance_upper_bound=cover)
                 self.covered[open_[dist < cover]] = True
             if self.plain and held <= cover:  # within the in-spec radius of a point: covered
                 near = near[self.covered[near]]
-            self._mark(self.in_spec, points[qualifies], normals[qualifies], held, near)
+            few = np.flatnonzero(qualifies)
+            self._mark(self.in_spec, rows(points, few), rows(normals, few), held, near)
             return
         reach = max(cover, held) if self.plain else held
         settled = self.in_spec[near]
@@ -336,13 +312,13 @@ class Coverage:
         cand = near[~settled]
         if not len(cand):
             return
-        samples = self.surface.points[cand]
+        samples = rows(self.surface.points, cand)
         dist, j = tree().query(samples, k=1, distance_upper_bound=reach)
         if self.plain:
             self.covered[cand[dist < cover]] = True
         near = np.flatnonzero(dist < held)
         j = j[near]
-        same = dot_rows(normals[j], self.normals[cand[near]]) >= SAME_SIDE_COS
+        same = dot_rows(rows(normals, j), rows(self.normals, cand[near])) >= SAME_SIDE_COS
         yes = qualifies[j] & same
         self.in_spec[cand[near[yes]]] = True
         # The nearest point does not qualify or lies on the other side (an edge, a thin
@@ -362,7 +338,7 @@ class Coverage:
         """Mark those of the samples `cand` with a `usable` point (all: None) on their side
         within `radius`: their nearest points in `points_tree`, four times more each round
         while all of them lie within the radius."""
-        samples = self.surface.points[cand]
+        samples = rows(self.surface.points, cand)
         rest = np.arange(len(cand))
         k = 8
         while len(rest):
@@ -370,7 +346,7 @@ class Coverage:
             dist, j = points_tree.query(samples[rest], k=k, distance_upper_bound=radius)
             near = np.isfinite(dist)
             j = np.where(near, j, 0)
-            cos = np.einsum("ijk,ik->ij", normals[j], self.normals[cand[rest]])
+            cos = np.einsum("ijk,ik->ij", rows(normals, j), rows(self.normals, cand[rest]))
             good = near & (cos >= SAME_SIDE_COS)
             if usable is not None:
                 good &= usable[j]
@@ -399,9 +375,11 @@ class Coverage:
             return
         # Built per call and queried once: unbalanced, it builds faster.
         points_tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-        dist, j = points_tree.query(self.surface.points[cand], k=1, distance_upper_bound=radius)
+        dist, j = points_tree.query(
+            rows(self.surface.points, cand), k=1, distance_upper_bound=radius
+        )
         found = np.flatnonzero(np.isfinite(dist))
-        same = dot_rows(normals[j[found]], self.normals[cand[found]]) >= SAME_SIDE_COS
+        same = dot_rows(rows(normals, j[found]), rows(self.normals, cand[found])) >= SAME_SIDE_COS
         marked[cand[found[same]]] = True
         other = found[~same]
         if len(other) and len(points) > 1:
@@ -431,13 +409,13 @@ class CloudSample:
         self.parts: dict[str, list[np.ndarray]] = {k: [] for k in PointCloud.__dataclass_fields__}
 
     def add(self, lo: int, scan: Scan, ori_rad: np.ndarray, swath: np.ndarray, wd: float) -> None:
-        rows, cols = np.nonzero(scan.valid)
+        index = valid_index(scan, 1)
         # Seeded random pick: a stride over row-major points would draw moire on the maps.
-        pick = np.flatnonzero(self.rng.random(len(rows)) * self.stride < 1.0)
-        r, c = rows[pick], cols[pick]
-        self.parts["points_part"].append(scan.points_part[r, c])
-        self.parts["distance_error_mm"].append(scan.z_sensor[r, c] - wd)
-        self.parts["orientation_error_rad"].append(ori_rad[r, c])
+        pick = np.flatnonzero(self.rng.random(len(index)) * self.stride < 1.0)
+        at, r = index[pick], valid_cells(scan, 1)[0][pick]
+        self.parts["points_part"].append(rows(scan.points_part.reshape(-1, 3), at))
+        self.parts["distance_error_mm"].append(np.take(scan.z_sensor, at) - wd)
+        self.parts["orientation_error_rad"].append(np.take(ori_rad, at))
         self.parts["profile"].append(lo + r)
         self.parts["swath"].append(swath[r])
 

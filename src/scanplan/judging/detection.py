@@ -25,7 +25,14 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from scanplan.core.context import PlanContext, recorded
-from scanplan.core.quantities import DEFECT_K_SIGMA, DEFECT_MIN_POINTS, DEFECTS_PER_TRIAL, ScanSpec
+from scanplan.core.quantities import (
+    DEFECT_K_SIGMA,
+    DEFECT_MIN_POINTS,
+    DEFECTS_PER_TRIAL,
+    ScanSpec,
+    cos_to_rays,
+    normal_in_laser_plane,
+)
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.judging.evaluation import surface_samples
@@ -97,25 +104,21 @@ def depth_sigma_mm(z: np.ndarray, cos: np.ndarray | None, sensor: SensorSpec) ->
     return np.hypot(sensor.noise.std_mm(z, cos, sensor.working_distance_mm), quant)
 
 
-def _cos_to_rays(normals: np.ndarray, rotations: np.ndarray, rays: np.ndarray) -> np.ndarray:
-    """|cos| between sensor-frame `rays` (..., 3) and part-frame `normals` (..., 3) turned
-    into the sensor frame by the poses' `rotations` (matmul-broadcast against the normals)."""
-    normals_sensor = np.matmul(normals, rotations)
-    return np.abs(np.einsum("...i,...i->...", normals_sensor, rays))
-
-
 def cos_incidence(scan: Scan, sensor: SensorSpec) -> np.ndarray:
     """(m, N) |cos| of the angle between each column's ray and the surface normal it hit."""
-    return _cos_to_rays(scan.normals_part, scan.poses[:, :3, :3], sensor.ray_directions())
+    n_x, n_z = normal_in_laser_plane(scan.normals_part, scan.poses[:, None])
+    return cos_to_rays(n_x, n_z, sensor.ray_directions())
 
 
 def cos_incidence_at(
     scan: Scan, sensor: SensorSpec, row: np.ndarray, col: np.ndarray
 ) -> np.ndarray:
     """`cos_incidence` at the points (row, col) of the scan alone, (k,)."""
-    normals = scan.normals_part[row, col][:, None, :]  # (k, 1, 3) against (k, 3, 3)
-    rays = sensor.ray_directions()[col][:, None, :]
-    return _cos_to_rays(normals, scan.poses[row, :3, :3], rays)[:, 0]
+    # A flat take of the rows costs a third of numpy's two-index gather.
+    flat = row * scan.normals_part.shape[1] + col
+    normals = np.take(scan.normals_part.reshape(-1, 3), flat, 0)
+    n_x, n_z = normal_in_laser_plane(normals, scan.poses[row])
+    return cos_to_rays(n_x, n_z, sensor.ray_directions()[col])
 
 
 def flagged(scan: Scan, nominal_z: np.ndarray, sensor: SensorSpec, k_sigma: float) -> np.ndarray:

@@ -16,7 +16,13 @@ import numpy as np
 from scanplan.core.quantities import DEFECT_TYPE, ScanSpec, norm_rows
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory
-from scanplan.judging.accumulators import samples_near, valid_points, valid_points_tree
+from scanplan.judging.chunks import (
+    rows,
+    samples_near,
+    valid_cells,
+    valid_points,
+    valid_points_tree,
+)
 from scanplan.judging.detectability import (
     COLUMN_STRIDE,
     DENSITY_RADIUS_MM,
@@ -126,8 +132,7 @@ class DetectabilitySurvey:
         pts = valid_points(scan, self._stride)
         if len(pts) == 0:
             return
-        row, col = np.nonzero(valid[:, :: self._stride])
-        col *= self._stride
+        row, col = valid_cells(scan, self._stride)
         passes = self._pass_of
         point_pass = np.zeros(len(pts), np.int64) if passes is None else passes[lo + row]
         # Those within reach, and some more.
@@ -139,17 +144,18 @@ class DetectabilitySurvey:
             return
         # One worker: the next chunk is measured on the other core meanwhile.
         near_tree = valid_points_tree(scan, self._stride)
+        asking = rows(samples, inside)
         self._count[inside] += self._stride * np.asarray(
-            near_tree.query_ball_point(samples[inside], self._radius, return_length=True)
+            near_tree.query_ball_point(asking, self._radius, return_length=True)
         )
         # Each sample's noise, pitch and passes from its nearest points (not each point's
         # nearest sample: a sub-sampled fan's columns may lie farther apart than the samples).
-        dist, j = near_tree.query(
-            samples[inside], k=NEAREST_POINTS, distance_upper_bound=self._radius
-        )
+        dist, j = near_tree.query(asking, k=NEAREST_POINTS, distance_upper_bound=self._radius)
         found = np.isfinite(dist)
         j = np.where(found, j, 0)
-        c, s = _pitch_and_noise(scan, fan, row, col, np.unique(j[found]))
+        asked = np.zeros(len(pts), bool)  # the points asked, in order: no sort
+        asked[j[found]] = True
+        c, s = _pitch_and_noise(scan, fan, row, col, np.flatnonzero(asked))
         good = found & np.isfinite(c[j]) & np.isfinite(s[j])
         sample = np.broadcast_to(inside[:, None], good.shape)[good]
         j = j[good]
@@ -201,10 +207,12 @@ def _pitch_and_noise(
     r, c = row[asked], col[asked]
     cos = cos_incidence_at(scan, fan, r, c)
     noise[asked] = depth_sigma_mm(scan.z_sensor[r, c], cos, fan) * cos
-    inner = c + 1 < scan.valid.shape[1]
-    r, c, asked = r[inner], c[inner], asked[inner]
-    step = norm_rows(scan.points_part[r, c + 1] - scan.points_part[r, c])
-    pitch[asked] = np.where(scan.valid[r, c + 1], step, np.nan)
+    n = scan.valid.shape[1]
+    inner = c + 1 < n
+    at, asked = r[inner] * n + c[inner], asked[inner]  # flat takes: a third of the cost
+    points = scan.points_part.reshape(-1, 3)
+    step = norm_rows(np.take(points, at + 1, 0) - np.take(points, at, 0))
+    pitch[asked] = np.where(scan.valid.ravel()[at + 1], step, np.nan)
     return pitch, noise
 
 

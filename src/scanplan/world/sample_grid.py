@@ -25,22 +25,26 @@ class SampleGrid:
         self.lo = points.min(axis=0) if self.size else np.zeros(3)
         extent = points.max(axis=0) - self.lo if self.size else np.zeros(3)
         cell = float(cell_mm)
-        # One empty cell on each side: the neighbours of a point's cell are always in the grid.
-        while np.prod(np.floor(extent / cell) + 3) > MAX_CELLS:
+        # Two empty cells on each side, a point's cell clipped to the inner of them: its
+        # neighbours are always in the grid, found by flat offsets with no bounds test.
+        while np.prod(np.floor(extent / cell) + 5) > MAX_CELLS:
             cell *= 1.5
         self.cell = cell
-        self.shape = (np.floor(extent / cell) + 3).astype(np.int64)
+        self.shape = (np.floor(extent / cell) + 5).astype(np.int64)
         keys = self._keys(points)
         self.order = np.argsort(keys, kind="stable")
         count = np.bincount(keys, minlength=int(np.prod(self.shape)))
         self.count = count
+        self.occupied = count > 0
         self.start = np.cumsum(count) - count  # the cell's first in `order`
+        strides = np.array([self.shape[1] * self.shape[2], self.shape[2], 1])
+        self._around = _NEIGHBOURS @ strides  # a cell's neighbours' flat offsets
 
     def _keys(self, points: np.ndarray) -> np.ndarray:
-        """The flat index of each point's cell, clipped to the grid's border cells (which
-        are empty: a point outside reaches only cells next to the border's)."""
-        cells = np.floor((points - self.lo) / self.cell) + 1
-        np.clip(cells, 0, self.shape - 1, out=cells)
+        """The flat index of each point's cell, clipped to the grid's inner border cells
+        (which are empty: a point outside reaches only cells next to the border's)."""
+        cells = np.floor((points - self.lo) / self.cell) + 2
+        np.clip(cells, 1, self.shape - 2, out=cells)
         c = cells.astype(np.int64)
         return (c[:, 0] * self.shape[1] + c[:, 1]) * self.shape[2] + c[:, 2]
 
@@ -54,13 +58,9 @@ class SampleGrid:
         flags = np.zeros(len(self.count), bool)
         flags[self._keys(points)] = True
         own = np.flatnonzero(flags)
-        cells = np.stack(np.unravel_index(own, tuple(self.shape)), -1)
-        around = (cells[:, None, :] + _NEIGHBOURS).reshape(-1, 3)
-        # The border cells are empty; their neighbours outside the grid are dropped.
-        inside = (around >= 0) & (around < self.shape)
-        around = around[inside[:, 0] & inside[:, 1] & inside[:, 2]]
-        flags[(around[:, 0] * self.shape[1] + around[:, 1]) * self.shape[2] + around[:, 2]] = True
-        keys = np.flatnonzero(flags & (self.count > 0))
+        flags[(own[:, None] + self._around).ravel()] = True
+        flags &= self.occupied
+        keys = np.flatnonzero(flags)
         count = self.count[keys]
         total = int(count.sum())
         if total == 0:
