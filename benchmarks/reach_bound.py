@@ -37,7 +37,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.judging.evaluation import coverage_spacing_mm, in_spec_radius_mm
 from scanplan.robot.base import Robot, inv_rigid
 from scanplan.robot.export.rotations import pose_from_xyzabc
-from scanplan.robot.links import ON_TABLE_MM
+from scanplan.robot.links import ON_TABLE_MM, swept_column
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.presets import get_robot
 from scanplan.robot.ur import URModel
@@ -179,9 +179,7 @@ class Stands:
 
     @classmethod
     def of(cls, robot: Robot, wrist: WristReach, block, part_bounds, clearance_mm: float):
-        ends, radii, _ = robot.link_capsules(np.zeros(6))  # as column_clear sweeps them
-        sweep = float((np.hypot(ends[:2, :, 0], ends[:2, :, 1]) + radii[:2, None]).max())
-        z_lo = float((ends[:2, :, 2] - radii[:2, None]).min())
+        sweep, z_lo, _ = swept_column(robot)  # as column_clear sweeps it
         top, up = float(block[1][2]), float(wrist.shoulder[2])
         return cls(
             (np.asarray(block[0][:2], float), np.asarray(block[1][:2], float)),

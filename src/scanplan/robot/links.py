@@ -226,7 +226,7 @@ def hung(T_base_part: np.ndarray) -> np.ndarray:
     return np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)[:, 2, 2] < 0.0
 
 
-def _column(robot: Robot) -> tuple[float, float, float]:
+def swept_column(robot: Robot) -> tuple[float, float, float]:
     """The links that turn with joint 1 only (column and shoulder) swept about the vertical:
     their radius and lowest and highest points in the base frame (mm)."""
     ends, radii, _ = robot.link_capsules(np.zeros(6))
@@ -244,7 +244,7 @@ def on_table_z(
     the clearance (placements at a few heights apart seldom land in that slab); None for
     an arm whose column reaches below its base frame too far for that (its base frame is
     `ON_TABLE_MM` at most above the top)."""
-    _, z_lo, _ = _column(robot)
+    _, z_lo, _ = swept_column(robot)
     lift = max(clearance_mm - z_lo, 0.0) + 1.0
     return -(float(block[1][2]) + lift) if lift <= ON_TABLE_MM else None
 
@@ -265,7 +265,7 @@ def column_clear(
     T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
     if block is None:
         return np.ones(len(T), bool)
-    sweep, z_lo, z_hi = _column(robot)
+    sweep, z_lo, z_hi = swept_column(robot)
     axis_in_part = inv_rigid(T)[:, :3, 3]  # the base origin, on the joint-1 axis
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
     gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
@@ -288,4 +288,5 @@ __all__ = [
     "hung",
     "obstacles_for",
     "on_table_z",
+    "swept_column",
 ]
