@@ -81,7 +81,7 @@ def test_follows_the_pose_by_pose_rule(robot: str, seed: int) -> None:
 
 
 class _Cell:
-    """A cell as `check_reach` asks it (`reach.CellView`): links clear wherever `along`
+    """A cell as `check_reach` asks it (`pass_branches.CellView`): links clear wherever `along`
     says, joint moves clear except into the joints in `blocked_moves`."""
 
     def __init__(self, along=None, blocked_moves=()):

@@ -6,29 +6,18 @@ Works for any `Robot`; the path is `T_base_flange` (n, 4, 4) in mm, e.g. from
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
 from scanplan.robot.base import Robot, wrap
+from scanplan.robot.pass_branches import CellView, by_flown, flown_count
 from scanplan.robot.presets import get_robot
 
 TWO_PI = 2 * np.pi
-
-
-class CellView(Protocol):
-    """What the choice of a pass's configuration asks of the cell (`links.LinkClearance`)."""
-
-    def clear_along(self, i: int, path: np.ndarray) -> np.ndarray:
-        """(m, b) whether b branches' joints (m, b, 6) from pose i on keep the links clear."""
-        ...
-
-    def clear_move(self, i0: int, q0: np.ndarray, i1: int, q1: np.ndarray) -> bool:
-        """Whether the joint move from q0 at pose i0 to q1 at pose i1 keeps them clear."""
-        ...
 
 
 def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -229,19 +218,24 @@ def _pass_start(
     held[1:] &= step <= np.radians(jump_deg)
     signs = np.signbit(arm.singularity_terms(np.nan_to_num(path)))
     held &= (signs == signs[0]).all(axis=2)
-    if cell is not None:  # the links checked only as far as each branch flies the pass
-        flying = np.cumprod(held, axis=0).astype(bool)
-        held &= cell.clear_along(at[0], np.where(flying[..., None], path, np.nan)) | ~flying
-    flown = np.where(held.all(axis=0), len(path), np.argmin(held, axis=0))  # (b,)
-    best = branches[flown == flown.max()]
-    cand = first[best]
-    if prev is not None:
-        if cell is not None:  # the most flown whose joint move in keeps the links clear
-            for k in np.lexsort((((first[branches] - prev) ** 2).sum(axis=1), -flown)):
-                if flown[k] == 0:
+    if cell is None:
+        flown = flown_count(held)
+        best = branches[flown == flown.max()]
+    else:  # the links checked only for the branches the choice reaches, most flown first
+        dist = np.zeros(len(branches)) if prev is None else ((first[branches] - prev) ** 2).sum(1)
+        order = by_flown(held, path, dist, cell, at[0])
+        k0, most = next(order)
+        if prev is not None:  # the most flown whose joint move in keeps the links clear
+            for k, count in itertools.chain([(k0, most)], order):
+                if count == 0:
                     break
                 if cell.clear_move(at[1], prev, at[0], first[branches[k]]):
                     return first[branches[k]]
+            return first[branches[k0]]  # none: the most flown, nearest the joints before
+        tied = itertools.takewhile(lambda kc: kc[1] == most, order)
+        best = branches[np.sort([k0, *(k for k, _ in tied)])]
+    cand = first[best]
+    if prev is not None:
         return cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
     terms = np.abs(arm.singularity_terms(cand)) / tol
     score = np.minimum(terms.min(axis=1), limit_margin(cand, limits) / np.radians(5))
