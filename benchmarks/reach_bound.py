@@ -151,7 +151,7 @@ def _shares(
 
 @dataclass(frozen=True)
 class ReachBound:
-    """`bound`: no shoulder position beside the table holds more of the samples in reach;
+    """`bound`: no shoulder position the arm can stand at holds more of the samples in reach;
     `best`: the share at the best position found (`shoulder_mm`, part frame), which the
     bound is within `_CLOSE_ENOUGH` of or the search's finest cell."""
 
