@@ -271,3 +271,20 @@ def test_weighted_sample_adds_the_views_it_misses_and_keeps_the_weight():
     assert np.isclose(sampled.sum(), weights.sum())
     assert np.isclose(sampled[heavy[sample]].sum(), 0.9)  # none of the light view's
     assert weighted_sample(traj, None, np.array([0, 30]), per_view=2)[1] is None
+
+
+def test_the_table_tops_height_only_adds_its_own_seeds() -> None:
+    """Placements standing the arm on the table's top are searched from their own best yaws
+    (held at that height), and do not displace the best of the other heights."""
+    heights = np.array([-400.0, -37.0, 0.0])
+    yaws = np.radians(np.arange(0.0, 360.0, 30.0))
+    grid = np.array([[300.0, 0.0, z, a] for z in heights for a in yaws])
+    scores = np.where(grid[:, 2] == -37.0, 5.0, 0.0) + np.cos(grid[:, 3])  # the top scores best
+    seeds, held = _seeds(grid, heights, scores, scores, 2, True, on_table=-37.0)
+    on_top = grid[seeds, 2] == -37.0
+    assert on_top.sum() == PER_HEIGHT_YAWS and held[on_top].all()
+    best = seeds[~held]
+    assert len(best) == 2 and (grid[best, 2] != -37.0).all()
+    assert (np.cos(grid[best, 3]) == 1.0).all()  # the others' best yaw, at both heights
+    without, held_without = _seeds(grid, heights, scores, scores, 2, True)
+    assert (grid[without[~held_without], 2] == -37.0).all()  # else the top's are the best

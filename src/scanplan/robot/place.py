@@ -177,11 +177,10 @@ def _scores(
 
 def _coarse_grid(reach: float, step: float, heights: np.ndarray, yaw_step_deg: float) -> np.ndarray:
     """(P, 4) rows (x, y, z, yaw rad): `step` apart along the base's +x axis out to `reach`,
-    every yaw step, at each of `heights`. One line, not the disc: the part and its cell
-    (table, fixtures) turned with it about the base's vertical axis give the arm the same
-    joints but the first, turned as much, so the disc only repeats the line with that
-    joint's margin changed (the pattern search moves off the line); the line on +x keeps
-    that joint mid-range on arms whose first joint turns ±170-180°."""
+    every yaw step, at each of `heights`. One line, not the disc: the part and its cell turned
+    about the base's vertical axis give the arm the same joints but the first, turned as
+    much, so the disc only repeats the line with that joint's margin changed (the pattern
+    search moves off it); the line on +x keeps it mid-range (first joints turn ±170-180°)."""
     radii = np.arange(0.0, reach + 1e-9, step)
     n_yaws = math.ceil(3 * 360.0 / yaw_step_deg - 1e-9)
     check_count(  # before the grid is allocated
@@ -257,12 +256,16 @@ def _seeds(
     even_scores: np.ndarray,
     keep: int,
     in_cell: bool,
+    on_table: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The coarse placements the pattern search starts from: the best `keep` by either
     score, and in a cell the best few yaws at each height too; and which of them are there
     only as their height's (searched at that height: the margins the search climbs do not
     see the table, and would lift a low placement to where the others are)."""
-    best = np.union1d(np.argsort(-scores)[:keep], np.argsort(-even_scores)[:keep])
+    # The table top's height (`on_table`) only adds its own seeds: the best are the others'.
+    other = grid[:, 2] != (np.nan if on_table is None else on_table)
+    ranked = [np.argsort(-np.where(other, v, -np.inf))[:keep] for v in (scores, even_scores)]
+    best = np.union1d(*ranked)
     per_height: list[int] = []
     if in_cell:
         for z in heights:
@@ -390,16 +393,15 @@ def place(
     coarse, w = weighted_sample(traj, weights, sample_poses(traj, coarse_poses), _COARSE_PER_VIEW)
     step = reach / 6
     heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
-    if obstacles is not None and obstacles.table_block is not None:  # and on the table's top
+    top = None  # and, in a cell, standing on the table's top
+    if obstacles is not None and obstacles.table_block is not None:
         top = on_table_z(arm, obstacles.table_block, obstacles.clearance_mm)
         heights = np.union1d(heights, [top] if top is not None and lo <= top <= hi else [])
     grid = _coarse_grid(reach, step / 2, heights, yaw_step_deg)
     placements = _placements(grid, centre)
     scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), placements, obstacles, w)
-    # And on evenly spaced poses alone: the first and last pose of every pass and move can
-    # outweigh the scanning in the sample above, and the seeds of either may be the better
-    # (the drone on a UR5e kept 0.87 of its scanning poses from the one, 0.75 from the
-    # other; on a KR 6 0.92 and 0.88).
+    # And on evenly spaced poses alone: a pass's first and last poses can outweigh the scanning
+    # in the sample above (the drone on a UR5e kept 0.87 of its poses from one, 0.75 from it).
     even = np.linspace(0, len(traj) - 1, min(coarse_poses, len(traj))).round().astype(int)
     even, w = weighted_sample(traj, weights, even, _COARSE_PER_VIEW)
     even_scores = _scores(arm, T_part_flange[even], _groups(traj, even), placements, obstacles, w)
@@ -410,7 +412,7 @@ def place(
     starts = _groups(traj, fine)
     # Seeds: the best few, and in a cell the best yaws at each height too, since the margins
     # favour heights from which the links may not clear the table (ranked at the end).
-    seeds, held_height = _seeds(grid, heights, scores, even_scores, keep, obstacles is not None)
+    seeds, held = _seeds(grid, heights, scores, even_scores, keep, obstacles is not None, top)
     best = grid[seeds]
     placed = _placements(best, centre)
     best_scores = _scores(arm, T_part_flange[fine], starts, placed, obstacles, w)
@@ -425,7 +427,7 @@ def place(
         best_scores,
         delta,
         (lo, hi),
-        held_height,
+        held,
         w,
     )
     evaluated += searched
