@@ -37,7 +37,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.judging.evaluation import coverage_spacing_mm, in_spec_radius_mm
 from scanplan.robot.base import Robot, inv_rigid
 from scanplan.robot.export.rotations import pose_from_xyzabc
-from scanplan.robot.links import ON_TABLE_MM, swept_column
+from scanplan.robot.links import ON_TABLE_MM, column_clear, swept_column
 from scanplan.robot.opw import OPWRobot
 from scanplan.robot.presets import get_robot
 from scanplan.robot.ur import URModel
@@ -167,13 +167,16 @@ def _gap(xy: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Stands:
-    """Where the arm's shoulder can be, in the part frame, as `links.column_clear` lets an
-    arm stand: its column (swept about the first axis: `sweep_mm` with the clearance) clear
-    beside the table `block`, at any height; or on the block's top (`on_top_z`: the
-    shoulder heights then), its column clear of the part's footprint `part_xy` too."""
+    """Where the arm's shoulder can be, in the part frame: where `links.column_clear` lets
+    the upright arm stand (its column, swept about the first axis, clear beside the table
+    `block`, or on its top), its column clear of the part's footprint `part_xy` too (the
+    sweep `sweep_mm` with the clearance). `on_top_z`: the shoulder heights on the top."""
 
+    robot: Robot
+    shoulder: np.ndarray
     block: tuple[np.ndarray, np.ndarray]
     part_xy: tuple[np.ndarray, np.ndarray]
+    clearance_mm: float
     sweep_mm: float
     on_top_z: tuple[float, float]
 
@@ -182,25 +185,28 @@ class Stands:
         sweep, z_lo, _ = swept_column(robot)  # as column_clear sweeps it
         top, up = float(block[1][2]), float(wrist.shoulder[2])
         return cls(
-            (np.asarray(block[0][:2], float), np.asarray(block[1][:2], float)),
+            robot,
+            wrist.shoulder,
+            (np.asarray(block[0], float), np.asarray(block[1], float)),
             (np.asarray(part_bounds[0][:2], float), np.asarray(part_bounds[1][:2], float)),
+            clearance_mm,
             sweep + clearance_mm,
             (top + clearance_mm - z_lo + up, top + ON_TABLE_MM + up),
         )
 
     def holds(self, shoulders: np.ndarray) -> np.ndarray:
         """(c,) whether an arm can stand with its shoulder at each of (c, 3)."""
-        xy, z = shoulders[:, :2], shoulders[:, 2]
-        beside = _gap(xy, *self.block) > self.sweep_mm
-        lo, hi = self.on_top_z
-        return beside | ((z >= lo) & (z <= hi) & (_gap(xy, *self.part_xy) > self.sweep_mm))
+        T_base_part = np.broadcast_to(np.eye(4), (len(shoulders), 4, 4)).copy()
+        T_base_part[:, :3, 3] = self.shoulder - shoulders  # the part in the upright base
+        clear = column_clear(self.robot, T_base_part, self.block, self.clearance_mm)
+        return clear & (_gap(shoulders[:, :2], *self.part_xy) > self.sweep_mm)
 
     def may_hold(self, centres: np.ndarray, half: float) -> np.ndarray:
         """(c,) False only where no shoulder position in the cube of half-size `half` about
         each centre is one an arm can stand at (the rounded rectangles are convex: a
         square whose corners lie within one lies within it)."""
         corners = centres[:, None, :2] + half * np.array([[-1, -1], [-1, 1], [1, -1], [1, 1]])
-        over_block = (_gap(corners, *self.block) <= self.sweep_mm).all(axis=1)
+        over_block = (_gap(corners, self.block[0][:2], self.block[1][:2]) <= self.sweep_mm).all(1)
         over_part = (_gap(corners, *self.part_xy) <= self.sweep_mm).all(axis=1)
         lo, hi = self.on_top_z
         slab = (centres[:, 2] + half >= lo) & (centres[:, 2] - half <= hi)
