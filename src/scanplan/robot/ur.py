@@ -15,7 +15,6 @@ import numpy as np
 
 from scanplan.robot.base import acos_or_nan as _acos_or_nan
 from scanplan.robot.base import as_poses
-from scanplan.robot.base import inv_rigid as _inv
 from scanplan.robot.base import wrap as _wrap
 
 
@@ -119,36 +118,50 @@ def inverse_kinematics(T_base_flange: np.ndarray, model: str | URModel = "ur5e")
     c5 = (p[..., 0] * s1 - p[..., 1] * c1 - m.d4) / m.d6
     t5a = _acos_or_nan(c5)
     t5 = np.stack([t5a, -t5a], axis=2)  # (n, 2, 2)
-    t1b = np.broadcast_to(t1[:, :, None], t5.shape)
-    # In frame 1, R16 = Rz(θ234) Ry(-θ5) Rz(θ6): its last row is [s5 c6, -s5 s6, c5].
-    T16 = _inv(_dh(t1b, m.d1, 0.0, np.pi / 2)) @ T06[:, None, None]
+    # T16 = A1(θ1)⁻¹ T06, written out (the batched 4x4 products cost two thirds of the
+    # call): its rows are c1·row0 + s1·row1, row2 - d1 (translation), s1·row0 - c1·row1.
+    R, c1, s1 = T06[:, None, :3], c1[..., None], s1[..., None]  # (n, 1, 3, 4), (n, 2, 1)
+    row0 = c1 * R[:, :, 0] + s1 * R[:, :, 1]  # (n, 2, 4)
+    row1 = np.broadcast_to(R[:, :, 2], row0.shape).copy()
+    row1[..., 3] -= m.d1
+    row2 = s1 * R[:, :, 0] - c1 * R[:, :, 1]
+    # Its last row's rotation is [s5 c6, -s5 s6, c5] (R16 = Rz(θ234) Ry(-θ5) Rz(θ6)).
     s5 = np.sin(t5)
     sgn = np.where(s5 < 0, -1.0, 1.0)
     singular = np.abs(s5) < 1e-10
-    t6 = np.where(singular, 0.0, np.arctan2(-T16[..., 2, 1] * sgn, T16[..., 2, 0] * sgn))
-    # The remaining three parallel joints form a planar 2-link arm plus a wrist angle.
-    T14 = T16 @ _inv(_dh(t5, m.d5, 0.0, -np.pi / 2) @ _dh(t6, m.d6, 0.0, 0.0))
-    x, y = T14[..., 0, 3], T14[..., 1, 3]
+    t6 = np.where(singular, 0.0, np.arctan2(-row2[:, :, None, 1] * sgn, row2[:, :, None, 0] * sgn))
+    # The remaining three parallel joints form a planar 2-link arm plus a wrist angle:
+    # T14 = T16 (A5 A6)⁻¹, whose first column is (c5 c6, -c5 s6, -s5, 0) and last
+    # (d5 s6, d5 c6, -d6, 1); rows 0 and 1 of T14 are all that is needed.
+    cos5, c6, s6 = np.cos(t5), np.cos(t6), np.sin(t6)
+    col0 = (cos5 * c6, -cos5 * s6, -s5)
+    col3 = (m.d5 * s6, m.d5 * c6, -m.d6)
+    r0, r1 = row0[:, :, None], row1[:, :, None]  # (n, 2, 1, 4)
+    x = r0[..., 0] * col3[0] + r0[..., 1] * col3[1] + r0[..., 2] * col3[2] + r0[..., 3]
+    y = r1[..., 0] * col3[0] + r1[..., 1] * col3[1] + r1[..., 2] * col3[2] + r1[..., 3]
+    t234 = np.arctan2(
+        r1[..., 0] * col0[0] + r1[..., 1] * col0[1] + r1[..., 2] * col0[2],
+        r0[..., 0] * col0[0] + r0[..., 1] * col0[1] + r0[..., 2] * col0[2],
+    )[..., None]
     c3 = (x**2 + y**2 - m.a2**2 - m.a3**2) / (2 * m.a2 * m.a3)
     t3a = _acos_or_nan(c3)
     t3 = np.stack([t3a, -t3a], axis=3)  # (n, 2, 2, 2)
     x, y = x[..., None], y[..., None]
     t2 = np.arctan2(y, x) - np.arctan2(m.a3 * np.sin(t3), m.a2 + m.a3 * np.cos(t3))
-    t234 = np.arctan2(T14[..., 1, 0], T14[..., 0, 0])[..., None]
     t4 = t234 - t2 - t3
     shape = t3.shape
+    # Wrapped before the shared angles are spread over the branches (fewer to wrap).
     q = np.stack(
         [
-            np.broadcast_to(t1[:, :, None, None], shape),
-            t2,
-            t3,
-            t4,
-            np.broadcast_to(t5[..., None], shape),
-            np.broadcast_to(t6[..., None], shape),
+            np.broadcast_to(_wrap(t1)[:, :, None, None], shape),
+            _wrap(t2),
+            _wrap(t3),
+            _wrap(t4),
+            np.broadcast_to(_wrap(t5)[..., None], shape),
+            np.broadcast_to(_wrap(t6)[..., None], shape),
         ],
         axis=-1,
     ).reshape(n, 8, 6)
-    q = _wrap(q)
     q[np.isnan(q).any(axis=2)] = np.nan
     return q
 
