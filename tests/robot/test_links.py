@@ -268,3 +268,35 @@ def test_the_on_table_height_stands_the_arm_on_the_tables_top(name) -> None:
     assert column_clear(arm, at(z), block, 20.0).all()
     assert not column_clear(arm, at(z + 400.0), block, 20.0).any()
     assert not column_clear(arm, at(z - 60.0), block, 20.0).any()
+
+
+def test_a_memo_gives_the_same_report_and_asks_the_cell_only_for_what_is_new(monkeypatch) -> None:
+    arm = get_robot("kr6-r900")
+    # The arm sweeping joints 1 and 2 past a post: some poses hit it, some clear it.
+    q = np.zeros((120, 6))
+    q[:, 0] = np.linspace(-0.8, 0.8, 120)
+    q[:, 1] = np.linspace(-0.3, 0.3, 120)
+    obstacles = obstacles_for(_box_part((60, 60, 600), (700.0, 0.0, 300.0)), Cell())
+    starts = np.zeros(120, bool)
+    starts[60] = True
+    alone = [check_links(arm, q[:n], obstacles, np.eye(4), starts[:n]) for n in (120, 90)]
+    assert alone[0].colliding.any() and not alone[0].colliding.all()
+    asked: list[int] = []
+    real = CellObstacles.capsules_hit
+
+    def counting(self, ends, radii, clearance_mm, exact=True):
+        asked.append(len(ends))
+        return real(self, ends, radii, clearance_mm, exact)
+
+    monkeypatch.setattr(CellObstacles, "capsules_hit", counting)
+    memo: dict = {}
+    first = check_links(arm, q, obstacles, np.eye(4), starts, memo=memo)
+    asked_first, asked[:] = sum(asked), []
+    again = check_links(arm, q[:90], obstacles, np.eye(4), starts[:90], memo=memo)
+    for report, fresh in zip((first, again), alone, strict=True):
+        assert np.array_equal(report.link, fresh.link)
+        assert np.array_equal(report.obstacle, fresh.obstacle)
+        assert report.moves == fresh.moves
+    # The second path is the first's start: only its last checked pose, which stands for
+    # fewer poses now, is new to the cell.
+    assert asked_first > 5 and sum(asked) <= 1

@@ -17,7 +17,7 @@ from scanplan.core.trajectory import Trajectory, lead_tops, pass_bounds
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
-from scanplan.robot.links import LinkClearance, LinkReport, check_links
+from scanplan.robot.links import LinkClearance, LinkMemo, LinkReport, check_links
 from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach
@@ -168,11 +168,12 @@ def fit_to_robot(
     # surface: those whose joint move in swept a link into the cell.
     raised = np.zeros(len(traj), bool)
     low = np.zeros(len(traj), bool)  # passes whose move down from the top flips the arm
+    memo: LinkMemo = {}  # the rounds check much the same passes' links again
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
         entry = entries_of(current, raised[keep])
-        report = _reach(current, arm, T_now, inv_tcp, obstacles, entry)
+        report = _reach(current, arm, T_now, inv_tcp, obstacles, entry, memo)
         index = np.flatnonzero(keep)
         why = np.full(len(index), -1)
         why[report.limit_violations] = CAUSES.index("joint limits")
@@ -182,7 +183,7 @@ def fit_to_robot(
         swings = report.pass_jumps
         if report.reachable and obstacles is not None:
             starts = entry | axis_steps(current, axes)
-            in_cell = check_links(arm, report.joints, obstacles, T_now, starts)
+            in_cell = check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
             moves, lifted = _lifted(current, index, in_cell.moves, raised, low)
             reverse = round_ < REVERSING_ROUNDS
             traj, reversed_now = _reversed(traj, current, index, moves, why, flipped, reverse)
@@ -214,7 +215,7 @@ def fit_to_robot(
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
     entry = entries_of(fitted, raised[keep])
-    report, links = _verdict(fitted, arm, kept(T_all, keep), inv_tcp, obstacles, axes, entry)
+    report, links = _verdict(fitted, arm, kept(T_all, keep), inv_tcp, obstacles, axes, entry, memo)
     return RobotFit(
         fitted,
         T_base_part,
@@ -239,6 +240,7 @@ def _reach(
     inv_tcp: np.ndarray,
     obstacles: CellObstacles | None,
     entry: np.ndarray,
+    memo: LinkMemo | None = None,
 ) -> ReachReport:
     """The reach check of `traj` with the part at `T_now`, each pass entered where `entry`
     says on a configuration whose links keep clear of the cell (`obstacles`), if given."""
@@ -247,7 +249,7 @@ def _reach(
         arm,
         swath=traj.swath,
         scanning=traj.scanning,
-        cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now),
+        cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now, memo),
         entry=entry,
     )
 
@@ -260,15 +262,16 @@ def _verdict(
     obstacles: CellObstacles | None,
     axes: ExternalAxes | None,
     entry: np.ndarray,
+    memo: LinkMemo | None = None,
 ) -> tuple[ReachReport, LinkReport | None]:
     """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
     each pass entered where `entry` says, and in a cell its links along the path and the
     joint moves into passes."""
-    report = _reach(fitted, arm, T_now, inv_tcp, obstacles, entry)
+    report = _reach(fitted, arm, T_now, inv_tcp, obstacles, entry, memo)
     if obstacles is None:
         return report, None
     starts = entry | axis_steps(fitted, axes)
-    return report, check_links(arm, report.joints, obstacles, T_now, starts)
+    return report, check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
 
 
 def _given_up_by_view(

@@ -24,6 +24,9 @@ LINK_STRIDE_MM = 10.0
 _MAX_SPAN = 64  # poses one check may stand for (bounds the look-ahead's cost)
 # A joint move is checked at poses this far apart on its most turning joint.
 JOINT_MOVE_STEP_RAD = np.radians(2.0)
+# What the cell answered for a checked capsule set (its ends in part coordinates, radii,
+# clearance and exactness, as bytes): a fit checks the same passes round after round.
+LinkMemo = dict[bytes, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -98,6 +101,7 @@ def _capsules_hit(
     T_base_part: np.ndarray,
     clearance_mm: float,
     exact: bool = True,
+    memo: LinkMemo | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(link, obstacle) per row of joints (m, 6): the first colliding link, -1 if none.
 
@@ -128,11 +132,33 @@ def _capsules_hit(
         checked.append(i)
         grown.append(radii + moved[:span].max(axis=0))
         i += span
-    hit = obstacles.capsules_hit(ends[checked], np.array(grown), clearance_mm, exact)[covers]
+    hit = _cell_hits(obstacles, ends[checked], np.array(grown), clearance_mm, exact, memo)[covers]
     colliding = hit >= 0
     link = np.where(colliding.any(axis=1), colliding.argmax(axis=1), -1)
     obstacle = np.where(link >= 0, hit[np.arange(len(hit)), np.maximum(link, 0)], -1)
     return link, obstacle
+
+
+def _cell_hits(
+    obstacles: CellObstacles,
+    ends: np.ndarray,
+    radii: np.ndarray,
+    clearance_mm: float,
+    exact: bool,
+    memo: LinkMemo | None,
+) -> np.ndarray:
+    """`obstacles.capsules_hit` of capsules (n, k, 2, 3) of radii (n, k), asking the cell
+    only for those `memo` does not know (each capsule set's answer is its own)."""
+    if memo is None:
+        return obstacles.capsules_hit(ends, radii, clearance_mm, exact)
+    tag = np.array([clearance_mm, float(exact)]).tobytes()
+    rows = np.concatenate([ends.reshape(len(ends), -1), radii], axis=1)
+    keys = [tag + row.tobytes() for row in rows]
+    new = [i for i, key in enumerate(keys) if key not in memo]
+    if new:
+        found = obstacles.capsules_hit(ends[new], radii[new], clearance_mm, exact)
+        memo.update(zip([keys[i] for i in new], found, strict=True))
+    return np.stack([memo[key] for key in keys]) if keys else np.zeros((0, radii.shape[1]), int)
 
 
 def check_links(
@@ -143,13 +169,16 @@ def check_links(
     pass_start: np.ndarray | None = None,
     clearance_mm: float | None = None,
     exact: bool = True,
+    memo: LinkMemo | None = None,
 ) -> LinkReport:
     """The arm's links along `joints` (n, 6) rad (NaN rows: no joints, not checked) with the
     part at `T_base_part`: at every pose, and, where `pass_start` (n,) is True, along the
     joint move from the previous pose's joints into that pose's (the move a program makes
     into each pass), at steps of `JOINT_MOVE_STEP_RAD`. exact=False: without FCL, a few mm
     too cautious (`CellObstacles.capsules_hit`). T_base_part: (4, 4), or (n, 4, 4) one per
-    pose (external axes; a joint move between two is checked with the part at both)."""
+    pose (external axes; a joint move between two is checked with the part at both).
+    memo: the cell's answers so far (`LinkMemo`), for a caller that checks much the same
+    path again; the same report as without it."""
     clearance_mm = obstacles.clearance_mm if clearance_mm is None else clearance_mm
     joints = np.asarray(joints, dtype=np.float64)
     n = len(joints)
@@ -165,6 +194,7 @@ def check_links(
             T_all[known] if per_pose else T_all,
             clearance_mm,
             exact,
+            memo,
         )
     moves: dict[int, tuple[int, int]] = {}
     starts = np.flatnonzero(np.zeros(n, bool) if pass_start is None else pass_start)
@@ -180,7 +210,7 @@ def check_links(
         path = q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
         ends = (T_all[before[-1]], T_all[i]) if per_pose else (T_all,)
         for T in ends[: 1 if len(ends) == 1 or np.array_equal(*ends) else 2]:
-            m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm, exact)
+            m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm, exact, memo)
             if (m_link >= 0).any():
                 first = int(np.argmax(m_link >= 0))
                 moves[int(i)] = (int(m_link[first]), int(m_obstacle[first]))
@@ -192,10 +222,16 @@ def check_links(
 class LinkClearance:
     """The arm's links in the cell as the reach check's choice of each pass's configuration
     asks (`pass_branches.CellView`): the quick check (`exact=False`) with the part at `T_base_part`
-    (4, 4), or (n, 4, 4) one per pose of the path checked."""
+    (4, 4), or (n, 4, 4) one per pose of the path checked; `memo` as `check_links`'."""
 
-    def __init__(self, robot: Robot, obstacles: CellObstacles, T_base_part: np.ndarray) -> None:
-        self.robot, self.obstacles = robot, obstacles
+    def __init__(
+        self,
+        robot: Robot,
+        obstacles: CellObstacles,
+        T_base_part: np.ndarray,
+        memo: LinkMemo | None = None,
+    ) -> None:
+        self.robot, self.obstacles, self.memo = robot, obstacles, memo
         self.T = np.asarray(T_base_part, dtype=np.float64)
 
     def _at(self, i: int, m: int = 1) -> np.ndarray:
@@ -205,7 +241,9 @@ class LinkClearance:
         T = self._at(i, len(path))
         return np.stack(
             [
-                ~check_links(self.robot, path[:, k], self.obstacles, T, exact=False).colliding
+                ~check_links(
+                    self.robot, path[:, k], self.obstacles, T, exact=False, memo=self.memo
+                ).colliding
                 for k in range(path.shape[1])
             ],
             axis=1,
@@ -215,7 +253,13 @@ class LinkClearance:
         ends = (i0 if i0 >= 0 else i1, i1)
         T = self.T if self.T.ndim == 2 else np.stack([self._at(i)[0] for i in ends])
         report = check_links(
-            self.robot, np.stack([q0, q1]), self.obstacles, T, np.array([False, True]), exact=False
+            self.robot,
+            np.stack([q0, q1]),
+            self.obstacles,
+            T,
+            np.array([False, True]),
+            exact=False,
+            memo=self.memo,
         )
         return not report.moves
 
@@ -282,6 +326,7 @@ def column_clear(
 
 __all__ = [
     "LinkClearance",
+    "LinkMemo",
     "LinkReport",
     "check_links",
     "column_clear",
