@@ -19,10 +19,10 @@ from scanplan.robot.place import (
     PER_HEIGHT_YAWS,
     _as_printed,
     _best_judged,
-    _placements,
     _seeds,
     place,
 )
+from scanplan.robot.place_search import placement_poses
 from scanplan.robot.place_weights import pose_weights, view_worths, weighted_sample
 from scanplan.robot.presets import get_robot
 from scanplan.world.cell import Cell
@@ -199,14 +199,16 @@ def test_an_arm_whose_column_stands_in_the_table_is_not_chosen() -> None:
     centre = T_part_flange[:, :2, 3].mean(axis=0)
     # (x, y, z, yaw): the path's centre under the base 300 mm below it; and 650 mm out.
     rows = np.array([[200.0, 0.0, -500.0, 0.0], [650.0, 0.0, -100.0, 0.0]])
-    clear = column_clear(get_robot("ur5e"), _placements(rows, centre), obstacles.table_block, 20.0)
+    clear = column_clear(
+        get_robot("ur5e"), placement_poses(rows, centre), obstacles.table_block, 20.0
+    )
     assert list(clear) == [False, True]
     T, _ = _best_judged(
         traj, get_robot("ur5e"), tcp, T_part_flange, rows, np.array([1.0, 0.5]), centre,
         obstacles,
     )  # fmt: skip
     assert column_clear(get_robot("ur5e"), T[None], obstacles.table_block, 20.0)[0]
-    assert np.allclose(T, _as_printed(_placements(rows[1:], centre)[0]))
+    assert np.allclose(T, _as_printed(placement_poses(rows[1:], centre)[0]))
 
 
 def _two_views(light_passes: int, light_n: int, heavy_n: int, apart_mm: float) -> Trajectory:

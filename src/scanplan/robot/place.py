@@ -5,45 +5,39 @@ lies as designed, turned about the vertical and moved). A placement is feasible 
 pose has an in-limit IK solution and each scanning pass keeps one arm configuration; among
 feasible ones the worst normalized margin (joint limits, wrist, elbow, shoulder) is
 maximized, else the share of the poses reached (weighted: of what they are worth,
-`place_weights`). A coarse grid on a subsample of poses, then a pattern search on more of them,
-then the full `check_reach` on every pose of the best. In a cell (`obstacles`), a placement
-that puts the arm's column into the table block is ranked below every other, the best
-candidate at each height of the grid is among the final ones, and those are ranked on a
-sample by the poses `fit.fit_to_robot` would keep (each pass as planned or turned about
-the beam; the links by `links.check_links`, the sensor body by its clearance).
+`place_weights`). A coarse grid on a subsample of poses, then a pattern search on more of
+them (`place_search`), then the full `check_reach` on every pose of the best. In a cell
+(`obstacles`), a placement that puts the arm's column into the table block is ranked below
+every other, the best candidate at each height of the grid is among the final ones, and
+those are ranked on a sample by the poses `fit.fit_to_robot` would keep (each pass as
+planned or turned about the beam; the links by `links.check_links`, the sensor body by its
+clearance).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from scanplan.core.limits import MAX_PLACEMENTS, check_count
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, most_kept, sensor_clear_both
 from scanplan.robot.links import LinkReport, check_links, column_clear, on_table_z
+from scanplan.robot.place_search import (
+    coarse_grid,
+    pattern_search,
+    placement_poses,
+    placement_scores,
+    run_starts,
+)
 from scanplan.robot.place_weights import checked_weights, sample_poses, weighted_sample
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import (
-    ReachReport,
-    check_reach,
-    fit_limits,
-    limit_margin,
-    pass_starts,
-    reduce_last_axis,
-)
+from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 
-# Margins that count as "clear": 5° from a limit or a wrist/elbow singularity, 20 mm from
-# the shoulder one (the thresholds `check_reach` flags).
-_MARGIN_REF = np.array([np.sin(np.radians(5.0)), np.sin(np.radians(5.0)), 20.0])
-_LIMIT_REF_RAD = np.radians(5.0)
-_CHUNK_POSES = 60_000  # poses per IK call: bounds memory at ~25 MB per chunk
 _LINK_RANK_POSES = 1500  # poses whose links rank the final candidates
 # Weighted, the poses added to the samples for each view they miss: only those, and few,
 # since the coarse grid's cost grows with its sample (the quadrotor's 116 views, every one
@@ -115,135 +109,6 @@ def reach_mm(robot: Robot) -> tuple[float, float]:
     return float(np.hypot(p[:, 0], p[:, 1]).max()), float(np.median(p[:, 2]))
 
 
-def _groups(traj: Trajectory, keep: np.ndarray) -> np.ndarray:
-    """Start indices (into the kept poses) of runs that must share one arm configuration:
-    each scanning pass is one run, each transition pose a run of its own."""
-    s, w = traj.scanning[keep], traj.swath[keep]
-    same = s[1:] & s[:-1] & (w[1:] == w[:-1])
-    return np.flatnonzero(np.r_[True, ~same])
-
-
-def _placements(params: np.ndarray, centre_xy: np.ndarray) -> np.ndarray:
-    """(P, 4, 4) T_base_part for rows (x, y, z, yaw rad); (x, y) is where the path's centre
-    lands."""
-    x, y, z, yaw = params.T
-    c, s = np.cos(yaw), np.sin(yaw)
-    T = np.zeros((len(params), 4, 4))
-    T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
-    T[:, 2, 2] = T[:, 3, 3] = 1.0
-    T[:, 0, 3] = x - (c * centre_xy[0] - s * centre_xy[1])
-    T[:, 1, 3] = y - (s * centre_xy[0] + c * centre_xy[1])
-    T[:, 2, 3] = z
-    return T
-
-
-def _scores(
-    robot: Robot,
-    T_part_flange: np.ndarray,
-    starts: np.ndarray,
-    T_base_part: np.ndarray,
-    obstacles: CellObstacles | None = None,
-    weights: np.ndarray | None = None,
-) -> np.ndarray:
-    """(P,) rank of each placement: the worst normalized margin (>= 0) if every pose is
-    reachable with one configuration per run, else reachable fraction - 2 (in [-2, -1]),
-    the fraction of the poses' `weights` (None: of the poses); 4 less where the arm's
-    column stands in the table block of `obstacles`."""
-    m = len(T_part_flange)
-    limits = robot.joint_limits
-    out = np.empty(len(T_base_part))
-    per = max(1, _CHUNK_POSES // m)
-    for k in range(0, len(T_base_part), per):
-        T = T_base_part[k : k + per, None] @ T_part_flange[None]  # (p, m, 4, 4)
-        p = len(T)
-        q = robot.inverse(T.reshape(-1, 4, 4))  # (p·m, 8, 6)
-        q, inside = fit_limits(q, limits)
-        inside &= ~np.isnan(q).any(axis=-1)
-        margin = np.abs(robot.singularity_terms(q)) / _MARGIN_REF
-        value = np.minimum(
-            reduce_last_axis(margin, np.minimum), limit_margin(q, limits) / _LIMIT_REF_RAD
-        )
-        value = np.where(inside, value, -np.inf).reshape(p, m, 8)
-        per_run = np.minimum.reduceat(value, starts, axis=1).max(axis=2)  # (p, runs)
-        worst = per_run.min(axis=1)
-        reached = inside.reshape(p, m, 8).any(axis=2)
-        fraction = reached.mean(axis=1) if weights is None else reached @ weights / weights.sum()
-        out[k : k + p] = np.where(np.isfinite(worst), worst, fraction - 2.0)
-    if obstacles is None:
-        return out
-    clear = column_clear(robot, T_base_part, obstacles.table_block, obstacles.clearance_mm)
-    return np.where(clear, out, out - 4.0)
-
-
-def _coarse_grid(reach: float, step: float, heights: np.ndarray, yaw_step_deg: float) -> np.ndarray:
-    """(P, 4) rows (x, y, z, yaw rad): `step` apart along the base's +x axis out to `reach`,
-    every yaw step, at each of `heights`. One line, not the disc: the part and its cell turned
-    about the base's vertical axis give the arm the same joints but the first, turned as
-    much, so the disc only repeats the line with that joint's margin changed (the pattern
-    search moves off it); the line on +x keeps it mid-range (first joints turn ±170-180°)."""
-    radii = np.arange(0.0, reach + 1e-9, step)
-    n_yaws = math.ceil(3 * 360.0 / yaw_step_deg - 1e-9)
-    check_count(  # before the grid is allocated
-        len(radii) * len(heights) * n_yaws,
-        MAX_PLACEMENTS,
-        f"candidate placements (yaw step {yaw_step_deg:g} deg)",
-        "give a larger yaw step",
-    )
-    # Yaw three times finer: the disc's positions round the base turned the part against
-    # the arm in between its yaw steps, which the line does not.
-    yaws = np.radians(np.arange(0.0, 360.0 - 1e-9, yaw_step_deg / 3))
-    r, z, a = np.meshgrid(radii, heights, yaws, indexing="ij")
-    return np.stack([r.ravel(), np.zeros(r.size), z.ravel(), a.ravel()], axis=1)
-
-
-def _pattern_search(
-    robot: Robot,
-    T_part_flange: np.ndarray,
-    starts: np.ndarray,
-    centre: np.ndarray,
-    obstacles: CellObstacles | None,
-    best: np.ndarray,
-    best_scores: np.ndarray,
-    delta: np.ndarray,
-    height_range: tuple[float, float],
-    held_height: np.ndarray | None = None,
-    weights: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Improve every candidate row of `best` (scored `best_scores`) at once: each round tries
-    a step of `delta` either way along x, y, z and yaw (z kept in `height_range`, and not
-    moved for the rows `held_height` marks; the poses weighted by `weights`), keeps the best
-    that scores higher, and halves the steps when none does, until they are under 4 mm or 24
-    rounds have run. Returns the candidates, their scores and how many were scored."""
-    lo, hi = height_range
-    evaluated = 0
-    moves = np.concatenate([np.zeros((1, 4)), np.eye(4), -np.eye(4)])
-    held = np.zeros(len(best), bool) if held_height is None else held_height
-    # A candidate that did not improve at these steps would try the same placements again
-    # (the same scores) until the steps change: only the others are scored.
-    stale = np.zeros(len(best), bool)
-    best, best_scores = best.copy(), best_scores.copy()
-    for _ in range(24):
-        rows = np.flatnonzero(~stale)
-        trial = best[rows, None] + moves[None] * delta
-        trial[..., 2] = np.clip(trial[..., 2], lo, hi)
-        trial[held[rows], :, 2] = best[rows[held[rows]], None, 2]
-        flat = trial.reshape(-1, 4)
-        s = _scores(robot, T_part_flange, starts, _placements(flat, centre), obstacles, weights)
-        evaluated += len(flat)
-        s = s.reshape(len(rows), len(moves))
-        pick = s.argmax(axis=1)
-        improved = s[np.arange(len(rows)), pick] > best_scores[rows] + 1e-9
-        best[rows] = np.where(improved[:, None], trial[np.arange(len(rows)), pick], best[rows])
-        best_scores[rows] = np.maximum(best_scores[rows], s.max(axis=1))
-        stale[rows[~improved]] = True
-        if not improved.any():
-            delta = delta / 2
-            stale[:] = False
-            if delta[0] < 4.0:  # a few mm move no pose in or out of reach worth the rounds
-                break
-    return best, best_scores, evaluated
-
-
 # In a cell, the seeds at each height: the best this many yaws at least 60° apart (the drone
 # on a KR 6 kept 0.886 of its scanning poses from the best yaw per height, 0.916 from three).
 PER_HEIGHT_YAWS = 3
@@ -301,7 +166,7 @@ def _best_judged(
     worth = np.ones(len(traj)) if weights is None else weights
     inv_tcp = np.linalg.inv(tcp)
     order = np.argsort(-best_scores)
-    placed = [_as_printed(_placements(best[i : i + 1], centre)[0]) for i in order]
+    placed = [_as_printed(placement_poses(best[i : i + 1], centre)[0]) for i in order]
     if obstacles is None:
         for rank, T_base_part in enumerate(placed):
             report = check_reach(
@@ -397,27 +262,31 @@ def place(
     if obstacles is not None and obstacles.table_block is not None:
         top = on_table_z(arm, obstacles.table_block, obstacles.clearance_mm)
         heights = np.union1d(heights, [top] if top is not None and lo <= top <= hi else [])
-    grid = _coarse_grid(reach, step / 2, heights, yaw_step_deg)
-    placements = _placements(grid, centre)
-    scores = _scores(arm, T_part_flange[coarse], _groups(traj, coarse), placements, obstacles, w)
+    grid = coarse_grid(reach, step / 2, heights, yaw_step_deg)
+    placements = placement_poses(grid, centre)
+    scores = placement_scores(
+        arm, T_part_flange[coarse], run_starts(traj, coarse), placements, obstacles, w
+    )
     # And on evenly spaced poses alone: a pass's first and last poses can outweigh the scanning
     # in the sample above (the drone on a UR5e kept 0.87 of its poses from one, 0.75 from it).
     even = np.linspace(0, len(traj) - 1, min(coarse_poses, len(traj))).round().astype(int)
     even, w = weighted_sample(traj, weights, even, _COARSE_PER_VIEW)
-    even_scores = _scores(arm, T_part_flange[even], _groups(traj, even), placements, obstacles, w)
+    even_scores = placement_scores(
+        arm, T_part_flange[even], run_starts(traj, even), placements, obstacles, w
+    )
     evaluated = 2 * len(grid)
 
     # Fine: pattern search from the best few, on more poses; all candidates move at once.
     fine, w = weighted_sample(traj, weights, sample_poses(traj, fine_poses), _FINE_PER_VIEW)
-    starts = _groups(traj, fine)
+    starts = run_starts(traj, fine)
     # Seeds: the best few, and in a cell the best yaws at each height too, since the margins
     # favour heights from which the links may not clear the table (ranked at the end).
     seeds, held = _seeds(grid, heights, scores, even_scores, keep, obstacles is not None, top)
     best = grid[seeds]
-    placed = _placements(best, centre)
-    best_scores = _scores(arm, T_part_flange[fine], starts, placed, obstacles, w)
+    placed = placement_poses(best, centre)
+    best_scores = placement_scores(arm, T_part_flange[fine], starts, placed, obstacles, w)
     delta = np.array([step / 2, step / 2, max((hi - lo) / 12, 1.0), np.radians(yaw_step_deg) / 2])
-    best, best_scores, searched = _pattern_search(
+    best, best_scores, searched = pattern_search(
         arm,
         T_part_flange[fine],
         starts,
