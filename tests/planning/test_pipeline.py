@@ -432,3 +432,30 @@ def test_a_view_the_arm_left_measuring_nothing_holds_nothing(plate):
     traj = Trajectory(traj.poses, traj.swath, traj.scanning, meta={"views": views})
     held = pipeline_module._held_by_view(plate, traj, PlanContext(ScanSpec()))
     assert list(held) == [0] and held[0].any()
+
+
+def test_a_view_judged_once_is_not_measured_again(housing, housing_views, monkeypatch):
+    # The fit judges each view as planned and as flown: a view the arm left as it was is
+    # the same scan, so its in-spec set is taken from the first judgement.
+    _, traj = housing_views
+    context = PlanContext.from_json_dict(traj.meta["context"], "plan")
+    calls: list[int] = []
+    real = pipeline_module.in_spec_samples
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline_module, "in_spec_samples", counting)
+    judged: dict = {}
+    first = pipeline_module._held_by_view(housing, traj, context, judged)
+    measured = len(calls)
+    assert measured >= 2 and len(first) == measured
+    again = pipeline_module._held_by_view(housing, traj, context, judged)
+    assert len(calls) == measured  # nothing measured twice
+    assert first.keys() == again.keys()
+    assert all(np.array_equal(first[k], again[k]) for k in first)
+    # A view with one pose fewer is another scan: measured, and only it.
+    fewer = traj.subset(np.arange(len(traj)) != int(np.flatnonzero(traj.scanning)[3]))
+    pipeline_module._held_by_view(housing, fewer, context, judged)
+    assert len(calls) == measured + 1

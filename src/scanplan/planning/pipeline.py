@@ -297,7 +297,9 @@ def fit_arm(
         record["external_axes"] = fitted_axes_record(arm.axes, fit.traj)
     # Judged view by view (a sample's in-spec state depends on one pass): the union is the
     # plan's figure, and what a view held that nothing flown holds is what the arm cost.
-    planned, flown = _held_by_view(part, traj, context), _held_by_view(part, fit.traj, context)
+    judged: dict[bytes, np.ndarray | None] = {}  # a view the fit left alone: not measured again
+    planned = _held_by_view(part, traj, context, judged)
+    flown = _held_by_view(part, fit.traj, context, judged)
     sets = [*planned.values(), *flown.values()]
     nothing = np.zeros(len(sets[0]) if sets else 0, bool)
     held = np.logical_or.reduce([nothing, *flown.values()])
@@ -319,20 +321,29 @@ def fit_arm(
     return replace(fit.traj, meta=fit.traj.meta | {"robot": record})
 
 
-def _held_by_view(part: Part, traj: Trajectory, context: PlanContext) -> dict[int, np.ndarray]:
+def _held_by_view(
+    part: Part, traj: Trajectory, context: PlanContext, judged: dict[bytes, np.ndarray | None]
+) -> dict[int, np.ndarray]:
     """Each view's in-spec set on the view choice's samples (`in_spec_samples`); none for a
-    view that measures nothing."""
+    view that measures nothing. `judged`: the sets found so far, by the view's poses and
+    passes (what `in_spec_samples` depends on; None: it measures nothing), added to."""
     out = {}
     for view in view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),):
         mine = view.holds(traj.swath)
         if not (mine & traj.scanning).any():
             continue
-        try:
-            out[view.index] = in_spec_samples(
-                part, context.spec, traj.subset(mine), 0, VIEW_CHOICE_FAN_POINTS, context
-            )
-        except ValueError:  # what the arm left of a view measures nothing: it holds nothing
-            continue
+        sub = traj.subset(mine)
+        passes = np.r_[True, sub.swath[1:] != sub.swath[:-1]]
+        key = sub.poses.tobytes() + sub.scanning.tobytes() + passes.tobytes()
+        if key not in judged:
+            try:
+                judged[key] = in_spec_samples(
+                    part, context.spec, sub, 0, VIEW_CHOICE_FAN_POINTS, context
+                )
+            except ValueError:  # what the arm left of a view measures nothing: it holds nothing
+                judged[key] = None
+        if (held := judged[key]) is not None:
+            out[view.index] = held
     return out
 
 
