@@ -212,6 +212,18 @@ def _across_flange(robot: str, tcp: np.ndarray) -> str | None:
     return across_flange(robot, arm.flange_axis, tcp)
 
 
+def _stance_line(stands: dict) -> str:
+    """Where the arm's base stands, for setting up the cell (`links.where_it_stands`)."""
+    x, y, z = stands["base_in_part_mm"]
+    at = f"its base at ({x:g}, {y:g}, {z:g}) mm in the part's frame"
+    if stands["on_table"]:
+        return f"the arm stands on the table's top, {at}, {stands['above_top_mm']:g} mm above it"
+    height = stands["above_top_mm"]
+    level = f"{abs(height):g} mm {'above' if height >= 0 else 'below'} the top"
+    edge = f"{stands['from_edge_mm']:g} mm off its edge"
+    return f"the arm stands beside the table, {at}, {edge}, {level}"
+
+
 def _arm_notes(plan: Plan) -> Lines:
     assert plan.arm is not None
     arm, record = plan.arm, plan.arm.record
@@ -230,6 +242,8 @@ def _arm_notes(plan: Plan) -> Lines:
             False,
         )
     ]
+    if stands := record.get("stands"):
+        lines.append((_stance_line(stands), False))
     if across := _across_flange(arm.robot, arm.T_flange_sensor):
         lines.append((f"note: {across}", False))
     if brackets := record.get("brackets"):

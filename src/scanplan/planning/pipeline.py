@@ -28,7 +28,7 @@ from scanplan.robot.axes_fit import PlacedArmOnAxes, choose_values, fitted_axes_
 from scanplan.robot.axes_place import arm_on_axes
 from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import CAUSES, RobotFit, beyond_reach_mm, fit_to_robot
-from scanplan.robot.links import obstacles_for
+from scanplan.robot.links import obstacles_for, where_it_stands
 from scanplan.robot.place import place
 from scanplan.robot.place_weights import pose_weights, view_worths
 from scanplan.robot.placed_arm import PlacedArm
@@ -293,6 +293,8 @@ def fit_arm(
         traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles, axes=arm.axes
     )
     record = fit.record(arm.tcp)
+    if arm.axes is None and (stands := where_it_stands(fit.T_base_part, obstacles.table_block)):
+        record["stands"] = stands
     if arm.axes is not None:
         record["external_axes"] = fitted_axes_record(arm.axes, fit.traj)
     # Judged view by view (a sample's in-spec state depends on one pass): the union is the

@@ -324,6 +324,29 @@ def column_clear(
     return beside | np.where(down, hangs_above, on_top)
 
 
+def where_it_stands(
+    T_base_part: np.ndarray, block: tuple[np.ndarray, np.ndarray] | None
+) -> dict | None:
+    """Where an upright arm's base stands for a user setting up the cell: on the table
+    block's top (`column_clear` lets it) or beside it, with its base origin in part
+    coordinates (mm), its height over the top and, beside, its axis's distance from the
+    block's edge. None without a table, or for an arm hung from above."""
+    T = np.asarray(T_base_part, dtype=np.float64)
+    if block is None or hung(T)[0]:
+        return None
+    lo, hi = np.asarray(block[0]), np.asarray(block[1])
+    base = inv_rigid(T)[:3, 3]
+    gap_xy = np.maximum(np.maximum(lo[:2] - base[:2], base[:2] - hi[:2]), 0.0)
+    said = {
+        "on_table": bool(not gap_xy.any()),
+        "base_in_part_mm": (np.round(base, 1) + 0.0).tolist(),  # no "-0"
+        "above_top_mm": round(float(base[2] - hi[2]), 1),
+    }
+    if gap_xy.any():
+        said["from_edge_mm"] = round(float(np.linalg.norm(gap_xy)), 1)
+    return said
+
+
 __all__ = [
     "LinkClearance",
     "LinkMemo",
@@ -334,4 +357,5 @@ __all__ = [
     "obstacles_for",
     "on_table_z",
     "swept_column",
+    "where_it_stands",
 ]
