@@ -300,3 +300,22 @@ def test_a_memo_gives_the_same_report_and_asks_the_cell_only_for_what_is_new(mon
     # The second path is the first's start: only its last checked pose, which stands for
     # fewer poses now, is new to the cell.
     assert asked_first > 5 and sum(asked) <= 1
+
+
+def test_the_distance_field_bounds_the_distance_to_the_nearest_cloud_point() -> None:
+    from scipy.spatial import cKDTree
+
+    from scanplan.world.capsule_collision import _DistanceField
+
+    rng = np.random.default_rng(3)
+    # A curved sheet of points, as a surface cloud is.
+    u, v = rng.uniform(0, 200, (2, 20_000))
+    cloud = np.stack([u, v, 30 * np.sin(u / 40)], axis=1)
+    field = _DistanceField(cloud, cell=4.0)
+    points = rng.uniform(-150, 350, (20_000, 3))
+    lo, hi = field.bounds(points)
+    d, _ = cKDTree(cloud).query(points)
+    assert (lo <= d).all() and (d <= hi).all()
+    inside = np.isfinite(hi)
+    assert inside.mean() > 0.2 and (hi[inside] - lo[inside] < 14.0).all()  # two diagonals
+    assert (lo[~inside] == 0).all()  # outside its grid it knows nothing

@@ -222,7 +222,7 @@ def check_links(
 class LinkClearance:
     """The arm's links in the cell as the reach check's choice of each pass's configuration
     asks (`pass_branches.CellView`): the quick check (`exact=False`) with the part at `T_base_part`
-    (4, 4), or (n, 4, 4) one per pose of the path checked; `memo` as `check_links`'."""
+    (4, 4), or (n, 4, 4) one per pose of the path checked; `memo`: as `check_links`'s."""
 
     def __init__(
         self,

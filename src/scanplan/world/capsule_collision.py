@@ -5,6 +5,8 @@ the capsules far from it, FCL tests the rest.
 
 from __future__ import annotations
 
+import math
+
 import fcl
 import numpy as np
 
@@ -80,8 +82,21 @@ class _SurfaceProxy:
         self.pitch = max(extent / 128.0, 2.0)
         self.bound_mm = self.pitch / 2
         cloud = _surface_points(part.mesh, self.bound_mm / 2)
-        self._tree = cKDTree(cloud)
+        # Leaves of 128 points: a surface cloud this dense is searched in a fraction of the
+        # nodes (the quadrotor's placement asked 58 000 points near the hull in 1.2 s, not
+        # 3.3 s with scipy's 16); the verdicts depend on the distances alone.
+        self._tree = cKDTree(cloud, leafsize=128)
         self._lo, self._hi = cloud.min(axis=0), cloud.max(axis=0)
+        self._cloud: np.ndarray | None = cloud
+        self._field: _DistanceField | None = None  # built when first asked
+
+    def _bounds(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (lo, hi) on the distance from each point to the cloud (`_DistanceField`;
+        0 and inf outside its grid)."""
+        if self._field is None:
+            assert self._cloud is not None
+            self._field, self._cloud = _DistanceField(self._cloud, self.pitch), None
+        return self._field.bounds(points)
 
     def within(self, segments: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((m,) maybe, (m,) surely): capsules (m, 2, 3) of radii (m,) that may touch the
@@ -120,15 +135,51 @@ class _SurfaceProxy:
         # The exact nearest of the unsure capsules' points that may be near: each
         # capsule left to FCL costs more than this query (the exact query of every
         # point cost the drone's fit on a KR 6 more than FCL saved).
-        unsure = (maybe & ~surely)[owner] & (d <= (1 + eps) * reach[owner])
-        exact, _ = self._tree.query(
-            points[unsure], distance_upper_bound=float(reach.max()), workers=-1
+        unsure = np.flatnonzero((maybe & ~surely)[owner] & (d <= (1 + eps) * reach[owner]))
+        # Most of them are decided by the distance field's bounds (the exact nearest points
+        # of 58 000 of them near the quadrotor's hull took 1.1 s); the tree is asked only
+        # where a bound straddles the capsule's radius or reach.
+        lo, hi = self._bounds(points[unsure])
+        r, rad = reach[owner[unsure]], radii[owner[unsure]]
+        exact = np.where(hi <= rad, 0.0, np.where(lo > r, np.inf, np.nan))
+        ask = np.isnan(exact) | ((hi > r) & (lo <= r)) | ((hi > rad) & (lo <= rad))
+        exact[ask], _ = self._tree.query(
+            points[unsure[ask]], distance_upper_bound=float(reach.max()), workers=-1
         )
         near = np.zeros(len(segments), bool)
-        np.logical_or.at(near, owner[unsure], exact <= reach[owner[unsure]])
-        np.logical_or.at(surely, owner[unsure], exact <= radii[owner[unsure]])
+        np.logical_or.at(near, owner[unsure], exact <= r)
+        np.logical_or.at(surely, owner[unsure], exact <= rad)
         maybe = surely | near
         return maybe, surely
+
+
+class _DistanceField:
+    """Bounds on the distance from a point to the nearest point of a cloud, from the
+    distance transform (`scipy.ndimage`) of the voxels (`cell` mm) the cloud occupies: the
+    distance d between the point's voxel's centre and the nearest occupied voxel's centre
+    is within a voxel's diagonal of it (each of the two points lies within half of one of
+    its voxel's centre). The grid reaches a margin beyond the cloud; outside it nothing is
+    known."""
+
+    def __init__(self, cloud: np.ndarray, cell: float) -> None:
+        from scipy.ndimage import distance_transform_edt
+
+        margin = min(32, math.ceil(100.0 / cell))  # voxels: 100 mm, at most 32 of them
+        self.cell, self.origin = cell, cloud.min(axis=0) - margin * cell
+        self.shape = np.floor((cloud.max(axis=0) - self.origin) / cell).astype(int) + margin + 1
+        occupied = np.zeros(self.shape, bool)
+        occupied[tuple(self._voxels(cloud).T)] = True
+        self.distance = distance_transform_edt(~occupied, sampling=cell)
+        self.slack = cell * math.sqrt(3.0) * (1 + 1e-9)
+
+    def _voxels(self, points: np.ndarray) -> np.ndarray:
+        return np.floor((points - self.origin) / self.cell).astype(int)
+
+    def bounds(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        voxel = self._voxels(points)
+        inside = ((voxel >= 0) & (voxel < self.shape)).all(axis=1)
+        d = self.distance[tuple(np.clip(voxel, 0, self.shape - 1).T)]
+        return np.where(inside, d - self.slack, 0.0), np.where(inside, d + self.slack, np.inf)
 
 
 def segment_box_distance(segments: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
