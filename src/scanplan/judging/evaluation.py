@@ -9,7 +9,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import Any, Protocol
 
@@ -163,23 +163,18 @@ def _judge(
     beside_coverage: Callable[[int, Scan, np.ndarray], None],
     aside: Sequence[Callable[[], Any]],
 ) -> list[Any]:
-    """Judge the scan's `chunks` on three threads, on the cores: the scan measured a chunk
-    ahead (`measure_in_chunks`), the `coverage` here, and beside it the other accumulators
-    (`beside_coverage`) on the chunk the coverage has just judged, each in chunk order (the
-    coverage builds the tree the survey shares). The jobs `aside`, which do not need the
-    scan (the collisions, the ceiling), run first beside the coverage: that thread is idle
-    while the first chunk is measured. Returns their results."""
+    """Judge the scan's `chunks` here, the `coverage` then the other accumulators
+    (`beside_coverage`; the coverage builds the tree the survey shares), while the next
+    chunk is measured (`measure_in_chunks`): two threads on two cores. Judging a chunk on
+    two threads of its own left the measuring a core's share of three. The jobs `aside`,
+    which do not need the scan (the collisions, the ceiling), run on a third thread from
+    the start: it has a core while the first chunk is measured. Returns their results."""
     with ThreadPoolExecutor(max_workers=1) as beside:
         aside_jobs = [beside.submit(job) for job in aside]
-        judged: Future[None] | None = None
         for lo, scan in chunks:
             ori = point_orientation_error(scan.normals_part, scan.poses)
             coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
-            if judged is not None:
-                judged.result()  # at most one chunk waits: memory stays bounded
-            judged = beside.submit(beside_coverage, lo, scan, ori)
-        if judged is not None:
-            judged.result()
+            beside_coverage(lo, scan, ori)
         return [job.result() for job in aside_jobs]
 
 
