@@ -223,3 +223,27 @@ def test_the_survey_asks_the_noise_and_pitch_of_the_points_a_sample_uses(plate):
     np.testing.assert_array_equal(pitch[asked], step[row, col][asked])
     others = np.setdiff1d(np.arange(len(row)), asked)
     assert np.isnan(noise[others]).all() and np.isnan(pitch[others]).all()
+
+
+def test_the_disc_crossing_and_found_share_are_numpys_own_to_the_bit():
+    # Sorted lookups and counts by words: the same numbers as np.interp in the given order
+    # and a row mean, ties and zeros included.
+    from scanplan.judging import detectability as dt
+
+    rng = np.random.default_rng(3)
+    gap = rng.uniform(0.05, 3.0, 5000)
+    col = np.r_[rng.uniform(0.05, 3.0, 4998), 0.0, 1.0]
+    gap[-1] = gap[-2]  # a tie
+    rho, sums = dt._profile_sums()
+    need = 6 * col / (2.0 * gap)
+    plain = np.empty((len(gap), dt.OFFSETS))
+    for i in range(dt.OFFSETS):
+        s = sums[:, i]
+        first = int(np.searchsorted(s, 0.0, side="right")) - 1
+        plain[:, i] = np.interp(need, s[first:], rho[first:], right=np.inf)
+    plain = np.where(need[:, None] <= 0.0, 0.0, plain)
+    crossing = dt._disc_crossing(gap, col, 6)
+    assert np.array_equal(crossing, plain)
+    ratio = rng.uniform(0.0, 5.0, len(gap))
+    found = ratio[:, None] >= crossing
+    assert np.array_equal(dt._share_of_offsets(found), found.mean(axis=1))

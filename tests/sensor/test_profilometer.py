@@ -14,6 +14,7 @@ from scanplan.core import quantities
 from scanplan.core.noise import NoiseModel
 from scanplan.core.sensor_spec import SensorSpec
 from scanplan.planning.swaths import Swath
+from scanplan.sensor import profilometer
 from scanplan.sensor.profilometer import LineProfilometer, PointStatus
 from scanplan.world.part import part_from_mesh
 
@@ -222,3 +223,22 @@ def test_same_seed_same_profile_and_batch_equals_single():
     x = LineProfilometer(part, SPEC, seed=9).measure_many(many)
     y = LineProfilometer(part, SPEC, seed=9, threads=1).measure_many(many)
     assert np.array_equal(x.z_sensor, y.z_sensor, equal_nan=True)
+
+
+@pytest.mark.parametrize("ahead_rays", [0, profilometer.AHEAD_RAYS])  # one ahead, two
+def test_chunks_measured_ahead_are_the_scan_measured_in_turn(ahead_rays, monkeypatch):
+    monkeypatch.setattr(profilometer, "AHEAD_RAYS", ahead_rays)
+    part = part_from_mesh(plate(tilt_deg=12.0))
+    spec = SPEC.with_points(64)
+    poses = SWATH.poses(np.linspace(0, 40, 50), np.zeros(50), np.zeros(50))
+    turn = LineProfilometer(part, spec, seed=4)
+    expected = [turn.measure_many(poses[lo : lo + 8]) for lo in range(0, 50, 8)]
+    chunks = list(LineProfilometer(part, spec, seed=4).measure_in_chunks(poses, 8))
+    assert [lo for lo, _ in chunks] == list(range(0, 50, 8))
+    for (_, got), want in zip(chunks, expected, strict=True):
+        assert np.array_equal(got.z_sensor, want.z_sensor, equal_nan=True)
+    # A caller that stops after the first chunk is not kept waiting for the rest.
+    stream = LineProfilometer(part, spec, seed=4).measure_in_chunks(poses, 8)
+    first = next(stream)[1]
+    stream.close()
+    assert np.array_equal(first.z_sensor, expected[0].z_sensor, equal_nan=True)

@@ -1,7 +1,7 @@
 """What the judges of a scan's chunk derive from it once and share, kept with the scan
 (`Scan.memo`): its valid points (flat indices, rows and columns, coordinates), their k-d
-tree and the surface samples near them. `evaluate` has the coverage ask first, on its
-thread, before the survey and the cloud sample ask on theirs.
+tree and the surface samples near them. `evaluate` has the coverage ask first, then the
+survey and the cloud sample, on one thread.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def valid_cells(scan: Scan, stride: int) -> tuple[np.ndarray, np.ndarray]:
 
 def valid_points_tree(scan: Scan, stride: int) -> cKDTree:
     """A k-d tree of `valid_points(scan, stride)`, built once per chunk (the first to ask
-    builds it; `evaluate` has its coverage ask before the survey, on another thread, does).
+    builds it; `evaluate` has its coverage ask before the survey does).
     Unbalanced: built per chunk and queried a few times, it builds in half the time; leaves
     of 32 points (not 16) build a fifth faster and answer as fast (the door, 256 columns)."""
     key = ("valid points tree", stride)

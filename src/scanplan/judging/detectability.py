@@ -32,7 +32,7 @@ ANGLES = 8  # a scratch's directions to the scan averaged over
 DENSITY_RADIUS_MM = 2.0
 NEAREST_POINTS = 8  # a sample's noise, pitch and passes: from its nearest points in a chunk
 COLUMN_STRIDE = 4  # the density is counted on every 4th column (x 4)
-OFFSETS = 16  # profile offsets averaged over, per sample
+OFFSETS = 16  # profile offsets averaged over, per sample (a multiple of 8: counted by words)
 MAX_PREDICTED_SAMPLES = 20_000
 WIDE_PROFILES = 4.0  # beyond this many profile spacings of radius, count by area
 
@@ -225,11 +225,15 @@ def _disc_crossing(gap: np.ndarray, col: np.ndarray, min_points: int) -> np.ndar
     (inf: not below `WIDE_PROFILES`): the inverse of `_profile_sums`, interpolated."""
     rho, sums = _profile_sums()
     need = min_points * col / (2.0 * gap)  # S(ρ) >= need: the chords hold enough points
+    # Looked up in rising order: np.interp starts each search where the last one ended, so
+    # sorted values cost a tenth (each value's answer is its own, in any order).
+    order = np.argsort(need)
+    rising = need[order]
     out = np.empty((len(gap), OFFSETS))
     for i in range(OFFSETS):
         s = sums[:, i]
         first = int(np.searchsorted(s, 0.0, side="right")) - 1  # S strictly rises from here
-        out[:, i] = np.interp(need, s[first:], rho[first:], right=np.inf)
+        out[order, i] = np.interp(rising, s[first:], rho[first:], right=np.inf)
     return np.where(need[:, None] <= 0.0, 0.0, out)
 
 
@@ -242,9 +246,20 @@ def _found_share(
     ratio = rk / gap
     # Far more than a few profiles across the disc: the count is its area's.
     wide = ratio > WIDE_PROFILES
-    found = (ratio[:, None] >= crossing).mean(axis=1)
+    found = _share_of_offsets(ratio[:, None] >= crossing)
     area_count = np.pi * rk**2 / (gap * col)
     return np.where(wide, (area_count >= min_points).astype(float), found)
+
+
+def _share_of_offsets(found: np.ndarray) -> np.ndarray:
+    """(k,) the share of True in each row of (k, `OFFSETS`) bool, as `found.mean(axis=1)`
+    to the last bit (whole counts over 16): counted 8 bytes at a time, at a third of the
+    cost of numpy's reduction along rows of 16."""
+    words = np.bitwise_count(np.ascontiguousarray(found).view(np.uint64))  # bools are 0 or 1
+    count = words[:, 0].astype(np.int64)
+    for column in words.T[1:]:  # OFFSETS / 8 columns: a reduction along rows of 2 is slow
+        count += column
+    return count / OFFSETS
 
 
 def _found_share_groove(

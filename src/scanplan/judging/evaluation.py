@@ -9,7 +9,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import Any, Protocol
 
@@ -161,26 +161,21 @@ def _judge(
     coverage: Coverage,
     has_prev: np.ndarray,
     beside_coverage: Callable[[int, Scan, np.ndarray], None],
-    the_ceiling: Callable[[], float | None],
-    ceiling: bool,
-) -> float | None:
-    """Judge the scan's `chunks` on three threads, on the cores: the scan measured a chunk
-    ahead (`measure_in_chunks`), the `coverage` here, and beside it the `ceiling` and the
-    other accumulators (`beside_coverage`) on the chunk the coverage has just judged, each
-    in chunk order (the coverage builds the tree the survey shares). Returns the ceiling
-    (`the_ceiling`, None unless `ceiling`)."""
+    aside: Sequence[Callable[[], Any]],
+) -> list[Any]:
+    """Judge the scan's `chunks` here, the `coverage` then the other accumulators
+    (`beside_coverage`; the coverage builds the tree the survey shares), while the next
+    chunk is measured (`measure_in_chunks`): two threads on two cores. Judging a chunk on
+    two threads of its own left the measuring a core's share of three. The jobs `aside`,
+    which do not need the scan (the collisions, the ceiling), run on a third thread from
+    the start: it has a core while the first chunk is measured. Returns their results."""
     with ThreadPoolExecutor(max_workers=1) as beside:
-        ceiling_job = beside.submit(the_ceiling) if ceiling else None
-        judged: Future[None] | None = None
+        aside_jobs = [beside.submit(job) for job in aside]
         for lo, scan in chunks:
             ori = point_orientation_error(scan.normals_part, scan.poses)
             coverage.add(scan, ori, has_prev[lo : lo + len(scan)])
-            if judged is not None:
-                judged.result()  # at most one chunk waits: memory stays bounded
-            judged = beside.submit(beside_coverage, lo, scan, ori)
-        if judged is not None:
-            judged.result()
-        return ceiling_job.result() if ceiling_job is not None else None
+            beside_coverage(lo, scan, ori)
+        return [job.result() for job in aside_jobs]
 
 
 def _out_of_reach(part: Part) -> ValueError:
@@ -317,12 +312,16 @@ def evaluate(
     chunks = LineProfilometer(in_cell, spec, seed=seed).measure_in_chunks(
         poses, chunk_poses, progress
     )
-    the_ceiling = partial(_visibility_ceiling, in_cell, surface, scan_spec, seed)
-    ceiling_found = _judge(chunks, coverage, has_prev, beside_coverage, the_ceiling, ceiling)
+    aside: list[Callable[[], Any]] = [
+        partial(_collision_summary, part, sensor, cell, traj, scan_spec),
+        partial(_path_summary, traj, scan_spec, limits, targets, blended),
+    ]
+    if ceiling:
+        aside.append(partial(_visibility_ceiling, in_cell, surface, scan_spec, seed))
+    collided, path, *ceiling_found = _judge(chunks, coverage, has_prev, beside_coverage, aside)
     if errors.n_valid == 0:
         raise _out_of_reach(in_cell)
     coverage_fraction, in_spec_fraction, coverage_map = coverage.finish()
-    collided = _collision_summary(part, sensor, cell, traj, scan_spec)
     return Metrics(
         part=part.name,
         planner=traj.planner,
@@ -334,7 +333,7 @@ def evaluate(
         surface=context.surface,
         visible_area_mm2=surface.area_mm2,
         in_spec_coverage=in_spec_fraction,
-        visibility_ceiling=ceiling_found,
+        visibility_ceiling=ceiling_found[0] if ceiling_found else None,
         in_spec_radius_mm=coverage.in_spec_radius,
         in_spec_cell_mm=2.0 * scan_spec.delta_s_opt_mm,
         tolerance_mm=scan_spec.tolerance_mm,
@@ -345,5 +344,5 @@ def evaluate(
         **collided,
         **errors.summary(),
         **spacing.summary(wd, scan_spec),
-        **_path_summary(traj, scan_spec, limits, targets, blended),
+        **path,
     )

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -114,6 +115,11 @@ class Profile:
         return self.status == PointStatus.VALID
 
 
+# At most this many rays of chunks measured ahead of the one `measure_in_chunks` hands out
+# (about 90 bytes a ray): two chunks of 256 poses of up to 1024 columns.
+AHEAD_RAYS = 2 * 256 * 1024
+
+
 class LineProfilometer:
     """A SensorSpec looking at a Part.
 
@@ -206,21 +212,30 @@ class LineProfilometer:
             f"rays to cast ({m:,} poses x {self.spec.points_per_profile:,} points per profile)",
             "give fewer poses or --points",
         )
-        starts = range(0, m, chunk_poses)
-        # The next chunk is measured while the caller works on this one (Embree and numpy
-        # release the GIL): judging a chunk costs about what measuring it does. One worker
-        # draws the chunks' noise in order, so the scan is the same as measured in turn.
+        starts = list(range(0, m, chunk_poses))
+        # The next chunks are measured while the caller works on this one (Embree and numpy
+        # release the GIL): judging a chunk costs about what measuring it does, more for
+        # some chunks, less for others, so two are measured ahead where they are small (a
+        # chunk that judges slowly then no longer holds up the measuring). One worker draws
+        # the chunks' noise in order, so the scan is the same as measured in turn.
+        depth = 2 if 2 * chunk_poses * self.spec.points_per_profile <= AHEAD_RAYS else 1
         with ThreadPoolExecutor(max_workers=1) as ahead:
-            job = ahead.submit(self._chunk_of, poses, 0, chunk_poses) if m else None
-            for lo in starts:
-                hi = min(m, lo + chunk_poses)
-                assert job is not None
-                scan = job.result()
-                if hi < m:
-                    job = ahead.submit(self._chunk_of, poses, hi, chunk_poses)
-                yield lo, scan
-                if progress is not None:
-                    progress(hi, m)
+            jobs = deque(
+                ahead.submit(self._chunk_of, poses, lo, chunk_poses) for lo in starts[:depth]
+            )
+            try:
+                for k, lo in enumerate(starts):
+                    hi = min(m, lo + chunk_poses)
+                    scan = jobs.popleft().result()
+                    if k + depth < len(starts):
+                        nxt = starts[k + depth]
+                        jobs.append(ahead.submit(self._chunk_of, poses, nxt, chunk_poses))
+                    yield lo, scan
+                    if progress is not None:
+                        progress(hi, m)
+            finally:  # a caller that stops early does not wait for chunks it will not take
+                for job in jobs:
+                    job.cancel()
 
     def _chunk_of(self, poses: np.ndarray, lo: int, chunk_poses: int) -> Scan:
         """The scan of poses lo, lo+1, ... (`chunk_poses` of them at most), on the region of
