@@ -22,6 +22,7 @@ ON_TABLE_MM = 50.0
 # grown by how far theirs moved).
 LINK_STRIDE_MM = 10.0
 _MAX_SPAN = 64  # poses one check may stand for (bounds the look-ahead's cost)
+_FIRST_LOOK = 8
 # A joint move is checked at poses this far apart on its most turning joint.
 JOINT_MOVE_STEP_RAD = np.radians(2.0)
 # What the cell answered for a checked capsule set (its ends in part coordinates, radii,
@@ -124,9 +125,13 @@ def _capsules_hit(
     covers = np.zeros(m, dtype=np.int64)
     i = 0
     while i < m:
-        window = ends[i : i + _MAX_SPAN]
-        moved = np.linalg.norm(window - ends[i], axis=-1).max(axis=2)  # (span, k)
-        far = moved.max(axis=1) > LINK_STRIDE_MM
+        # A check mostly stands for a few poses: the first few looked at before all of them.
+        for look in (_FIRST_LOOK, _MAX_SPAN):
+            window = ends[i : i + look]
+            moved = np.linalg.norm(window - ends[i], axis=-1).max(axis=2)  # (span, k)
+            far = moved.max(axis=1) > LINK_STRIDE_MM
+            if far.any() or len(window) < look:
+                break
         span = max(int(np.argmax(far)) if far.any() else len(window), 1)
         covers[i : i + span] = len(checked)
         checked.append(i)
