@@ -430,7 +430,7 @@ def test_a_view_the_arm_left_measuring_nothing_holds_nothing(plate):
         for k in range(2)
     ]
     traj = Trajectory(traj.poses, traj.swath, traj.scanning, meta={"views": views})
-    held = pipeline_module._held_by_view(plate, traj, PlanContext(ScanSpec()))
+    held = pipeline_module._held_by_view(plate, traj, PlanContext(ScanSpec()), {})
     assert list(held) == [0] and held[0].any()
 
 
