@@ -44,7 +44,12 @@ def test_where_the_arm_stands_is_said_for_setting_up_the_cell() -> None:
     # The part 250 mm out along the base's x, the base frame 1 mm over the table's top.
     on_top = pose_from_xyzabc([250, 0, -1, 0, 0, 0])
     stands = where_it_stands(on_top, block)
-    assert stands == {"on_table": True, "base_in_part_mm": [-250.0, 0.0, 1.0], "above_top_mm": 1.0}
+    assert stands == {
+        "on_table": True,
+        "level_with_top": True,
+        "base_in_part_mm": [-250.0, 0.0, 1.0],
+        "above_top_mm": 1.0,
+    }
     # 700 mm out and 400 mm lower: beside the table, 400 mm below its top.
     beside = where_it_stands(pose_from_xyzabc([700, 0, 400, 0, 0, 0]), block)
     assert beside is not None and not beside["on_table"]
@@ -60,5 +65,13 @@ def test_where_the_arm_stands_is_said_for_setting_up_the_cell() -> None:
     assert (
         "the arm stands beside the table, its base at (-700, 0, -400) mm in the part's frame, "
         "400 mm off its edge, 400 mm below the top"
+    ) in _notes(arm)
+    # Beyond the table's edge at its top's height: on a stand level with it.
+    edge = where_it_stands(pose_from_xyzabc([350, 0, -1, 0, 0, 0]), block)
+    assert edge is not None and edge["level_with_top"] and not edge["on_table"]
+    arm = replace(arm, record=record | {"stands": edge})
+    assert (
+        "the arm stands level with the table's top beside it, its base at (-350, 0, 1) mm in "
+        "the part's frame, 50 mm off its edge, 1 mm above the top"
     ) in _notes(arm)
     assert not [line for line in _notes(replace(arm, record=record)) if "stands" in line]

@@ -221,6 +221,8 @@ def _stance_line(stands: dict) -> str:
     height = stands["above_top_mm"]
     level = f"{abs(height):g} mm {'above' if height >= 0 else 'below'} the top"
     edge = f"{stands['from_edge_mm']:g} mm off its edge"
+    if stands.get("level_with_top"):
+        return f"the arm stands level with the table's top beside it, {at}, {edge}, {level}"
     return f"the arm stands beside the table, {at}, {edge}, {level}"
 
 

@@ -334,18 +334,22 @@ def where_it_stands(
 ) -> dict | None:
     """Where an upright arm's base stands for a user setting up the cell: on the table
     block's top (`column_clear` lets it) or beside it, with its base origin in part
-    coordinates (mm), its height over the top and, beside, its axis's distance from the
-    block's edge. None without a table, or for an arm hung from above."""
+    coordinates (mm), its height over the top (and whether that is the top's, within
+    `ON_TABLE_MM`) and, beside, its axis's distance from the block's edge. None without a
+    table, or for an arm hung from above."""
     T = np.asarray(T_base_part, dtype=np.float64)
     if block is None or hung(T)[0]:
         return None
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
     base = inv_rigid(T)[:3, 3]
     gap_xy = np.maximum(np.maximum(lo[:2] - base[:2], base[:2] - hi[:2]), 0.0)
+    above = float(base[2] - hi[2])
     said = {
         "on_table": bool(not gap_xy.any()),
+        # Beside its footprint but at its top's height: on a stand level with the table.
+        "level_with_top": bool(0.0 <= above <= ON_TABLE_MM),
         "base_in_part_mm": (np.round(base, 1) + 0.0).tolist(),  # no "-0"
-        "above_top_mm": round(float(base[2] - hi[2]), 1),
+        "above_top_mm": round(above, 1),
     }
     if gap_xy.any():
         said["from_edge_mm"] = round(float(np.linalg.norm(gap_xy)), 1)
