@@ -229,6 +229,14 @@ def test_the_arm_judging_a_view_keeps_only_what_it_flies(plate):
     copy = pickle.loads(pickle.dumps(arm))
     assert copy._obstacles is None
     np.testing.assert_array_equal(copy.flown(plate, traj).poses, flown.poses)
+    # Given the cell's obstacles the caller built (as the plan's pipeline does), it judges
+    # with them, the same; for another part it builds its own.
+    given = PlacedArm("ur3e", TCP, T_base_part, PlanContext(ScanSpec()))
+    given.among(plate, arm.obstacles(plate))
+    assert given.obstacles(plate) is arm.obstacles(plate)
+    np.testing.assert_array_equal(given.flown(plate, traj).poses, flown.poses)
+    other = replace(plate, name="other")
+    assert given.obstacles(other) is not arm.obstacles(plate)
 
 
 def test_a_pass_is_entered_on_the_branch_that_flies_it_whole():

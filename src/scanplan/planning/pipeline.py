@@ -132,6 +132,8 @@ def plan_views(
             free, free_views, weights = _free_plan(part, first, spec, cell)
             arm, brackets = _placed(part, free, arm, context, obstacles, weights)
             placed = _placed_arm(arm, context)
+            if arm.axes is None and obstacles is not None:  # (with axes: their disk too)
+                placed = placed.among(part, obstacles)  # the top view is judged here
         selection = choose(arm=placed, known=known)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)

@@ -37,6 +37,12 @@ class PlacedArm:
     def __getstate__(self) -> dict:
         return self.__dict__ | {"_obstacles": None}
 
+    def among(self, part: Part, obstacles: CellObstacles) -> PlacedArm:
+        """This arm judging `part` among `obstacles` (`obstacles_for` its context's cell,
+        built by the caller already): not built again in this process."""
+        self._obstacles = (id(part), obstacles)
+        return self
+
     def obstacles(self, part: Part) -> CellObstacles:
         if self._obstacles is None or self._obstacles[0] != id(part):
             spec = self.context.spec
