@@ -131,9 +131,7 @@ def plan_views(
             known = first.known
             free, free_views, weights = _free_plan(part, first, spec, cell)
             arm, brackets = _placed(part, free, arm, context, obstacles, weights)
-            placed = _placed_arm(arm, context)
-            if arm.axes is None and obstacles is not None:  # (with axes: their disk too)
-                placed = placed.among(part, obstacles)  # the top view is judged here
+            placed = _placed_arm(arm, context, part, obstacles)
         selection = choose(arm=placed, known=known)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
@@ -186,12 +184,16 @@ class Arm:
     brackets: tuple[np.ndarray, ...] = ()
 
 
-def _placed_arm(arm: Arm, context: PlanContext) -> PlacedArm:
-    """The placed `arm` as the view choice flies a candidate with it."""
+def _placed_arm(
+    arm: Arm, context: PlanContext, part: Part, obstacles: CellObstacles | None
+) -> PlacedArm:
+    """The placed `arm` as the view choice flies a candidate with it; without axes, judging
+    `part` among the `obstacles` built already, if given (with axes: their disk too)."""
     assert arm.T_base_part is not None
     if arm.axes is not None:
         return PlacedArmOnAxes(arm.robot, arm.tcp, arm.T_base_part, context, arm.axes)
-    return PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
+    placed = PlacedArm(arm.robot, arm.tcp, arm.T_base_part, context)
+    return placed if obstacles is None else placed.among(part, obstacles)
 
 
 def _free_plan(
@@ -238,7 +240,7 @@ def _placed(
             candidate = replace(arm, tcp=tcp, T_base_part=T_base_part)
         if len(arm.brackets) < 2:
             return candidate, []
-        flown = _placed_arm(candidate, context).flown(part, free)
+        flown = _placed_arm(candidate, context, part, obstacles).flown(part, free)
         try:
             held = in_spec_samples(part, context.spec, flown, 0, VIEW_CHOICE_FAN_POINTS, context)
             share = float(held.mean()) if len(held) else 0.0
