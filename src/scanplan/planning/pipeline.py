@@ -242,8 +242,7 @@ def _placed(
             return candidate, []
         flown = _placed_arm(candidate, context, part, obstacles).flown(part, free)
         try:
-            held = in_spec_samples(part, context.spec, flown, 0, VIEW_CHOICE_FAN_POINTS, context)
-            share = float(held.mean()) if len(held) else 0.0
+            share = _held_share(part, flown, context)
         except ValueError:  # the arm flies nothing that measures
             share = 0.0
         tried.append((share, candidate))
@@ -322,9 +321,14 @@ def fit_arm(
         record["free_views_not_flown"] = views
         record["in_spec_not_flown"] = share
     if free is not None:
-        held = in_spec_samples(part, context.spec, free, 0, VIEW_CHOICE_FAN_POINTS, context)
-        record["in_spec_free_plan"] = float(held.mean()) if len(held) else 0.0
+        record["in_spec_free_plan"] = _held_share(part, free, context)
     return replace(fit.traj, meta=fit.traj.meta | {"robot": record})
+
+
+def _held_share(part: Part, traj: Trajectory, context: PlanContext) -> float:
+    """The share of the view choice's samples `traj` holds in spec (`in_spec_samples`)."""
+    held = in_spec_samples(part, context.spec, traj, 0, VIEW_CHOICE_FAN_POINTS, context)
+    return float(held.mean()) if len(held) else 0.0
 
 
 def _held_by_view(
