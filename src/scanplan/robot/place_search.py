@@ -24,7 +24,7 @@ from scanplan.world.capsule_collision import CellObstacles
 # the shoulder one (the thresholds `check_reach` flags).
 _MARGIN_REF = np.array([np.sin(np.radians(5.0)), np.sin(np.radians(5.0)), 20.0])
 _LIMIT_REF_RAD = np.radians(5.0)
-_CHUNK_POSES = 60_000  # poses per IK call: bounds memory at ~25 MB per chunk
+_CHUNK_POSES = 60_000  # poses per IK call: ~25 MB per chunk, a chunk per core at once
 
 
 def run_starts(traj: Trajectory, keep: np.ndarray) -> np.ndarray:
