@@ -261,9 +261,9 @@ def evaluate(
 ) -> Metrics:
     """Simulate the scan of `traj` and summarize it (SPEC §7).
 
-    points_per_profile: sub-sample the fan for a faster evaluation (same line width); the
-    in-spec density rule still judges the real sensor's columns.
-    progress(done, total): called after each chunk of scanning poses (a caller's progress bar).
+    points_per_profile: sub-sample the fan for a faster evaluation (same line width); the in-spec
+    density rule still judges the real sensor's columns. progress(done, total): called after
+    each chunk of scanning poses (a caller's progress bar).
     context: what the plan is judged as (its surface to inspect, region of interest and
     reward); None: as recorded in the trajectory (`context.recorded`). Every statistic is
     over the part's surface to inspect: points on other faces count as no hit; the context's
@@ -273,8 +273,7 @@ def evaluate(
     planned pose, each an exact stop).
     ceiling: also measure the visibility ceiling of the surface to inspect (beside the scan).
     observers: each started on the surface samples, the fan and the scanning poses' passes,
-    then fed every chunk of the scan. Raises ValueError if no scanning pose returns a valid
-    point."""
+    then fed every chunk of the scan. Raises ValueError if no scanning pose sees a point."""
     start_time = time.perf_counter()
     sensor = scan_spec.sensor
     spec = sensor.with_points(points_per_profile) if points_per_profile else sensor
@@ -284,7 +283,6 @@ def evaluate(
         raise ValueError("trajectory has no scanning pose")
     scan_idx, has_prev = scanning_steps(traj)
     poses = traj.poses[scan_idx]
-    m = len(poses)
     swath = traj.swath[scan_idx]
     # The scan direction y_s says which way is forward (only the sign of Δs uses it): on a
     # side view's pass up a wall the horizontal has no forward.
@@ -298,7 +296,7 @@ def evaluate(
     errors = PointErrors(wd, spec.z_range_mm)
     spacing = Spacing(u_dir, has_prev, context.full_beam_angle)
     coverage = coverage_of(surface, scan_spec, spec, oriented_normals(part)[surface.faces])
-    sample = CloudSample(m * n_cols, max_map_points, seed)
+    sample = CloudSample(len(poses) * n_cols, max_map_points, seed)
     for observer in observers:
         observer.start(surface, spec, swath)
 
@@ -315,9 +313,7 @@ def evaluate(
     aside: list[Callable[[], Any]] = [
         partial(_collision_summary, part, sensor, cell, traj, scan_spec),
         partial(_path_summary, traj, scan_spec, limits, targets, blended),
-    ]
-    if ceiling:
-        aside.append(partial(_visibility_ceiling, in_cell, surface, scan_spec, seed))
+    ] + ([partial(_visibility_ceiling, in_cell, surface, scan_spec, seed)] if ceiling else [])
     collided, path, *ceiling_found = _judge(chunks, coverage, has_prev, beside_coverage, aside)
     if errors.n_valid == 0:
         raise _out_of_reach(in_cell)
@@ -326,7 +322,7 @@ def evaluate(
         part=part.name,
         planner=traj.planner,
         sensor=spec.name,
-        profiles=m,
+        profiles=len(poses),
         points_per_profile=n_cols,
         coverage_fraction=coverage_fraction,
         coverage_radius_mm=coverage.cover_radius,
