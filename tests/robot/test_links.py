@@ -7,10 +7,11 @@ import fcl
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
 
 from scanplan.robot import ROBOT_NAMES, get_robot
 from scanplan.robot.links import check_links, column_clear, obstacles_for, on_table_z
-from scanplan.world.capsule_collision import CellObstacles
+from scanplan.world.capsule_collision import CellObstacles, _DistanceField
 from scanplan.world.cell import TABLE_MARGIN_MM, Cell
 from scanplan.world.part import part_from_mesh
 
@@ -303,10 +304,6 @@ def test_a_memo_gives_the_same_report_and_asks_the_cell_only_for_what_is_new(mon
 
 
 def test_the_distance_field_bounds_the_distance_to_the_nearest_cloud_point() -> None:
-    from scipy.spatial import cKDTree
-
-    from scanplan.world.capsule_collision import _DistanceField
-
     rng = np.random.default_rng(3)
     # A curved sheet of points, as a surface cloud is.
     u, v = rng.uniform(0, 200, (2, 20_000))

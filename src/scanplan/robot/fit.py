@@ -140,17 +140,16 @@ def fit_to_robot(
     obstacles: CellObstacles | None = None,
     axes: ExternalAxes | None = None,
 ) -> RobotFit:
-    """`traj` (part frame) made flyable by `robot` with the sensor at `tcp`
-    (`T_flange_sensor`): placed by `robot.place.place` unless `T_base_part` is given; poses
-    unreachable or beyond the joint limits are given up (a pass continues after them as a
-    new pass) and passes are split where the arm flips its configuration, until the reach
-    check of the whole path finds neither. First, each pass is turned half a turn about the
-    beam where the arm keeps more of its poses that way. In a cell (`obstacles`), poses that
-    put an arm link into the part, a fixture or the table are given up too; a pass whose
-    joint move in would sweep a link through them is entered at the top of the move
-    leading into it instead (the arm reconfigures there), then flown the other way, and
-    given up if that move does too. With external `axes`, each pose is flown with the part where its
-    values (`traj.external`) put it."""
+    """`traj` (part frame) made flyable by `robot` with the sensor at `tcp` (`T_flange_sensor`):
+    placed by `robot.place.place` unless `T_base_part` is given; poses unreachable or beyond the
+    joint limits are given up (a pass goes on after them as a new one) and passes are split
+    where the arm flips its configuration, until the reach check of the whole path finds
+    neither. First, each pass is turned half a turn about the beam where the arm keeps more of
+    its poses that way. In a cell (`obstacles`), poses that put an arm link into the part, a
+    fixture or the table are given up too; a pass whose joint move in would sweep a link through
+    them is entered at the top of the move leading into it instead (a reconfiguration), then
+    flown the other way, and given up if that move does too. With external `axes`, the part is
+    where each pose's values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:

@@ -298,6 +298,12 @@ def on_table_z(
     return -(float(block[1][2]) + lift) if lift <= ON_TABLE_MM else None
 
 
+def _off_footprint(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(…, 2) how far each point (…, 3) lies outside the box lo..hi in x and in y (0 over
+    its footprint)."""
+    return np.maximum(np.maximum(lo[:2] - points[..., :2], points[..., :2] - hi[:2]), 0.0)
+
+
 def column_clear(
     robot: Robot,
     T_base_part: np.ndarray,
@@ -317,7 +323,7 @@ def column_clear(
     sweep, z_lo, z_hi = swept_column(robot)
     axis_in_part = inv_rigid(T)[:, :3, 3]  # the base origin, on the joint-1 axis
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
-    gap_xy = np.maximum(np.maximum(lo[:2] - axis_in_part[:, :2], axis_in_part[:, :2] - hi[:2]), 0)
+    gap_xy = _off_footprint(axis_in_part, lo, hi)
     base_z = axis_in_part[:, 2]
     down = hung(T)
     bottom = np.where(down, base_z - z_hi, base_z + z_lo)  # the column's lowest point
@@ -342,7 +348,7 @@ def where_it_stands(
         return None
     lo, hi = np.asarray(block[0]), np.asarray(block[1])
     base = inv_rigid(T)[:3, 3]
-    gap_xy = np.maximum(np.maximum(lo[:2] - base[:2], base[:2] - hi[:2]), 0.0)
+    gap_xy = _off_footprint(base, lo, hi)
     above = float(base[2] - hi[2])
     said = {
         "on_table": bool(not gap_xy.any()),
