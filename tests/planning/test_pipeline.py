@@ -35,6 +35,8 @@ from scanplan.planning.view_choice import (
 from scanplan.planning.view_joining import order_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.place import best_placement, place
+from scanplan.robot.presets import get_robot
 from scanplan.world.cell import Cell, planned_cell
 from scanplan.world.collision import checker_for
 from scanplan.world.part import load_part, part_from_mesh
@@ -459,3 +461,40 @@ def test_a_view_judged_once_is_not_measured_again(housing, housing_views, monkey
     fewer = traj.subset(np.arange(len(traj)) != int(np.flatnonzero(traj.scanning)[3]))
     pipeline_module._held_by_view(housing, fewer, context, judged)
     assert len(calls) == measured + 1
+
+
+def test_the_fit_judges_the_unfitted_plan_beside_it_as_it_would_here(
+    housing, housing_views, monkeypatch
+):
+    # What the fit judges of the plan before fitting (each view as planned, the plan made
+    # without the arm) runs in a process beside the fit: the record is the one judged here.
+    _, traj = housing_views
+    context = PlanContext.from_json_dict(traj.meta["context"], "plan")
+    tcp = parse_pose_arg("0,0,90,0,0,0")
+    arm = Arm("ur5e", tcp, T_base_part=place(traj, "ur5e", tcp).T_base_part)
+    here: list[int] = []
+    real = pipeline_module._held_share
+
+    def counting(*args):
+        here.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(pipeline_module, "_held_share", counting)
+    monkeypatch.setattr(view_workers_module, "view_worker_count", lambda: 2)
+    beside = pipeline_module.fit_arm(housing, traj, arm, context, free=traj).meta["robot"]
+    assert here == []  # judged in the other process
+    monkeypatch.setattr(view_workers_module, "view_worker_count", lambda: 0)
+    alone = pipeline_module.fit_arm(housing, traj, arm, context, free=traj).meta["robot"]
+    assert here == [1]
+    assert beside == alone
+    assert 0.0 < beside["in_spec"] <= beside["in_spec_without_robot"] + 1e-9
+    assert 0.0 < beside["in_spec_free_plan"] <= 1.0
+
+
+def test_the_planner_places_the_arm_where_place_does(housing_views):
+    _, traj = housing_views
+    tcp = parse_pose_arg("0,0,90,0,0,0")
+    T, score, evaluated = best_placement(traj, get_robot("ur5e"), tcp)
+    placement = place(traj, "ur5e", tcp)
+    assert np.array_equal(T, placement.T_base_part)
+    assert score == placement.score and evaluated == placement.evaluated > 0

@@ -5,6 +5,7 @@ the plan to an arm. The one module that knows views, planners and metrics togeth
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -21,7 +22,7 @@ from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.planners import Planner
 from scanplan.planning.view_choice import ViewBudget, ViewSelection, choose_views
 from scanplan.planning.view_joining import join_views, order_views
-from scanplan.planning.view_workers import view_worker_count
+from scanplan.planning.view_workers import process_beside, view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view
 from scanplan.robot.axes import ExternalAxes, with_disk
 from scanplan.robot.axes_fit import PlacedArmOnAxes, choose_values, fitted_axes_record
@@ -29,7 +30,7 @@ from scanplan.robot.axes_place import arm_on_axes
 from scanplan.robot.base import pose_arg
 from scanplan.robot.fit import CAUSES, RobotFit, beyond_reach_mm, fit_to_robot
 from scanplan.robot.links import obstacles_for, where_it_stands
-from scanplan.robot.place import place
+from scanplan.robot.place import best_placement
 from scanplan.robot.place_weights import pose_weights, view_worths
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.presets import get_robot
@@ -235,8 +236,10 @@ def _placed(
             candidate = replace(arm, tcp=tcp, T_base_part=T_base_part, axes=axes)
         else:
             if T_base_part is None:
-                placement = place(free, arm.robot, tcp, obstacles=obstacles, weights=weights)
-                T_base_part = placement.T_base_part
+                # Placed only: `fit_arm` checks the plan chosen for the arm there, not this.
+                T_base_part, *_ = best_placement(
+                    free, get_robot(arm.robot), tcp, obstacles=obstacles, weights=weights
+                )
             candidate = replace(arm, tcp=tcp, T_base_part=T_base_part)
         if len(arm.brackets) < 2:
             return candidate, []
@@ -292,18 +295,24 @@ def fit_arm(
         traj, _ = choose_values(
             traj, arm.robot, arm.tcp, arm.T_base_part, arm.axes, obstacles, centre
         )
-    fit = fit_to_robot(
-        traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles, axes=arm.axes
-    )
+    with process_beside() as beside:
+        # The views as planned and the plan without the arm are judged on the other core
+        # while this one fits the arm: neither depends on the fit.
+        ahead = (part, traj, context, free)
+        judging = None if beside is None else beside.submit(_judged_unfitted, *ahead)
+        fit = fit_to_robot(
+            traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles, axes=arm.axes
+        )
+        unfitted = _judged_unfitted(*ahead) if judging is None else judging.result()
+    planned, judged, free_share = unfitted
     record = fit.record(arm.tcp)
     if arm.axes is None and (stands := where_it_stands(fit.T_base_part, obstacles.table_block)):
         record["stands"] = stands
     if arm.axes is not None:
         record["external_axes"] = fitted_axes_record(arm.axes, fit.traj)
     # Judged view by view (a sample's in-spec state depends on one pass): the union is the
-    # plan's figure, and what a view held that nothing flown holds is what the arm cost.
-    judged: dict[bytes, np.ndarray | None] = {}  # a view the fit left alone: not measured again
-    planned = _held_by_view(part, traj, context, judged)
+    # plan's figure, and what a view held that nothing flown holds is what the arm cost. A
+    # view the fit left alone is not measured again (`judged`).
     flown = _held_by_view(part, fit.traj, context, judged)
     sets = [*planned.values(), *flown.values()]
     nothing = np.zeros(len(sets[0]) if sets else 0, bool)
@@ -320,9 +329,20 @@ def fit_arm(
         views, share = _not_flown(free_views, held, arm.robot, arm.tcp, fit)
         record["free_views_not_flown"] = views
         record["in_spec_not_flown"] = share
-    if free is not None:
-        record["in_spec_free_plan"] = _held_share(part, free, context)
+    if free_share is not None:
+        record["in_spec_free_plan"] = free_share
     return replace(fit.traj, meta=fit.traj.meta | {"robot": record})
+
+
+def _judged_unfitted(
+    part: Part, traj: Trajectory, context: PlanContext, free: Trajectory | None
+) -> tuple[dict[int, np.ndarray], dict[bytes, np.ndarray | None], float | None]:
+    """What `fit_arm` judges of the plan before the fit: each view's in-spec set as planned,
+    the sets by view key (`_held_by_view`'s `judged`), and the share the plan made without
+    the arm (`free`, if any) holds. Run in a process beside the fit (picklable both ways)."""
+    judged: dict[bytes, np.ndarray | None] = {}
+    planned = _held_by_view(part, traj, context, judged)
+    return planned, judged, None if free is None else _held_share(part, free, context)
 
 
 def _held_share(part: Part, traj: Trajectory, context: PlanContext) -> float:
@@ -344,7 +364,8 @@ def _held_by_view(
             continue
         sub = traj.subset(mine)
         passes = np.r_[True, sub.swath[1:] != sub.swath[:-1]]
-        key = sub.poses.tobytes() + sub.scanning.tobytes() + passes.tobytes()
+        what = (sub.poses, sub.scanning, passes)  # what its in-spec set depends on
+        key = hashlib.sha256(b"".join(a.tobytes() for a in what)).digest()
         if key not in judged:
             try:
                 judged[key] = in_spec_samples(

@@ -15,9 +15,10 @@ import os
 import signal
 import threading
 import warnings
+from collections.abc import Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, replace
 from multiprocessing import forkserver
 from typing import Any
@@ -258,3 +259,17 @@ def _judge_quietly(
         return _judge_with(state, view)
     except ValueError as exc:
         return exc
+
+
+@contextmanager
+def process_beside() -> Iterator[ProcessPoolExecutor | None]:
+    """One process, forked from the workers' server, for work a caller runs beside its own
+    (a second core's judging while this one fits an arm); None where there are no view
+    workers (one core, or in a worker): the caller runs that work itself. A task that has
+    not finished when the block is left is waited for."""
+    if not view_worker_count():
+        yield None
+        return
+    start_worker_server()
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        yield pool

@@ -241,12 +241,45 @@ def place(
     the links must keep clear of (None: links not checked)."""
     started = time.perf_counter()
     arm = get_robot(robot)
+    tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=np.float64)
+    T_best, score, evaluated = best_placement(
+        traj, arm, tcp, height_range_mm, yaw_step_deg, coarse_poses, fine_poses, keep,
+        obstacles, weights,
+    )  # fmt: skip
+    T_part_flange = traj.poses @ np.linalg.inv(tcp)
+    report = check_reach(T_best @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning)
+    chosen = Placement(T_best, report, score, evaluated, 0.0)
+    if obstacles is not None and chosen.reachable:
+        links = check_links(
+            arm,
+            chosen.report.joints,
+            obstacles,
+            chosen.T_base_part,
+            pass_starts(traj.swath, traj.scanning),
+        )
+        chosen = replace(chosen, links=links)
+    return replace(chosen, seconds=time.perf_counter() - started)
+
+
+def best_placement(
+    traj: Trajectory,
+    arm: Robot,
+    tcp: np.ndarray,
+    height_range_mm: tuple[float, float] | None = None,
+    yaw_step_deg: float = 30.0,
+    coarse_poses: int = 48,
+    fine_poses: int = 256,
+    keep: int = 6,
+    obstacles: CellObstacles | None = None,
+    weights: np.ndarray | None = None,
+) -> tuple[np.ndarray, float, int]:
+    """`place`'s search alone, for a caller that checks the placement its own way (the
+    planner fits the arm there): (T_base_part, its score, the placements scored)."""
     if len(traj) == 0:
         raise ValueError("cannot place an empty trajectory")
     if not (np.isfinite(yaw_step_deg) and 0 < yaw_step_deg <= 360):
         raise ValueError(f"yaw step must be in (0, 360] degrees, got {yaw_step_deg}")
     weights = checked_weights(weights, len(traj))
-    tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=np.float64)
     T_part_flange = traj.poses @ np.linalg.inv(tcp)
     reach, z_mid = reach_mm(arm)
     lo, hi = height_range_mm if height_range_mm is not None else (z_mid - reach, z_mid + reach)
@@ -305,15 +338,4 @@ def place(
     T_best, score = _best_judged(
         traj, arm, tcp, T_part_flange, best, best_scores, centre, obstacles, weights
     )
-    report = check_reach(T_best @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning)
-    chosen = Placement(T_best, report, score, evaluated, 0.0)
-    if obstacles is not None and chosen.reachable:
-        links = check_links(
-            arm,
-            chosen.report.joints,
-            obstacles,
-            chosen.T_base_part,
-            pass_starts(traj.swath, traj.scanning),
-        )
-        chosen = replace(chosen, links=links)
-    return replace(chosen, seconds=time.perf_counter() - started)
+    return T_best, score, evaluated
