@@ -80,6 +80,24 @@ def test_follows_the_pose_by_pose_rule(robot: str, seed: int) -> None:
     np.testing.assert_allclose(got, want, atol=1e-9, equal_nan=True)
 
 
+@pytest.mark.parametrize("stretch", [1, 7, 30, 200])
+def test_follows_the_pose_by_pose_rule_across_stretches_beyond_the_limits(stretch: int) -> None:
+    # One pass whose A3 folds beyond the KR 6's -120° limit for `stretch` poses, twice: the
+    # poses there are skipped at once (growing windows), the same as stepped one by one.
+    arm = get_robot("kr6-r900")
+    q = np.tile(np.radians([20.0, -80.0, -100.0, 30.0, 40.0, 10.0]), (3 * stretch + 40, 1))
+    q[:, 0] += np.linspace(0.0, 0.5, len(q))
+    for lo in (10, 2 * stretch + 20):
+        q[lo : lo + stretch, 2] = np.radians(-150.0)
+    poses = arm.forward(q)
+    swath, scanning = np.zeros(len(q), int), np.ones(len(q), bool)
+    report = check_reach(poses, arm, swath=swath, scanning=scanning)
+    want = _pose_by_pose(poses, "kr6-r900", swath=swath, scanning=scanning)
+    np.testing.assert_allclose(report.joints, want, atol=1e-9, equal_nan=True)
+    assert len(report.limit_violations) == 2 * stretch
+    assert report.limit_violations[0] == 10 and report.limit_violations[-1] == 3 * stretch + 19
+
+
 class _Cell:
     """A cell as `check_reach` asks it (`pass_branches.CellView`): links clear wherever `along`
     says, joint moves clear except into the joints in `blocked_moves`."""

@@ -267,6 +267,23 @@ def _nearest(
     return None if not np.isfinite(dist[0, branch]) else (branch, cand[0, branch])
 
 
+def _next_within(
+    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, lo: int, hi: int
+) -> int:
+    """The first pose from `lo` on, before `hi`, with an in-limit solution from `prev` (`hi`
+    if none): the poses `check_reach` would step one by one, finding none, while its joints
+    stay at `prev`. Looked for in growing windows, so a short gap costs a short look."""
+    size = 8
+    while lo < hi:
+        top = min(hi, lo + size)
+        _, dist = _candidates(solutions[lo:top], limits, np.broadcast_to(prev, (top - lo, 6)))
+        found = np.isfinite(dist).any(axis=1)
+        if found.any():
+            return lo + int(np.argmax(found))
+        lo, size = top, size * 8
+    return hi
+
+
 def _follow(solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, branch: int) -> np.ndarray:
     """(t, 6) the joints of the first t poses of `solutions` (m, 8, 6) while taking, pose by
     pose, the in-limit solution nearest the previous joints (`_nearest`) stays on `branch`
@@ -366,7 +383,7 @@ def check_reach(
         pinned = False
         nearest = _nearest(solutions[i : i + 1], limits, prev[None])
         if nearest is None:
-            i += 1
+            i = _next_within(solutions, limits, prev, i + 1, end[i])
             continue
         branch, prev = nearest
         joints[i], last = prev, i
