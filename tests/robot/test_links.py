@@ -9,8 +9,15 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
+import scanplan.robot.links as links_module
 from scanplan.robot import ROBOT_NAMES, get_robot
-from scanplan.robot.links import check_links, column_clear, obstacles_for, on_table_z
+from scanplan.robot.links import (
+    LinkClearance,
+    check_links,
+    column_clear,
+    obstacles_for,
+    on_table_z,
+)
 from scanplan.world.capsule_collision import CellObstacles, _DistanceField
 from scanplan.world.cell import TABLE_MARGIN_MM, Cell
 from scanplan.world.part import part_from_mesh
@@ -301,6 +308,32 @@ def test_a_memo_gives_the_same_report_and_asks_the_cell_only_for_what_is_new(mon
     # The second path is the first's start: only its last checked pose, which stands for
     # fewer poses now, is new to the cell.
     assert asked_first > 5 and sum(asked) <= 1
+
+
+def test_a_path_asked_again_is_answered_from_the_memo(monkeypatch) -> None:
+    # The reach check's choice asks the quick check along each pass's branches; the fit's
+    # rounds ask again about passes left as they were: answered without the links checked.
+    arm = get_robot("kr6-r900")
+    q = np.zeros((120, 2, 6))
+    q[:, :, 0] = np.linspace(-0.8, 0.8, 120)[:, None]
+    q[:, 1, 1] = 0.4  # the second branch leans towards the post
+    obstacles = obstacles_for(_box_part((60, 60, 600), (700.0, 0.0, 300.0)), Cell())
+    fresh = LinkClearance(arm, obstacles, np.eye(4)).clear_along(0, q)
+    assert fresh.any() and not fresh.all()
+    memo: dict = {}
+    first = LinkClearance(arm, obstacles, np.eye(4), memo).clear_along(0, q)
+    checked: list[int] = []
+    real = links_module.check_links
+
+    def counting(*args, **kwargs):
+        checked.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(links_module, "check_links", counting)
+    again = LinkClearance(arm, obstacles, np.eye(4), memo).clear_along(0, q)
+    assert checked == [] and np.array_equal(again, fresh) and np.array_equal(first, fresh)
+    moved = LinkClearance(arm, obstacles, np.eye(4), memo).clear_along(0, q[:100])
+    assert len(checked) == 2 and np.array_equal(moved, fresh[:100])  # a new path: checked
 
 
 def test_the_distance_field_bounds_the_distance_to_the_nearest_cloud_point() -> None:

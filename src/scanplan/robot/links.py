@@ -5,6 +5,7 @@ table block, at every target and along the joint moves into each pass.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,8 @@ _FIRST_LOOK = 8
 # A joint move is checked at poses this far apart on its most turning joint.
 JOINT_MOVE_STEP_RAD = np.radians(2.0)
 # What the cell answered for a checked capsule set (its ends in part coordinates, radii,
-# clearance and exactness, as bytes): a fit checks the same passes round after round.
+# clearance and exactness, as bytes), and the quick check's answer for a whole path
+# (`LinkClearance.clear_along`): a fit checks the same passes round after round.
 LinkMemo = dict[bytes, np.ndarray]
 
 
@@ -244,7 +246,14 @@ class LinkClearance:
 
     def clear_along(self, i: int, path: np.ndarray) -> np.ndarray:
         T = self._at(i, len(path))
-        return np.stack(
+        key = b""
+        if self.memo is not None:
+            # The fit's rounds ask again about passes they left as they were: the answer
+            # for the whole path is remembered, not only its capsule sets'.
+            key = b"along" + hashlib.sha256(path.tobytes() + T.tobytes()).digest()
+            if key in self.memo:
+                return self.memo[key]
+        clear = np.stack(
             [
                 ~check_links(
                     self.robot, path[:, k], self.obstacles, T, exact=False, memo=self.memo
@@ -253,6 +262,9 @@ class LinkClearance:
             ],
             axis=1,
         )
+        if self.memo is not None:
+            self.memo[key] = clear
+        return clear
 
     def clear_move(self, i0: int, q0: np.ndarray, i1: int, q1: np.ndarray) -> bool:
         ends = (i0 if i0 >= 0 else i1, i1)
