@@ -310,6 +310,25 @@ def test_a_memo_gives_the_same_report_and_asks_the_cell_only_for_what_is_new(mon
     assert asked_first > 5 and sum(asked) <= 1
 
 
+def test_a_checked_pose_stands_for_poses_whose_capsules_its_grown_ones_hold() -> None:
+    arm = get_robot("ur5e")
+    rng = np.random.default_rng(5)
+    # Passes of small steps, a jump between them, and a pose standing still for a while.
+    q = np.cumsum(rng.normal(0.0, 0.004, (600, 6)), axis=0)
+    q[300:] += 0.5
+    q[400:480] = q[400]
+    ends, radii, _ = arm.link_capsules(q)
+    first, group, grown = links_module._stride_groups(ends, radii)
+    assert first[0] == 0 and np.array_equal(first, np.flatnonzero(np.diff(np.r_[-1, group])))
+    assert 300 in first  # the jump starts a group
+    assert np.diff(np.r_[first, len(q)]).max() <= links_module._MAX_SPAN
+    assert 1 < len(q) / len(first) < 64  # a checked pose stands for several
+    moved = np.linalg.norm(ends - ends[first][group], axis=-1).max(axis=-1)  # (m, k)
+    assert (moved <= links_module.LINK_STRIDE_MM + 1e-9).all()
+    assert (moved <= grown[group] - radii + 1e-12).all()
+    assert np.allclose(grown.max(axis=0), radii + moved.max(axis=0))
+
+
 def test_a_path_asked_again_is_answered_from_the_memo(monkeypatch) -> None:
     # The reach check's choice asks the quick check along each pass's branches; the fit's
     # rounds ask again about passes left as they were: answered without the links checked.

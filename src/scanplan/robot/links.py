@@ -22,8 +22,7 @@ ON_TABLE_MM = 50.0
 # Poses whose capsules lie within this of a checked pose's share its verdict (its capsules
 # grown by how far theirs moved).
 LINK_STRIDE_MM = 10.0
-_MAX_SPAN = 64  # poses one check may stand for (bounds the look-ahead's cost)
-_FIRST_LOOK = 8
+_MAX_SPAN = 64  # poses one check may stand for (a joint move's steps are few)
 # A joint move is checked at poses this far apart on its most turning joint.
 JOINT_MOVE_STEP_RAD = np.radians(2.0)
 # What the cell answered for a checked capsule set (its ends in part coordinates, radii,
@@ -110,10 +109,10 @@ def _capsules_hit(
 
     Consecutive poses of a pass move the links by fractions of a millimetre, so not every
     pose goes to FCL: a checked pose stands for the poses after it whose capsule ends all
-    lie within `LINK_STRIDE_MM` of its own, each link's capsule grown by the furthest its
-    ends moved among them (a point of a capsule moves no further than its ends do), and a
-    hit is charged to all of them. T_base_part: (4, 4), or (m, 4, 4) one per row (the part
-    moved by external axes)."""
+    lie within `LINK_STRIDE_MM` of its own (`_stride_groups`), each link's capsule grown by
+    the furthest its ends moved among them (a point of a capsule moves no further than its
+    ends do), and a hit is charged to all of them. T_base_part: (4, 4), or (m, 4, 4) one
+    per row (the part moved by external axes)."""
     ends, radii, _ = robot.link_capsules(joints)
     T_part_base = inv_rigid(np.asarray(T_base_part, dtype=np.float64))
     if T_part_base.ndim == 2:
@@ -121,29 +120,40 @@ def _capsules_hit(
     else:
         R, t = T_part_base[:, :3, :3], T_part_base[:, :3, 3]
         ends = np.einsum("mij,mkej->mkei", R, ends) + t[:, None, None, :]
-    m = len(ends)
-    checked: list[int] = []
-    grown: list[np.ndarray] = []
-    covers = np.zeros(m, dtype=np.int64)
-    i = 0
-    while i < m:
-        # A check mostly stands for a few poses: the first few looked at before all of them.
-        for look in (_FIRST_LOOK, _MAX_SPAN):
-            window = ends[i : i + look]
-            moved = np.linalg.norm(window - ends[i], axis=-1).max(axis=2)  # (span, k)
-            far = moved.max(axis=1) > LINK_STRIDE_MM
-            if far.any() or len(window) < look:
-                break
-        span = max(int(np.argmax(far)) if far.any() else len(window), 1)
-        covers[i : i + span] = len(checked)
-        checked.append(i)
-        grown.append(radii + moved[:span].max(axis=0))
-        i += span
-    hit = _cell_hits(obstacles, ends[checked], np.array(grown), clearance_mm, exact, memo)[covers]
+    checked, covers, grown = _stride_groups(ends, radii)
+    hit = _cell_hits(obstacles, ends[checked], grown, clearance_mm, exact, memo)[covers]
     colliding = hit >= 0
     link = np.where(colliding.any(axis=1), colliding.argmax(axis=1), -1)
     obstacle = np.where(link >= 0, hit[np.arange(len(hit)), np.maximum(link, 0)], -1)
     return link, obstacle
+
+
+def _stride_groups(
+    ends: np.ndarray, radii: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The poses checked for capsules `ends` (m, k, 2, 3) of `radii` (k,): (c,) the first
+    pose of each group, (m,) the group of each pose, (c, k) each group's radii grown by the
+    furthest its link's ends move from the first pose's. A group ends before the pose at
+    which the capsule ends could have moved more than `LINK_STRIDE_MM` from its first:
+    the most any end moves from pose to pose, summed, bounds how far they have (found for
+    all poses at once; the walk from group to group is a hop a group), or at `_MAX_SPAN`
+    poses."""
+    m = len(ends)
+    if m == 0:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros((0, len(radii)))
+    step = np.sqrt((np.diff(ends, axis=0) ** 2).sum(axis=-1)).max(axis=(1, 2))
+    travelled = np.r_[0.0, np.cumsum(step)]
+    # The first pose beyond the stride from each pose, at most `_MAX_SPAN` on.
+    beyond = np.searchsorted(travelled, travelled + LINK_STRIDE_MM, side="right")
+    beyond = np.minimum(beyond, np.arange(m) + _MAX_SPAN).tolist()
+    first, i = [], 0
+    while i < m:
+        first.append(i)
+        i = beyond[i]
+    starts = np.array(first)
+    covers = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, m]))
+    moved = np.sqrt(((ends - ends[starts][covers]) ** 2).sum(axis=-1)).max(axis=2)  # (m, k)
+    return starts, covers, radii + np.maximum.reduceat(moved, starts, axis=0)
 
 
 def _cell_hits(
