@@ -353,6 +353,13 @@ def test_a_path_asked_again_is_answered_from_the_memo(monkeypatch) -> None:
     assert checked == [] and np.array_equal(again, fresh) and np.array_equal(first, fresh)
     moved = LinkClearance(arm, obstacles, np.eye(4), memo).clear_along(0, q[:100])
     assert len(checked) == 2 and np.array_equal(moved, fresh[:100])  # a new path: checked
+    # A joint move asked again, too.
+    move = (0, q[0, 0], 119, q[119, 1])
+    told = LinkClearance(arm, obstacles, np.eye(4)).clear_move(*move)
+    assert LinkClearance(arm, obstacles, np.eye(4), memo).clear_move(*move) is told
+    asked = len(checked)
+    assert LinkClearance(arm, obstacles, np.eye(4), memo).clear_move(*move) is told
+    assert len(checked) == asked
 
 
 def test_the_distance_field_bounds_the_distance_to_the_nearest_cloud_point() -> None:

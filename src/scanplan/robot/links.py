@@ -26,8 +26,8 @@ _MAX_SPAN = 64  # poses one check may stand for (a joint move's steps are few)
 # A joint move is checked at poses this far apart on its most turning joint.
 JOINT_MOVE_STEP_RAD = np.radians(2.0)
 # What the cell answered for a checked capsule set (its ends in part coordinates, radii,
-# clearance and exactness, as bytes), and the quick check's answer for a whole path
-# (`LinkClearance.clear_along`): a fit checks the same passes round after round.
+# clearance and exactness, as bytes), and the quick check's answer for a whole path or
+# joint move (`LinkClearance`): a fit checks the same passes round after round.
 LinkMemo = dict[bytes, np.ndarray]
 
 
@@ -279,15 +279,18 @@ class LinkClearance:
     def clear_move(self, i0: int, q0: np.ndarray, i1: int, q1: np.ndarray) -> bool:
         ends = (i0 if i0 >= 0 else i1, i1)
         T = self.T if self.T.ndim == 2 else np.stack([self._at(i)[0] for i in ends])
+        joints = np.stack([q0, q1])
+        key = b""
+        if self.memo is not None:  # as `clear_along`'s: the same moves asked round after round
+            key = b"move" + hashlib.sha256(joints.tobytes() + T.tobytes()).digest()
+            if key in self.memo:
+                return bool(self.memo[key])
         report = check_links(
-            self.robot,
-            np.stack([q0, q1]),
-            self.obstacles,
-            T,
-            np.array([False, True]),
-            exact=False,
+            self.robot, joints, self.obstacles, T, np.array([False, True]), exact=False,
             memo=self.memo,
-        )
+        )  # fmt: skip
+        if self.memo is not None:
+            self.memo[key] = np.array(not report.moves)
         return not report.moves
 
 
