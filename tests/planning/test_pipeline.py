@@ -5,6 +5,9 @@ moves; a view no clear move reaches is left out and counted."""
 from __future__ import annotations
 
 import json
+from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -489,6 +492,21 @@ def test_the_fit_judges_the_unfitted_plan_beside_it_as_it_would_here(
     assert beside == alone
     assert 0.0 < beside["in_spec"] <= beside["in_spec_without_robot"] + 1e-9
     assert 0.0 < beside["in_spec_free_plan"] <= 1.0
+
+    # A process that died (killed, out of memory): the work is done here instead.
+    class Dead:
+        def submit(self, *args):
+            future: Future = Future()
+            future.set_exception(BrokenProcessPool("killed"))
+            return future
+
+    @contextmanager
+    def dead_process():
+        yield Dead()
+
+    monkeypatch.setattr(pipeline_module, "process_beside", dead_process)
+    again = pipeline_module.fit_arm(housing, traj, arm, context, free=traj).meta["robot"]
+    assert again == alone and here == [1, 1]
 
 
 def test_the_planner_places_the_arm_where_place_does(housing_views):

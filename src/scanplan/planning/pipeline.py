@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
 from functools import partial
 
@@ -303,7 +304,10 @@ def fit_arm(
         fit = fit_to_robot(
             traj, arm.robot, arm.tcp, arm.T_base_part, obstacles=obstacles, axes=arm.axes
         )
-        unfitted = _judged_unfitted(*ahead) if judging is None else judging.result()
+        try:
+            unfitted = _judged_unfitted(*ahead) if judging is None else judging.result()
+        except BrokenProcessPool:  # the process died (killed, out of memory): judged here
+            unfitted = _judged_unfitted(*ahead)
     planned, judged, free_share = unfitted
     record = fit.record(arm.tcp)
     if arm.axes is None and (stands := where_it_stands(fit.T_base_part, obstacles.table_block)):

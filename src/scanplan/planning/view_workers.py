@@ -235,7 +235,7 @@ _WORKER: tuple[Part, ViewJudge] | None = None
 
 def _start_worker(part: Part, judge: ViewJudge) -> None:
     global _WORKER
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _ignore_ctrl_c()
     _WORKER = (part, judge)
 
 
@@ -266,10 +266,16 @@ def process_beside() -> Iterator[ProcessPoolExecutor | None]:
     """One process, forked from the workers' server, for work a caller runs beside its own
     (a second core's judging while this one fits an arm); None where there are no view
     workers (one core, or in a worker): the caller runs that work itself. A task that has
-    not finished when the block is left is waited for."""
+    not finished when the block is left is waited for; if the process dies (killed, out of
+    memory), its futures raise `BrokenProcessPool` and the caller may run the work itself."""
     if not view_worker_count():
         yield None
         return
     start_worker_server()
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("forkserver")) as pool:
+    context = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(1, mp_context=context, initializer=_ignore_ctrl_c) as pool:
         yield pool
+
+
+def _ignore_ctrl_c() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
