@@ -22,7 +22,7 @@ ON_TABLE_MM = 50.0
 # Poses whose capsules lie within this of a checked pose's share its verdict (its capsules
 # grown by how far theirs moved).
 LINK_STRIDE_MM = 10.0
-_MAX_SPAN = 64  # poses one check may stand for (a joint move's steps are few)
+_MAX_SPAN = 64  # poses one check may stand for at most (of a pass that barely moves the arm)
 # A joint move is checked at poses this far apart on its most turning joint.
 JOINT_MOVE_STEP_RAD = np.radians(2.0)
 # What the cell answered for a checked capsule set (its ends in part coordinates, radii,

@@ -39,6 +39,9 @@ from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 
 _LINK_RANK_POSES = 1500  # poses whose links rank the final candidates
+# The search's defaults: the yaw step of its coarse grid, the poses it scores the grid and the
+# pattern search on, and how many of the grid's best it moves on from.
+YAW_STEP_DEG, COARSE_POSES, FINE_POSES, KEEP = 30.0, 48, 256, 6
 # Weighted, the poses added to the samples for each view they miss: only those, and few,
 # since the coarse grid's cost grows with its sample (the quadrotor's 116 views, every one
 # added: placed in 22 s, not 12; only those missed: 16 s).
@@ -226,10 +229,10 @@ def place(
     robot: str | Path | Robot,
     tcp: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
-    yaw_step_deg: float = 30.0,
-    coarse_poses: int = 48,
-    fine_poses: int = 256,
-    keep: int = 6,
+    yaw_step_deg: float = YAW_STEP_DEG,
+    coarse_poses: int = COARSE_POSES,
+    fine_poses: int = FINE_POSES,
+    keep: int = KEEP,
     obstacles: CellObstacles | None = None,
     weights: np.ndarray | None = None,
 ) -> Placement:
@@ -266,10 +269,10 @@ def best_placement(
     arm: Robot,
     tcp: np.ndarray,
     height_range_mm: tuple[float, float] | None = None,
-    yaw_step_deg: float = 30.0,
-    coarse_poses: int = 48,
-    fine_poses: int = 256,
-    keep: int = 6,
+    yaw_step_deg: float = YAW_STEP_DEG,
+    coarse_poses: int = COARSE_POSES,
+    fine_poses: int = FINE_POSES,
+    keep: int = KEEP,
     obstacles: CellObstacles | None = None,
     weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, int]:
