@@ -30,6 +30,7 @@ from scanplan.core.limits import (
     STEP_MM,
     TOLERANCE_MM,
 )
+from scanplan.core.quantities import PLACE_YAW_STEP_DEG
 
 # ---- export -------------------------------------------------------------------------------
 ROBOT_HELP = (
@@ -237,7 +238,7 @@ def place_cmd(
     robot: PlaceRobotOpt,
     tcp: TcpOpt = None,
     height_range: HeightRangeOpt = None,
-    yaw_step: YawStepOpt = 30.0,
+    yaw_step: YawStepOpt = PLACE_YAW_STEP_DEG,
     part: PlannedPartOpt = None,
     units: PlannedUnitsOpt = None,
     quiet: QuietOpt = False,

@@ -24,6 +24,8 @@ COVERAGE_TARGET = 0.93
 # quiet machine choose the same views); past it the views chosen by then are kept.
 # `--view-candidates` sets it; `--view-seconds` adds a wall-clock limit only when asked.
 VIEW_CHOICE_CANDIDATES = 400
+# The yaw step (deg) of the placement search's coarse grid (`place`, `--yaw-step`).
+PLACE_YAW_STEP_DEG = 30.0
 # A defect call (`metrics.detection`): points beyond this many σ of the sensor noise from the
 # nominal surface, clustered, at least this many points.
 DEFECT_K_SIGMA = 4.0

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scanplan.core.quantities import PLACE_YAW_STEP_DEG
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, most_kept, sensor_clear_both
@@ -39,9 +40,9 @@ from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 
 _LINK_RANK_POSES = 1500  # poses whose links rank the final candidates
-# The search's defaults: the yaw step of its coarse grid, the poses it scores the grid and the
-# pattern search on, and how many of the grid's best it moves on from.
-YAW_STEP_DEG, COARSE_POSES, FINE_POSES, KEEP = 30.0, 48, 256, 6
+# The search's defaults (its yaw step is `quantities.PLACE_YAW_STEP_DEG`): the poses it scores
+# the coarse grid and the pattern search on, and how many of the grid's best it moves on from.
+COARSE_POSES, FINE_POSES, KEEP = 48, 256, 6
 # Weighted, the poses added to the samples for each view they miss: only those, and few,
 # since the coarse grid's cost grows with its sample (the quadrotor's 116 views, every one
 # added: placed in 22 s, not 12; only those missed: 16 s).
@@ -229,7 +230,7 @@ def place(
     robot: str | Path | Robot,
     tcp: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
-    yaw_step_deg: float = YAW_STEP_DEG,
+    yaw_step_deg: float = PLACE_YAW_STEP_DEG,
     coarse_poses: int = COARSE_POSES,
     fine_poses: int = FINE_POSES,
     keep: int = KEEP,
@@ -269,7 +270,7 @@ def best_placement(
     arm: Robot,
     tcp: np.ndarray,
     height_range_mm: tuple[float, float] | None = None,
-    yaw_step_deg: float = YAW_STEP_DEG,
+    yaw_step_deg: float = PLACE_YAW_STEP_DEG,
     coarse_poses: int = COARSE_POSES,
     fine_poses: int = FINE_POSES,
     keep: int = KEEP,
