@@ -239,3 +239,39 @@ def test_the_top_view_may_suffice_on_a_plate_not_on_a_tall_box():
     assert top_view_may_suffice(plate, 0.93)
     assert not top_view_may_suffice(plate, 0.97)  # too many edges for that target
     assert not top_view_may_suffice(steep_of((200.0, 200.0, 200.0)), 0.93)  # four walls, a top
+
+
+class _ReachesNearBlock:
+    """An arm standing at +x that reaches only samples with x above `x_min`."""
+
+    def __init__(self, x_min: float) -> None:
+        self.x_min = x_min
+        self.asked = 0
+
+    @property
+    def stands_at(self) -> np.ndarray:
+        return np.array([900.0, 0.0, 0.0])
+
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        self.asked += 1
+        return points[:, 0] > self.x_min
+
+
+def test_missed_views_for_an_arm_are_aimed_only_at_what_it_reaches():
+    part = part_from_mesh(
+        trimesh.util.concatenate(
+            [_box((0, 0, 50), (100, 200, 100)), _box((-300, 0, 50), (100, 200, 100))]
+        ),
+        "blocks",
+    )
+    samples = hemisphere_visible_samples(part, 3.0)
+    missed = part.mesh.face_normals[samples.faces][:, 0] > 0.99
+    # It reaches the near block's wall (x = 50), not the far one's (x = -250).
+    arm = _ReachesNearBlock(-100.0)
+    views = missed_views(part, SPEC, samples, missed, min_samples=50, arm=arm)
+    assert arm.asked > 0
+    assert len(views) == 1
+    assert views[0].faces is not None
+    assert part.mesh.triangles_center[views[0].faces, 0].mean() == pytest.approx(50.0)
+    # An arm that reaches neither gets no view at all.
+    assert missed_views(part, SPEC, samples, missed, 50, arm=_ReachesNearBlock(1e9)) == []

@@ -15,6 +15,7 @@ from scanplan.world.surface import (
     hemisphere_visible_samples,
     oriented_normals,
     reachable_samples,
+    turned_towards,
     upward_visible_samples,
 )
 
@@ -106,3 +107,16 @@ def test_the_ceiling_is_found_once_per_part_and_samples():
     assert other is not first
     again = reachable_samples(_shelf_over_plate(), surface, tol)  # another part, same mesh
     assert again is not first and np.array_equal(again, first)
+
+
+def test_a_direction_is_turned_towards_another_by_at_most_the_angle():
+    n = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.6, 0.8], [0.0, 0.28, 0.96]])
+    to = np.array([0.0, 0.0, 1.0])
+    out = turned_towards(n, to, np.radians(30.0))
+    assert np.allclose(np.linalg.norm(out, axis=1), 1.0)
+    angle_to = np.degrees(np.arccos(np.clip(out @ to, -1, 1)))
+    # 90° and 36.9° away: turned by 30°; 16.3° away: nearer than that, so `to` itself.
+    assert angle_to[:3] == pytest.approx([60.0, 60.0, 36.87 - 30.0], abs=0.01)
+    assert np.allclose(out[3], to)
+    # Turned in the plane of n and `to`: the first stays in the x-z plane.
+    assert out[0, 1] == pytest.approx(0.0)

@@ -172,7 +172,7 @@ def choose_views(
         top_view = beside.submit(judge, part, View.looking_along(UP, 0))
         samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
         rule = _KeepRule(min_gain, gain_floor, min_gain_per_s)
-        greedy = _Greedy(part, spec, samples, spent, rule, coverage_target)
+        greedy = _Greedy(part, spec, samples, spent, rule, coverage_target, arm)
         steep = steep_samples(part, samples)
         if workers and scheduler is None and not top_view_may_suffice(steep, coverage_target):
             # The top view cannot be enough: the workers start now and plan, beside it, the
@@ -250,8 +250,9 @@ class _Greedy:
         spent: _Spent,
         rule: _KeepRule,
         coverage_target: float,
+        arm: PlacedArm | None = None,
     ) -> None:
-        self.part, self.spec, self.samples = part, spec, samples
+        self.part, self.spec, self.samples, self.arm = part, spec, samples, arm
         self.spent, self.rule, self.coverage_target = spent, rule, coverage_target
         self.plans: list[ViewPlan] = []
         self.coverage: list[float] = []
@@ -392,7 +393,12 @@ class _Greedy:
             self.reachable = reachable_samples(self.part, self.samples, self.spec.tol_angle_rad)
         missed = self.reachable & ~self.covered
         more = missed_views(
-            self.part, self.spec, self.samples, missed, int(self.rule.least * len(self.covered))
+            self.part,
+            self.spec,
+            self.samples,
+            missed,
+            int(self.rule.least * len(self.covered)),
+            arm=None if self.arm is None else self.arm.aiming(),
         )
         # Each also scanned level: a strip under an overhang or down a pocket is seen
         # only so (the camera beside the laser), but level costs the stepped plate and

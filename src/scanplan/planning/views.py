@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -27,6 +28,7 @@ from scanplan.world.surface import (
     hemisphere_directions,
     oriented_normals,
     towards_up,
+    turned_towards,
 )
 
 # A region (and a view's slab) smaller than this share of the surface gets no view of its
@@ -278,6 +280,7 @@ def missed_views(
     min_samples: int,
     index: int = 1,
     seed: int = 0,
+    arm: ArmReach | None = None,
 ) -> list[View]:
     """Views aimed at what the views chosen so far miss: the `missed` samples of `surface`
     grouped by normal direction (`hemisphere_directions` bins). Within a group, axes are
@@ -287,7 +290,10 @@ def missed_views(
     `VIEW_AXIS_MAX_TILT_DEG` from +Z, `view_axis`), each also tilted back towards +Z by
     `MISSED_AXIS_TILTS_DEG`; the samples an axis sees are cut into depth slabs along it (a
     gap of the distance tolerance: one raster holds one depth). One view per slab of at
-    least `min_samples` samples, its region the faces they lie on."""
+    least `min_samples` samples, its region the faces they lie on. With a placed `arm`
+    (`ArmReach`), the axes are also tilted towards where it stands, and a view is aimed only
+    at the samples the arm reaches along its axis: an axis along which it reaches fewer than
+    `min_samples` gets none (the arm could fly nothing of it)."""
     idx = np.flatnonzero(missed)
     if len(idx) < min_samples:
         return []
@@ -309,15 +315,24 @@ def missed_views(
             bases = np.vstack([mean[None], normals[picks]])
             bases = np.array([view_axis(n) for n in bases])
             best: tuple[int, np.ndarray, np.ndarray] | None = None
-            for tilt in MISSED_AXIS_TILTS_DEG:
-                for axis in towards_up(bases, math.radians(tilt)):
-                    sees = _sees(part, points[members], normals[members], axis, cos_tol)
-                    if best is None or int(sees.sum()) > best[0]:
-                        best = (int(sees.sum()), axis, members[sees])
+            for axis in _missed_axes(bases, points[members], arm):
+                sees = _sees(part, points[members], normals[members], axis, cos_tol)
+                if best is None or int(sees.sum()) > best[0]:
+                    best = (int(sees.sum()), axis, sees)
             assert best is not None
-            count, axis, seen = best
+            count, axis, sees = best
             if count < min_samples:
                 break
+            if arm is not None:
+                # Aimed only at what the arm reaches along the axis: what it does not is
+                # left to the next axis, or given up if the arm reaches too little of it.
+                reached = sees.copy()
+                reached[sees] = arm.reaches(points[members][sees], axis)
+                if reached.sum() < min_samples:
+                    members = members[~sees]
+                    continue
+                sees = reached
+            seen = members[sees]
             members = np.setdiff1d(members, seen)
             depth = points[seen] @ axis
             order = np.argsort(depth)
@@ -327,6 +342,34 @@ def missed_views(
                     faces = np.unique(surface.faces[idx[seen[group]]])
                     views.append(View.looking_along(axis, index + len(views), faces))
     return views
+
+
+class ArmReach(Protocol):
+    """A placed arm as `missed_views` aims views for it: `reaches(points, axis)` (k,) bool,
+    whether it reaches the sensor looking at each point along -axis; `stands_at` (3,), where
+    it stands in the part's frame."""
+
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray: ...
+
+    @property
+    def stands_at(self) -> np.ndarray: ...
+
+
+def _missed_axes(bases: np.ndarray, points: np.ndarray, arm: ArmReach | None) -> list[np.ndarray]:
+    """The axes tried for a group of missed samples (`missed_views`): `bases` tilted towards
+    +Z by each of `MISSED_AXIS_TILTS_DEG`, and with an `arm` also towards where it stands
+    (level: the arm may stand below the part)."""
+    axes = [a for tilt in MISSED_AXIS_TILTS_DEG for a in towards_up(bases, math.radians(tilt))]
+    if arm is None:
+        return axes
+    to_arm = arm.stands_at - points.mean(axis=0)
+    to_arm[2] = 0.0
+    if np.linalg.norm(to_arm) < 1e-9:
+        return axes
+    to_arm /= np.linalg.norm(to_arm)
+    for tilt in MISSED_AXIS_TILTS_DEG[1:]:
+        axes += [view_axis(a) for a in turned_towards(bases, to_arm, math.radians(tilt))]
+    return axes
 
 
 def _sees(

@@ -233,6 +233,10 @@ class PlacedArmOnAxes(PlacedArm):
         super().__init__(robot, tcp, T_base_part, context)
         self.axes = axes
 
+    def aiming(self) -> None:
+        """None: the axes bring a view round to the arm, wherever it stands."""
+        return None
+
     def obstacles(self, part: Part) -> CellObstacles:
         """The cell's obstacles with the turntable's disk among them."""
         if self._obstacles is None or self._obstacles[0] != id(part):

@@ -13,13 +13,19 @@ import numpy as np
 
 from scanplan.core.context import PlanContext
 from scanplan.core.trajectory import Trajectory
+from scanplan.robot.base import inv_rigid
 from scanplan.robot.fit import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.presets import get_robot
+from scanplan.robot.reach import fit_limits
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
+
+# The turns about the beam a nominal sensor pose is tried at by `PlacedArm.reaches`: the
+# raster's direction, which sets it, is chosen only when the view is planned.
+NOMINAL_TURNS = 4
 
 
 class PlacedArm:
@@ -52,6 +58,41 @@ class PlacedArm:
                 obstacles_for(part, cell, spec.sensor, spec.clearance_mm),
             )
         return self._obstacles[1]
+
+    @property
+    def stands_at(self) -> np.ndarray:
+        """(3,) the arm's base in the part's frame."""
+        return inv_rigid(self.T_base_part)[:3, 3]
+
+    def aiming(self) -> PlacedArm | None:
+        """This arm, as the views aimed at what it misses are aimed for it
+        (`views.missed_views`)."""
+        return self
+
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        """(k,) bool: whether the arm reaches, within its joint limits, the sensor looking
+        at each of `points` (k, 3; part frame) along -`axis` (3,) from the working distance,
+        at one of `NOMINAL_TURNS` turns about the beam: whether a view along `axis` may fly
+        anything there. The view's poses lean from its axis as the surface does (the door's
+        top view: 92 % of its footprints reached so, 80 % of its poses), and the links and
+        the cell are left to `flown`: what it may fly, not what it will."""
+        arm = get_robot(self.robot)
+        beam = -np.asarray(axis, float) / np.linalg.norm(axis)
+        side = np.cross(beam, [1.0, 0.0, 0.0])
+        if np.linalg.norm(side) < 1e-6:
+            side = np.cross(beam, [0.0, 1.0, 0.0])
+        side /= np.linalg.norm(side)
+        turns = np.arange(NOMINAL_TURNS) * (2 * np.pi / NOMINAL_TURNS)
+        x = np.cos(turns)[:, None] * side + np.sin(turns)[:, None] * np.cross(beam, side)
+        R = np.stack([x, np.cross(beam, x), np.broadcast_to(beam, x.shape)], axis=-1)
+        sensor = np.broadcast_to(np.eye(4), (NOMINAL_TURNS, len(points), 4, 4)).copy()
+        sensor[..., :3, :3] = R[:, None]
+        sensor[..., :3, 3] = points - self.context.spec.working_distance_mm * beam
+        flange = self.T_base_part @ sensor.reshape(-1, 4, 4) @ inv_rigid(self.tcp)
+        q = arm.inverse(flange)
+        _, inside = fit_limits(q, arm.joint_limits)
+        ok = (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
+        return ok.reshape(NOMINAL_TURNS, len(points)).any(axis=0)
 
     def flown(self, part: Part, traj: Trajectory) -> Trajectory:
         """`traj` as this arm flies it, quickly judged: each pass as planned or turned half

@@ -281,11 +281,17 @@ def unit_perpendicular(v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def towards_up(n: np.ndarray, angle_rad: float) -> np.ndarray:
     """(k, 3): the unit vectors `n` turned towards +Z by up to `angle_rad` (+Z itself where it
     is nearer than that)."""
-    cos_up = np.clip(n[:, 2], -1.0, 1.0)
-    side = UP - cos_up[:, None] * n
+    return turned_towards(n, UP, angle_rad)
+
+
+def turned_towards(n: np.ndarray, to: np.ndarray, angle_rad: float) -> np.ndarray:
+    """(k, 3): the unit vectors `n` turned towards the unit vector `to` by up to `angle_rad`
+    (`to` itself where it is nearer than that)."""
+    cos_to = np.clip(n @ to, -1.0, 1.0)
+    side = to - cos_to[:, None] * n
     norm = np.linalg.norm(side, axis=1, keepdims=True)
     side = np.where(norm > 1e-9, side / np.maximum(norm, 1e-12), 0.0)
-    turn = np.minimum(np.arccos(cos_up), angle_rad)[:, None]
+    turn = np.minimum(np.arccos(cos_to), angle_rad)[:, None]
     return np.cos(turn) * n + np.sin(turn) * side
 
 
