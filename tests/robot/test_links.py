@@ -18,7 +18,7 @@ from scanplan.robot.links import (
     obstacles_for,
     on_table_z,
 )
-from scanplan.world.capsule_collision import CellObstacles, _DistanceField
+from scanplan.world.capsule_collision import CellObstacles, _DistanceField, _SurfaceProxy
 from scanplan.world.cell import TABLE_MARGIN_MM, Cell
 from scanplan.world.part import part_from_mesh
 
@@ -375,3 +375,30 @@ def test_the_distance_field_bounds_the_distance_to_the_nearest_cloud_point() -> 
     inside = np.isfinite(hi)
     assert inside.mean() > 0.2 and (hi[inside] - lo[inside] < 14.0).all()  # two diagonals
     assert (lo[~inside] == 0).all()  # outside its grid it knows nothing
+
+
+def test_the_surface_proxy_says_what_the_exact_distances_of_a_capsules_axis_points_say():
+    # What `within` decides from the distance field's bounds, and the k-d tree only where
+    # they straddle, is what every axis point's exact nearest cloud point says.
+    part = part_from_mesh(trimesh.creation.icosphere(3, radius=30.0), "ball")
+    proxy = _SurfaceProxy(part)
+    assert proxy._cloud is not None
+    cloud = cKDTree(proxy._cloud.copy())
+    rng = np.random.default_rng(5)
+    m = 2000
+    a = rng.uniform(-80, 80, (m, 3))
+    step = rng.normal(size=(m, 3))
+    step *= rng.uniform(0, 80, (m, 1)) / np.linalg.norm(step, axis=1, keepdims=True)
+    segments = np.stack([a, a + step], axis=1)
+    radii = rng.uniform(2.0, 25.0, m)
+    maybe, surely = proxy.within(segments, radii)
+    reach = radii + proxy.bound_mm + 0.5 * proxy.pitch
+    count = np.ceil(np.linalg.norm(step, axis=1) / proxy.pitch).astype(int) + 1
+    owner = np.repeat(np.arange(m), count)
+    t = np.concatenate([np.linspace(0.0, 1.0, c) for c in count])
+    d = cloud.query(a[owner] + t[:, None] * step[owner], distance_upper_bound=200.0)[0]
+    nearest = np.full(m, np.inf)
+    np.minimum.at(nearest, owner, d)
+    np.testing.assert_array_equal(surely, nearest <= radii)
+    np.testing.assert_array_equal(maybe, nearest <= reach)
+    assert 0.1 < surely.mean() and surely.sum() < maybe.sum() < m  # all three verdicts occur
