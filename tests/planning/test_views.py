@@ -29,7 +29,7 @@ from scanplan.planning.views import (
 from scanplan.rl.planners import make_planner
 from scanplan.world.cell import Cell
 from scanplan.world.collision import checker_for
-from scanplan.world.part import part_from_mesh
+from scanplan.world.part import Part, part_from_mesh
 from scanplan.world.surface import hemisphere_visible_samples
 
 SPEC = ScanSpec()
@@ -131,14 +131,18 @@ def _box(centre, extents) -> trimesh.Trimesh:
     return box
 
 
-def test_missed_views_aim_at_what_is_missed_one_per_depth():
-    # Two blocks 300 mm apart along x: their +x walls face one way at two depths.
-    part = part_from_mesh(
+def _two_blocks() -> Part:
+    """Two blocks 300 mm apart along x: their +x walls face one way at two depths."""
+    return part_from_mesh(
         trimesh.util.concatenate(
             [_box((0, 0, 50), (100, 200, 100)), _box((-300, 0, 50), (100, 200, 100))]
         ),
         "blocks",
     )
+
+
+def test_missed_views_aim_at_what_is_missed_one_per_depth():
+    part = _two_blocks()
     samples = hemisphere_visible_samples(part, 3.0)
     normals = part.mesh.face_normals[samples.faces]
     missed = normals[:, 0] > 0.99
@@ -258,12 +262,7 @@ class _ReachesNearBlock:
 
 
 def test_missed_views_for_an_arm_are_aimed_only_at_what_it_reaches():
-    part = part_from_mesh(
-        trimesh.util.concatenate(
-            [_box((0, 0, 50), (100, 200, 100)), _box((-300, 0, 50), (100, 200, 100))]
-        ),
-        "blocks",
-    )
+    part = _two_blocks()
     samples = hemisphere_visible_samples(part, 3.0)
     missed = part.mesh.face_normals[samples.faces][:, 0] > 0.99
     # It reaches the near block's wall (x = 50), not the far one's (x = -250).
