@@ -130,7 +130,7 @@ class _SurfaceProxy:
         np.logical_or.at(surely, whose, hi <= rad)
         np.logical_or.at(maybe, whose, hi <= r)
         # The bounds straddle the radius or the reach: the exact distance decides (the
-        # quadrotor's placement: 58 000 points near its hull, most settled by the bounds).
+        # bounds are within a voxel's diagonal of it, so few points are asked).
         unsure = ((lo <= rad) & (hi > rad)) | ((lo <= r) & (hi > r))
         # A capsule known to touch needs no more; one known to come near, only the radius.
         ask = np.flatnonzero(unsure & ~surely[whose] & ~(maybe[whose] & (lo > rad)))
