@@ -40,8 +40,9 @@ from scanplan.robot.reach import ReachReport, check_reach, pass_starts
 from scanplan.world.capsule_collision import CellObstacles
 
 _LINK_RANK_POSES = 1500  # poses whose links rank the final candidates
-# The search's defaults (its yaw step is `quantities.PLACE_YAW_STEP_DEG`): the poses it scores
-# the coarse grid and the pattern search on, and how many of the grid's best it moves on from.
+# The search's settings (its yaw step's default is `quantities.PLACE_YAW_STEP_DEG`): the
+# poses it scores the coarse grid and the pattern search on, and how many of the grid's best
+# it moves on from.
 COARSE_POSES, FINE_POSES, KEEP = 48, 256, 6
 # Weighted, the poses added to the samples for each view they miss: only those, and few,
 # since the coarse grid's cost grows with its sample (the quadrotor's 116 views, every one
@@ -231,9 +232,6 @@ def place(
     tcp: np.ndarray | None = None,
     height_range_mm: tuple[float, float] | None = None,
     yaw_step_deg: float = PLACE_YAW_STEP_DEG,
-    coarse_poses: int = COARSE_POSES,
-    fine_poses: int = FINE_POSES,
-    keep: int = KEEP,
     obstacles: CellObstacles | None = None,
     weights: np.ndarray | None = None,
 ) -> Placement:
@@ -247,9 +245,8 @@ def place(
     arm = get_robot(robot)
     tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=np.float64)
     T_best, score, evaluated = best_placement(
-        traj, arm, tcp, height_range_mm, yaw_step_deg, coarse_poses, fine_poses, keep,
-        obstacles, weights,
-    )  # fmt: skip
+        traj, arm, tcp, height_range_mm, yaw_step_deg, obstacles, weights
+    )
     T_part_flange = traj.poses @ np.linalg.inv(tcp)
     report = check_reach(T_best @ T_part_flange, arm, swath=traj.swath, scanning=traj.scanning)
     chosen = Placement(T_best, report, score, evaluated, 0.0)
@@ -271,9 +268,6 @@ def best_placement(
     tcp: np.ndarray,
     height_range_mm: tuple[float, float] | None = None,
     yaw_step_deg: float = PLACE_YAW_STEP_DEG,
-    coarse_poses: int = COARSE_POSES,
-    fine_poses: int = FINE_POSES,
-    keep: int = KEEP,
     obstacles: CellObstacles | None = None,
     weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, int]:
@@ -292,7 +286,7 @@ def best_placement(
     centre = T_part_flange[:, :2, 3].mean(axis=0)
 
     # Coarse: a grid along a line out to the arm's reach, every yaw step, a few heights.
-    coarse, w = weighted_sample(traj, weights, sample_poses(traj, coarse_poses), _COARSE_PER_VIEW)
+    coarse, w = weighted_sample(traj, weights, sample_poses(traj, COARSE_POSES), _COARSE_PER_VIEW)
     step = reach / 6
     heights = np.linspace(lo, hi, 7) if hi > lo else np.array([lo])
     top = None  # and, in a cell, standing on the table's top
@@ -306,7 +300,7 @@ def best_placement(
     )
     # And on evenly spaced poses alone: a pass's first and last poses can outweigh the scanning
     # in the sample above (the drone on a UR5e kept 0.87 of its poses from one, 0.75 from it).
-    even = np.linspace(0, len(traj) - 1, min(coarse_poses, len(traj))).round().astype(int)
+    even = np.linspace(0, len(traj) - 1, min(COARSE_POSES, len(traj))).round().astype(int)
     even, w = weighted_sample(traj, weights, even, _COARSE_PER_VIEW)
     even_scores = placement_scores(
         arm, T_part_flange[even], run_starts(traj, even), placements, obstacles, w
@@ -314,11 +308,11 @@ def best_placement(
     evaluated = 2 * len(grid)
 
     # Fine: pattern search from the best few, on more poses; all candidates move at once.
-    fine, w = weighted_sample(traj, weights, sample_poses(traj, fine_poses), _FINE_PER_VIEW)
+    fine, w = weighted_sample(traj, weights, sample_poses(traj, FINE_POSES), _FINE_PER_VIEW)
     starts = run_starts(traj, fine)
     # Seeds: the best few, and in a cell the best yaws at each height too, since the margins
     # favour heights from which the links may not clear the table (ranked at the end).
-    seeds, held = _seeds(grid, heights, scores, even_scores, keep, obstacles is not None, top)
+    seeds, held = _seeds(grid, heights, scores, even_scores, KEEP, obstacles is not None, top)
     best = grid[seeds]
     placed = placement_poses(best, centre)
     best_scores = placement_scores(arm, T_part_flange[fine], starts, placed, obstacles, w)
