@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 import scanplan.planning.pass_path as pass_path_module
 import scanplan.planning.pipeline as pipeline_module
+import scanplan.planning.view_choice as view_choice_module
 import scanplan.planning.view_joining as view_joining_module
 import scanplan.planning.view_workers as view_workers_module
 from helpers import HEMISPHERE, fcl_distance, fixture_files, overhang_part, straight
@@ -516,3 +517,46 @@ def test_the_planner_places_the_arm_where_place_does(housing_views):
     placement = place(traj, "ur5e", tcp)
     assert np.array_equal(T, placement.T_base_part)
     assert score == placement.score and evaluated == placement.evaluated > 0
+
+
+class _FliesAll:
+    """An arm standing at -y that reaches every point and flies every view as planned."""
+
+    stands_at = np.array([0.0, -900.0, 0.0])
+
+    def aiming(self) -> _FliesAll:
+        return self
+
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        return np.ones(len(points), bool)
+
+    def flown(self, part, traj: Trajectory) -> Trajectory:
+        return traj
+
+
+def test_views_aimed_at_what_is_missed_are_scanned_up_their_tilt_too_for_an_arm(monkeypatch):
+    """The views aimed at what the chosen ones miss join the candidates as the raster's
+    rule has them and scanned level; for an arm, scanned up their tilt too (the sensor a
+    quarter turn round), one of each per tilted view, and only for an arm."""
+    part = overhang_part()
+    cell = planned_cell(PlanContext(SPEC, views="auto"), part)
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
+    aimed: list[list[str]] = []
+    add_missed = view_choice_module._Greedy._add_missed
+
+    def spied(self, scan_level):
+        before = len(self.candidates)
+        added = add_missed(self, scan_level)
+        aimed.append([v.scan for v in self.candidates[before:]])
+        return added
+
+    monkeypatch.setattr(view_choice_module._Greedy, "_add_missed", spied)
+    scans = {}
+    for name, arm in (("free", None), ("arm", _FliesAll())):
+        aimed.clear()
+        choose_views(part, SPEC, plan, workers=0, arm=arm)
+        scans[name] = [s for added in aimed for s in added]
+    free, arm = scans["free"], scans["arm"]
+    assert free.count("level") > 0 and "uphill" not in free
+    assert arm.count("uphill") == arm.count("level") > 0
+    assert arm.count("rule") == free.count("rule")  # the arm flies all: the same views aimed

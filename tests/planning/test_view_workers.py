@@ -17,7 +17,7 @@ from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part, tcp
 from scanplan.core.quantities import OVERLAP, UP, ScanSpec
 from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.view_workers import ViewJudge, ViewWorkers, _warm_up
-from scanplan.planning.views import View, view_axis
+from scanplan.planning.views import SCAN_LEVEL, View, view_axis
 from scanplan.rl.planners import make_planner
 from scanplan.world.cell import Cell
 
@@ -39,7 +39,7 @@ def test_views_planned_on_a_worker_are_those_planned_here():
     part = overhang_part()
     plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
     judge = ViewJudge(SPEC, plan, points_per_profile=64)
-    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, level=True)
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, scan=SCAN_LEVEL)
     views = [View.looking_along(UP, 0), side]
     here = [judge(part, v) for v in views]
     with ViewWorkers(part, judge, workers=1) as pool:
@@ -91,7 +91,7 @@ def test_a_view_whose_worker_dies_is_planned_here_and_the_rest_too():
     part = overhang_part()
     raster = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
     judge = ViewJudge(SPEC, DiesInAWorker(raster), points_per_profile=64)
-    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, level=True)
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, scan=SCAN_LEVEL)
     here = judge(part, side)
     with ViewWorkers(part, judge, workers=1) as pool:
         lost = pool.submit(side)

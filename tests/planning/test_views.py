@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,6 +17,9 @@ from scanplan.planning.pass_path import plan_scan
 from scanplan.planning.pipeline import plan_views
 from scanplan.planning.view_choice import steep_samples, top_view_may_suffice
 from scanplan.planning.views import (
+    SCAN_LEVEL,
+    SCAN_RULE,
+    SCAN_UPHILL,
     VIEW_AXIS_MAX_TILT_DEG,
     View,
     candidate_views,
@@ -203,15 +207,21 @@ def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():
     wall = np.flatnonzero((part.mesh.face_normals[:, 1] < -0.99) & (centres[:, 2] < 0))
     wall_y, wall_top = centres[wall[0], 1], part.mesh.vertices[part.mesh.faces[wall], 2].max()
     axis = view_axis(np.array([0.0, -1.0, 0.0]))
-    level = View.looking_along(axis, 1, wall, level=True)
-    along = level.level_direction()
+    level = View.looking_along(axis, 1, wall, scan=SCAN_LEVEL)
+    along = level.scan_direction()
     assert along is not None and abs(along[2]) < 1e-9  # level in the view frame ...
     assert abs((np.linalg.inv(level.R)[:3, :3] @ along)[2]) < 1e-9  # ... and the part's
     assert View.looking_along(UP).level_direction() is None
+    # Up the tilt: a quarter turn from level about the view's axis; the rule: no direction.
+    uphill = replace(level, scan=SCAN_UPHILL).scan_direction()
+    assert uphill is not None and abs(uphill @ along) < 1e-9 and abs(uphill[2]) < 1e-9
+    assert abs((np.linalg.inv(level.R)[:3, :3] @ uphill)[2]) > 0.1  # climbs in the part's
+    assert replace(level, scan=SCAN_RULE).scan_direction() is None
+    assert View.looking_along(UP, scan=SCAN_UPHILL).scan_direction() is None
     cell = Cell.around(part)
     planner = make_planner("geometric")
     held = {}
-    for name, direction in (("level", along), ("up the tilt", np.cross(UP, along))):
+    for name, direction in (("level", along), ("up the tilt", uphill)):
 
         def plan(view_part, view, direction=direction):
             swaths, traj = plan_scan(

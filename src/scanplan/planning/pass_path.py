@@ -206,8 +206,8 @@ def _all_too_near(part: Part, spec: ScanSpec) -> str:
 @dataclass(frozen=True)
 class ViewRaster:
     """How `plan_views` plans a view (a `views.PlanView`): `plan_scan` of the part turned
-    into the view's frame, in the cell turned with it; a level view (`View.level`) scanned
-    level unless a direction was given. Picklable, for the view workers."""
+    into the view's frame, in the cell turned with it; a view scanned level or up its tilt
+    (`View.scan_direction`) so unless a direction was given. Picklable, for the view workers."""
 
     spec: ScanSpec
     planner: Planner
@@ -219,13 +219,13 @@ class ViewRaster:
     def __call__(
         self, view_part: Part, view: View, progress: Callable[[int, int], None] | None = None
     ) -> tuple[int, Trajectory]:
-        level = view.level_direction() if view.level and self.direction == "auto" else None
+        scan = view.scan_direction() if self.direction == "auto" else None
         swaths, traj = plan_scan(
             view_part,
             self.spec,
             self.planner,
             self.raster,
-            self.direction if level is None else level,
+            self.direction if scan is None else scan,
             self.overlap,
             progress,
             self.cell.rotated(view.R),

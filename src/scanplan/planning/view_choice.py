@@ -25,7 +25,15 @@ from scanplan.core.quantities import (
 )
 from scanplan.judging import coverage_spacing_mm
 from scanplan.planning.view_workers import KnownViews, ViewJudge, ViewWorkers
-from scanplan.planning.views import PlanView, View, ViewPlan, candidate_views, missed_views
+from scanplan.planning.views import (
+    SCAN_LEVEL,
+    SCAN_UPHILL,
+    PlanView,
+    View,
+    ViewPlan,
+    candidate_views,
+    missed_views,
+)
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.world.part import Part
 from scanplan.world.surface import VisibleSurface, hemisphere_visible_samples, reachable_samples
@@ -132,8 +140,9 @@ def choose_views(
     `min_gain_per_s` per second of its time in the cycle (`cycle.view_seconds`); when none
     does, views
     aimed at what a beam could reach and no chosen view holds (`views.missed_views`) join
-    the candidates, `MISSED_ROUNDS` times at most, each also scanned level (`View.level`,
-    with `scan_level`: the direction rule left to the raster's 'auto'), none planned twice.
+    the candidates, `MISSED_ROUNDS` times at most, each also scanned level (`View.scan`,
+    with `scan_level`: the direction rule left to the raster's 'auto'; with an `arm`, up
+    its tilt too), none planned twice.
     A panel whose top view reaches the
     target (the door) stays one view. The exact cover by as many views among all those
     planned (`cover.max_cover`) is computed for scale (`exact_coverage`), not kept.
@@ -261,7 +270,7 @@ class _Greedy:
         self.pool: ViewWorkers | None = None
         self.candidates: list[View] = []
         self.on_faces: list[np.ndarray] = []  # the samples on each candidate's faces
-        self.tried: set[tuple[bytes, bytes, bool]] = set()
+        self.tried: set[tuple[bytes, bytes, str]] = set()
         # Asked of the workers, not yet taken: with workers, the next candidates the choice
         # would try (those not planned yet with the largest bounds), `pool.width` of them, so
         # the workers plan ahead of it. Asking for every candidate at once wasted more than it
@@ -403,8 +412,13 @@ class _Greedy:
         # Each also scanned level: a strip under an overhang or down a pocket is seen
         # only so (the camera beside the laser), but level costs the stepped plate and
         # the quadrotor 7 and 2 points of their ceiling when every view is scanned so.
+        # With an arm, also up the tilt: the sensor a quarter turn round, where the wrist
+        # may reach what it cannot scanning the other ways (the sheet metal on a KR 6,
+        # flown 0.735 -> 0.749; nothing lost on the drone, quadrotor or plates).
         if scan_level:
-            more += [replace(v, level=True) for v in more if v.level_direction() is not None]
+            tilted = [v for v in more if v.level_direction() is not None]
+            scans = (SCAN_LEVEL,) if self.arm is None else (SCAN_LEVEL, SCAN_UPHILL)
+            more += [replace(v, scan=scan) for scan in scans for v in tilted]
         # A view planned before would add what it added then: nothing worth a view.
         more = [v for v in more if v.key() not in self.tried]
         if not more:

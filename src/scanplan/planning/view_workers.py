@@ -40,7 +40,7 @@ TASKS_AHEAD = 2
 
 
 # A view's key (`View.key`) -> its plan and in-spec set, as a view choice judged them.
-KnownViews = dict[tuple[bytes, bytes, bool], tuple[ViewPlan, np.ndarray]]
+KnownViews = dict[tuple[bytes, bytes, str], tuple[ViewPlan, np.ndarray]]
 
 
 @dataclass(frozen=True)

@@ -114,28 +114,33 @@ def rotation_to_up(axis: np.ndarray) -> np.ndarray:
     return R
 
 
+# How a tilted view's passes run (`View.scan`): by the raster's direction rule; level in the
+# part frame, across the tilt (`View.level_direction`); or up the tilt, the laser line level.
+SCAN_RULE, SCAN_LEVEL, SCAN_UPHILL = "rule", "level", "uphill"
+
+
 @dataclass(frozen=True)
 class View:
     """One raster of the scan, seen along −axis.
 
     index: order of the view; axis: (3,) unit, the view's up (part frame); R: (4, 4) the
     rotation mapping the part frame to the view frame (axis → +Z); faces: (k,) int the
-    faces of its region (None: the whole surface to inspect, the top view); level: scanned
-    level (`level_direction`) rather than by the raster's direction rule.
+    faces of its region (None: the whole surface to inspect, the top view); scan: how its
+    passes run (`SCAN_RULE`, `SCAN_LEVEL`, `SCAN_UPHILL`; `scan_direction`).
     """
 
     index: int
     axis: np.ndarray
     R: np.ndarray
     faces: np.ndarray | None = None
-    level: bool = False
+    scan: str = SCAN_RULE
 
     @staticmethod
     def looking_along(
-        axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None, level: bool = False
+        axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None, scan: str = SCAN_RULE
     ) -> View:
         axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
-        return View(index, axis, rotation_to_up(axis), faces, level)
+        return View(index, axis, rotation_to_up(axis), faces, scan)
 
     def part(self, part: Part) -> Part:
         """The part in the view frame (`Part.turned`: its ray engine and collision model
@@ -151,10 +156,10 @@ class View:
             mask &= region
         return replace(part.turned(self.R), inspect_faces=mask)
 
-    def key(self) -> tuple[bytes, bytes, bool]:
+    def key(self) -> tuple[bytes, bytes, str]:
         """What makes two proposed views the same view: their axis, region and scan rule."""
         faces = b"" if self.faces is None else np.sort(np.asarray(self.faces)).tobytes()
-        return np.round(self.axis, 9).tobytes(), faces, self.level
+        return np.round(self.axis, 9).tobytes(), faces, self.scan
 
     def level_direction(self) -> np.ndarray | None:
         """The scan direction of a tilted view, in its frame: level in the part frame
@@ -167,6 +172,15 @@ class View:
         if norm < 1e-9:
             return None
         return self.R[:3, :3] @ (across / norm)
+
+    def scan_direction(self) -> np.ndarray | None:
+        """The scan direction `scan` sets, in the view's frame: level, or up the tilt (a
+        quarter turn from level about the view's axis). None: the raster's direction rule
+        decides (`SCAN_RULE`, or a view looking straight down, which has no tilt)."""
+        level = self.level_direction()
+        if level is None or self.scan == SCAN_RULE:
+            return None
+        return level if self.scan == SCAN_LEVEL else np.cross([0.0, 0.0, 1.0], level)
 
     def to_part_frame(self, traj: Trajectory) -> Trajectory:
         """A trajectory planned in the view frame, back in the part frame (R⁻¹ @ T)."""
