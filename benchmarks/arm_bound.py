@@ -15,11 +15,12 @@ placement the share is judged again with the poses twice as dense (has the sampl
 settled?) and with the arm's links kept clear of the part and the table (`links.check_links`,
 any branch within the limits).
 
-The placements searched: the arm's shoulder on a grid (`--step` mm) where `place` lets it
-stand (`reach_bound.Stands`), the base turned to face the part. A shoulder position is
-judged by the IK only while the reach bound there (the share whose wrist shell it reaches,
-never below the IK's share) is above the best IK share found, best first: so the best of the
-grid is found without judging most of it.
+The placements searched: the arm's shoulder on a grid (`--step` mm) where an arm may stand
+(`reach_bound.Stands`: beside the table's block or on its top, its column clear of the
+table, its base's axis off the part's footprint), the base turned to face the part. A
+shoulder position is judged by the IK only while the reach bound there (the share whose
+wrist shell it reaches, never below the IK's share) is above the best IK share found, best
+first: so the best of the grid is found without judging most of it.
 
     cd benchmarks && PYTHONPATH=../src python arm_bound.py ../../shared/parts \
         [--only drone,quadrotor] [--robots ur5e,kr6-r900] [--tcp 0,0,90,0,0,0] \
@@ -161,6 +162,9 @@ def best_shoulder(judge: Judge, pts, nrm, shell: Shell, reach: float, stands: St
     grow = reach + shell.far_mm
     lo, hi = pts.min(axis=0) - grow, pts.max(axis=0) + grow
     axes = [np.arange(a, b + step, step) for a, b in zip(lo, hi, strict=True)]
+    # Standing on the table's top, the shoulder is within a few millimetres of one height,
+    # which the grid's heights would seldom hit.
+    axes[2] = np.union1d(axes[2], np.mean(stands.on_top_z))
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     grid = grid[stands.holds(grid)]
     upper, _ = _shares(grid, pts, nrm, shell, (reach, reach))
@@ -176,6 +180,8 @@ def best_shoulder(judge: Judge, pts, nrm, shell: Shell, reach: float, stands: St
         return best, best_at, best_upper, judged
     offsets = np.stack(np.meshgrid(*[[-0.5, 0.0, 0.5]] * 3, indexing="ij"), -1).reshape(-1, 3)
     near = best_at + offsets[np.abs(offsets).sum(axis=1) > 0] * step
+    if abs(best_at[2] - np.mean(stands.on_top_z)) < 1e-6:  # on the top: stays at its height
+        near = near[np.abs(near[:, 2] - best_at[2]) < 1e-6]
     for at in near[stands.holds(near)]:
         got = judge(at)
         judged += 1
@@ -226,7 +232,11 @@ def main() -> None:
             robot = get_robot(arm)
             wrist = wrist_reach(robot)
             start = time.perf_counter()
-            stands = Stands.of(robot, wrist, block, part.bounds, spec.clearance_mm)
+            # The base's axis anywhere off the part's footprint, its column not kept clear
+            # of the part: looser than `place` (it keeps the links clear), so a bound on it.
+            stands = replace(
+                Stands.of(robot, wrist, block, part.bounds, spec.clearance_mm), sweep_mm=0.0
+            )
             shell = wrist_shell(spec, inv_rigid(inv_tcp), wrist)
             judge = Judge(robot, poses[0], inv_tcp, middle, float(seen.mean()))
             if args.part_pose:  # this placement only: the reach bound is not searched
