@@ -16,8 +16,8 @@ settled?) and with the arm's links kept clear of the part and the table (`links.
 any branch within the limits).
 
 The placements searched: the arm's shoulder on a grid (`--step` mm) where an arm may stand
-(`reach_bound.Stands`: beside the table's block or on its top, its column clear of the
-table, its base's axis off the part's footprint), the base turned to face the part. A
+(`StandsClear`: beside the table's block or on its top, the column of links that turn with
+joint 1 alone clear of the table and the part), the base turned to face the part. A
 shoulder position is judged by the IK only while the reach bound there (the share whose
 wrist shell it reaches, never below the IK's share) is above the best IK share found, best
 first: so the best of the grid is found without judging most of it.
@@ -43,7 +43,7 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.judging.evaluation import coverage_spacing_mm, in_spec_radius_mm
 from scanplan.robot.base import Robot, inv_rigid
 from scanplan.robot.export.rotations import pose_from_xyzabc
-from scanplan.robot.links import check_links, obstacles_for
+from scanplan.robot.links import check_links, obstacles_for, swept_column
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import fit_limits
 from scanplan.world.capsule_collision import CellObstacles
@@ -155,7 +155,39 @@ class Judge:
         return float(ok.mean()) * self.share
 
 
-def best_shoulder(judge: Judge, pts, nrm, shell: Shell, reach: float, stands: Stands, step: float):
+@dataclass(frozen=True)
+class StandsClear:
+    """Where an arm may stand, for the bound: as `reach_bound.Stands` has it (its column clear
+    of the table, its base's axis off the part's footprint) and its column (the links that
+    turn with joint 1 alone, swept about the vertical: `links.swept_column`) clear of the
+    part's surface `points` (part frame). Kept no clearance away, the other links unchecked:
+    looser than `place`, so the bound holds for wherever it may put the arm."""
+
+    stands: Stands
+    points: np.ndarray
+    shoulder_up_mm: float  # the shoulder above the base frame
+    column: tuple[float, float, float]  # its radius, lowest and highest point over the base
+
+    @property
+    def on_top_z(self) -> tuple[float, float]:
+        return self.stands.on_top_z
+
+    def holds(self, shoulders: np.ndarray) -> np.ndarray:
+        """(c,) whether an upright arm can stand with its shoulder at each of (c, 3)."""
+        ok = self.stands.holds(shoulders)
+        radius, low, high = self.column
+        z = self.points[:, 2]
+        at = np.flatnonzero(ok)
+        for lo in range(0, len(at), 128):
+            some = at[lo : lo + 128]
+            base = shoulders[some, 2, None] - self.shoulder_up_mm
+            near = np.linalg.norm(shoulders[some, None, :2] - self.points[None, :, :2], axis=-1)
+            inside = (near < radius) & (z >= base + low) & (z <= base + high)
+            ok[some[inside.any(axis=1)]] = False
+        return ok
+
+
+def best_shoulder(judge: Judge, pts, nrm, shell: Shell, reach: float, stands: StandsClear, step):
     """The shoulder position with the most samples held: the best of a `step` grid, judged
     best first by the reach bound there until that bound is below the best found; then the
     grid half as fine about it. Returns (share, shoulder, the reach bound there, judged)."""
@@ -232,10 +264,13 @@ def main() -> None:
             robot = get_robot(arm)
             wrist = wrist_reach(robot)
             start = time.perf_counter()
-            # The base's axis anywhere off the part's footprint, its column not kept clear
-            # of the part: looser than `place` (it keeps the links clear), so a bound on it.
-            stands = replace(
-                Stands.of(robot, wrist, block, part.bounds, spec.clearance_mm), sweep_mm=0.0
+            beside = Stands.of(robot, wrist, block, part.bounds, spec.clearance_mm)
+            stands = StandsClear(
+                # Anywhere its column clears the table and the part (`_gap` > -1: always).
+                replace(beside, sweep_mm=-1.0),
+                surface.points[np.random.default_rng(1).permutation(len(surface.points))[:30_000]],
+                float(wrist.shoulder[2]),
+                swept_column(robot),
             )
             shell = wrist_shell(spec, inv_rigid(inv_tcp), wrist)
             judge = Judge(robot, poses[0], inv_tcp, middle, float(seen.mean()))
