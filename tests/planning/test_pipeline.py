@@ -29,8 +29,8 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging import evaluate
 from scanplan.planning.pass_path import ViewRaster, passes_blocked, plan_scan
 from scanplan.planning.pipeline import Arm, default_views, plan_views
+from scanplan.planning.view_budget import ViewBudget
 from scanplan.planning.view_choice import (
-    ViewBudget,
     _eval_spacing,
     choose_views,
     steep_samples,

@@ -25,7 +25,7 @@ from scanplan.judging.verdict import (
     verdict_lines,
 )
 from scanplan.planning.pipeline import Arm, plan_views
-from scanplan.planning.view_choice import ViewBudget
+from scanplan.planning.view_budget import ViewBudget
 from scanplan.rl.planners import make_planner
 from scanplan.robot.axes import combined, load_positioner, track_of
 from scanplan.robot.export import parse_pose_arg

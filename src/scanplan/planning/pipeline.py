@@ -21,7 +21,8 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.judging import in_spec_samples
 from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.planners import Planner
-from scanplan.planning.view_choice import ViewBudget, ViewSelection, choose_views
+from scanplan.planning.view_budget import ViewBudget
+from scanplan.planning.view_choice import ViewSelection, choose_views
 from scanplan.planning.view_joining import join_views, order_views
 from scanplan.planning.view_workers import process_beside, view_worker_count
 from scanplan.planning.views import View, ViewPlan, plan_view

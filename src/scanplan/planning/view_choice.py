@@ -6,7 +6,6 @@ the budget the choice may spend and the rules a view must pass to be kept.
 from __future__ import annotations
 
 import math
-import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
@@ -19,11 +18,11 @@ from scanplan.core.limits import TooLarge
 from scanplan.core.quantities import (
     COVERAGE_TARGET,
     UP,
-    VIEW_CHOICE_CANDIDATES,
     VIEW_CHOICE_FAN_POINTS,
     ScanSpec,
 )
 from scanplan.judging import coverage_spacing_mm
+from scanplan.planning.view_budget import Spent, ViewBudget
 from scanplan.planning.view_workers import KnownViews, ViewJudge, ViewWorkers
 from scanplan.planning.views import (
     SCAN_LEVEL,
@@ -61,26 +60,6 @@ MAX_VIEWS = 150
 # along them and roll to 85° across): a part with more than 1 - COVERAGE_TARGET of its
 # surface steeper needs more views.
 TOP_VIEW_SLOPE_DEG = 75.0
-
-
-@dataclass(frozen=True)
-class ViewBudget:
-    """How much the view choice may do: `candidates` views planned (work, the same on any
-    machine), and a wall-clock limit in `seconds` only where the user asks for one."""
-
-    candidates: int = VIEW_CHOICE_CANDIDATES
-    seconds: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.candidates < 1:
-            raise ValueError(f"--view-candidates must be at least 1, got {self.candidates}")
-        if self.seconds is not None and not (math.isfinite(self.seconds) and self.seconds > 0):
-            raise ValueError(f"--view-seconds must be a number of seconds > 0, got {self.seconds}")
-
-    def said(self) -> str:
-        """How the plan's note names the budget that stopped the choice."""
-        limit = f"{self.candidates} candidate views"
-        return limit + (f" or {self.seconds:g} s" if self.seconds is not None else "")
 
 
 @dataclass(frozen=True)
@@ -169,7 +148,7 @@ def choose_views(
     of it (`placed_arm.PlacedArm.flown`), so the cover is of what the arm can scan; `known`, the
     views a choice without the arm planned (`ViewSelection.known`), are not planned again."""
 
-    spent = _Spent(ViewBudget() if budget is None else budget)
+    spent = Spent(ViewBudget() if budget is None else budget)
     judge = ViewJudge(spec, plan, points_per_profile, seed, arm, known)
     with ExitStack() as stack:
         # The top view is planned on a thread of its own from the start, beside the samples
@@ -206,31 +185,6 @@ def choose_views(
     return greedy.selection()
 
 
-class _Spent:
-    """What the view choice has spent of its `budget`: candidates taken, and the clock."""
-
-    def __init__(self, budget: ViewBudget) -> None:
-        self.budget = budget
-        self.deadline = None if budget.seconds is None else time.perf_counter() + budget.seconds
-        self.taken = 0  # candidates whose plan the choice has taken: the work it counts
-        self.timed_out = False
-
-    def out_of_work(self) -> bool:
-        """Whether the candidates the budget allows are all taken (said as out of time)."""
-        self.timed_out = self.timed_out or self.taken >= self.budget.candidates
-        return self.timed_out
-
-    def out_of_time(self) -> bool:
-        # Asked only where another candidate would be planned: True means one was not.
-        # Counted in candidates taken, not asked of the workers (how far they plan ahead
-        # depends on the cores), so the same views on any machine and any load.
-        self.timed_out = self.timed_out or self.taken >= self.budget.candidates
-        self.timed_out = self.timed_out or (
-            self.deadline is not None and time.perf_counter() > self.deadline
-        )
-        return self.timed_out
-
-
 @dataclass(frozen=True)
 class _KeepRule:
     """When a view's gain is worth a view (`choose_views`): at least `min_gain`, or at least
@@ -256,7 +210,7 @@ class _Greedy:
         part: Part,
         spec: ScanSpec,
         samples: VisibleSurface,
-        spent: _Spent,
+        spent: Spent,
         rule: _KeepRule,
         coverage_target: float,
         arm: PlacedArm | None = None,
