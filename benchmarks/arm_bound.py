@@ -33,23 +33,17 @@ import argparse
 import math
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
-from compare_views import PARTS  # the shared parts and their units (benchmarks/)
-from reach_bound import Shell, Stands, _shares, wrist_reach, wrist_shell
+from reach_bound import Shell, Stands, _shares, judged_parts, wrist_reach, wrist_shell
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.judging.evaluation import coverage_spacing_mm, in_spec_radius_mm
 from scanplan.robot.base import Robot, inv_rigid
 from scanplan.robot.export.rotations import pose_from_xyzabc
 from scanplan.robot.links import check_links, obstacles_for, swept_column
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import fit_limits
 from scanplan.world.capsule_collision import CellObstacles
-from scanplan.world.cell import Cell
-from scanplan.world.part import load_part
-from scanplan.world.surface import hemisphere_visible_samples, oriented_normals, reachable_samples
 
 _SAMPLES = 800  # visible samples judged (a random subset, the same for every placement)
 _CHUNK = 50_000  # poses per inverse-kinematics call
@@ -234,32 +228,21 @@ def main() -> None:
     )
     args = ap.parse_args()
     spec = ScanSpec()
-    sensor = spec.sensor.with_points(256)
     inv_tcp = inv_rigid(pose_from_xyzabc(float(v) for v in args.tcp.split(",")))
     print(
         "part | arm | ceiling | reach bound | IK bound | finer poses | with links | shoulder "
         "| judged (s)"
     )
     print("---|---|---|---|---|---|---|---|---")
-    parts = {"drone": "mm", "door": "mm"}
-    parts |= {str(Path(args.parts_dir) / n): u for n, u in PARTS.items()}
-    for name, units in parts.items():
-        if args.only and not any(o in name for o in args.only.split(",")):
-            continue
-        part = load_part(name, units)
-        surface = hemisphere_visible_samples(part, coverage_spacing_mm(sensor), 0)
-        cell = Cell.around(part)
-        seen = reachable_samples(cell.occluding(part), surface, spec.tol_angle_rad)
-        normals = oriented_normals(part)[surface.faces]
+    for case in judged_parts(args.parts_dir, args.only, spec):
+        part, surface, seen, normals = case.part, case.surface, case.seen, case.normals
+        cell, block, slack = case.cell, case.block, case.slack_mm
         pick = np.flatnonzero(seen)
         pick = np.sort(np.random.default_rng(0).choice(pick, min(_SAMPLES, len(pick)), False))
         pts, nrm = surface.points[pick], normals[pick]
         middle = (pts.min(axis=0) + pts.max(axis=0)) / 2
         obstacles = obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
         poses = {fine: _clear(in_spec_poses(pts, nrm, spec, fine), obstacles) for fine in (0, 1)}
-        block = cell.table_block(part)
-        assert block is not None
-        slack = in_spec_radius_mm(spec, sensor.line_width_mm / (sensor.points_per_profile - 1))
         for arm in args.robots.split(","):
             robot = get_robot(arm)
             wrist = wrist_reach(robot)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,8 +43,13 @@ from scanplan.robot.opw import OPWRobot
 from scanplan.robot.presets import get_robot
 from scanplan.robot.ur import URModel
 from scanplan.world.cell import Cell
-from scanplan.world.part import load_part
-from scanplan.world.surface import hemisphere_visible_samples, oriented_normals, reachable_samples
+from scanplan.world.part import Part, load_part
+from scanplan.world.surface import (
+    VisibleSurface,
+    hemisphere_visible_samples,
+    oriented_normals,
+    reachable_samples,
+)
 
 # The branch and bound: first cells this wide (mm), halved until this fine, or until the
 # bound is within this share of the best placement found.
@@ -267,6 +273,42 @@ def checked_radius(robot: Robot, wrist: WristReach, samples: int = 200_000) -> f
     return float(np.linalg.norm(at - wrist.shoulder, axis=1).max()) / wrist.radius_mm
 
 
+@dataclass(frozen=True)
+class Judged:
+    """A part as the bounds judge it: its samples seen from the upper hemisphere at 256
+    columns (`surface`, `evaluate`'s), those the visibility ceiling sees (`seen`), their
+    outward `normals`, the table's `block` under it, and `slack_mm`: how far the point
+    measured may lie from a sample it holds in spec (the in-spec radius)."""
+
+    part: Part
+    surface: VisibleSurface
+    seen: np.ndarray
+    normals: np.ndarray
+    cell: Cell
+    block: tuple[np.ndarray, np.ndarray]
+    slack_mm: float
+
+
+def judged_parts(parts_dir: str, only: str, spec: ScanSpec) -> Iterator[Judged]:
+    """The built-in drone and door and the shared parts in `parts_dir` whose name holds one
+    of `only`'s comma-separated names (all if empty), each `Judged`."""
+    sensor = spec.sensor.with_points(256)
+    parts = {"drone": "mm", "door": "mm"}
+    parts |= {str(Path(parts_dir) / n): u for n, u in PARTS.items()}
+    for name, units in parts.items():
+        if only and not any(o in name for o in only.split(",")):
+            continue
+        part = load_part(name, units)
+        surface = hemisphere_visible_samples(part, coverage_spacing_mm(sensor), 0)
+        cell = Cell.around(part)
+        seen = reachable_samples(cell.occluding(part), surface, spec.tol_angle_rad)
+        block = cell.table_block(part)
+        assert block is not None
+        pitch = sensor.line_width_mm / (sensor.points_per_profile - 1)
+        normals = oriented_normals(part)[surface.faces]
+        yield Judged(part, surface, seen, normals, cell, block, in_spec_radius_mm(spec, pitch))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("parts_dir", nargs="?", default="../shared/parts")
@@ -275,23 +317,12 @@ def main() -> None:
     ap.add_argument("--tcp", default="0,0,90,0,0,0", help="x,y,z mm, A,B,C deg (ZYX)")
     args = ap.parse_args()
     spec = ScanSpec()
-    sensor = spec.sensor.with_points(256)
     tcp = pose_from_xyzabc(float(v) for v in args.tcp.split(","))
     print("part | arm | wrist radius mm (FK max / formula) | ceiling | bound | best | shoulder")
     print("---|---|---|---|---|---|---")
-    parts = {"drone": "mm", "door": "mm"}
-    parts |= {str(Path(args.parts_dir) / n): u for n, u in PARTS.items()}
-    for name, units in parts.items():
-        if args.only and not any(o in name for o in args.only.split(",")):
-            continue
-        part = load_part(name, units)
-        surface = hemisphere_visible_samples(part, coverage_spacing_mm(sensor), 0)
-        cell = Cell.around(part)
-        seen = reachable_samples(cell.occluding(part), surface, spec.tol_angle_rad)
-        normals = oriented_normals(part)[surface.faces]
-        block = cell.table_block(part)
-        assert block is not None
-        slack = in_spec_radius_mm(spec, sensor.line_width_mm / (sensor.points_per_profile - 1))
+    for judged in judged_parts(args.parts_dir, args.only, spec):
+        part, surface, seen, normals = judged.part, judged.surface, judged.seen, judged.normals
+        block, slack = judged.block, judged.slack_mm
         for arm in args.robots.split(","):
             robot = get_robot(arm)
             wrist = wrist_reach(robot)
