@@ -106,8 +106,9 @@ def held(
     obstacles: CellObstacles | None = None,
 ) -> np.ndarray:
     """(k,) whether some pose of each sample's (k, m, 4, 4) has an IK solution within the
-    joint limits (and, with `obstacles`, its links clear of the cell). The poses are tried a
-    few at a time, each sample's only until one holds it."""
+    joint limits (and, with `obstacles`, its links clear of the cell by the quick, slightly
+    cautious verdict of `links.check_links`). The poses are tried a few at a time, each
+    sample's only until one holds it."""
     k, m = poses.shape[:2]
     out = np.zeros(k, bool)
     per = max(1, _CHUNK // max(k, 1))
@@ -151,10 +152,10 @@ class Judge:
 
 @dataclass(frozen=True)
 class StandsClear:
-    """Where an arm may stand, for the bound: as `reach_bound.Stands` has it (its column clear
-    of the table, its base's axis off the part's footprint) and its column (the links that
-    turn with joint 1 alone, swept about the vertical: `links.swept_column`) clear of the
-    part's surface `points` (part frame). Kept no clearance away, the other links unchecked:
+    """Where an arm may stand, for the bound: its column (the links that turn with joint 1
+    alone, swept about the vertical: `links.swept_column`) clear of the table as
+    `reach_bound.Stands` has it (given no footprint margin) and clear of the part's surface
+    `points` (part frame). Kept no clearance away, the other links unchecked:
     looser than `place`, so the bound holds for wherever it may put the arm."""
 
     stands: Stands
