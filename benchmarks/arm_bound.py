@@ -29,13 +29,20 @@ first: so the best of the grid is found without judging most of it.
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from reach_bound import Shell, Stands, _shares, judged_parts, wrist_reach, wrist_shell
+from reach_bound import (
+    Shell,
+    Stands,
+    _shares,
+    bound_arguments,
+    judged_parts,
+    wrist_reach,
+    wrist_shell,
+)
 
 from scanplan.core.quantities import ScanSpec
 from scanplan.robot.base import Robot, inv_rigid
@@ -218,11 +225,7 @@ def best_shoulder(judge: Judge, pts, nrm, shell: Shell, reach: float, stands: St
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("parts_dir", nargs="?", default="../shared/parts")
-    ap.add_argument("--only", default="", help="parts whose name contains this (a,b: any)")
-    ap.add_argument("--robots", default="ur5e,kr6-r900,irb2400")
-    ap.add_argument("--tcp", default="0,0,90,0,0,0", help="x,y,z mm, A,B,C deg (ZYX)")
+    ap = bound_arguments()
     ap.add_argument("--step", type=float, default=50.0, help="the shoulder grid's step, mm")
     ap.add_argument(
         "--part-pose", default="", help="judge this placement only (x,y,z mm, A,B,C deg)"

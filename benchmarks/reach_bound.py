@@ -309,13 +309,19 @@ def judged_parts(parts_dir: str, only: str, spec: ScanSpec) -> Iterator[Judged]:
         yield Judged(part, surface, seen, normals, cell, block, in_spec_radius_mm(spec, pitch))
 
 
-def main() -> None:
+def bound_arguments() -> argparse.ArgumentParser:
+    """The arguments both bounds take: the shared parts' folder, which parts and arms, the
+    sensor's mount on the flange."""
     ap = argparse.ArgumentParser()
     ap.add_argument("parts_dir", nargs="?", default="../shared/parts")
     ap.add_argument("--only", default="", help="parts whose name contains this (a,b: any)")
     ap.add_argument("--robots", default="ur5e,kr6-r900,irb2400")
     ap.add_argument("--tcp", default="0,0,90,0,0,0", help="x,y,z mm, A,B,C deg (ZYX)")
-    args = ap.parse_args()
+    return ap
+
+
+def main() -> None:
+    args = bound_arguments().parse_args()
     spec = ScanSpec()
     tcp = pose_from_xyzabc(float(v) for v in args.tcp.split(","))
     print("part | arm | wrist radius mm (FK max / formula) | ceiling | bound | best | shoulder")
