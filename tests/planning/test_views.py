@@ -218,6 +218,8 @@ def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():
     assert abs((np.linalg.inv(level.R)[:3, :3] @ uphill)[2]) > 0.1  # climbs in the part's
     assert replace(level, scan=SCAN_RULE).scan_direction() is None
     assert View.looking_along(UP, scan=SCAN_UPHILL).scan_direction() is None
+    with pytest.raises(ValueError, match="not 'across'"):
+        replace(level, scan="across")
     cell = Cell.around(part)
     planner = make_planner("geometric")
     held = {}

@@ -135,6 +135,10 @@ class View:
     faces: np.ndarray | None = None
     scan: str = SCAN_RULE
 
+    def __post_init__(self) -> None:
+        if self.scan not in (SCAN_RULE, SCAN_LEVEL, SCAN_UPHILL):  # else read as up the tilt
+            raise ValueError(f"a view is scanned by its rule, level or uphill, not {self.scan!r}")
+
     @staticmethod
     def looking_along(
         axis: np.ndarray, index: int = 0, faces: np.ndarray | None = None, scan: str = SCAN_RULE
