@@ -5,7 +5,8 @@ the hemisphere surface free and flown (and their difference), the scanning poses
 by cause (of those the views chosen for the arm planned), passes split, whether export's
 check passes (`check_flyable`: reach, joint limits, flips, the arm's links and the sensor
 body against the part, fixtures and table), and the planning time with the arm beside the
-time without it (a ratio: this machine is noisy).
+time without it (a ratio: this machine is noisy) and whether it is within its allowance
+(`allowance`).
 
     PYTHONPATH=src python benchmarks/robot_plans.py [PARTS_DIR] [--points 256] [--only NAME]
         [--robots ur5e,kr6-r900,irb2400]
@@ -36,6 +37,12 @@ TCP = np.eye(4)
 TCP[2, 3] = 90.0
 
 
+def allowance(free_s: float) -> float:
+    """The planning time allowed with an arm: 3x the plan without it, or 20 s more,
+    whichever is larger."""
+    return max(3.0 * free_s, free_s + 20.0)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("parts_dir", nargs="?", default="../shared/parts")
@@ -49,7 +56,7 @@ def main() -> None:
     parts |= {str(Path(args.parts_dir) / n): u for n, u in PARTS.items()}
     print(
         "part | robot | --part-pose | in-spec free / flown (gap) | scanning poses given up"
-        " by cause | passes split | export's check | plan s with / without (ratio)"
+        " by cause | passes split | export's check | plan s with / without (ratio, allowance)"
     )
     print("---|---|---|---|---|---|---|---")
     for name, units in parts.items():
@@ -86,7 +93,9 @@ def main() -> None:
                 f"{sum(causes.values())} of {int(traj.scanning.sum()) + sum(causes.values())}"
                 f"{f' ({given_up})' if given_up else ''} | {fit['passes_split']} | "
                 f"{'flyable' if check.flyable else 'NOT: ' + check.first_problem(traj.swath)} | "
-                f"{t_arm:.1f} / {t_free:.1f} ({t_arm / t_free:.1f}x)",
+                f"{t_arm:.1f} / {t_free:.1f} ({t_arm / t_free:.1f}x, "
+                f"{'within' if t_arm <= allowance(t_free) else 'over'} "
+                f"{allowance(t_free):.1f})",
                 flush=True,
             )
 

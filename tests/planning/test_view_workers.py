@@ -150,3 +150,39 @@ def test_a_scheduler_address_that_is_no_scheduler_is_one_line():
     with tcp_server(lambda conn: conn.sendall(b"\xff" * 16)) as address:
         with pytest.raises(ValueError, match=f"^--scheduler {address}: what answers there is not"):
             ViewWorkers(part, judge, 0, address)
+
+
+class _FliesOnlyFromAbove:
+    """An arm that flies a scanning pose only with its beam at most `max_tilt_deg` from
+    straight down (its wrist meets a rim lower than that), the rest given up."""
+
+    def __init__(self, max_tilt_deg: float) -> None:
+        self.cos = np.cos(np.radians(max_tilt_deg))
+
+    def flown(self, part, traj):
+        keep = ~traj.scanning | (traj.poses[:, 2, 2] <= -self.cos)
+        return traj if keep.all() else traj.subset(keep)
+
+
+def test_a_view_the_arm_cannot_fly_as_planned_is_flown_with_its_beams_raised(monkeypatch):
+    """A side view (its beams up to 10 degrees below level) that an arm flies only from a
+    few degrees higher: judged with its beams raised within the angle tolerance, it holds
+    more in spec than the arm flies of it as planned."""
+    import scanplan.planning.view_workers as view_workers
+
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, scan=SCAN_LEVEL)
+    arm = _FliesOnlyFromAbove(max_tilt_deg=77.0)
+    judge = ViewJudge(SPEC, plan, points_per_profile=64, arm=arm)  # type: ignore[arg-type]
+    planned, held = judge(part, side)
+    assert planned.lean_deg == max(view_workers.LEAN_DEG)
+    assert held.any()
+    beams = planned.traj.poses[planned.traj.scanning, :3, 2]
+    assert np.degrees(np.arccos(-beams[:, 2])).max() <= 80.0 - planned.lean_deg + 1e-6
+    free, _ = ViewJudge(SPEC, plan, points_per_profile=64)(part, side)
+    assert free.lean_deg == 0.0  # without an arm, views are judged as planned
+    monkeypatch.setattr(view_workers, "LEAN_DEG", ())
+    as_planned, held_as_planned = judge(part, side)
+    assert as_planned.lean_deg == 0.0
+    assert held.sum() > held_as_planned.sum()
