@@ -160,12 +160,14 @@ def test_a_pass_the_wrist_reaches_only_turned_is_turned_not_given_up() -> None:
     assert np.allclose(flown[:, :3, 3], traj.poses[:, :3, 3])  # from the same place
 
 
-def test_a_pass_is_not_turned_where_its_move_turned_would_bring_the_body_into_the_cell(
+def test_a_pass_whose_move_turned_would_bring_the_body_into_the_cell_turns_without_it(
     monkeypatch,
 ):
-    """The move into a pass turns with it: two passes both kept better turned, but the
-    second's move, turned, puts the sensor body into the cell where it was clear as
-    planned, so only the first is turned."""
+    """The move into a pass turns with it, unless turned it puts the sensor body into the
+    cell where it was clear as planned: two passes both kept better turned, the second's
+    move in spoils, so it is flown as planned and the second pass turns alone (the arm
+    turns the sensor in its joint move into the pass). A move inside a pass that would
+    spoil keeps the whole pass as planned."""
     swath = np.array([0, 0, 0, 1, 1, 1])
     scanning = np.array([True, True, True, False, True, True])  # pose 3: the move into pass 1
     traj = Trajectory(np.tile(np.eye(4), (6, 1, 1)), swath, scanning)
@@ -182,11 +184,26 @@ def test_a_pass_is_not_turned_where_its_move_turned_would_bring_the_body_into_th
         fit_module, "sensor_clear_both", lambda poses, obs: (sensor_planned, sensor_turned)
     )
     out, count = fit_module._turned(traj, None, np.eye(4), np.eye(4), object())  # type: ignore[arg-type]
+    assert count == 2
+    assert np.allclose(out.poses[[0, 1, 2, 4, 5]], HALF_TURN)
+    assert np.allclose(out.poses[3], np.eye(4))  # the move into pass 1, as planned
+    # Without a cell there is no body to keep clear: both passes turn, the move with them.
+    monkeypatch.setattr(fit_module, "flyable_poses", lambda *a, **k: (planned, turned))
+    out, count = fit_module._turned(traj, None, np.eye(4), np.eye(4), None)  # type: ignore[arg-type]
+    assert count == 2 and np.allclose(out.poses, HALF_TURN)
+    # The spoiling move inside pass 1 (after its first scanning pose): pass 1 stays as planned.
+    inside = Trajectory(traj.poses, swath, np.array([True, True, True, True, False, True]))
+    planned_inside = np.array([False, False, False, False, True, False])
+    sensor_turned[:] = True
+    sensor_turned[4] = False
+    monkeypatch.setattr(
+        fit_module,
+        "flyable_poses",
+        lambda *a, **k: (planned_inside & sensor_planned, turned & sensor_turned),
+    )
+    out, count = fit_module._turned(inside, None, np.eye(4), np.eye(4), object())  # type: ignore[arg-type]
     assert count == 1
     assert np.allclose(out.poses[:3], HALF_TURN) and np.allclose(out.poses[3:], np.eye(4))
-    # Without a cell there is no body to keep clear: both passes turn.
-    monkeypatch.setattr(fit_module, "flyable_poses", lambda *a, **k: (planned, turned))
-    assert fit_module._turned(traj, None, np.eye(4), np.eye(4), None)[1] == 2  # type: ignore[arg-type]
 
 
 def test_fit_says_why_each_pose_was_given_up_and_what_would_help():

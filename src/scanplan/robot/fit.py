@@ -394,24 +394,35 @@ def _turned(
 ) -> tuple[Trajectory, int]:
     """`traj` with each pass (and the move into it, which carries its swath index) turned
     half a turn about the beam where more of its poses are reachable and clear that way,
-    and how many were."""
+    and how many were. Where the move into such a pass, turned, would bring the body (not
+    symmetric about the beam) into the cell where it was clear (a move down to a wall view
+    beside the table), the move is flown as planned and the arm turns the sensor in the
+    joint move into the pass; a pass whose own moves would, is not turned."""
     sensor_ok = None if obstacles is None else sensor_clear_both(traj.poses, obstacles)
     planned, turned = flyable_poses(
         traj, arm, T_base_part, inv_tcp, obstacles, sensor_ok=sensor_ok, choosing=traj.scanning
     )
     scanning = traj.scanning
     better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
+    lead = _lead_ins(traj)
+    as_planned = np.zeros(len(traj), bool)  # moves into turned passes left as planned
     if sensor_ok is not None and len(better):
-        # The move into a pass turns with it: not a pass whose move, turned, would bring
-        # the body (not symmetric about the beam) into the cell where it was clear (a move
-        # down to a wall view beside the table).
         spoiled = ~scanning & sensor_ok[0] & ~sensor_ok[1]
-        better = np.setdiff1d(better, traj.swath[spoiled])
+        better = np.setdiff1d(better, traj.swath[spoiled & ~lead])
+        as_planned = lead & np.isin(traj.swath, traj.swath[spoiled & lead])
     if not len(better):
         return traj, 0
-    turn = np.isin(traj.swath, better)
+    turn = np.isin(traj.swath, better) & ~as_planned
     poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
     return replace(traj, poses=poses), len(better)
+
+
+def _lead_ins(traj: Trajectory) -> np.ndarray:
+    """(n,) bool: the moves into each pass, its swath's poses before its first scanning pose."""
+    passes, at = np.unique(traj.swath, return_inverse=True)
+    first = np.full(len(passes), len(traj))
+    np.minimum.at(first, at[traj.scanning], np.flatnonzero(traj.scanning))
+    return ~traj.scanning & (np.arange(len(traj)) < first[at])
 
 
 def renumbered_passes(
