@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from helpers import FAST, JSON_VALUES, one_line_or_ok
 from scanplan.core.plan_file import read_csv, read_json, read_trajectory, write_csv, write_json
-from scanplan.core.trajectory import Trajectory, lead_tops, pass_entries
+from scanplan.core.trajectory import Trajectory, lead_ins, lead_tops, pass_entries
 from scanplan.planning.swaths import Swath
 
 
@@ -164,6 +164,8 @@ def test_the_top_of_the_move_into_a_pass_and_where_a_plan_enters_it():
     # A plan that starts with a move: its top is where the move is farthest from the pass.
     start = Trajectory(poses[2:], swath[2:], scanning[2:])
     assert lead_tops(start)[4] == 0
+    # The moves into the passes: pass 1's four, no other pose.
+    np.testing.assert_array_equal(np.flatnonzero(lead_ins(traj)), [2, 3, 4, 5])
     # Entered at each pass's first pose, unless the plan's arm record says where.
     np.testing.assert_array_equal(np.flatnonzero(pass_entries(traj)), [0, 6, 8])
     record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "3": [0.0] * 6, "8": [0.0] * 6}}

@@ -169,6 +169,14 @@ def lead_tops(traj: Trajectory) -> np.ndarray:
     return top
 
 
+def lead_ins(traj: Trajectory) -> np.ndarray:
+    """(n,) bool: the moves into each pass, its swath's poses before its first scanning pose."""
+    passes, at = np.unique(traj.swath, return_inverse=True)
+    first = np.full(len(passes), len(traj))
+    np.minimum.at(first, at[traj.scanning], np.flatnonzero(traj.scanning))
+    return ~traj.scanning & (np.arange(len(traj)) < first[at])
+
+
 def pass_entries(traj: Trajectory) -> np.ndarray:
     """(n,) bool: where a program enters a pass by a joint move into the configuration it
     flies the pass on: where the plan's arm record says (`pass_entry_joints_deg`, chosen by

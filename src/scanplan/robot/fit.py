@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory, lead_tops, pass_bounds
+from scanplan.core.trajectory import Trajectory, lead_ins, lead_tops, pass_bounds
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
@@ -404,7 +404,7 @@ def _turned(
     )
     scanning = traj.scanning
     better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
-    lead = _lead_ins(traj)
+    lead = lead_ins(traj)
     as_planned = np.zeros(len(traj), bool)  # moves into turned passes left as planned
     if sensor_ok is not None and len(better):
         spoiled = ~scanning & sensor_ok[0] & ~sensor_ok[1]
@@ -415,14 +415,6 @@ def _turned(
     turn = np.isin(traj.swath, better) & ~as_planned
     poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
     return replace(traj, poses=poses), len(better)
-
-
-def _lead_ins(traj: Trajectory) -> np.ndarray:
-    """(n,) bool: the moves into each pass, its swath's poses before its first scanning pose."""
-    passes, at = np.unique(traj.swath, return_inverse=True)
-    first = np.full(len(passes), len(traj))
-    np.minimum.at(first, at[traj.scanning], np.flatnonzero(traj.scanning))
-    return ~traj.scanning & (np.arange(len(traj)) < first[at])
 
 
 def renumbered_passes(
