@@ -42,6 +42,26 @@ def inch_plan(tmp_path_factory) -> tuple[Path, Path, Path]:
     return part, plan, d
 
 
+def test_a_recorded_part_not_found_from_here_is_asked_for_in_one_line(
+    inch_plan, tmp_path, monkeypatch
+):
+    part, _, d = inch_plan
+    monkeypatch.chdir(d)  # planned with the part's path as typed there: relative
+    planned = run_cli(
+        "plan", part.name, "--units", "in", "--planner", "fixed", "--views", "top", "-q",
+        "-o", "relative.csv",
+    )  # fmt: skip
+    assert planned.exit_code == 0, planned.output
+    monkeypatch.chdir(tmp_path)  # another folder: that path leads nowhere from here
+    plan = str(d / "relative.csv")
+    result = run_cli("evaluate", plan, "--points", "64")
+    assert result.exit_code == 2 and result.stderr.count("\n") == 1, result.output
+    assert "records its part as given when it was planned" in result.stderr
+    assert "Traceback" not in result.output
+    given = run_cli("evaluate", str(part), plan, "--points", "64")
+    assert given.exit_code == 0, given.output
+
+
 def _cycle(output: str) -> str:
     return re.search(r"cycle time ([0-9.]+) s", output).group(1)
 

@@ -50,7 +50,16 @@ def planned_part(
             "plans named their part)"
         )
     recorded_units = context.fixture_units
-    loaded = load_part(name, units or recorded_units)
+    try:
+        loaded = load_part(name, units or recorded_units)
+    except ValueError as exc:
+        if part or Path(name).exists():
+            raise
+        # Recorded as given when planned: a relative path is relative to where that was.
+        raise ValueError(
+            f"{exc}: {plan.where} records its part as given when it was planned; give the "
+            "part's file before the plan"
+        ) from None
     if not context.part_digest or geometry_digest(loaded) == context.part_digest:
         return loaded
     planned = f"{context.part or 'unnamed'} [{recorded_units}]"
