@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from helpers import FAST, JSON_VALUES, one_line_or_ok
 from scanplan.core.plan_file import read_csv, read_json, read_trajectory, write_csv, write_json
-from scanplan.core.trajectory import Trajectory, lead_ins, lead_tops, pass_entries
+from scanplan.core.trajectory import Trajectory, half_turns, lead_ins, lead_tops, pass_entries
 from scanplan.planning.swaths import Swath
 
 
@@ -166,6 +166,14 @@ def test_the_top_of_the_move_into_a_pass_and_where_a_plan_enters_it():
     assert lead_tops(start)[4] == 0
     # The moves into the passes: pass 1's four, no other pose.
     np.testing.assert_array_equal(np.flatnonzero(lead_ins(traj)), [2, 3, 4, 5])
+    # A sensor turned half about its beam between two poses, not one turned 60°.
+    turned = poses.copy()
+    turned[3:, :3, :3] = np.diag([-1.0, -1.0, 1.0])  # from pose 3 on: half a turn
+    c, s60 = 0.5, np.sqrt(3) / 2
+    turned[8:, :3, :3] = turned[8:, :3, :3] @ [[c, -s60, 0], [s60, c, 0], [0, 0, 1]]
+    np.testing.assert_array_equal(
+        np.flatnonzero(half_turns(Trajectory(turned, swath, scanning))), [3]
+    )
     # Entered at each pass's first pose, unless the plan's arm record says where.
     np.testing.assert_array_equal(np.flatnonzero(pass_entries(traj)), [0, 6, 8])
     record = {"pass_entry_joints_deg": {"0": [0.0] * 6, "3": [0.0] * 6, "8": [0.0] * 6}}

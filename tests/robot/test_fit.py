@@ -206,6 +206,16 @@ def test_a_pass_whose_move_turned_would_bring_the_body_into_the_cell_turns_witho
     assert np.allclose(out.poses[:3], HALF_TURN) and np.allclose(out.poses[3:], np.eye(4))
 
 
+def test_a_half_turn_of_the_sensor_between_two_poses_is_made_by_a_joint_move() -> None:
+    """Pass 0 turned about its beam, the move after it not: the move's first pose is
+    entered by a joint move (as every pass's first pose is), not reached by a linear one."""
+    poses = np.tile(np.eye(4), (5, 1, 1))
+    poses[:2] = HALF_TURN
+    traj = Trajectory(poses, np.array([0, 0, 1, 1, 1]), np.array([True, True, False, True, True]))
+    entry = fit_module.entries_of(traj, np.zeros(5, bool))
+    np.testing.assert_array_equal(np.flatnonzero(entry), [0, 2, 3])
+
+
 def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
     traj = _two_views(900.0)
     fit = fit_to_robot(traj, "ur3e", TCP, parse_pose_arg("450,0,-200,0,0,0"))

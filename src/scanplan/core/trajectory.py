@@ -177,6 +177,15 @@ def lead_ins(traj: Trajectory) -> np.ndarray:
     return ~traj.scanning & (np.arange(len(traj)) < first[at])
 
 
+def half_turns(traj: Trajectory, least_deg: float = 90.0) -> np.ndarray:
+    """(n,) bool: the poses whose sensor is turned more than `least_deg` from the pose before
+    (a pass turned half a turn about its beam beside a move that is not): an arm turns it
+    so in a joint move, not in a linear one."""
+    R = traj.poses[:, :3, :3]
+    cos = (np.einsum("nij,nij->n", R[:-1], R[1:]) - 1.0) / 2.0
+    return np.r_[False, cos < math.cos(math.radians(least_deg))]
+
+
 def pass_entries(traj: Trajectory) -> np.ndarray:
     """(n,) bool: where a program enters a pass by a joint move into the configuration it
     flies the pass on: where the plan's arm record says (`pass_entry_joints_deg`, chosen by

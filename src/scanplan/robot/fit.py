@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory, lead_ins, lead_tops, pass_bounds
+from scanplan.core.trajectory import Trajectory, half_turns, lead_ins, lead_tops, pass_bounds
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
@@ -122,13 +122,14 @@ def entry_joints_deg(entry: np.ndarray, joints: np.ndarray) -> dict[str, list[fl
 def entries_of(traj: Trajectory, raised: np.ndarray) -> np.ndarray:
     """(n,) bool: where the path and each of its passes are entered by a joint move: its
     first pose, and each pass's first pose or, where `raised` (n,) marks that pose, the top
-    of the move leading into it (`lead_tops`)."""
+    of the move leading into it (`lead_tops`); and each pose the sensor comes to turned
+    about half a turn from the pose before (`half_turns`: a pass turned beside its move)."""
     top = lead_tops(traj)
     first = np.flatnonzero(top >= 0)
     entry = np.zeros(len(traj), bool)
     entry[np.where(raised[first], top[first], first)] = True
     entry[:1] = True
-    return entry
+    return entry | half_turns(traj)
 
 
 def fit_to_robot(
