@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory, pass_bounds, pass_entries
+from scanplan.core.trajectory import Trajectory, pass_bounds, pass_entries, rotation_deg
 
 CYCLE_TIME_MODEL = (
     "trapezoidal speed profiles (accelerate, cruise, decelerate; triangular when a stretch "
@@ -174,13 +174,6 @@ class CycleTime:
         }
 
 
-def _rotation_deg(poses: np.ndarray) -> np.ndarray:
-    """(n-1,) angle of the rotation between consecutive poses, degrees."""
-    R = poses[:, :3, :3]
-    trace = np.einsum("nji,nji->n", R[:-1], R[1:])  # trace(R_iᵀ R_i+1)
-    return np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
-
-
 def _joint_bounds(
     joints_rad: np.ndarray | None, n: int, limits: MotionLimits
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -274,7 +267,7 @@ def cycle_time(
             0.0, 0.0, 0.0, np.zeros(n_pass), np.zeros(0), scan_v, travel_v, 0, swaths, limits
         )
     length = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
-    turn = _rotation_deg(poses)
+    turn = rotation_deg(poses)
     # Segment i runs from pose i to pose i+1; it scans if it ends inside a pass.
     in_pass = scanning[1:] & ~start[1:]
     joint_cruise, joint_trap = _joint_bounds(joints_rad, n, limits)

@@ -177,13 +177,18 @@ def lead_ins(traj: Trajectory) -> np.ndarray:
     return ~traj.scanning & (np.arange(len(traj)) < first[at])
 
 
+def rotation_deg(poses: np.ndarray) -> np.ndarray:
+    """(n-1,) angle of the rotation between consecutive poses (n, 4, 4), degrees."""
+    R = poses[:, :3, :3]
+    trace = np.einsum("nji,nji->n", R[:-1], R[1:])  # trace(R_iᵀ R_i+1)
+    return np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
+
+
 def half_turns(traj: Trajectory, least_deg: float = 90.0) -> np.ndarray:
     """(n,) bool: the poses whose sensor is turned more than `least_deg` from the pose before
     (a pass turned half a turn about its beam beside a move that is not): an arm turns it
     so in a joint move, not in a linear one."""
-    R = traj.poses[:, :3, :3]
-    cos = (np.einsum("nij,nij->n", R[:-1], R[1:]) - 1.0) / 2.0
-    return np.r_[False, cos < math.cos(math.radians(least_deg))]
+    return np.r_[False, rotation_deg(traj.poses) > least_deg]
 
 
 def pass_entries(traj: Trajectory) -> np.ndarray:

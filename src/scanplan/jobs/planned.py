@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from scanplan.core.context import VIEW_MODES, PlanContext
+from scanplan.core.paths import not_regular
 from scanplan.core.plan import Plan
 from scanplan.core.sensor_files import load_sensor
 from scanplan.world.cell import Cell, planned_cell
@@ -53,7 +54,7 @@ def planned_part(
     try:
         loaded = load_part(name, units or recorded_units)
     except ValueError as exc:
-        if part or Path(name).exists():
+        if part or not_regular(name) is None:  # given, or there and not a part: as it said
             raise
         # Recorded as given when planned: a relative path is relative to where that was.
         raise ValueError(
