@@ -163,6 +163,12 @@ class _FliesOnlyFromAbove:
         keep = ~traj.scanning | (traj.poses[:, 2, 2] <= -self.cos)
         return traj if keep.all() else traj.subset(keep)
 
+    def aiming(self) -> None:
+        return None  # stands nowhere in particular: no view is slid for it
+
+    def moves_clear(self, part, traj) -> bool:
+        return True
+
 
 def test_a_view_the_arm_cannot_fly_as_planned_is_flown_with_its_beams_raised(monkeypatch):
     """A side view (its beams up to 10 degrees below level) that an arm flies only from a
@@ -186,3 +192,74 @@ def test_a_view_the_arm_cannot_fly_as_planned_is_flown_with_its_beams_raised(mon
     as_planned, held_as_planned = judge(part, side)
     assert as_planned.lean_deg == 0.0
     assert held.sum() > held_as_planned.sum()
+
+
+class _ReachesOnlyNearer:
+    """An arm whose shoulder is at `shoulder_at`, that flies a scanning pose of a view
+    planned as `planned` (4, 4 each) only where it is on the near side of the plane x =
+    `near_x`, or brought at least `least_mm` nearer the shoulder along its laser line."""
+
+    def __init__(
+        self, planned: np.ndarray, shoulder_at: np.ndarray, least_mm: float, near_x: float
+    ) -> None:
+        self.planned, self.shoulder_at = planned, shoulder_at
+        self.least_mm, self.near_x = least_mm, near_x
+
+    def aiming(self):
+        return self
+
+    def moves_clear(self, part, traj) -> bool:
+        return True
+
+    def flown(self, part, traj):
+        at = traj.poses[:, :3, 3]
+        moved = at - self.planned[:, :3, 3]
+        towards = self.shoulder_at - self.planned[:, :3, 3]
+        along = np.abs(np.einsum("ij,ij->i", moved, self.planned[:, :3, 0]))
+        nearer = (np.einsum("ij,ij->i", moved, towards) > 0) & (along >= self.least_mm)
+        keep = ~traj.scanning | nearer | (at[:, 0] <= self.near_x)
+        return traj if keep.all() else traj.subset(keep)
+
+
+def test_a_view_the_arm_reaches_only_part_of_is_flown_with_its_lines_slid_towards_it(
+    monkeypatch,
+):
+    """A side view whose laser line is longer than the wall it holds, flown by an arm that
+    reaches its poses past one end of the wall only a little nearer than planned: judged
+    with each line slid along itself towards the arm, it holds more in spec than the arm
+    flies of it as planned. The top view is not slid."""
+    import scanplan.planning.view_workers as view_workers
+
+    monkeypatch.setattr(view_workers, "LEAN_DEG", ())  # the slide alone
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, scan=SCAN_LEVEL)
+    free, _ = ViewJudge(SPEC, plan, points_per_profile=64)(part, side)
+    assert free.slide_mm == 0.0  # without an arm, views are judged as planned
+    poses = free.traj.poses
+    shoulder = poses[:, :3, 3].mean(axis=0) + np.array([0.0, -2000.0, 1000.0])
+    shortest = min(view_workers.SLIDE_SHARES) * SPEC.sensor.line_width_mm
+    arm = _ReachesOnlyNearer(poses, shoulder, 0.5 * shortest, float(np.median(poses[:, 0, 3])))
+    judge = ViewJudge(SPEC, plan, points_per_profile=64, arm=arm)  # type: ignore[arg-type]
+    slid, held = judge(part, side)
+    assert slid.slide_mm in [s * SPEC.sensor.line_width_mm for s in view_workers.SLIDE_SHARES]
+    # Each pose moved along its own line by the slide, each pass towards the shoulder.
+    moved = slid.traj.poses[:, :3, 3] - poses[:, :3, 3]
+    assert np.allclose(np.abs(np.einsum("ij,ij->i", moved, poses[:, :3, 0])), slid.slide_mm)
+    assert np.allclose(np.linalg.norm(moved, axis=1), slid.slide_mm)
+    nearer = np.einsum("ij,ij->i", moved, shoulder - poses[:, :3, 3])
+    for k in np.unique(free.traj.swath):
+        assert nearer[free.traj.swath == k].sum() > 0
+    assert np.array_equal(slid.traj.poses[:, :3, :3], poses[:, :3, :3])
+    monkeypatch.setattr(view_workers, "SLIDE_SHARES", ())
+    as_planned, held_as_planned = judge(part, side)
+    assert as_planned.slide_mm == 0.0
+    assert held.sum() > held_as_planned.sum()
+    top = View.looking_along(UP, 0)
+    monkeypatch.setattr(view_workers, "SLIDE_SHARES", (0.15, 0.3))
+    top_plan, _ = ViewJudge(SPEC, plan, points_per_profile=64)(part, top)
+    top_arm = _ReachesOnlyNearer(top_plan.traj.poses, shoulder, 0.5 * shortest, -1e9)
+    top_judge = ViewJudge(SPEC, plan, points_per_profile=64, arm=top_arm)  # type: ignore[arg-type]
+    # This arm flies only poses slid towards it: the top view, never slid, flies nothing.
+    with pytest.raises(ValueError, match="flies nothing"):
+        top_judge(part, top)

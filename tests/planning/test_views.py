@@ -8,7 +8,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
-from scipy.spatial.transform import Rotation
 
 from helpers import HEMISPHERE, overhang_part
 from scanplan.core.quantities import UP, ScanSpec
@@ -24,10 +23,8 @@ from scanplan.planning.views import (
     View,
     candidate_views,
     depth_slabs,
-    limit_beam_tilt,
     missed_views,
     plan_view,
-    raised_beams,
     segment_regions,
     view_axis,
 )
@@ -181,41 +178,6 @@ def test_a_missed_slope_in_a_trench_gets_an_axis_steep_enough_to_clear_its_rim()
     assert len(views) == 1
     tilt = math.degrees(math.acos(views[0].axis[2]))
     assert 55.0 <= tilt <= 70.0 - 2.0  # turned up from the normal to see past the wall
-
-
-def test_a_beam_leaning_past_the_view_tilt_is_turned_back_about_its_footprint():
-    wd = SPEC.working_distance_mm
-    level = np.eye(4)
-    level[:3, :3] = Rotation.from_euler("y", 90, degrees=True).as_matrix()  # beam along +x
-    level[:3, 3] = (-wd, 0.0, 30.0)
-    down = np.eye(4)
-    down[:3, :3] = Rotation.from_euler("x", 180, degrees=True).as_matrix()  # beam along -z
-    out = limit_beam_tilt(np.stack([level, down]), UP, wd)
-    tilt = math.degrees(math.acos(-out[0, 2, 2]))
-    assert tilt == pytest.approx(VIEW_AXIS_MAX_TILT_DEG)
-    assert np.allclose(out[0, :3, 3] + wd * out[0, :3, 2], (0.0, 0.0, 30.0))  # same footprint
-    assert out[0, 2, 3] > 30.0 + 60.0  # the sensor lifted above the footprint
-    assert np.allclose(out[0, :3, 0] @ out[0, :3, 1], 0.0)
-    assert np.array_equal(out[1], down)  # a beam within the tilt is left as it was
-
-
-def test_beams_raised_keep_their_footprints_and_a_beam_near_straight_down_goes_no_further():
-    wd = SPEC.working_distance_mm
-    side = np.eye(4)
-    side[:3, :3] = Rotation.from_euler("y", 80, degrees=True).as_matrix()  # 10 deg below level
-    side[:3, 3] = (-wd, 0.0, 30.0)
-    steep = np.eye(4)
-    steep[:3, :3] = Rotation.from_euler("y", 178, degrees=True).as_matrix()  # 2 deg off down
-    out = raised_beams(np.stack([side, steep]), wd, 4.0)
-    down = np.array([0.0, 0.0, -1.0])
-    before = [math.degrees(math.acos(p[:3, 2] @ down)) for p in (side, steep)]
-    after = [math.degrees(math.acos(np.clip(p[:3, 2] @ down, -1, 1))) for p in out]
-    assert after[0] == pytest.approx(before[0] - 4.0)
-    assert after[1] == pytest.approx(0.0, abs=1e-6)  # turned onto straight down, not past it
-    for p, q in zip((side, steep), out, strict=True):
-        assert np.allclose(p[:3, 3] + wd * p[:3, 2], q[:3, 3] + wd * q[:3, 2])  # same footprint
-        assert np.allclose(q[:3, :3] @ q[:3, :3].T, np.eye(3))
-    assert out[0, 2, 3] > side[2, 3]  # seen from higher up
 
 
 def test_a_wall_under_an_overhang_is_held_by_a_level_scan_not_one_up_the_tilt():

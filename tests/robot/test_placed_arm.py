@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from helpers import plate_with_block
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import UP, ScanSpec
+from scanplan.core.trajectory import Trajectory
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.placed_arm import NOMINAL_TURNS, PlacedArm
 from scanplan.robot.presets import get_robot
@@ -45,3 +47,35 @@ def test_the_arm_reaches_a_point_when_a_sensor_turned_about_the_beam_over_it_is_
     np.testing.assert_array_equal(got, expected)
     # Three metres off: nothing.
     assert not arm.reaches(points[:20] + [3000.0, 0.0, 0.0], UP).any()
+
+
+def test_the_shoulder_is_where_the_upper_arm_starts_in_the_parts_frame():
+    # The part 500 mm out along the base's x and turned a quarter turn about its z.
+    T_base_part = np.eye(4)
+    T_base_part[:3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    T_base_part[:3, 3] = (500.0, 0.0, 0.0)
+    for robot, height in (("kr6-r900", 400.0), ("irb2400", 615.0)):
+        arm = PlacedArm(robot, np.eye(4), T_base_part, PlanContext(ScanSpec()))
+        in_base = T_base_part @ np.r_[arm.shoulder_at, 1.0]
+        assert np.isclose(in_base[2], height)  # the upper arm's first joint above the base
+        assert 0.0 < in_base[0] < 150.0 and abs(in_base[1]) < 1e-9  # a little ahead of joint 1
+        assert np.allclose(arm.stands_at, np.linalg.inv(T_base_part)[:3, 3])
+
+
+def test_moves_are_clear_unless_one_brings_the_sensor_body_into_the_part():
+    part = plate_with_block()
+    wd = ScanSpec().working_distance_mm
+    down = Rotation.from_euler("x", 180, degrees=True).as_matrix()  # looking down
+    poses = np.broadcast_to(np.eye(4), (3, 4, 4)).copy()
+    poses[:, :3, :3] = down
+    top = float(part.bounds[1, 2])
+    poses[:, :3, 3] = [(0.0, 0.0, top + wd), (20.0, 0.0, top + wd), (40.0, 0.0, top + wd)]
+    traj = Trajectory(poses, np.zeros(3, int), np.array([False, True, True]))
+    arm = PlacedArm("kr6-r900", TCP, parse_pose_arg("500,0,0,0,0,0"), PlanContext(ScanSpec()))
+    assert arm.moves_clear(part, traj)
+    inside = poses.copy()
+    inside[0, :3, 3] = part.bounds.mean(axis=0)  # the move's pose in the middle of the part
+    assert not arm.moves_clear(part, Trajectory(inside, traj.swath, traj.scanning))
+    # A scanning pose there is not a move's: `flown` judges it.
+    scanning_inside = Trajectory(inside, traj.swath, np.ones(3, bool))
+    assert arm.moves_clear(part, scanning_inside)

@@ -18,7 +18,8 @@ from scanplan.planning.bands import plan_adaptive_swaths
 from scanplan.planning.motion import plan_transition
 from scanplan.planning.planners import Planner, pass_workers
 from scanplan.planning.swaths import Swath, plan_swaths
-from scanplan.planning.views import View, limit_beam_tilt
+from scanplan.planning.view_poses import limit_beam_tilt
+from scanplan.planning.views import View
 from scanplan.world.cell import Cell
 from scanplan.world.collision import checker_for
 from scanplan.world.part import Part

@@ -195,12 +195,14 @@ class View:
 @dataclass(frozen=True)
 class ViewPlan:
     """A view planned: its trajectory (part frame, swath indices from 0) and passes;
-    `lean_deg`: its beams raised so for an arm (`raised_beams`), 0 as planned."""
+    `lean_deg`: its beams raised so for an arm (`view_poses.raised_beams`), and `slide_mm`
+    its lines slid so along themselves (`view_poses.slid_lines`); 0: as planned."""
 
     view: View
     traj: Trajectory
     passes: int
     lean_deg: float = 0.0
+    slide_mm: float = 0.0
 
 
 # The top-view planner: (the part in a view's frame, that view) -> (passes, trajectory).
@@ -404,46 +406,3 @@ def _sees(
         ray = np.broadcast_to(axis, start.shape)
         ok[todo] = ~part.ray_engine.occluded(start, ray, np.full(len(todo), 1e6))
     return ok
-
-
-def limit_beam_tilt(
-    poses: np.ndarray, up: np.ndarray, pivot_mm: float, max_tilt_deg: float = VIEW_AXIS_MAX_TILT_DEG
-) -> np.ndarray:
-    """(n, 4, 4) `poses` whose beam (z_s) leans more than `max_tilt_deg` from straight down
-    (−`up`, the table's normal) turned back to that tilt about the point `pivot_mm` along the
-    beam (the footprint at W_d). A planner aligning the beam with a vertical wall would lay
-    the sensor level with the wall's foot, the table there; at the view's tilt the wall is
-    still within 10° of the beam, inside the angle tolerance."""
-    down = -np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
-    tilt = np.arccos(np.clip(poses[:, :3, 2] @ down, -1.0, 1.0))
-    return _turned_down(poses, down, pivot_mm, tilt - math.radians(max_tilt_deg))
-
-
-def raised_beams(poses: np.ndarray, pivot_mm: float, deg: float) -> np.ndarray:
-    """(n, 4, 4) `poses` with each beam (z_s) raised by `deg` towards straight down (−Z)
-    about the point `pivot_mm` along it (the footprint at W_d), a beam nearer than that to
-    straight down turned onto it: the same footprints, seen from higher up, within the
-    angle tolerance when `deg` is."""
-    down = np.array([0.0, 0.0, -1.0])
-    tilt = np.arccos(np.clip(poses[:, :3, 2] @ down, -1.0, 1.0))
-    return _turned_down(poses, down, pivot_mm, np.minimum(tilt, math.radians(deg)))
-
-
-def _turned_down(
-    poses: np.ndarray, down: np.ndarray, pivot_mm: float, angle: np.ndarray
-) -> np.ndarray:
-    """`poses` each turned by its `angle` (rad; none where <= 0) towards `down` about the
-    point `pivot_mm` along its beam."""
-    turn = np.flatnonzero(angle > 1e-9)
-    if len(turn) == 0:
-        return poses
-    out = poses.copy()
-    beam = poses[turn, :3, 2]
-    axis = np.cross(beam, down)
-    norm = np.linalg.norm(axis, axis=1, keepdims=True)
-    axis = np.where(norm > 1e-9, axis / np.maximum(norm, 1e-12), [1.0, 0.0, 0.0])
-    rot = Rotation.from_rotvec(axis * angle[turn, None]).as_matrix()
-    footprint = poses[turn, :3, 3] + pivot_mm * beam
-    out[turn, :3, :3] = rot @ poses[turn, :3, :3]
-    out[turn, :3, 3] = footprint - pivot_mm * out[turn, :3, 2]
-    return out

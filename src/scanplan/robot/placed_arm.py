@@ -64,6 +64,14 @@ class PlacedArm:
         """(3,) the arm's base in the part's frame."""
         return inv_rigid(self.T_base_part)[:3, 3]
 
+    @property
+    def shoulder_at(self) -> np.ndarray:
+        """(3,) the arm's shoulder (where its upper arm starts, the joints at zero) in the
+        part's frame: what its reach is measured from."""
+        starts, _, names = get_robot(self.robot).link_capsules(np.zeros((1, 6)))
+        shoulder = np.r_[starts[0, names.index("upper arm"), 0], 1.0]
+        return (inv_rigid(self.T_base_part) @ shoulder)[:3]
+
     def aiming(self) -> PlacedArm | None:
         """This arm, as the views aimed at what it misses are aimed for it
         (`views.missed_views`)."""
@@ -93,6 +101,13 @@ class PlacedArm:
         _, inside = fit_limits(q, arm.joint_limits)
         ok = (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
         return ok.reshape(NOMINAL_TURNS, len(points)).any(axis=0)
+
+    def moves_clear(self, part: Part, traj: Trajectory) -> bool:
+        """Whether the sensor body keeps its clearance of the cell at every pose of `traj`
+        that does not scan: `flown` judges the scanning poses, and takes the moves between
+        them as planned clear, which a view moved after planning must be checked for."""
+        moves = traj.poses[~traj.scanning]
+        return bool(self.obstacles(part).sensor_clear(moves).all())
 
     def flown(self, part: Part, traj: Trajectory) -> Trajectory:
         """`traj` as this arm flies it, quickly judged: each pass as planned or turned half
