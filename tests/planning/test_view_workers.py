@@ -231,6 +231,7 @@ def test_a_view_the_arm_reaches_only_part_of_is_flown_with_its_lines_slid_toward
     import scanplan.planning.view_workers as view_workers
 
     monkeypatch.setattr(view_workers, "LEAN_DEG", ())  # the slide alone
+    shares = view_workers.SLIDE_SHARES
     part = overhang_part()
     plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
     side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, scan=SCAN_LEVEL)
@@ -251,12 +252,17 @@ def test_a_view_the_arm_reaches_only_part_of_is_flown_with_its_lines_slid_toward
     for k in np.unique(free.traj.swath):
         assert nearer[free.traj.swath == k].sum() > 0
     assert np.array_equal(slid.traj.poses[:, :3, :3], poses[:, :3, :3])
+    # Slid, a move of the view would come into the cell: it is judged as planned.
+    arm.moves_clear = lambda part, traj: np.array_equal(traj.poses, poses)
+    into_cell, _ = judge(part, side)
+    assert into_cell.slide_mm == 0.0
+    arm.moves_clear = lambda part, traj: True
     monkeypatch.setattr(view_workers, "SLIDE_SHARES", ())
     as_planned, held_as_planned = judge(part, side)
     assert as_planned.slide_mm == 0.0
     assert held.sum() > held_as_planned.sum()
     top = View.looking_along(UP, 0)
-    monkeypatch.setattr(view_workers, "SLIDE_SHARES", (0.15, 0.3))
+    monkeypatch.setattr(view_workers, "SLIDE_SHARES", shares)
     top_plan, _ = ViewJudge(SPEC, plan, points_per_profile=64)(part, top)
     top_arm = _ReachesOnlyNearer(top_plan.traj.poses, shoulder, 0.5 * shortest, -1e9)
     top_judge = ViewJudge(SPEC, plan, points_per_profile=64, arm=top_arm)  # type: ignore[arg-type]

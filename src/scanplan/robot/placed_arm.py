@@ -68,8 +68,8 @@ class PlacedArm:
     def shoulder_at(self) -> np.ndarray:
         """(3,) the arm's shoulder (where its upper arm starts, the joints at zero) in the
         part's frame: what its reach is measured from."""
-        starts, _, names = get_robot(self.robot).link_capsules(np.zeros((1, 6)))
-        shoulder = np.r_[starts[0, names.index("upper arm"), 0], 1.0]
+        segments, _, names = get_robot(self.robot).link_capsules(np.zeros((1, 6)))
+        shoulder = np.r_[segments[0, names.index("upper arm"), 0], 1.0]  # its first end
         return (inv_rigid(self.T_base_part) @ shoulder)[:3]
 
     def aiming(self) -> PlacedArm | None:
