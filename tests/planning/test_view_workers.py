@@ -16,6 +16,7 @@ import pytest
 from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part, tcp_server
 from scanplan.core.quantities import OVERLAP, UP, ScanSpec
 from scanplan.planning.pass_path import ViewRaster
+from scanplan.planning.view_choice import choose_views
 from scanplan.planning.view_workers import ViewJudge, ViewWorkers, _warm_up
 from scanplan.planning.views import SCAN_LEVEL, View, view_axis
 from scanplan.rl.planners import make_planner
@@ -269,3 +270,26 @@ def test_a_view_the_arm_reaches_only_part_of_is_flown_with_its_lines_slid_toward
     # This arm flies only poses slid towards it: the top view, never slid, flies nothing.
     with pytest.raises(ValueError, match="flies nothing"):
         top_judge(part, top)
+
+
+class _FliesNothingThatMeasures:
+    """An arm standing where it flies no scanning pose of any view."""
+
+    T_base_part = np.eye(4)
+
+    def aiming(self) -> None:
+        return None
+
+    def moves_clear(self, part, traj) -> bool:
+        return True
+
+    def flown(self, part, traj):
+        return traj.subset(~traj.scanning)
+
+
+def test_an_arm_that_flies_nothing_of_any_view_is_said_to_be_out_of_reach_not_the_views():
+    part = overhang_part()
+    plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
+    with pytest.raises(ValueError, match=r"^the arm placed at --part-pose 0,0,0,0,0,0 flies "):
+        choose_views(part, SPEC, plan, arm=_FliesNothingThatMeasures())  # type: ignore[arg-type]
+    assert choose_views(part, SPEC, plan).plans  # without the arm its views see the part

@@ -33,6 +33,7 @@ from scanplan.planning.views import (
     candidate_views,
     missed_views,
 )
+from scanplan.robot.base import pose_arg
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.world.part import Part
 from scanplan.world.surface import VisibleSurface, hemisphere_visible_samples, reachable_samples
@@ -384,6 +385,13 @@ class _Greedy:
         return True
 
     def selection(self) -> ViewSelection:
+        if not self.plans and self.arm is not None:
+            raise ValueError(
+                f"the arm placed at --part-pose {pose_arg(self.arm.T_base_part)} flies nothing "
+                f"that measures of any view of part {self.part.name}: from there each pose is "
+                "out of its reach or puts a link or the sensor into the cell (give another "
+                "--part-pose, a larger arm or a --positioner)"
+            )
         if not self.plans:
             raise ValueError(f"no view of part {self.part.name} sees its surface to inspect")
         left_out = [cov for _, cov in self.evaluated.values()]
