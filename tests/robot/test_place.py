@@ -290,3 +290,27 @@ def test_the_table_tops_height_only_adds_its_own_seeds() -> None:
     assert (np.cos(grid[best, 3]) == 1.0).all()  # the others' best yaw, at both heights
     without, held_without = _seeds(grid, heights, scores, scores, 2, True)
     assert (grid[without[~held_without], 2] == -37.0).all()  # else the top's are the best
+
+
+def test_an_arm_does_not_stand_on_the_table_under_a_wide_part() -> None:
+    """An arch 1.2 m wide resting on the table on its two feet: an arm standing on the
+    table's top under its span has its axis over the part's footprint and its column
+    within the part's height. It may stand level with the table's top beside it, not under
+    the arch; without the part's bounds (as before) both read as clear."""
+    feet = [trimesh.creation.box((100.0, 600.0, 300.0)) for _ in range(2)]
+    feet[0].apply_translation((-550.0, 0.0, 150.0))
+    feet[1].apply_translation((550.0, 0.0, 150.0))
+    roof = trimesh.creation.box((1200.0, 600.0, 20.0))
+    roof.apply_translation((0.0, 0.0, 310.0))
+    part = part_from_mesh(trimesh.util.concatenate([*feet, roof]), "arch")
+    obstacles = obstacles_for(part, Cell.around(part), clearance_mm=20.0)
+    block = obstacles.table_block
+    assert block is not None
+    arm = get_robot("kr6-r900")
+    on_top = float(block[1][2]) + 1.0  # the base 1 mm above the table's top
+    # Standing at the arch's middle, under the roof; and beside the table, 450 mm out in y.
+    T_under = np.linalg.inv(parse_pose_arg(f"0,0,{on_top},0,0,0"))
+    T_beside = np.linalg.inv(parse_pose_arg(f"0,-750,{on_top},0,0,0"))
+    T = np.stack([T_under, T_beside])
+    assert list(column_clear(arm, T, block, 20.0)) == [True, True]
+    assert list(column_clear(arm, T, block, 20.0, obstacles.part_bounds)) == [False, True]

@@ -79,7 +79,11 @@ def stands_clear(
         values = np.zeros((max(2, math.ceil(2 * half / RAIL_STEP_MM) + 1), len(axes.names)))
         values[:, -1] = np.linspace(-half, half, len(values))  # the track's is the last axis
         T = axes.base_part(T_base_part, values)
-    return bool(column_clear(arm, T, obstacles.table_block, obstacles.clearance_mm).all())
+    return bool(
+        column_clear(
+            arm, T, obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
+        ).all()
+    )
 
 
 def arm_along(

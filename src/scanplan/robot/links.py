@@ -334,6 +334,7 @@ def column_clear(
     T_base_part: np.ndarray,
     block: tuple[np.ndarray, np.ndarray] | None,
     clearance_mm: float,
+    part_bounds: np.ndarray | None = None,
 ) -> np.ndarray:
     """(P,) whether the arm can stand where placements T_base_part (P, 4, 4; turning the
     part about the vertical only, or also upside down for an arm hung from above) put it,
@@ -341,23 +342,31 @@ def column_clear(
     turn with joint 1 only (the first two capsules, column and shoulder), swept about the
     vertical, keep `clearance_mm` from the block, and an upright arm over the block stands
     on its top (within `ON_TABLE_MM`), not on a riser nothing models; a hung arm over it
-    hangs above its top. A cheap test the placement search runs on every candidate."""
+    hangs above its top. With `part_bounds` ((2, 3) lo, hi), its joint-1 axis stands off
+    the part's footprint unless the column is wholly above or below the part: an arm does
+    not stand under a curved panel's span (next to a part, its links are checked against
+    it as everywhere). A cheap test the placement search runs on every candidate."""
     T = np.asarray(T_base_part, dtype=np.float64).reshape(-1, 4, 4)
-    if block is None:
-        return np.ones(len(T), bool)
     sweep, z_lo, z_hi = swept_column(robot)
     axis_in_part = inv_rigid(T)[:, :3, 3]  # the base origin, on the joint-1 axis
-    lo, hi = np.asarray(block[0]), np.asarray(block[1])
-    gap_xy = _off_footprint(axis_in_part, lo, hi)
     base_z = axis_in_part[:, 2]
     down = hung(T)
     bottom = np.where(down, base_z - z_hi, base_z + z_lo)  # the column's lowest point
     top = np.where(down, base_z - z_lo, base_z + z_hi)
+    ok = np.ones(len(T), bool)
+    if part_bounds is not None:
+        lo, hi = np.asarray(part_bounds[0]), np.asarray(part_bounds[1])
+        under = ~_off_footprint(axis_in_part, lo, hi).any(axis=1)  # its axis over the box
+        ok &= ~(under & (bottom < hi[2] + clearance_mm) & (top > lo[2] - clearance_mm))
+    if block is None:
+        return ok
+    lo, hi = np.asarray(block[0]), np.asarray(block[1])
+    gap_xy = _off_footprint(axis_in_part, lo, hi)
     gap_z = np.maximum(lo[2] - top, bottom - hi[2])
     beside = np.linalg.norm(gap_xy, axis=1) > sweep + clearance_mm
     on_top = (gap_z > clearance_mm) & (base_z - hi[2] <= ON_TABLE_MM)
     hangs_above = down & (bottom - hi[2] > clearance_mm)
-    return beside | np.where(down, hangs_above, on_top)
+    return ok & (beside | np.where(down, hangs_above, on_top))
 
 
 def where_it_stands(

@@ -188,7 +188,9 @@ def _best_judged(
         *_, T_best, score = max(ranked, key=lambda r: r[:3])
         return T_best, score
     # An arm standing in the table cannot be set up: judged only if none stands clear.
-    clear = column_clear(arm, np.stack(placed), obstacles.table_block, obstacles.clearance_mm)
+    clear = column_clear(
+        arm, np.stack(placed), obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
+    )
     if clear.any():
         placed = [T for T, ok in zip(placed, clear, strict=True) if ok]
         order = order[clear]

@@ -90,7 +90,9 @@ def placement_scores(
         list(pool.map(score, range(0, len(T_base_part), per)))
     if obstacles is None:
         return out
-    clear = column_clear(robot, T_base_part, obstacles.table_block, obstacles.clearance_mm)
+    clear = column_clear(
+        robot, T_base_part, obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
+    )
     return np.where(clear, out, out - 4.0)
 
 

@@ -251,6 +251,7 @@ class CellObstacles:
                 )
             )
         self.table_block = block
+        self.part_bounds = np.asarray(part.bounds, dtype=np.float64)  # where no arm stands
 
     def sensor_clear(self, poses: np.ndarray) -> np.ndarray:
         """(n,) bool: the sensor body at poses (n, 4, 4) keeps its clearance from the part,
