@@ -1,9 +1,10 @@
 """The straight lines a robot program flies between targets that nothing checks: for a plan
 made for an arm (`scanplan plan PART --robot ...`), every linear step (not into a joint
-move) longer than `--longer-than` mm (moves are planned with poses at most 20 mm apart, so
-a longer step is where the fit gave up poses between), interpolated at `--step` mm: does
-the sensor body come into the cell on the way, does a link, does the arm leave its reach?
-The arm's joints along a step follow the branch nearest those at its first pose.
+move) longer than `--longer-than` mm (moves are planned with poses at most
+`motion.MOVE_STEP_MM` apart, so a longer step is where the fit gave up poses between),
+interpolated at `--step` mm: does the sensor body come into the cell on the way, does a
+link, does the arm leave its reach? The arm's joints along a step follow the branch
+nearest those at its first pose.
 
     cd benchmarks && PYTHONPATH=../src python linear_gaps.py PLAN.json PART [--units m]
 
@@ -22,6 +23,7 @@ from scanplan.core.context import recorded
 from scanplan.core.plan_file import read_json
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import pass_entries
+from scanplan.planning.motion import MOVE_STEP_MM
 from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
@@ -48,7 +50,7 @@ def main() -> None:
     ap.add_argument("plan", nargs="?", help="a plan made for an arm (default: the drone's)")
     ap.add_argument("part", nargs="?")
     ap.add_argument("--units", default="mm")
-    ap.add_argument("--longer-than", type=float, default=20.0, help="mm")
+    ap.add_argument("--longer-than", type=float, default=MOVE_STEP_MM, help="mm")
     ap.add_argument("--step", type=float, default=2.0, help="mm between interpolated poses")
     args = ap.parse_args()
     spec = ScanSpec()

@@ -13,6 +13,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
+import scanplan.planning.view_workers as view_workers
 from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part, tcp_server
 from scanplan.core.quantities import OVERLAP, UP, ScanSpec
 from scanplan.planning.pass_path import ViewRaster
@@ -175,8 +176,6 @@ def test_a_view_the_arm_cannot_fly_as_planned_is_flown_with_its_beams_raised(mon
     """A side view (its beams up to 10 degrees below level) that an arm flies only from a
     few degrees higher: judged with its beams raised within the angle tolerance, it holds
     more in spec than the arm flies of it as planned."""
-    import scanplan.planning.view_workers as view_workers
-
     part = overhang_part()
     plan = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, Cell.around(part))
     side = View.looking_along(view_axis(np.array([0.0, -1.0, 0.0])), 1, scan=SCAN_LEVEL)
@@ -229,8 +228,6 @@ def test_a_view_the_arm_reaches_only_part_of_is_flown_with_its_lines_slid_toward
     reaches its poses past one end of the wall only a little nearer than planned: judged
     with each line slid along itself towards the arm, it holds more in spec than the arm
     flies of it as planned. The top view is not slid."""
-    import scanplan.planning.view_workers as view_workers
-
     monkeypatch.setattr(view_workers, "LEAN_DEG", ())  # the slide alone
     shares = view_workers.SLIDE_SHARES
     part = overhang_part()

@@ -15,6 +15,10 @@ from scipy.spatial.transform import Rotation, Slerp
 from scanplan.core.quantities import UP
 from scanplan.world.collision import CellChecker, CollisionChecker
 
+# The most a move's sensor poses are apart: each is checked, so every place the body passes
+# is (a plan's longer straight step is where poses were given up after planning).
+MOVE_STEP_MM = 20.0
+
 
 def _line(a: np.ndarray, b: np.ndarray, step_mm: float) -> np.ndarray:
     """Points from a (excluded) to b (included), at most step_mm apart. (k, 3), k >= 0."""
@@ -33,7 +37,9 @@ def _poses(rotation: np.ndarray, positions: np.ndarray) -> np.ndarray:
     return poses
 
 
-def straight_move(start: np.ndarray, end_mm: np.ndarray, step_mm: float = 20.0) -> np.ndarray:
+def straight_move(
+    start: np.ndarray, end_mm: np.ndarray, step_mm: float = MOVE_STEP_MM
+) -> np.ndarray:
     """Poses (k, 4, 4) from `start` (excluded) straight to the position `end_mm` (included),
     orientation kept, at most step_mm apart: every place the body passes gets checked."""
     return _poses(start[:3, :3], _line(start[:3, 3], np.asarray(end_mm, float), step_mm))
@@ -44,7 +50,7 @@ def lift_cross_descend(
     end: np.ndarray,
     height_mm: float,
     up: np.ndarray = UP,
-    step_mm: float = 20.0,
+    step_mm: float = MOVE_STEP_MM,
     body_radius_mm: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The poses strictly between `start` and `end` (4x4): straight up along `up` to
@@ -78,8 +84,8 @@ def plan_transition(
     end: np.ndarray,
     clearance_mm: float,
     up: np.ndarray = UP,
-    step_mm: float = 20.0,
-    raise_step_mm: float = 20.0,
+    step_mm: float = MOVE_STEP_MM,
+    raise_step_mm: float = MOVE_STEP_MM,
 ) -> np.ndarray:
     """Non-scanning poses (k, 4, 4) from `start` to `end` (both excluded) that keep the
     sensor body at least `clearance_mm` from the part.

@@ -21,8 +21,8 @@ from scanplan.robot.links import (
     LinkClearance,
     LinkReport,
     check_links,
-    column_clear,
     obstacles_for,
+    stands_in_cell,
 )
 from scanplan.robot.reach import ReachReport, check_reach
 from scanplan.world.capsule_collision import CellObstacles
@@ -70,7 +70,7 @@ def stands_clear(
     arm: Robot, T_base_part: np.ndarray, axes: ExternalAxes | None, obstacles: CellObstacles
 ) -> bool:
     """Whether the arm's column stands beside the table block or on its top
-    (`links.column_clear`) wherever its track can take it: the rail is there over its whole
+    (`links.stands_in_cell`) wherever its track can take it: the rail is there over its whole
     length, so every stand along it, not only those a plan uses, is checked. A turntable
     turns the part, not the table, so it does not move the column's stand."""
     T = np.asarray(T_base_part, dtype=np.float64)[None]
@@ -79,11 +79,7 @@ def stands_clear(
         values = np.zeros((max(2, math.ceil(2 * half / RAIL_STEP_MM) + 1), len(axes.names)))
         values[:, -1] = np.linspace(-half, half, len(values))  # the track's is the last axis
         T = axes.base_part(T_base_part, values)
-    return bool(
-        column_clear(
-            arm, T, obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
-        ).all()
-    )
+    return bool(stands_in_cell(arm, T, obstacles).all())
 
 
 def arm_along(

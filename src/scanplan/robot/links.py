@@ -369,6 +369,13 @@ def column_clear(
     return ok & (beside | np.where(down, hangs_above, on_top))
 
 
+def stands_in_cell(robot: Robot, T_base_part: np.ndarray, obstacles: CellObstacles) -> np.ndarray:
+    """`column_clear` among a cell's `obstacles`: off its table block and the part."""
+    return column_clear(
+        robot, T_base_part, obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
+    )
+
+
 def where_it_stands(
     T_base_part: np.ndarray, block: tuple[np.ndarray, np.ndarray] | None
 ) -> dict | None:
@@ -402,6 +409,7 @@ __all__ = [
     "LinkReport",
     "check_links",
     "column_clear",
+    "stands_in_cell",
     "hung",
     "obstacles_for",
     "on_table_z",

@@ -26,7 +26,7 @@ from scanplan.core.quantities import PLACE_YAW_STEP_DEG
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import flyable_poses, kept_by_pass, most_kept, sensor_clear_both
-from scanplan.robot.links import LinkReport, check_links, column_clear, on_table_z
+from scanplan.robot.links import LinkReport, check_links, on_table_z, stands_in_cell
 from scanplan.robot.place_search import (
     coarse_grid,
     pattern_search,
@@ -188,9 +188,7 @@ def _best_judged(
         *_, T_best, score = max(ranked, key=lambda r: r[:3])
         return T_best, score
     # An arm standing in the table cannot be set up: judged only if none stands clear.
-    clear = column_clear(
-        arm, np.stack(placed), obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
-    )
+    clear = stands_in_cell(arm, np.stack(placed), obstacles)
     if clear.any():
         placed = [T for T, ok in zip(placed, clear, strict=True) if ok]
         order = order[clear]

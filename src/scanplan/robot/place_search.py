@@ -16,7 +16,7 @@ import numpy as np
 from scanplan.core.limits import MAX_PLACEMENTS, check_count
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot
-from scanplan.robot.links import column_clear
+from scanplan.robot.links import stands_in_cell
 from scanplan.robot.reach import fit_limits, limit_margin, reduce_last_axis
 from scanplan.world.capsule_collision import CellObstacles
 
@@ -90,9 +90,7 @@ def placement_scores(
         list(pool.map(score, range(0, len(T_base_part), per)))
     if obstacles is None:
         return out
-    clear = column_clear(
-        robot, T_base_part, obstacles.table_block, obstacles.clearance_mm, obstacles.part_bounds
-    )
+    clear = stands_in_cell(robot, T_base_part, obstacles)
     return np.where(clear, out, out - 4.0)
 
 
