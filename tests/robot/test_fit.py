@@ -10,6 +10,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 import scanplan.robot.fit as fit_module
+import scanplan.robot.pass_repairs as repairs
 from scanplan.cli import app
 from scanplan.core.context import PlanContext
 from scanplan.core.plan import Plan
@@ -129,6 +130,15 @@ def test_plan_for_an_arm_then_export_with_what_the_plan_records(tmp_path):
     assert text.count("movej([") == passes + int(not planned.scanning[0])
     poses, _ = parse_program(text, "urscript")
     assert len(poses) == len(plan_motion(planned, ExportOptions()).poses) < len(planned)
+    # `place` judges the plan's own placement first, as export did: the same answer, no
+    # search; with another TCP it searches.
+    result = runner.invoke(app, ["place", str(plan), "--robot", "ur3e"])
+    assert result.exit_code == 0, result.output
+    assert "--tcp 0,0,90,0,0,0 (the plan's)" in result.output
+    assert f"--part-pose {recorded['part_pose']}\n" in result.output
+    assert "(the plan's own placement, not searched)" in result.output
+    result = runner.invoke(app, ["place", str(plan), "--robot", "ur3e", "--tcp", "0,0,80,0,0,0"])
+    assert "placements in" in result.output and "plan's own" not in result.output
     # An option needs the arm it refers to.
     result = runner.invoke(app, ["plan", "drone", "--tcp", "0,0,90,0,0,0", "-o", str(plan)])
     assert result.exit_code == 2 and "--tcp needs --robot" in result.stderr
@@ -223,7 +233,7 @@ def test_fit_says_why_each_pose_was_given_up_and_what_would_help():
     by_cause = record["given_up_by_cause"]
     # Every pose given up is counted under a cause, view by view.
     assert {k: sum(v.values()) for k, v in by_cause.items()} == record["scanning_poses_given_up"]
-    assert set().union(*by_cause.values()) <= set(fit_module.CAUSES)
+    assert set().union(*by_cause.values()) <= set(repairs.CAUSES)
     assert "reach" in set().union(*by_cause.values())
     # The far end lies beyond the UR3e's reach: the hint says by how much.
     assert record["beyond_reach_mm"] > 0
@@ -292,22 +302,22 @@ def test_a_pass_whose_joint_move_in_hits_the_cell_is_flown_the_other_way_then_gi
     traj = Trajectory(poses, swath, scanning)
     index, flipped = np.arange(11), np.zeros(11, bool)
     why = np.full(11, -1)
-    out, reversed_now = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, flipped)
+    out, reversed_now = repairs.flown_back(traj, traj, index, {6: (0, 0)}, why, flipped)
     # Entered from its other end; the move that led to its old start is given up.
     assert reversed_now
     np.testing.assert_array_equal(out.poses[:, 0, 3], [0, 1, 2, 3, 4, 5, 10, 9, 8, 7, 6])
-    assert why[5] == fit_module.CAUSES.index("joint move into a pass")
+    assert why[5] == repairs.CAUSES.index("joint move into a pass")
     assert (why[:5] == -1).all() and (why[6:] == -1).all()
     # Its move in hits the cell that way too: now it is given up.
     why = np.full(11, -1)
-    again, reversed_now = fit_module._reversed(out, out, index, {6: (0, 0)}, why, flipped)
+    again, reversed_now = repairs.flown_back(out, out, index, {6: (0, 0)}, why, flipped)
     assert not reversed_now and again is out
-    assert (why[5:] == fit_module.CAUSES.index("joint move into a pass")).all()
+    assert (why[5:] == repairs.CAUSES.index("joint move into a pass")).all()
     # After the reversing rounds a pass is given up at once, never reversed.
     why, fresh = np.full(11, -1), np.zeros(11, bool)
-    late, reversed_now = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, fresh, False)
+    late, reversed_now = repairs.flown_back(traj, traj, index, {6: (0, 0)}, why, fresh, False)
     assert not reversed_now and late is traj and not fresh.any()
-    assert (why[5:] == fit_module.CAUSES.index("joint move into a pass")).all()
+    assert (why[5:] == repairs.CAUSES.index("joint move into a pass")).all()
 
 
 def test_a_reversed_pass_takes_its_external_axis_values_along():
@@ -317,7 +327,7 @@ def test_a_reversed_pass_takes_its_external_axis_values_along():
     external = np.arange(11.0)[:, None]
     traj = Trajectory(poses, swath, scanning, external=external)
     index, flipped, why = np.arange(11), np.zeros(11, bool), np.full(11, -1)
-    out, _ = fit_module._reversed(traj, traj, index, {6: (0, 0)}, why, flipped)
+    out, _ = repairs.flown_back(traj, traj, index, {6: (0, 0)}, why, flipped)
     assert out.external is not None
     np.testing.assert_array_equal(out.external[:, 0], [0, 1, 2, 3, 4, 5, 10, 9, 8, 7, 6])
 
@@ -334,13 +344,13 @@ def test_a_pass_whose_move_in_hits_the_cell_is_entered_at_the_top_of_its_move_fi
     assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, 7]
     # The joint move into pass 1's first pose hits: the pass is entered at its top instead.
     low = np.zeros(11, bool)
-    left, lifted = fit_module._lifted(traj, index, {7: (0, 0)}, raised, low)
+    left, lifted = repairs.lifted(traj, index, {7: (0, 0)}, raised, low)
     assert lifted and left == {} and np.flatnonzero(raised).tolist() == [7]
     top = int(fit_module.lead_tops(traj)[7])
     assert top in (5, 6)
     assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, top]
     # Its move in hits from the top too: left to be flown the other way or given up.
-    left, lifted = fit_module._lifted(traj, index, {top: (0, 0)}, raised, low)
+    left, lifted = repairs.lifted(traj, index, {top: (0, 0)}, raised, low)
     assert not lifted and left == {top: (0, 0)}
 
 
@@ -355,11 +365,11 @@ def test_a_pass_whose_move_down_from_the_top_flips_is_entered_beside_the_surface
     raised, low = np.zeros(113, bool), np.zeros(113, bool)
     raised[106] = True
     flips = np.array([1, 4, 7, 10])
-    left, lowered = fit_module._lowered(traj, index, flips, raised, low)
+    left, lowered = repairs.lowered(traj, index, flips, raised, low)
     assert left.tolist() == [1, 7, 10] and lowered
     assert not raised.any() and np.flatnonzero(low).tolist() == [106]
     # Lowered for good: its joint move in is not raised again.
-    left, lifted = fit_module._lifted(traj, index, {6: (0, 1)}, raised, low)
+    left, lifted = repairs.lifted(traj, index, {6: (0, 1)}, raised, low)
     assert left == {6: (0, 1)} and not lifted and not raised.any()
 
 

@@ -10,6 +10,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+# The most a move's sensor poses are apart: each is checked, so every place the body passes
+# is. A plan's longer straight step is where a fit gave up poses of a move after planning
+# (`robot.straight_moves` checks the way between).
+MOVE_STEP_MM = 20.0
+
 
 @dataclass(frozen=True)
 class Trajectory:

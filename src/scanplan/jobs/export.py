@@ -211,5 +211,12 @@ def flyable_joints(
             f"{report.model} cannot fly this plan: {where} — place the part "
             "(scanplan place) or give --allow-unreachable"
         )
+    # What passed is said too: the warning's summaries are those of what failed.
+    for line, passed in (
+        (report.summary(), report.reachable),
+        (result.links.summary(), result.links.clear),
+    ):
+        if passed:
+            say(line)
     say(f"warning: {where}")
     return report.joints

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.robot import get_robot
+from scanplan.robot.base import Robot
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
+from scanplan.robot.flyable import check_flyable
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import Placement, place
+from scanplan.world.capsule_collision import CellObstacles
+from scanplan.world.part import Part
 
 
 def place_plan(
@@ -24,8 +30,10 @@ def place_plan(
     bar: ProgressBar = no_bar,
 ) -> Placement:
     """Search the part's pose (x, y, z, yaw) from which `robot` with the sensor at `tcp`
-    (None: the flange, said) flies every pose of `plan`, its links clear of the part, the
-    table and the fixtures the plan records."""
+    (None: the plan's for the arm it was made for, else the flange; said) flies every pose
+    of `plan`, its links clear of the part, the table and the fixtures the plan records. A
+    plan made for this arm and TCP is first judged where it was planned, as `export` judges
+    it: if the arm flies it there, that is the answer (no search)."""
     arm = get_robot(robot)  # a bad arm is named before a missing part
     the_part = planned_part(
         plan, part, units, "the arm's links are checked against the part",
@@ -33,17 +41,45 @@ def place_plan(
     )  # fmt: skip
     spec = plan.spec
     obstacles = obstacles_for(the_part, plan_cell(plan, the_part), spec.sensor, spec.clearance_mm)
-    if tcp is None:
-        say(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
+    same_arm = plan.arm is not None and plan.arm.robot == robot
+    if tcp is None and same_arm and plan.arm is not None:
+        say(f"--tcp {plan.arm.record.get('tcp', '')} (the plan's)")
+        T_tcp = plan.arm.T_flange_sensor
+    else:
+        if tcp is None:
+            say(f"--tcp not given: {IDENTITY_POSE} (the sensor origin is the flange)")
+        T_tcp = parse_pose_arg(tcp or IDENTITY_POSE, TCP_MM)
+    if same_arm:
+        with bar("judging the plan's placement"):
+            found = planned_placement(plan, arm, T_tcp, the_part, obstacles)
+        if found is not None:
+            say("the plan's own placement flies every pose (as export checks it): kept")
+            return found
     with bar("searching a placement"):
-        return place(
-            plan.traj,
-            arm,
-            parse_pose_arg(tcp or IDENTITY_POSE, TCP_MM),
-            heights,
-            yaw_step_deg,
-            obstacles=obstacles,
-        )
+        return place(plan.traj, arm, T_tcp, heights, yaw_step_deg, obstacles=obstacles)
+
+
+def planned_placement(
+    plan: Plan, arm: Robot, T_tcp: np.ndarray, part: Part, obstacles: CellObstacles
+) -> Placement | None:
+    """The placement `plan` records for the arm it was made for, if `arm` holding the
+    sensor at `T_tcp` flies every pose from there as `export` checks it (each pass entered
+    on the joints recorded); None otherwise, or for a plan moved by external axes (their
+    stand is the plan's, not a placement of the part alone)."""
+    recorded = plan.arm
+    if (
+        recorded is None
+        or plan.traj.external is not None
+        or not np.allclose(T_tcp, recorded.T_flange_sensor, atol=1e-6)
+    ):
+        return None
+    checked = check_flyable(
+        plan.traj, arm, recorded.T_base_part, T_tcp, part, plan_cell(plan, part),
+        plan.spec.sensor, obstacles,
+    )  # fmt: skip
+    if not checked.flyable:
+        return None
+    return Placement(recorded.T_base_part, checked.reach, None, 0, 0.0, checked.links)
 
 
 def placement_lines(result: Placement) -> list[str]:
@@ -54,7 +90,11 @@ def placement_lines(result: Placement) -> list[str]:
         lines.append(result.links.summary())
     lines.append(
         f"worst margins: joint limit {m['limit_deg']:.1f} deg, wrist {m['wrist_deg']:.1f} deg, "
-        f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm "
-        f"({result.evaluated} placements in {result.seconds:.1f} s)"
+        f"elbow {m['elbow_deg']:.1f} deg, shoulder {m['shoulder_mm']:.0f} mm"
+        + (
+            " (the plan's own placement, not searched)"
+            if result.score is None
+            else f" ({result.evaluated} placements in {result.seconds:.1f} s)"
+        )
     )
     return lines

@@ -13,11 +13,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from scanplan.core.quantities import UP
+from scanplan.core.trajectory import MOVE_STEP_MM
 from scanplan.world.collision import CellChecker, CollisionChecker
-
-# The most a move's sensor poses are apart: each is checked, so every place the body passes
-# is (a plan's longer straight step is where poses were given up after planning).
-MOVE_STEP_MM = 20.0
 
 
 def _line(a: np.ndarray, b: np.ndarray, step_mm: float) -> np.ndarray:

@@ -6,34 +6,23 @@ happens only between passes, as a joint move. It says what it gave up.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory, half_turns, lead_ins, lead_tops, pass_bounds
+from scanplan.core.trajectory import Trajectory, half_turns, lead_ins, lead_tops
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
 from scanplan.robot.links import LinkClearance, LinkMemo, LinkReport, check_links
+from scanplan.robot.pass_repairs import CAUSES, flown_back, lifted, lowered
 from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach
+from scanplan.robot.straight_moves import blocked_steps, detours
 from scanplan.world.capsule_collision import CellObstacles
-
-# Why a pose is given up: out of the arm's reach, beyond its joint limits, an arm link
-# within the clearance of the part, a fixture or the table (in `CellObstacles.NAMES`'
-# order), or on the joint move into its pass.
-CAUSES = (
-    "reach",
-    "joint limits",
-    "link in the part",
-    "link in a fixture",
-    "link in the table",
-    "joint move into a pass",
-)
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
 # whole pass did, and so show a flip of its own; a few rounds settle it. Passes are flown
@@ -76,10 +65,15 @@ class RobotFit:
     beyond_reach_mm: float | None = None
     reversed: int = 0
     entry: np.ndarray | None = None  # (n,) where the path and each pass are entered
+    blocked_lines: int = 0  # straight moves across poses given up the arm cannot fly
 
     @property
     def flyable(self) -> bool:
-        return self.report.reachable and (self.links is None or self.links.clear)
+        return (
+            self.report.reachable
+            and (self.links is None or self.links.clear)
+            and not self.blocked_lines
+        )
 
     def record(self, tcp: np.ndarray) -> dict:
         """What the plan file records of the arm."""
@@ -149,8 +143,11 @@ def fit_to_robot(
     its poses that way. In a cell (`obstacles`), poses that put an arm link into the part, a
     fixture or the table are given up too; a pass whose joint move in would sweep a link through
     them is entered at the top of the move leading into it instead (a reconfiguration), then
-    flown the other way, and given up if that move does too. With external `axes`, the part is
-    where each pose's values (`traj.external`) put it."""
+    flown the other way, and given up if that move does too. Last, where poses of a move were
+    given up and the straight line left between the poses either side is not flyable
+    (`straight_moves`), the arm goes by joint moves: through a pose above the line where one
+    keeps clear, else straight into the pose after. With external `axes`, the part is where
+    each pose's values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
@@ -168,11 +165,14 @@ def fit_to_robot(
     # surface: those whose joint move in swept a link into the cell.
     raised = np.zeros(len(traj), bool)
     low = np.zeros(len(traj), bool)  # passes whose move down from the top flips the arm
+    # Poses after given-up ones reached by a joint move, as the straight line to them from
+    # the pose before is not flyable (`straight_moves`).
+    resumed = np.zeros(len(traj), bool)
     memo: LinkMemo = {}  # the rounds check much the same passes' links again
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(keep, swath)
         T_now = kept(T_all, keep)
-        entry = entries_of(current, raised[keep])
+        entry = entries_of(current, raised[keep]) | resumed[keep]
         report = _reach(current, arm, T_now, inv_tcp, obstacles, entry, memo)
         index = np.flatnonzero(keep)
         why = np.full(len(index), -1)
@@ -184,19 +184,33 @@ def fit_to_robot(
         if report.reachable and obstacles is not None:
             starts = entry | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
-            moves, lifted = _lifted(current, index, in_cell.moves, raised, low)
+            moves, raised_now = lifted(current, index, in_cell.moves, raised, low)
             reverse = round_ < REVERSING_ROUNDS
-            traj, reversed_now = _reversed(traj, current, index, moves, why, flipped, reverse)
+            traj, reversed_now = flown_back(traj, current, index, moves, why, flipped, reverse)
             if reversed_now:
                 T_all = part_poses(T_base_part, traj.external, axes)
+                resumed[flipped] = False  # the reversed passes are entered afresh
             hit = in_cell.colliding
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
-            reversed_now = lifted = False
-        flips, lowered = _lowered(current, index, report.config_flips, raised, low)
-        done = not (len(swings) or reversed_now or lifted or lowered)
+            reversed_now = raised_now = False
+        flips, lowered_now = lowered(current, index, report.config_flips, raised, low)
+        done = not (len(swings) or reversed_now or raised_now or lowered_now)
         if report.reachable and done and (why < 0).all():
-            break
+            # Settled: the straight lines across what was given up, last.
+            lines = blocked_steps(
+                arm, current, T_now, inv_tcp, report.joints, entry, obstacles, memo
+            )
+            if not len(lines):
+                break
+            vias = {}  # the arm goes round each: over a pose above it, else by a joint move
+            if obstacles is not None and T_all.ndim == 2:
+                vias = detours(
+                    traj, keep, index, lines, report.joints, arm, T_all, inv_tcp, obstacles, memo
+                )
+            resumed[np.setdiff1d(index[lines], list(vias))] = True
+            traj = _put(traj, vias, keep, swath, resumed)
+            continue
         bad = np.flatnonzero(why >= 0)
         keep[index[bad]] = False
         cause[index[bad]] = why[bad]
@@ -214,8 +228,10 @@ def fit_to_robot(
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
-    entry = entries_of(fitted, raised[keep])
-    report, links = _verdict(fitted, arm, kept(T_all, keep), inv_tcp, obstacles, axes, entry, memo)
+    entry = entries_of(fitted, raised[keep]) | resumed[keep]
+    T_kept = kept(T_all, keep)
+    report, links = _verdict(fitted, arm, T_kept, inv_tcp, obstacles, axes, entry, memo)
+    blocked = blocked_steps(arm, fitted, T_kept, inv_tcp, report.joints, entry, obstacles, memo)
     return RobotFit(
         fitted,
         T_base_part,
@@ -230,6 +246,7 @@ def fit_to_robot(
         beyond_mm,
         reversed_passes,
         entry=entry,
+        blocked_lines=len(blocked),
     )
 
 
@@ -303,87 +320,24 @@ def beyond_reach_mm(
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
-def _lifted(
-    current: Trajectory,
-    index: np.ndarray,
-    moves: dict[int, tuple[int, int]],
-    raised: np.ndarray,
-    low: np.ndarray,
-) -> tuple[dict[int, tuple[int, int]], bool]:
-    """The joint `moves` into passes of `current` (the kept poses of the fit's plan, at
-    `index`) that sweep a link into the cell, less those of passes entered at their first
-    pose with a move leading into them: those are entered at the top of it from now on
-    (marked in `raised`, by their first pose), unless `low` marks them (that move down
-    flips the arm). Returns the moves left, and whether any was lifted."""
-    top = lead_tops(current)
-    left = {}
-    for i, hit in moves.items():
-        if current.scanning[i] and top[i] != i and not low[index[i]]:
-            raised[index[i]] = True
-        else:
-            left[i] = hit
-    return left, len(left) < len(moves)
-
-
-def _lowered(
-    current: Trajectory, index: np.ndarray, flips: np.ndarray, raised: np.ndarray, low: np.ndarray
-) -> tuple[np.ndarray, bool]:
-    """Of the configuration `flips` (pose indices into `current`, the kept poses of the
-    fit's plan at `index`), those on the move down into a pass entered at its top: no
-    controller flips in a linear move, so that pass is entered at its first pose again
-    and for good (`raised` cleared, `low` set, by its first pose). Returns the other
-    flips (where the pass is cut) and whether any pass was lowered."""
-    lowered = np.zeros(len(flips), bool)
-    starts, _ = pass_bounds(current.scanning, current.swath)
-    first = np.flatnonzero(starts)
-    for k, f in enumerate(flips):
-        if current.scanning[f]:
-            continue
-        after = first[first > f]
-        if not len(after) or current.swath[after[0]] != current.swath[f]:
-            continue
-        s = index[after[0]]
-        if raised[s]:
-            raised[s], low[s], lowered[k] = False, True, True
-    return flips[~lowered], bool(lowered.any())
-
-
-def _reversed(
+def _put(
     traj: Trajectory,
-    current: Trajectory,
-    index: np.ndarray,
-    moves: Iterable[int],
-    why: np.ndarray,
-    flipped: np.ndarray,
-    reverse: bool = True,
-) -> tuple[Trajectory, bool]:
-    """Passes of `current` (the kept poses of `traj`, at `index`) whose joint move in
-    (`moves`: their first poses) sweeps a link into the cell, flown the other way: entered
-    from their other end, the moves that led to their first pose given up (the arm makes
-    a joint move instead); a pass already flown so, or any with `reverse` off, is given up
-    (in `why`). `flipped` marks the poses reversed. Returns `traj` with those passes
-    reversed, and whether any was."""
-    poses, external = traj.poses, traj.external
-    reversed_any = False
-    for i in moves:
-        in_pass = current.swath == current.swath[i]
-        piece = np.flatnonzero(in_pass & current.scanning)
-        slots = index[piece]
-        if not reverse or flipped[slots].any() or len(slots) < 2:
-            why[in_pass] = CAUSES.index("joint move into a pass")
-            continue
-        if not reversed_any:
-            poses = poses.copy()
-            external = None if external is None else external.copy()
-        poses[slots] = poses[slots[::-1]]
-        if external is not None:  # the axes' values go with their poses
-            external[slots] = external[slots[::-1]]
-        flipped[slots] = True
-        why[in_pass & ~current.scanning] = CAUSES.index("joint move into a pass")
-        reversed_any = True
-    if not reversed_any:
-        return traj, False
-    return replace(traj, poses=poses, external=external), True
+    vias: dict[int, tuple[int, np.ndarray, bool]],
+    keep: np.ndarray,
+    swath: np.ndarray,
+    resumed: np.ndarray,
+) -> Trajectory:
+    """`traj` with the detours `vias` ({line's end: (index, sensor pose, by joint moves)})
+    put in place of move poses given up, kept again in the pass of the line's end (`swath`,
+    renumbered over the kept poses); where reached and left by joint moves, the pose and
+    the line's end are entered so (`resumed`)."""
+    if not vias:
+        return traj
+    poses = traj.poses.copy()
+    for end, (via, pose, jointed) in vias.items():
+        poses[via], keep[via], swath[via] = pose, True, swath[end]
+        resumed[[via, end]] |= jointed
+    return replace(traj, poses=poses)
 
 
 def _turned(

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -25,6 +25,7 @@ from scanplan.robot.links import (
     stands_in_cell,
 )
 from scanplan.robot.reach import ReachReport, check_reach
+from scanplan.robot.straight_moves import blocked_steps
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
 from scanplan.world.collision import checker_for
@@ -43,13 +44,15 @@ class Flyability:
     reach: the reach check (its `joints` (n, 6) rad, NaN where none was found);
     links: the arm's link capsules against the cell; touching: (n,) bool, the sensor body
     in the part, table or a fixture; problems: (first pose, what, summary) of each kind of
-    failure, none when the arm flies the plan.
+    failure, none when the arm flies the plan; blocked_lines: the poses reached by a long
+    straight move (across poses a fit gave up) the arm cannot fly (`straight_moves`).
     """
 
     reach: ReachReport
     links: LinkReport
     touching: np.ndarray
     problems: list[tuple[int, str, str]]
+    blocked_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def flyable(self) -> bool:
@@ -141,6 +144,18 @@ def check_flyable(
     reach, links = arm_along(traj, arm, T_base_part, T_flange_sensor, obstacles, axes, entries)
     touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []
+    T_all = part_poses(T_base_part, traj.external, axes)
+    inv_tcp = np.linalg.inv(T_flange_sensor)
+    lines = blocked_steps(arm, traj, T_all, inv_tcp, reach.joints, pass_entries(traj), obstacles)
+    if len(lines):
+        problems.append(
+            (
+                int(lines[0]),
+                f"is reached by a straight move from pose {int(lines[0]) - 1} the arm cannot "
+                "fly (out of reach, a flip or a link or the sensor in the cell on the way)",
+                f"straight moves: {len(lines)} the arm cannot fly",
+            )
+        )
     if not links.clear:
         problems.append((links.first(), links.describe(links.first()), links.summary()))
     if not stands_clear(arm, T_base_part, axes, obstacles):
@@ -162,4 +177,4 @@ def check_flyable(
                 f"sensor: {int(touching.sum())} poses touching the cell",
             )
         )
-    return Flyability(reach, links, touching, problems)
+    return Flyability(reach, links, touching, problems, lines)

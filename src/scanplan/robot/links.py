@@ -178,6 +178,17 @@ def _cell_hits(
     return np.stack([memo[key] for key in keys]) if keys else np.zeros((0, radii.shape[1]), int)
 
 
+def joint_path(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """(k, 6) the joints strictly between q0 and q1 on the joint move from one to the other,
+    at most `JOINT_MOVE_STEP_RAD` apart on the joint that turns most (none for a move
+    shorter than two steps): the controller turns each joint by the difference of its
+    (unwrapped) angles."""
+    steps = int(np.ceil(np.abs(q1 - q0).max() / JOINT_MOVE_STEP_RAD))
+    if steps < 2:
+        return np.zeros((0, 6))
+    return q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
+
+
 def check_links(
     robot: Robot,
     joints: np.ndarray,
@@ -219,12 +230,9 @@ def check_links(
         before = known[known < i]
         if not len(before) or i not in known:
             continue
-        q0, q1 = joints[before[-1]], joints[i]
-        # The controller turns each joint by the difference of its (unwrapped) angles.
-        steps = int(np.ceil(np.abs(q1 - q0).max() / JOINT_MOVE_STEP_RAD))
-        if steps < 2:
+        path = joint_path(joints[before[-1]], joints[i])
+        if not len(path):
             continue
-        path = q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
         ends = (T_all[before[-1]], T_all[i]) if per_pose else (T_all,)
         for T in ends[: 1 if len(ends) == 1 or np.array_equal(*ends) else 2]:
             m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm, exact, memo)

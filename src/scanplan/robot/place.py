@@ -56,13 +56,14 @@ class Placement:
 
     T_base_part: (4, 4) mm, the `--part-pose` of `scanplan export`.
     report: the full reach check of every pose there; score: worst normalized margin
-    (>= 1: everything clear of the thresholds; < 0: not feasible on the search subsample).
+    (>= 1: everything clear of the thresholds; < 0: not feasible on the search subsample),
+    None for a placement judged, not searched (a plan's own).
     links: the arm's links along the path there (None: placed without a cell).
     """
 
     T_base_part: np.ndarray
     report: ReachReport
-    score: float
+    score: float | None
     evaluated: int
     seconds: float
     links: LinkReport | None = None

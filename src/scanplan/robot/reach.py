@@ -257,7 +257,7 @@ def _candidates(
     return cand, dist
 
 
-def _nearest(
+def nearest_solution(
     solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray
 ) -> tuple[int, np.ndarray] | None:
     """(branch, joints) of the one pose's (1, 8, 6) in-limit solution nearest `prev` (1, 6),
@@ -286,8 +286,8 @@ def _next_within(
 
 def _follow(solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, branch: int) -> np.ndarray:
     """(t, 6) the joints of the first t poses of `solutions` (m, 8, 6) while taking, pose by
-    pose, the in-limit solution nearest the previous joints (`_nearest`) stays on `branch`
-    from `prev`: each pose checked against the branch's path unwrapped from `prev` at once,
+    pose, the in-limit solution nearest the previous joints (`nearest_solution`) stays on
+    `branch` from `prev`: each pose checked against the branch's path unwrapped from `prev` at once,
     so a pass costs a few array operations instead of a Python step a pose. t stops at the
     first pose where the nearest is another branch, or none (the caller steps it alone)."""
     if not len(solutions):
@@ -365,7 +365,7 @@ def check_reach(
             continue
         if prev is None or (entered[i] and not pinned):
             if entries is not None and i in entries:  # the configuration recorded
-                found = _nearest(solutions[i : i + 1], limits, np.asarray(entries[i])[None])
+                found = nearest_solution(solutions[i : i + 1], limits, np.asarray(entries[i])[None])
                 start = None if found is None else found[1]
             else:
                 start = _pass_start(
@@ -381,7 +381,7 @@ def check_reach(
         # In a pass, or the first pose when the caller gave `q_start`: the in-limit
         # solution nearest the previous joints.
         pinned = False
-        nearest = _nearest(solutions[i : i + 1], limits, prev[None])
+        nearest = nearest_solution(solutions[i : i + 1], limits, prev[None])
         if nearest is None:
             i = _next_within(solutions, limits, prev, i + 1, end[i])
             continue
