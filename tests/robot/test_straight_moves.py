@@ -11,10 +11,12 @@ from scanplan.core.trajectory import MOVE_STEP_MM, Trajectory
 from scanplan.robot import check_reach, get_robot
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
+from scanplan.robot.flyable import check_flyable
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.straight_moves import blocked_steps, long_steps
+from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import Cell
-from scanplan.world.part import part_from_mesh
+from scanplan.world.part import Part, part_from_mesh
 
 TCP = parse_pose_arg("0,0,90,0,0,0")
 DOWN = np.diag([1.0, -1.0, -1.0])  # the beam (sensor z) pointing down
@@ -29,14 +31,17 @@ def _moves(points) -> Trajectory:
     return Trajectory(poses, np.zeros(len(points), np.int64), np.zeros(len(points), bool))
 
 
-def _box_cell(height_mm: float):
-    """A 100 mm square box `height_mm` tall on the part's origin, in a cell, as the links and
-    the sensor body see it."""
+def _box(height_mm: float) -> Part:
+    """A 100 mm square box `height_mm` tall on the part's origin."""
     box = trimesh.creation.box((100.0, 100.0, height_mm))
     box.apply_translation((0.0, 0.0, height_mm / 2))
-    return obstacles_for(
-        part_from_mesh(box, "box"), Cell(), ScanSpec().sensor, ScanSpec().clearance_mm
-    )
+    return part_from_mesh(box, "box")
+
+
+def _box_cell(height_mm: float) -> CellObstacles:
+    """`_box` in a cell, as the links and the sensor body see it."""
+    spec = ScanSpec()
+    return obstacles_for(_box(height_mm), Cell(), spec.sensor, spec.clearance_mm)
 
 
 def _joints(arm, traj, T):
@@ -74,6 +79,12 @@ def test_a_straight_move_through_the_part_is_blocked_one_over_it_is_not() -> Non
     high = _moves([[-160.0, 0.0, 400.0], [160.0, 0.0, 400.0]])
     joints = _joints(arm, high, T)
     assert blocked_steps(arm, high, T, inv, joints, entry, obstacles).tolist() == []
+    # Export's check of the arm refuses it, naming the line.
+    checked = check_flyable(low, arm, T, TCP, _box(100.0), Cell(), ScanSpec().sensor, obstacles)
+    assert not checked.flyable and checked.blocked_lines.tolist() == [1]
+    assert "reached by a straight move from pose 0 the arm cannot fly" in checked.first_problem(
+        low.swath
+    )
     # A joint move instead is not a straight line: not judged here.
     assert blocked_steps(arm, low, T, inv, joints, np.ones(2, bool), obstacles).tolist() == []
 

@@ -3,7 +3,8 @@ planned (`MOVE_STEP_MM`): where a fit gave up poses of a move and kept those eit
 the controller flies a straight line between the two that no pose of the plan lies on. This
 checks that line as the controller flies it: the sensor's position moved linearly and its
 orientation turned evenly, the arm staying on the branch it is on at the line's start. Where
-the arm cannot fly it, `detour` finds a pose above it to pass through by two joint moves.
+the arm cannot fly it, `detour` finds a pose above it to pass through, by two straight moves
+or two joint moves.
 """
 
 from __future__ import annotations
