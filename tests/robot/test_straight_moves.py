@@ -116,9 +116,9 @@ def test_a_fit_goes_round_a_straight_move_it_cannot_fly_by_a_pose_above_it() -> 
         traj.poses, np.array([0, 1, 1, 1, 1]), np.array([True, False, False, False, True])
     )
     fit = fit_to_robot(traj, arm, TCP, T, obstacles=obstacles)
-    assert fit.flyable and fit.blocked_lines == 0 and fit.moves_given_up == 0
-    # In the far pose's place a pose above the box, reached and left by joint moves, on
-    # the joints the plan records.
+    assert fit.flyable and fit.blocked_lines == 0 and fit.moves_given_up == 1
+    # Between the move's low poses a pose above the box, reached and left by joint moves,
+    # on the joints the plan records.
     assert len(fit.traj) == 5
     assert 100.0 + 170.0 <= fit.traj.poses[2, 2, 3] <= 600.0 + 170.0
     assert fit.entry is not None and np.flatnonzero(fit.entry).tolist() == [0, 2, 3, 4]

@@ -203,13 +203,14 @@ def fit_to_robot(
             )
             if not len(lines):
                 break
-            vias = {}  # the arm goes round each: over a pose above it, else by a joint move
-            if obstacles is not None and T_all.ndim == 2:
-                vias = detours(
-                    traj, keep, index, lines, report.joints, arm, T_all, inv_tcp, obstacles, memo
+            # Each gone round: through a pose above it, else by a joint move into its end.
+            resumed[index[lines]] = True
+            if obstacles is not None and traj.external is None:
+                vias = detours(current, lines, report.joints, arm, T_all, inv_tcp, obstacles, memo)
+                at = {int(index[i]): way for i, way in vias.items()}
+                traj, (keep, cause, swath, flipped, raised, low, resumed) = _with_vias(
+                    traj, at, [keep, cause, swath, flipped, raised, low, resumed]
                 )
-            resumed[np.setdiff1d(index[lines], list(vias))] = True
-            traj = _put(traj, vias, keep, swath, resumed)
             continue
         bad = np.flatnonzero(why >= 0)
         keep[index[bad]] = False
@@ -320,24 +321,38 @@ def beyond_reach_mm(
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
-def _put(
-    traj: Trajectory,
-    vias: dict[int, tuple[int, np.ndarray, bool]],
-    keep: np.ndarray,
-    swath: np.ndarray,
-    resumed: np.ndarray,
-) -> Trajectory:
-    """`traj` with the detours `vias` ({line's end: (index, sensor pose, by joint moves)})
-    put in place of move poses given up, kept again in the pass of the line's end (`swath`,
-    renumbered over the kept poses); where reached and left by joint moves, the pose and
-    the line's end are entered so (`resumed`)."""
+def _with_vias(
+    traj: Trajectory, vias: dict[int, tuple[np.ndarray, bool]], per_pose: list[np.ndarray]
+) -> tuple[Trajectory, list[np.ndarray]]:
+    """`traj` with the poses of `vias` ({pose: (the sensor pose to fly through before it,
+    whether joint moves reach and leave it)}) put in, each in the pass of the pose after
+    it, and the fit's arrays `per_pose` (keep, cause, swath, flipped, raised, low,
+    resumed: in that order) grown to match: a via kept, given up for nothing, in the pose
+    after's pass, not flipped, raised or low; it and the pose after entered by a joint move
+    as it says, the pose after by a straight one otherwise."""
     if not vias:
-        return traj
-    poses = traj.poses.copy()
-    for end, (via, pose, jointed) in vias.items():
-        poses[via], keep[via], swath[via] = pose, True, swath[end]
-        resumed[[via, end]] |= jointed
-    return replace(traj, poses=poses)
+        return traj, per_pose
+    at = np.array(sorted(vias))
+    jointed = np.array([vias[i][1] for i in at])
+    keep, cause, swath, flipped, raised, low, resumed = per_pose
+    resumed[at] = jointed
+    grown = [
+        np.insert(keep, at, True),
+        np.insert(cause, at, -1),
+        np.insert(swath, at, swath[at]),
+        *(np.insert(a, at, False) for a in (flipped, raised, low)),
+        np.insert(resumed, at, jointed),
+    ]
+    poses = np.insert(traj.poses, at, np.stack([vias[i][0] for i in at]), axis=0)
+    return (
+        replace(
+            traj,
+            poses=poses,
+            swath=np.insert(traj.swath, at, traj.swath[at]),
+            scanning=np.insert(traj.scanning, at, False),
+        ),
+        grown,
+    )
 
 
 def _turned(

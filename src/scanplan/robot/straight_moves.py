@@ -176,8 +176,6 @@ def detour(
 
 def detours(
     traj: Trajectory,
-    keep: np.ndarray,
-    index: np.ndarray,
     lines: np.ndarray,
     joints: np.ndarray,
     arm: Robot,
@@ -185,21 +183,15 @@ def detours(
     inv_tcp: np.ndarray,
     obstacles: CellObstacles,
     memo: LinkMemo | None = None,
-) -> dict[int, tuple[int, np.ndarray, bool]]:
-    """For the straight moves the arm cannot fly into poses `lines` of a fit's kept poses of
-    `traj` (`keep`, at `index`; `joints` the arm's along them), a `detour` each where there
-    is one: {the line's end (an index into `traj`): (a move pose given up between its ends,
-    of the move into the same pass as the end, the detour's sensor pose to put there, and
-    whether it is reached and left by joint moves)}."""
-    found: dict[int, tuple[int, np.ndarray, bool]] = {}
+) -> dict[int, tuple[np.ndarray, bool]]:
+    """For the straight moves into poses `lines` of `traj` the arm cannot fly (`joints` the
+    arm's along it), a `detour` each where there is one: {the line's end: (the detour's
+    sensor pose, to fly through before it, and whether it is reached and left by joint
+    moves)}."""
+    found: dict[int, tuple[np.ndarray, bool]] = {}
     for i in lines:
-        start, end = int(index[i - 1]), int(index[i])
-        gap = np.arange(start + 1, end)
-        free = gap[~traj.scanning[gap] & ~keep[gap] & (traj.swath[gap] == traj.swath[end])]
-        if not len(free):
-            continue
-        a, b = traj.poses[start], traj.poses[end]
+        a, b = traj.poses[i - 1], traj.poses[i]
         way = detour(arm, T_part, inv_tcp, a, b, joints[i - 1], joints[i], obstacles, memo)
         if way is not None:
-            found[end] = (int(free[len(free) // 2]), *way)
+            found[int(i)] = way
     return found
