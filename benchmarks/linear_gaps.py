@@ -37,7 +37,7 @@ def main() -> None:
     ap.add_argument("plan", nargs="?", help="a plan made for an arm (default: the drone's)")
     ap.add_argument("part", nargs="?")
     ap.add_argument("--units", default="mm")
-    ap.add_argument("--step", type=float, default=1.0, help="mm between the poses checked")
+    ap.add_argument("--step", type=float, default=0.5, help="mm between the poses checked")
     args = ap.parse_args()
     spec = ScanSpec()
     if args.plan is None:

@@ -19,8 +19,11 @@ from scanplan.robot.reach import check_reach, nearest_solution
 from scanplan.world.capsule_collision import CellObstacles
 
 # The poses a straight line is checked at are this far apart at most: finer than the moves'
-# own, as nothing else looks at the way between.
-LINE_STEP_MM = 5.0
+# own, as nothing else looks at the way between. Dense enough that the links' check, which
+# lets a pose stand for those near it with its capsules grown by how far theirs moved
+# (`links.LINK_STRIDE_MM`), bounds the whole way, not only the poses (at 5 mm two lines of
+# the quadrotor's KR 6 plan passed that a check at 1 mm found a link within the clearance on).
+LINE_STEP_MM = 1.0
 # Where a detour's pose is looked for: above the middle of the straight move the arm cannot
 # fly by these heights (mm, straight up in the cell), and moved these shares of the way
 # towards the arm's base axis (where the line leaves its reach); nearest first, so that the
