@@ -145,8 +145,9 @@ def fit_to_robot(
     them is entered at the top of the move leading into it instead (a reconfiguration), then
     flown the other way, and given up if that move does too. Last, where poses of a move were
     given up and the straight line left between the poses either side is not flyable
-    (`straight_moves`), the arm goes by joint moves: through a pose above the line where one
-    keeps clear, else straight into the pose after. With external `axes`, the part is where
+    (`straight_moves`), the arm goes round: through a pose put in above the line, by two
+    straight or two joint moves, where one keeps clear, else by a joint move into the pose
+    after. With external `axes`, the part is where
     each pose's values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
@@ -205,7 +206,7 @@ def fit_to_robot(
                 break
             # Each gone round: through a pose above it, else by a joint move into its end.
             resumed[index[lines]] = True
-            if obstacles is not None and traj.external is None:
+            if obstacles is not None and traj.external is None and T_all.ndim == 2:
                 vias = detours(current, lines, report.joints, arm, T_all, inv_tcp, obstacles, memo)
                 at = {int(index[i]): way for i, way in vias.items()}
                 traj, (keep, cause, swath, flipped, raised, low, resumed) = _with_vias(
