@@ -4,6 +4,9 @@ plan made for an arm (`scanplan plan PART --robot ...`), how many such lines it 
 how many the arm could not fly the way between (out of reach, past a joint limit, a flip, a
 link or the sensor body in the cell), checked as `export` checks them and again at poses
 `--step` mm apart (finer than the check's own). A plan from this release should have none.
+Also the joint moves (into each pass and each detour), which only the arm's links are
+checked along: on how many the sensor body comes within the plan's clearance of the cell,
+and into it, at the steps the links are checked at.
 
     cd benchmarks && PYTHONPATH=../src python linear_gaps.py PLAN.json PART [--units m]
 
@@ -24,11 +27,12 @@ from scanplan.core.trajectory import pass_entries
 from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
-from scanplan.robot.links import obstacles_for
+from scanplan.robot.links import joint_path, obstacles_for
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import check_reach
 from scanplan.robot.straight_moves import LINE_STEP_MM, blocked_steps, long_steps
 from scanplan.world.cell import planned_cell
+from scanplan.world.collision import checker_for
 from scanplan.world.part import load_part
 
 
@@ -76,6 +80,22 @@ def main() -> None:
         f"{name}: {len(traj)} poses, {len(lines)} straight lines across given-up poses (up "
         f"to {length.max() if len(lines) else 0:.0f} mm); the arm cannot fly {found[0]} of them "
         f"checked at {LINE_STEP_MM:g} mm, {found[1]} at {args.step:g} mm"
+    )
+    # The sensor body along the joint moves, at the steps `check_links` checks the links at.
+    cell = planned_cell(recorded(traj, spec), part)
+    touching = checker_for(part, spec.sensor, cell)
+    moves = near = into = 0
+    for i in np.flatnonzero(entry)[1:]:
+        path = joint_path(joints[i - 1], joints[i])
+        if not len(path) or np.isnan(path).any():
+            continue
+        sensor = np.linalg.inv(T_base_part) @ robot.forward(path) @ np.linalg.inv(inv_tcp)
+        moves += 1
+        near += int(not obstacles.sensor_clear(sensor).all())
+        into += int(touching.check(sensor, 1e-3).touching.any())
+    print(
+        f"{name}: {moves} joint moves; the sensor body comes within {spec.clearance_mm:g} mm "
+        f"of the cell on {near} of them, into it on {into}"
     )
 
 
