@@ -157,25 +157,16 @@ def fit_to_robot(
     inv_tcp = np.linalg.inv(tcp)
     T_all = part_poses(T_base_part, traj.external, axes)
     traj, turned = _turned(traj, arm, T_all, inv_tcp, obstacles)
-    keep = np.ones(len(traj), bool)
-    cause = np.full(len(traj), -1)  # why each pose given up was: an index into CAUSES
-    swath = traj.swath.copy()
+    m = _Marks.of(traj)
     splits = 0
-    flipped = np.zeros(len(traj), bool)  # the poses of passes flown the other way
-    # The first poses of passes entered at the top of the move into them, not beside the
-    # surface: those whose joint move in swept a link into the cell.
-    raised = np.zeros(len(traj), bool)
-    low = np.zeros(len(traj), bool)  # passes whose move down from the top flips the arm
-    # Poses after given-up ones reached by a joint move, as the straight line to them from
-    # the pose before is not flyable (`straight_moves`).
-    resumed = np.zeros(len(traj), bool)
     memo: LinkMemo = {}  # the rounds check much the same passes' links again
+    arm_cell = (arm, inv_tcp, obstacles, memo)  # where a detour is looked for
     for round_ in range(MAX_ROUNDS):
-        current = traj.subset(keep, swath)
-        T_now = kept(T_all, keep)
-        entry = entries_of(current, raised[keep]) | resumed[keep]
+        current = traj.subset(m.keep, m.swath)
+        T_now = kept(T_all, m.keep)
+        entry = entries_of(current, m.raised[m.keep]) | m.resumed[m.keep]
         report = _reach(current, arm, T_now, inv_tcp, obstacles, entry, memo)
-        index = np.flatnonzero(keep)
+        index = np.flatnonzero(m.keep)
         why = np.full(len(index), -1)
         why[report.limit_violations] = CAUSES.index("joint limits")
         why[report.unreachable] = CAUSES.index("reach")
@@ -185,17 +176,17 @@ def fit_to_robot(
         if report.reachable and obstacles is not None:
             starts = entry | axis_steps(current, axes)
             in_cell = check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
-            moves, raised_now = lifted(current, index, in_cell.moves, raised, low)
+            moves, raised_now = lifted(current, index, in_cell.moves, m.raised, m.low)
             reverse = round_ < REVERSING_ROUNDS
-            traj, reversed_now = flown_back(traj, current, index, moves, why, flipped, reverse)
+            traj, reversed_now = flown_back(traj, current, index, moves, why, m.flipped, reverse)
             if reversed_now:
                 T_all = part_poses(T_base_part, traj.external, axes)
-                resumed[flipped] = False  # the reversed passes are entered afresh
+                m.resumed[m.flipped] = False  # the reversed passes are entered afresh
             hit = in_cell.colliding
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
             reversed_now = raised_now = False
-        flips, lowered_now = lowered(current, index, report.config_flips, raised, low)
+        flips, lowered_now = lowered(current, index, report.config_flips, m.raised, m.low)
         done = not (len(swings) or reversed_now or raised_now or lowered_now)
         if report.reachable and done and (why < 0).all():
             # Settled: the straight lines across what was given up, last.
@@ -204,42 +195,26 @@ def fit_to_robot(
             )
             if not len(lines):
                 break
-            # Each gone round: through a pose above it, else by a joint move into its end.
-            resumed[index[lines]] = True
-            if obstacles is not None and traj.external is None and T_all.ndim == 2:
-                vias = detours(current, lines, report.joints, arm, T_all, inv_tcp, obstacles, memo)
-                at = {int(index[i]): way for i, way in vias.items()}
-                traj, (keep, cause, swath, flipped, raised, low, resumed) = _with_vias(
-                    traj, at, [keep, cause, swath, flipped, raised, low, resumed]
-                )
+            traj, m = _gone_round(traj, current, index, lines, report.joints, m, T_all, *arm_cell)
             continue
-        bad = np.flatnonzero(why >= 0)
-        keep[index[bad]] = False
-        cause[index[bad]] = why[bad]
-        # A pass goes on after a gap or a flip as a new pass: the arm reconfigures between.
-        cut = np.zeros(len(traj), bool)
-        cut[index[flips]] = True
-        cut[index[swings]] = True
-        splits += int(len(np.union1d(flips, swings)))
-        swath = renumbered_passes(traj, keep, swath, cut)
-    beyond_mm = beyond_reach_mm(traj, arm, T_all, inv_tcp, cause)
-    given_up, by_cause = _given_up_by_view(traj, keep, cause)
-    reversed_passes = len(np.unique(swath[flipped & keep & traj.scanning]))
-    fitted = traj.subset(keep, swath)
+        splits += m.give_up(traj, index, why, np.union1d(flips, swings))
+    beyond_mm = beyond_reach_mm(traj, arm, T_all, inv_tcp, m.cause)
+    given_up, by_cause = _given_up_by_view(traj, m.keep, m.cause)
+    reversed_passes = len(np.unique(m.swath[m.flipped & m.keep & traj.scanning]))
+    fitted = traj.subset(m.keep, m.swath)
     if not fitted.scanning.any():
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
-    fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, swath, keep)})
+    fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, m.swath, m.keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
-    entry = entries_of(fitted, raised[keep]) | resumed[keep]
-    T_kept = kept(T_all, keep)
-    report, links = _verdict(fitted, arm, T_kept, inv_tcp, obstacles, axes, entry, memo)
-    blocked = blocked_steps(arm, fitted, T_kept, inv_tcp, report.joints, entry, obstacles, memo)
+    entry = entries_of(fitted, m.raised[m.keep]) | m.resumed[m.keep]
+    T_kept = kept(T_all, m.keep)
+    report, links, blocked = _verdict(fitted, arm, T_kept, inv_tcp, obstacles, axes, entry, memo)
     return RobotFit(
         fitted,
         T_base_part,
         report,
         given_up,
-        int((~keep & ~traj.scanning).sum()),
+        int((~m.keep & ~traj.scanning).sum()),
         splits,
         placement,
         links,
@@ -248,7 +223,7 @@ def fit_to_robot(
         beyond_mm,
         reversed_passes,
         entry=entry,
-        blocked_lines=len(blocked),
+        blocked_lines=blocked,
     )
 
 
@@ -282,15 +257,18 @@ def _verdict(
     axes: ExternalAxes | None,
     entry: np.ndarray,
     memo: LinkMemo | None = None,
-) -> tuple[ReachReport, LinkReport | None]:
+) -> tuple[ReachReport, LinkReport | None, int]:
     """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
-    each pass entered where `entry` says, and in a cell its links along the path and the
-    joint moves into passes."""
+    each pass entered where `entry` says, in a cell its links along the path and the joint
+    moves into passes, and how many of its straight moves across poses given up the arm
+    cannot fly (`straight_moves.blocked_steps`)."""
     report = _reach(fitted, arm, T_now, inv_tcp, obstacles, entry, memo)
+    lines = blocked_steps(arm, fitted, T_now, inv_tcp, report.joints, entry, obstacles, memo)
     if obstacles is None:
-        return report, None
+        return report, None, len(lines)
     starts = entry | axis_steps(fitted, axes)
-    return report, check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
+    links = check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
+    return report, links, len(lines)
 
 
 def _given_up_by_view(
@@ -322,38 +300,91 @@ def beyond_reach_mm(
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
-def _with_vias(
-    traj: Trajectory, vias: dict[int, tuple[np.ndarray, bool]], per_pose: list[np.ndarray]
-) -> tuple[Trajectory, list[np.ndarray]]:
-    """`traj` with the poses of `vias` ({pose: (the sensor pose to fly through before it,
-    whether joint moves reach and leave it)}) put in, each in the pass of the pose after
-    it, and the fit's arrays `per_pose` (keep, cause, swath, flipped, raised, low,
-    resumed: in that order) grown to match: a via kept, given up for nothing, in the pose
-    after's pass, not flipped, raised or low; it and the pose after entered by a joint move
-    as it says, the pose after by a straight one otherwise."""
-    if not vias:
-        return traj, per_pose
-    at = np.array(sorted(vias))
-    jointed = np.array([vias[i][1] for i in at])
-    keep, cause, swath, flipped, raised, low, resumed = per_pose
-    resumed[at] = jointed
-    grown = [
-        np.insert(keep, at, True),
-        np.insert(cause, at, -1),
-        np.insert(swath, at, swath[at]),
-        *(np.insert(a, at, False) for a in (flipped, raised, low)),
-        np.insert(resumed, at, jointed),
-    ]
-    poses = np.insert(traj.poses, at, np.stack([vias[i][0] for i in at]), axis=0)
-    return (
-        replace(
-            traj,
-            poses=poses,
-            swath=np.insert(traj.swath, at, traj.swath[at]),
-            scanning=np.insert(traj.scanning, at, False),
-        ),
-        grown,
-    )
+@dataclass
+class _Marks:
+    """Per pose of the fit's plan: kept; why given up (into `CAUSES`, -1: not); its pass,
+    renumbered over the kept; its pass flown the other way (`flown_back`); a pass's first
+    entered at the top of its move (`lifted`), or whose move down flips (`lowered`); entered
+    by a joint move after poses given up (`straight_moves`)."""
+
+    keep: np.ndarray
+    cause: np.ndarray
+    swath: np.ndarray
+    flipped: np.ndarray
+    raised: np.ndarray
+    low: np.ndarray
+    resumed: np.ndarray
+
+    def give_up(
+        self, traj: Trajectory, index: np.ndarray, why: np.ndarray, cuts: np.ndarray
+    ) -> int:
+        """The kept poses (at `index`) with a cause in `why` (>= 0) given up, and passes cut
+        before the kept poses `cuts` (flips, joints swinging): a pass goes on after a gap or
+        a cut as a new pass, the arm reconfiguring between. Returns how many were cut."""
+        bad = np.flatnonzero(why >= 0)
+        self.keep[index[bad]] = False
+        self.cause[index[bad]] = why[bad]
+        cut = np.zeros(len(traj), bool)
+        cut[index[cuts]] = True
+        self.swath = renumbered_passes(traj, self.keep, self.swath, cut)
+        return len(cuts)
+
+    @classmethod
+    def of(cls, traj: Trajectory) -> _Marks:
+        n = len(traj)
+        none = [np.zeros(n, bool) for _ in range(4)]
+        return cls(np.ones(n, bool), np.full(n, -1), traj.swath.copy(), *none)
+
+    def with_vias(
+        self, traj: Trajectory, vias: dict[int, tuple[np.ndarray, bool]]
+    ) -> tuple[Trajectory, _Marks]:
+        """`traj` with the poses of `vias` ({pose: (the sensor pose to fly through before
+        it, whether joint moves reach and leave it)}) put in, each in the pass of the pose
+        after it, and these marks grown to match: a via kept, given up for nothing, in the
+        pose after's pass, not flipped, raised or low; it and the pose after entered by a
+        joint move as it says, the pose after by a straight one otherwise."""
+        if not vias:
+            return traj, self
+        at = np.array(sorted(vias))
+        jointed = np.array([vias[i][1] for i in at])
+        self.resumed[at] = jointed
+        grown = _Marks(
+            np.insert(self.keep, at, True),
+            np.insert(self.cause, at, -1),
+            np.insert(self.swath, at, self.swath[at]),
+            np.insert(self.flipped, at, False),
+            np.insert(self.raised, at, False),
+            np.insert(self.low, at, False),
+            np.insert(self.resumed, at, jointed),
+        )
+        poses = np.insert(traj.poses, at, np.stack([vias[i][0] for i in at]), axis=0)
+        swath = np.insert(traj.swath, at, traj.swath[at])
+        scanning = np.insert(traj.scanning, at, False)
+        return replace(traj, poses=poses, swath=swath, scanning=scanning), grown
+
+
+def _gone_round(
+    traj: Trajectory,
+    current: Trajectory,
+    index: np.ndarray,
+    lines: np.ndarray,
+    joints: np.ndarray,
+    m: _Marks,
+    T_all: np.ndarray,
+    arm: Robot,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    memo: LinkMemo,
+) -> tuple[Trajectory, _Marks]:
+    """The straight moves into poses `lines` of `current` (the kept poses of `traj`, at
+    `index`; `joints` the arm's along them) the arm cannot fly, each gone round: through a
+    pose put in above it (`straight_moves.detours`, in a cell, the part where one pose puts
+    it), else by a joint move into its end."""
+    m.resumed[index[lines]] = True
+    if obstacles is None or traj.external is not None or T_all.ndim != 2:
+        return traj, m
+    vias = detours(current, lines, joints, arm, T_all, inv_tcp, obstacles, memo)
+    return m.with_vias(traj, {int(index[i]): way for i, way in vias.items()})
 
 
 def _turned(
