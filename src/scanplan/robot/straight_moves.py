@@ -10,10 +10,10 @@ or two joint moves.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 from scanplan.core.trajectory import MOVE_STEP_MM, Trajectory
 from scanplan.robot.base import Robot
+from scanplan.robot.export.thinning import linear_move
 from scanplan.robot.links import LinkMemo, check_links, joint_path
 from scanplan.robot.reach import check_reach, nearest_solution
 from scanplan.world.capsule_collision import CellObstacles
@@ -46,16 +46,6 @@ def _fractions(a: np.ndarray, b: np.ndarray, step_mm: float) -> np.ndarray:
     return np.linspace(0.0, 1.0, max(2, int(np.ceil(length / step_mm)) + 1))
 
 
-def _between(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(k, 4, 4) poses at fractions `t` of the way from a to b: position linear,
-    orientation by slerp."""
-    out = np.broadcast_to(np.eye(4), (len(t), 4, 4)).copy()
-    turn = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a[:3, :3], b[:3, :3]])))
-    out[:, :3, :3] = turn(t).as_matrix()
-    out[:, :3, 3] = a[:3, 3] + t[:, None] * (b[:3, 3] - a[:3, 3])
-    return out
-
-
 def blocked_steps(
     arm: Robot,
     traj: Trajectory,
@@ -80,11 +70,11 @@ def blocked_steps(
     ends = [(traj.poses[i - 1], traj.poses[i]) for i in steps]
     t = [_fractions(a, b, step_mm) for a, b in ends]
     sizes = np.array([len(f) for f in t])
-    poses = np.concatenate([_between(a, b, f) for (a, b), f in zip(ends, t, strict=True)])
+    poses = np.concatenate([linear_move(a, b, f) for (a, b), f in zip(ends, t, strict=True)])
     T_all = np.asarray(T_part, dtype=np.float64)
     if T_all.ndim == 3:  # the part's pose along each line, moved with the sensor
         T_all = np.concatenate(
-            [_between(T_all[i - 1], T_all[i], f) for i, f in zip(steps, t, strict=True)]
+            [linear_move(T_all[i - 1], T_all[i], f) for i, f in zip(steps, t, strict=True)]
         )
     which = np.repeat(np.arange(len(steps)), sizes)
     first = np.r_[0, np.cumsum(sizes)[:-1]]
@@ -128,7 +118,7 @@ def _detour_poses(T_part: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarra
     """(k, 4, 4) the sensor poses a detour between poses a and b may pass through, in the
     order they are tried (`DETOUR_HEIGHTS_MM`, `DETOUR_INWARD`; part frame)."""
     up = T_part[2, :3]  # the base's vertical in the part's frame
-    middle = _between(a, b, np.array([0.5]))[0]
+    middle = linear_move(a, b, np.array([0.5]))[0]
     inward = np.linalg.inv(T_part)[:3, 3] - middle[:3, 3]  # to the base's origin
     inward -= (inward @ up) * up  # level: to its axis
     h, s = np.meshgrid(DETOUR_HEIGHTS_MM, DETOUR_INWARD, indexing="ij")
@@ -160,7 +150,7 @@ def detour(
     tcp, to_part = np.linalg.inv(inv_tcp), np.linalg.inv(T_part)
     for k, pose in enumerate(above):
         there, on = _fractions(a, pose, LINE_STEP_MM), _fractions(pose, b, LINE_STEP_MM)
-        bent = np.concatenate([_between(a, pose, there), _between(pose, b, on[1:])])
+        bent = np.concatenate([linear_move(a, pose, there), linear_move(pose, b, on[1:])])
         lines = np.zeros(len(bent), np.int64)
         if not _not_flown(arm, bent, T_part, inv_tcp, lines, {0: q0}, obstacles, memo).any():
             return pose, False

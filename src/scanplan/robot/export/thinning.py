@@ -15,16 +15,24 @@ from scipy.spatial.transform import Rotation
 def segment_errors(poses: np.ndarray, i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
     """(position error mm, angle error rad) of poses i+1..j-1 of (n, 4, 4) `poses` against
     the linear move from pose i to pose j, each at its own arc-length parameter."""
-    p = poses[i : j + 1, :3, 3]
-    u = interp_params(p)[1:-1]
+    u = interp_params(poses[i : j + 1, :3, 3])[1:-1]
     inner = slice(i + 1, j)
-    flown = p[0] + u[:, None] * (p[-1] - p[0])
-    pos_err = np.linalg.norm(poses[inner, :3, 3] - flown, axis=1)
-    r0 = Rotation.from_matrix(poses[i, :3, :3])
-    turn = (r0.inv() * Rotation.from_matrix(poses[j, :3, :3])).as_rotvec()
-    slerp = r0 * Rotation.from_rotvec(u[:, None] * turn)
-    ang_err = (slerp.inv() * Rotation.from_matrix(poses[inner, :3, :3])).magnitude()
+    flown = linear_move(poses[i], poses[j], u)
+    pos_err = np.linalg.norm(poses[inner, :3, 3] - flown[:, :3, 3], axis=1)
+    turned = Rotation.from_matrix(flown[:, :3, :3]).inv()
+    ang_err = (turned * Rotation.from_matrix(poses[inner, :3, :3])).magnitude()
     return pos_err, ang_err
+
+
+def linear_move(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """(k, 4, 4) the poses at parameters `u` (k,) in [0, 1] of a controller's linear move
+    from pose a to pose b: position linearly, orientation by slerp, with one parameter."""
+    r0 = Rotation.from_matrix(a[:3, :3])
+    turn = (r0.inv() * Rotation.from_matrix(b[:3, :3])).as_rotvec()
+    out = np.broadcast_to(np.eye(4), (len(u), 4, 4)).copy()
+    out[:, :3, :3] = (r0 * Rotation.from_rotvec(np.outer(u, turn))).as_matrix()
+    out[:, :3, 3] = a[:3, 3] + np.outer(u, b[:3, 3] - a[:3, 3])
+    return out
 
 
 def interp_params(p: np.ndarray) -> np.ndarray:
