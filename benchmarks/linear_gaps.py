@@ -20,16 +20,16 @@ import argparse
 
 import numpy as np
 
-from scanplan.core.context import recorded
+from scanplan.core.plan import Plan
 from scanplan.core.plan_file import read_json
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import pass_entries
 from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.flyable import check_flyable
 from scanplan.robot.links import joint_path, obstacles_for
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import check_reach
 from scanplan.robot.straight_moves import LINE_STEP_MM, blocked_steps, long_steps
 from scanplan.world.cell import planned_cell
 from scanplan.world.collision import checker_for
@@ -43,46 +43,38 @@ def main() -> None:
     ap.add_argument("--units", default="mm")
     ap.add_argument("--step", type=float, default=0.5, help="mm between the poses checked")
     args = ap.parse_args()
-    spec = ScanSpec()
     if args.plan is None:
         name, part = "drone, kr6-r900", load_part("drone", "mm")
         arm = Arm("kr6-r900", parse_pose_arg("0,0,90,0,0,0"))
-        _, traj = plan_views(part, spec, make_planner("geometric"), "auto", arm=arm)
+        _, traj = plan_views(part, ScanSpec(), make_planner("geometric"), "auto", arm=arm)
     else:
         if args.part is None:
             raise SystemExit("give the plan's part after the plan")
         name, traj, part = args.plan, read_json(args.plan), load_part(args.part, args.units)
-    record = traj.meta.get("robot")
-    if not isinstance(record, dict):
+    plan = Plan.of(traj)  # the arm, its placement and entries as every command reads them
+    if plan.arm is None:
         raise SystemExit(f"{name} is not a plan made for an arm")
-    obstacles = obstacles_for(
-        part, planned_cell(recorded(traj, spec), part), spec.sensor, spec.clearance_mm
+    spec, robot = plan.spec, get_robot(plan.arm.robot)
+    T_base_part, inv_tcp = plan.arm.T_base_part, np.linalg.inv(plan.arm.T_flange_sensor)
+    cell = planned_cell(plan.context, part)
+    obstacles = obstacles_for(part, cell, spec.sensor, spec.clearance_mm)
+    # As `export` checks the plan: its joints, and the lines at the check's own spacing.
+    checked = check_flyable(
+        traj, robot, T_base_part, plan.arm.T_flange_sensor, part, cell, spec.sensor, obstacles
     )
-    robot = get_robot(record["robot"])
-    T_base_part = parse_pose_arg(record["part_pose"])
-    inv_tcp = np.linalg.inv(parse_pose_arg(record["tcp"]))
-    entry = pass_entries(traj)
-    joints = check_reach(
-        T_base_part @ traj.poses @ inv_tcp,
-        robot,
-        swath=traj.swath,
-        scanning=traj.scanning,
-        entry=entry,
-        entries=_entries(record),
-    ).joints
+    joints, entry = checked.joints, pass_entries(traj)
     lines = long_steps(traj, entry)
     length = np.linalg.norm(traj.positions_mm[lines] - traj.positions_mm[lines - 1], axis=1)
-    found = [
-        len(blocked_steps(robot, traj, T_base_part, inv_tcp, joints, entry, obstacles, None, s))
-        for s in (LINE_STEP_MM, args.step)
-    ]
+    finer = blocked_steps(
+        robot, traj, T_base_part, inv_tcp, joints, entry, obstacles, None, args.step
+    )
+    found = [len(checked.blocked_lines), len(finer)]
     print(
         f"{name}: {len(traj)} poses, {len(lines)} straight lines across given-up poses (up "
         f"to {length.max() if len(lines) else 0:.0f} mm); the arm cannot fly {found[0]} of them "
         f"checked at {LINE_STEP_MM:g} mm, {found[1]} at {args.step:g} mm"
     )
     # The sensor body along the joint moves, at the steps `check_links` checks the links at.
-    cell = planned_cell(recorded(traj, spec), part)
     touching = checker_for(part, spec.sensor, cell)
     moves = near = into = 0
     for i in np.flatnonzero(entry)[1:]:
@@ -97,11 +89,6 @@ def main() -> None:
         f"{name}: {moves} joint moves; the sensor body comes within {spec.clearance_mm:g} mm "
         f"of the cell on {near} of them, into it on {into}"
     )
-
-
-def _entries(record: dict) -> dict[int, np.ndarray]:
-    """The joints each pass is entered with, as the plan records them (rad)."""
-    return {int(i): np.radians(q) for i, q in record.get("pass_entry_joints_deg", {}).items()}
 
 
 if __name__ == "__main__":
