@@ -4,9 +4,10 @@ plan made for an arm (`scanplan plan PART --robot ...`), how many such lines it 
 how many the arm could not fly the way between (out of reach, past a joint limit, a flip, a
 link or the sensor body in the cell), checked as `export` checks them and again at poses
 `--step` mm apart (finer than the check's own). A plan from this release should have none.
-Also the joint moves (into each pass and each detour), which only the arm's links are
-checked along: on how many the sensor body comes within the plan's clearance of the cell,
-and into it, at the steps the links are checked at.
+Also the joint moves (into each pass, each detour and each lift): on how many the sensor
+body comes within the plan's clearance of the cell (between poses that keep it: the fit's
+standard), and into it (`export`'s), at the steps the links are checked at. A plan from
+this release should have none.
 
     cd benchmarks && PYTHONPATH=../src python linear_gaps.py PLAN.json PART [--units m]
 
@@ -28,11 +29,11 @@ from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.flyable import check_flyable
-from scanplan.robot.links import joint_path, obstacles_for
+from scanplan.robot.joint_moves import TOUCH_MM, sensor_swept
+from scanplan.robot.links import obstacles_for
 from scanplan.robot.presets import get_robot
 from scanplan.robot.straight_moves import LINE_STEP_MM, blocked_steps, long_steps
 from scanplan.world.cell import planned_cell
-from scanplan.world.collision import checker_for
 from scanplan.world.part import load_part
 
 
@@ -74,20 +75,14 @@ def main() -> None:
         f"to {length.max() if len(lines) else 0:.0f} mm); the arm cannot fly {found[0]} of them "
         f"checked at {LINE_STEP_MM:g} mm, {found[1]} at {args.step:g} mm"
     )
-    # The sensor body along the joint moves, at the steps `check_links` checks the links at.
-    touching = checker_for(part, spec.sensor, cell)
-    moves = near = into = 0
-    for i in np.flatnonzero(entry)[1:]:
-        path = joint_path(joints[i - 1], joints[i])
-        if not len(path) or np.isnan(path).any():
-            continue
-        sensor = np.linalg.inv(T_base_part) @ robot.forward(path) @ np.linalg.inv(inv_tcp)
-        moves += 1
-        near += int(not obstacles.sensor_clear(sensor).all())
-        into += int(touching.check(sensor, 1e-3).touching.any())
+    # The sensor body along the joint moves, as the fit and `export` check it.
+    jointed = entry & (np.arange(len(traj)) > 0)
+    tcp = plan.arm.T_flange_sensor
+    near = sensor_swept(robot, joints, jointed, T_base_part, tcp, obstacles)
+    into = sensor_swept(robot, joints, jointed, T_base_part, tcp, obstacles, TOUCH_MM)
     print(
-        f"{name}: {moves} joint moves; the sensor body comes within {spec.clearance_mm:g} mm "
-        f"of the cell on {near} of them, into it on {into}"
+        f"{name}: {int(jointed.sum())} joint moves; the sensor body comes within "
+        f"{spec.clearance_mm:g} mm of the cell on {len(near)} of them, into it on {len(into)}"
     )
 
 

@@ -16,7 +16,7 @@ from scanplan.core.context import PlanContext
 from scanplan.core.plan import Plan
 from scanplan.core.plan_file import read_json
 from scanplan.core.quantities import ScanSpec
-from scanplan.core.trajectory import Trajectory
+from scanplan.core.trajectory import Trajectory, lead_tops
 from scanplan.planning.pipeline import _not_flown
 from scanplan.planning.swaths import Swath
 from scanplan.planning.views import View, ViewPlan
@@ -346,7 +346,7 @@ def test_a_pass_whose_move_in_hits_the_cell_is_entered_at_the_top_of_its_move_fi
     low = np.zeros(11, bool)
     left, lifted = repairs.lifted(traj, index, {7: (0, 0)}, raised, low)
     assert lifted and left == {} and np.flatnonzero(raised).tolist() == [7]
-    top = int(fit_module.lead_tops(traj)[7])
+    top = int(lead_tops(traj)[7])
     assert top in (5, 6)
     assert np.flatnonzero(fit_module.entries_of(traj, raised)).tolist() == [0, top]
     # Its move in hits from the top too: left to be flown the other way or given up.
@@ -403,3 +403,10 @@ def test_views_the_arm_flies_none_of_are_said_with_why_and_what_would_help():
     # Judged on other samples: nothing is compared, nothing said.
     assert _not_flown(views, held[:10], "ur3e", TCP, fit) == ([], 0.0)
     assert facing([0.0, 0.0, 1.0]) == "up" and facing([-0.7, 0.1, 0.7]) == "-x (44° up)"
+
+
+def test_passes_given_up_for_the_sensor_on_their_joint_move_get_their_own_hint():
+    record = {"given_up_by_cause": {"0": {"sensor on a joint move": 466}}}
+    (hint,) = what_would_help(record)
+    assert hint.startswith("466 poses on passes whose joint move in swings the sensor body")
+    assert "--part-pose" in hint

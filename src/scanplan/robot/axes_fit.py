@@ -23,7 +23,7 @@ from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
 from scanplan.robot.base import Robot
-from scanplan.robot.fit import renumbered_passes
+from scanplan.robot.fit_marks import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, kept_by_pass, turned_passes
 from scanplan.robot.links import hung, obstacles_for
 from scanplan.robot.place import reach_mm

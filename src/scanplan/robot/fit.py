@@ -12,16 +12,18 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.core.plan import ViewRecord, view_records
-from scanplan.core.trajectory import Trajectory, half_turns, lead_ins, lead_tops
+from scanplan.core.trajectory import Trajectory, lead_ins
 from scanplan.robot.axes import ExternalAxes, axis_steps, kept, part_poses
 from scanplan.robot.base import Robot, pose_arg
+from scanplan.robot.fit_marks import FitMarks, entries_of
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, sensor_clear_both, turned_passes
+from scanplan.robot.joint_moves import lift, sensor_swept
 from scanplan.robot.links import LinkClearance, LinkMemo, LinkReport, check_links
 from scanplan.robot.pass_repairs import CAUSES, flown_back, lifted, lowered
 from scanplan.robot.place import Placement, place, reach_mm
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import ReachReport, check_reach
-from scanplan.robot.straight_moves import blocked_steps, detours
+from scanplan.robot.straight_moves import Way, blocked_steps, detours
 from scanplan.world.capsule_collision import CellObstacles
 
 # Rounds of dropping and splitting: a piece of a pass may start on another branch than the
@@ -31,6 +33,8 @@ from scanplan.world.capsule_collision import CellObstacles
 # (the quadrotor on a UR5e with a turntable took more than six rounds).
 REVERSING_ROUNDS = 6
 MAX_ROUNDS = 40
+# Times a joint move into one pose is lifted at most (`_gone_round`).
+MAX_LIFTS = 3
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,7 @@ class RobotFit:
     reversed: int = 0
     entry: np.ndarray | None = None  # (n,) where the path and each pass are entered
     blocked_lines: int = 0  # straight moves across poses given up the arm cannot fly
+    swept_moves: int = 0  # joint moves that bring the sensor body within the clearance
 
     @property
     def flyable(self) -> bool:
@@ -73,6 +78,7 @@ class RobotFit:
             self.report.reachable
             and (self.links is None or self.links.clear)
             and not self.blocked_lines
+            and not self.swept_moves
         )
 
     def record(self, tcp: np.ndarray) -> dict:
@@ -113,19 +119,6 @@ def entry_joints_deg(entry: np.ndarray, joints: np.ndarray) -> dict[str, list[fl
     return {str(i): np.round(np.degrees(joints[i]), 6).tolist() for i in at}
 
 
-def entries_of(traj: Trajectory, raised: np.ndarray) -> np.ndarray:
-    """(n,) bool: where the path and each of its passes are entered by a joint move: its
-    first pose, and each pass's first pose or, where `raised` (n,) marks that pose, the top
-    of the move leading into it (`lead_tops`); and each pose the sensor comes to turned
-    about half a turn from the pose before (`half_turns`: a pass turned beside its move)."""
-    top = lead_tops(traj)
-    first = np.flatnonzero(top >= 0)
-    entry = np.zeros(len(traj), bool)
-    entry[np.where(raised[first], top[first], first)] = True
-    entry[:1] = True
-    return entry | half_turns(traj)
-
-
 def fit_to_robot(
     traj: Trajectory,
     robot: str | Path | Robot,
@@ -147,8 +140,9 @@ def fit_to_robot(
     given up and the straight line left between the poses either side is not flyable
     (`straight_moves`), the arm goes round: through a pose put in above the line, by two
     straight or two joint moves, where one keeps clear, else by a joint move into the pose
-    after. With external `axes`, the part is where
-    each pose's values (`traj.external`) put it."""
+    after; and a joint move that swings the sensor body into the cell is made higher up
+    (`joint_moves.lift`), its pass given up where no lift keeps it clear. With external
+    `axes`, the part is where each pose's values (`traj.external`) put it."""
     arm = get_robot(robot)
     placement = None
     if T_base_part is None:
@@ -157,14 +151,14 @@ def fit_to_robot(
     inv_tcp = np.linalg.inv(tcp)
     T_all = part_poses(T_base_part, traj.external, axes)
     traj, turned = _turned(traj, arm, T_all, inv_tcp, obstacles)
-    m = _Marks.of(traj)
+    m = FitMarks.of(traj)
     splits = 0
     memo: LinkMemo = {}  # the rounds check much the same passes' links again
     arm_cell = (arm, inv_tcp, obstacles, memo)  # where a detour is looked for
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(m.keep, m.swath)
         T_now = kept(T_all, m.keep)
-        entry = entries_of(current, m.raised[m.keep]) | m.resumed[m.keep]
+        entry = m.entry(current)
         report = _reach(current, arm, T_now, inv_tcp, obstacles, entry, memo)
         index = np.flatnonzero(m.keep)
         why = np.full(len(index), -1)
@@ -181,7 +175,7 @@ def fit_to_robot(
             traj, reversed_now = flown_back(traj, current, index, moves, why, m.flipped, reverse)
             if reversed_now:
                 T_all = part_poses(T_base_part, traj.external, axes)
-                m.resumed[m.flipped] = False  # the reversed passes are entered afresh
+                m.resumed[m.flipped] = m.descended[m.flipped] = False  # entered afresh
             hit = in_cell.colliding
             why[hit] = CAUSES.index("link in the part") + in_cell.obstacle[hit]
         else:
@@ -189,14 +183,23 @@ def fit_to_robot(
         flips, lowered_now = lowered(current, index, report.config_flips, m.raised, m.low)
         done = not (len(swings) or reversed_now or raised_now or lowered_now)
         if report.reachable and done and (why < 0).all():
-            # Settled: the straight lines across what was given up, last.
+            # Settled: the straight lines across what was given up and the sensor body
+            # along the joint moves, last.
             lines = blocked_steps(
                 arm, current, T_now, inv_tcp, report.joints, entry, obstacles, memo
             )
-            if not len(lines):
+            jointed = entry | axis_steps(current, axes)  # the joint moves, turntable's too
+            swept = _swept(arm, report.joints, jointed, T_now, tcp, obstacles)
+            if not len(lines) and not len(swept):
                 break
-            traj, m = _gone_round(traj, current, index, lines, report.joints, m, T_all, *arm_cell)
-            continue
+            traj, m, stuck = _gone_round(
+                traj, current, index, lines, swept, report.joints, m, T_all, *arm_cell
+            )
+            T_all = part_poses(T_base_part, traj.external, axes)
+            if not len(stuck):
+                continue
+            stuck_passes = np.isin(current.swath, current.swath[stuck])
+            why[stuck_passes] = CAUSES.index("sensor on a joint move")
         splits += m.give_up(traj, index, why, np.union1d(flips, swings))
     beyond_mm = beyond_reach_mm(traj, arm, T_all, inv_tcp, m.cause)
     given_up, by_cause = _given_up_by_view(traj, m.keep, m.cause)
@@ -206,9 +209,10 @@ def fit_to_robot(
         raise ValueError(f"{arm.name} reaches no scanning pose of this plan from this placement")
     fitted = replace(fitted, meta=fitted.meta | {"views": _views(traj, m.swath, m.keep)})
     # The verdict on what is kept, as `export` will check it (after the last round too).
-    entry = entries_of(fitted, m.raised[m.keep]) | m.resumed[m.keep]
+    entry = m.entry(fitted)
     T_kept = kept(T_all, m.keep)
     report, links, blocked = _verdict(fitted, arm, T_kept, inv_tcp, obstacles, axes, entry, memo)
+    swept = _swept(arm, report.joints, entry | axis_steps(fitted, axes), T_kept, tcp, obstacles)
     return RobotFit(
         fitted,
         T_base_part,
@@ -224,6 +228,7 @@ def fit_to_robot(
         reversed_passes,
         entry=entry,
         blocked_lines=blocked,
+        swept_moves=len(swept),
     )
 
 
@@ -300,67 +305,19 @@ def beyond_reach_mm(
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
-@dataclass
-class _Marks:
-    """Per pose of the fit's plan: kept; why given up (into `CAUSES`, -1: not); its pass,
-    renumbered over the kept; its pass flown the other way (`flown_back`); a pass's first
-    entered at the top of its move (`lifted`), or whose move down flips (`lowered`); entered
-    by a joint move after poses given up (`straight_moves`)."""
-
-    keep: np.ndarray
-    cause: np.ndarray
-    swath: np.ndarray
-    flipped: np.ndarray
-    raised: np.ndarray
-    low: np.ndarray
-    resumed: np.ndarray
-
-    def give_up(
-        self, traj: Trajectory, index: np.ndarray, why: np.ndarray, cuts: np.ndarray
-    ) -> int:
-        """The kept poses (at `index`) with a cause in `why` (>= 0) given up, and passes cut
-        before the kept poses `cuts` (flips, joints swinging): a pass goes on after a gap or
-        a cut as a new pass, the arm reconfiguring between. Returns how many were cut."""
-        bad = np.flatnonzero(why >= 0)
-        self.keep[index[bad]] = False
-        self.cause[index[bad]] = why[bad]
-        cut = np.zeros(len(traj), bool)
-        cut[index[cuts]] = True
-        self.swath = renumbered_passes(traj, self.keep, self.swath, cut)
-        return len(cuts)
-
-    @classmethod
-    def of(cls, traj: Trajectory) -> _Marks:
-        n = len(traj)
-        none = [np.zeros(n, bool) for _ in range(4)]
-        return cls(np.ones(n, bool), np.full(n, -1), traj.swath.copy(), *none)
-
-    def with_vias(
-        self, traj: Trajectory, vias: dict[int, tuple[np.ndarray, bool]]
-    ) -> tuple[Trajectory, _Marks]:
-        """`traj` with the poses of `vias` ({pose: (the sensor pose to fly through before
-        it, whether joint moves reach and leave it)}) put in, each in the pass of the pose
-        after it, and these marks grown to match: a via kept, given up for nothing, in the
-        pose after's pass, not flipped, raised or low; it and the pose after entered by a
-        joint move as it says, the pose after by a straight one otherwise."""
-        if not vias:
-            return traj, self
-        at = np.array(sorted(vias))
-        jointed = np.array([vias[i][1] for i in at])
-        self.resumed[at] = jointed
-        grown = _Marks(
-            np.insert(self.keep, at, True),
-            np.insert(self.cause, at, -1),
-            np.insert(self.swath, at, self.swath[at]),
-            np.insert(self.flipped, at, False),
-            np.insert(self.raised, at, False),
-            np.insert(self.low, at, False),
-            np.insert(self.resumed, at, jointed),
-        )
-        poses = np.insert(traj.poses, at, np.stack([vias[i][0] for i in at]), axis=0)
-        swath = np.insert(traj.swath, at, traj.swath[at])
-        scanning = np.insert(traj.scanning, at, False)
-        return replace(traj, poses=poses, swath=swath, scanning=scanning), grown
+def _swept(
+    arm: Robot,
+    joints: np.ndarray,
+    entry: np.ndarray,
+    T_now: np.ndarray,
+    tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+) -> np.ndarray:
+    """The joint moves (into poses of the kept plan) that bring the sensor body within
+    the clearance of the cell (`joint_moves.sensor_swept`); none without a cell."""
+    if obstacles is None:
+        return np.zeros(0, np.int64)
+    return sensor_swept(arm, joints, entry, T_now, tcp, obstacles)
 
 
 def _gone_round(
@@ -368,23 +325,46 @@ def _gone_round(
     current: Trajectory,
     index: np.ndarray,
     lines: np.ndarray,
+    swept: np.ndarray,
     joints: np.ndarray,
-    m: _Marks,
+    m: FitMarks,
     T_all: np.ndarray,
     arm: Robot,
     inv_tcp: np.ndarray,
     obstacles: CellObstacles | None,
     memo: LinkMemo,
-) -> tuple[Trajectory, _Marks]:
-    """The straight moves into poses `lines` of `current` (the kept poses of `traj`, at
-    `index`; `joints` the arm's along them) the arm cannot fly, each gone round: through a
-    pose put in above it (`straight_moves.detours`, in a cell, the part where one pose puts
-    it), else by a joint move into its end."""
+) -> tuple[Trajectory, FitMarks, np.ndarray]:
+    """The straight moves into poses `lines` and the joint moves into poses `swept` of
+    `current` (the kept poses of `traj`, at `index`; `joints` the arm's along them) the arm
+    cannot fly, each gone round. A straight one through a pose put in above it
+    (`straight_moves.detours`, in a cell, the part where one pose puts it), else by a joint
+    move into its end; a joint move lifted (`joint_moves.lift`), where the part stands
+    still over it, up to `MAX_LIFTS` times into one pose (a lift changes the branches the
+    arm flies on after it, so a move lifted before may need it again). Returns also the joint moves
+    nothing clears (whose passes the caller gives up): then nothing is put in."""
+    ways: dict[int, Way] = {}
+    stuck = []
+    T_now = kept(T_all, m.keep)
+    for i in swept:
+        still = T_now.ndim == 2 or np.array_equal(T_now[i - 1], T_now[i])
+        T = None if not still else T_now if T_now.ndim == 2 else T_now[i]
+        way = None
+        if obstacles is not None and T is not None and m.lifts[index[i]] < MAX_LIFTS:
+            a, b = current.poses[i - 1 : i + 1]
+            way = lift(arm, T, inv_tcp, a, b, joints[i - 1], joints[i], obstacles, memo)
+        if way is None:
+            stuck.append(int(i))
+        else:
+            ways[int(index[i])] = way
+    if stuck:
+        return traj, m, np.array(stuck, np.int64)
+    m.lifts[list(ways)] += 1
     m.resumed[index[lines]] = True
-    if obstacles is None or traj.external is not None or T_all.ndim != 2:
-        return traj, m
-    vias = detours(current, lines, joints, arm, T_all, inv_tcp, obstacles, memo)
-    return m.with_vias(traj, {int(index[i]): way for i, way in vias.items()})
+    if obstacles is not None and traj.external is None and T_all.ndim == 2:
+        found = detours(current, lines, joints, arm, T_all, inv_tcp, obstacles, memo)
+        ways |= {int(index[i]): way for i, way in found.items()}
+    traj, m = m.with_ways(traj, ways)
+    return traj, m, np.zeros(0, np.int64)
 
 
 def _turned(
@@ -417,23 +397,6 @@ def _turned(
     turn = np.isin(traj.swath, better) & ~as_planned
     poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
     return replace(traj, poses=poses), len(better)
-
-
-def renumbered_passes(
-    traj: Trajectory, keep: np.ndarray, swath: np.ndarray, cut: np.ndarray
-) -> np.ndarray:
-    """Swath indices in order, consecutive over the kept poses: a new one wherever a pass
-    resumes after given-up poses or at a cut, so pieces of one pass become passes."""
-    index = np.flatnonzero(keep)
-    new_pass = np.zeros(len(index), bool)
-    if len(index):
-        same = swath[index[1:]] == swath[index[:-1]]
-        gap = (np.diff(index) > 1) & traj.scanning[index[1:]]
-        new_pass[1:] = ~same | gap
-    new_pass |= cut[index]
-    out = swath.copy()
-    out[index] = int(swath[index[0]]) + np.cumsum(new_pass) - int(new_pass[0]) if len(index) else 0
-    return out
 
 
 def _views(traj: Trajectory, swath: np.ndarray, keep: np.ndarray) -> list[dict]:

@@ -17,6 +17,7 @@ from scanplan.core.sensor_spec import SensorSpec
 from scanplan.core.trajectory import Trajectory, pass_entries
 from scanplan.robot.axes import ExternalAxes, axis_steps, part_poses
 from scanplan.robot.base import Robot
+from scanplan.robot.joint_moves import TOUCH_MM, sensor_swept
 from scanplan.robot.links import (
     LinkClearance,
     LinkReport,
@@ -31,8 +32,6 @@ from scanplan.world.cell import Cell
 from scanplan.world.collision import checker_for
 from scanplan.world.part import Part
 
-# The sensor check asks FCL only about bodies within this of the cell (exact below it).
-_TOUCH_MM = 1e-3
 # The stands along a track the arm's column is checked at, this far apart at most.
 RAIL_STEP_MM = 100.0
 
@@ -45,7 +44,9 @@ class Flyability:
     links: the arm's link capsules against the cell; touching: (n,) bool, the sensor body
     in the part, table or a fixture; problems: (first pose, what, summary) of each kind of
     failure, none when the arm flies the plan; blocked_lines: the poses reached by a long
-    straight move (across poses a fit gave up) the arm cannot fly (`straight_moves`).
+    straight move (across poses a fit gave up) the arm cannot fly (`straight_moves`);
+    swept: the poses entered by a joint move along which the sensor body goes into the
+    cell (`joint_moves.sensor_swept`).
     """
 
     reach: ReachReport
@@ -53,6 +54,7 @@ class Flyability:
     touching: np.ndarray
     problems: list[tuple[int, str, str]]
     blocked_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    swept: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def flyable(self) -> bool:
@@ -142,11 +144,12 @@ def check_flyable(
     if obstacles is None:
         obstacles = obstacles_for(part, cell, sensor, clearance)
     reach, links = arm_along(traj, arm, T_base_part, T_flange_sensor, obstacles, axes, entries)
-    touching = checker_for(part, sensor, cell).check(traj.poses, _TOUCH_MM).touching
+    touching = checker_for(part, sensor, cell).check(traj.poses, TOUCH_MM).touching
     problems = [(*reach.first_problem(), reach.summary())] if not reach.reachable else []
     T_all = part_poses(T_base_part, traj.external, axes)
     inv_tcp = np.linalg.inv(T_flange_sensor)
-    lines = blocked_steps(arm, traj, T_all, inv_tcp, reach.joints, pass_entries(traj), obstacles)
+    entry = pass_entries(traj)
+    lines = blocked_steps(arm, traj, T_all, inv_tcp, reach.joints, entry, obstacles)
     if len(lines):
         problems.append(
             (
@@ -154,6 +157,17 @@ def check_flyable(
                 f"is reached by a straight move from pose {int(lines[0]) - 1} the arm cannot "
                 "fly (out of reach, a flip or a link or the sensor in the cell on the way)",
                 f"straight moves: {len(lines)} the arm cannot fly",
+            )
+        )
+    moves = entry | axis_steps(traj, axes)  # where the arm makes joint moves
+    swept = sensor_swept(arm, reach.joints, moves, T_all, T_flange_sensor, obstacles, TOUCH_MM)
+    if len(swept):
+        problems.append(
+            (
+                int(swept[0]),
+                "is reached by a joint move that swings the sensor body into the part, table "
+                "or a fixture",
+                f"joint moves: {len(swept)} swing the sensor body into the cell",
             )
         )
     if not links.clear:
@@ -177,4 +191,4 @@ def check_flyable(
                 f"sensor: {int(touching.sum())} poses touching the cell",
             )
         )
-    return Flyability(reach, links, touching, problems, lines)
+    return Flyability(reach, links, touching, problems, lines, swept)

@@ -115,6 +115,11 @@ def what_would_help(record: dict) -> list[str]:
                 f"{count} poses put an arm link within the clearance of {what}: the part "
                 "raised or turned (--part-pose, a riser), or a positioner"
             )
+        elif cause == "sensor on a joint move":
+            out.append(
+                f"{count} poses on passes whose joint move in swings the sensor body into the "
+                "cell at every height tried: the arm placed elsewhere (--part-pose)"
+            )
         else:
             out.append(f"{count} poses on passes no joint move reaches clear of the cell")
     return out

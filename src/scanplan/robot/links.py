@@ -6,6 +6,7 @@ table block, at every target and along the joint moves into each pass.
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -189,6 +190,22 @@ def joint_path(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     return q0 + np.linspace(0.0, 1.0, steps + 1)[1:-1, None] * (q1 - q0)
 
 
+def each_joint_move(
+    joints: np.ndarray, entered: np.ndarray
+) -> Iterator[tuple[int, int, np.ndarray]]:
+    """(the pose before, the pose, `joint_path` between) of each joint move a program makes
+    into the poses `entered` (n,) marks, from the last pose before with joints (`joints`
+    (n, 6), NaN rows: none); moves too short to have steps between are left out."""
+    known = np.flatnonzero(~np.isnan(joints).any(axis=1))
+    for i in np.flatnonzero(entered):
+        before = known[known < i]
+        if not len(before) or i not in known:
+            continue
+        path = joint_path(joints[before[-1]], joints[i])
+        if len(path):
+            yield int(before[-1]), int(i), path
+
+
 def check_links(
     robot: Robot,
     joints: np.ndarray,
@@ -225,15 +242,9 @@ def check_links(
             memo,
         )
     moves: dict[int, tuple[int, int]] = {}
-    starts = np.flatnonzero(np.zeros(n, bool) if pass_start is None else pass_start)
-    for i in starts:
-        before = known[known < i]
-        if not len(before) or i not in known:
-            continue
-        path = joint_path(joints[before[-1]], joints[i])
-        if not len(path):
-            continue
-        ends = (T_all[before[-1]], T_all[i]) if per_pose else (T_all,)
+    starts = np.zeros(n, bool) if pass_start is None else pass_start
+    for before, i, path in each_joint_move(joints, starts):
+        ends = (T_all[before], T_all[i]) if per_pose else (T_all,)
         for T in ends[: 1 if len(ends) == 1 or np.array_equal(*ends) else 2]:
             m_link, m_obstacle = _capsules_hit(robot, path, obstacles, T, clearance_mm, exact, memo)
             if (m_link >= 0).any():

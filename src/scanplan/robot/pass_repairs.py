@@ -15,7 +15,8 @@ from scanplan.core.trajectory import Trajectory, lead_tops, pass_bounds
 
 # Why a pose is given up: out of the arm's reach, beyond its joint limits, an arm link
 # within the clearance of the part, a fixture or the table (in `CellObstacles.NAMES`'
-# order), or on the joint move into its pass.
+# order), on the joint move into its pass, or the sensor body in the cell on a joint move
+# no lift clears (`joint_moves`).
 CAUSES = (
     "reach",
     "joint limits",
@@ -23,6 +24,7 @@ CAUSES = (
     "link in a fixture",
     "link in the table",
     "joint move into a pass",
+    "sensor on a joint move",
 )
 
 

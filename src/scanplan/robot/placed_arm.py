@@ -14,7 +14,7 @@ import numpy as np
 from scanplan.core.context import PlanContext
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import inv_rigid
-from scanplan.robot.fit import renumbered_passes
+from scanplan.robot.fit_marks import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.presets import get_robot

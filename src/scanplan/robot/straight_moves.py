@@ -9,6 +9,8 @@ or two joint moves.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from scanplan.core.trajectory import MOVE_STEP_MM, Trajectory
@@ -32,6 +34,17 @@ DETOUR_HEIGHTS_MM = (100.0, 200.0, 300.0, 450.0, 600.0)
 DETOUR_INWARD = (0.0, 0.25, 0.5)
 
 
+@dataclass(frozen=True)
+class Way:
+    """Poses a program flies through before a pose of its plan: `poses` (k, 4, 4) sensor
+    poses (part frame); `jointed` (k,) whether it reaches each by a joint move (else by a
+    straight one); `end_jointed` whether it then reaches the pose itself by a joint move."""
+
+    poses: np.ndarray
+    jointed: np.ndarray
+    end_jointed: bool
+
+
 def long_steps(traj: Trajectory, entry: np.ndarray) -> np.ndarray:
     """Poses i (> 0) reached from pose i - 1 by a straight move longer than a move's poses
     are apart (not a joint move: `entry` (n,) marks those)."""
@@ -39,7 +52,7 @@ def long_steps(traj: Trajectory, entry: np.ndarray) -> np.ndarray:
     return 1 + np.flatnonzero((length > MOVE_STEP_MM * (1 + 1e-6)) & ~entry[1:])
 
 
-def _fractions(a: np.ndarray, b: np.ndarray, step_mm: float) -> np.ndarray:
+def fractions(a: np.ndarray, b: np.ndarray, step_mm: float) -> np.ndarray:
     """(k,) how far along the line from pose a to pose b, both ends included, for poses at
     most `step_mm` apart."""
     length = float(np.linalg.norm(b[:3, 3] - a[:3, 3]))
@@ -68,7 +81,7 @@ def blocked_steps(
     if not steps:
         return np.zeros(0, np.int64)
     ends = [(traj.poses[i - 1], traj.poses[i]) for i in steps]
-    t = [_fractions(a, b, step_mm) for a, b in ends]
+    t = [fractions(a, b, step_mm) for a, b in ends]
     sizes = np.array([len(f) for f in t])
     poses = np.concatenate([linear_move(a, b, f) for (a, b), f in zip(ends, t, strict=True)])
     T_all = np.asarray(T_part, dtype=np.float64)
@@ -79,11 +92,11 @@ def blocked_steps(
     which = np.repeat(np.arange(len(steps)), sizes)
     first = np.r_[0, np.cumsum(sizes)[:-1]]
     starts = {int(f): joints[i - 1] for f, i in zip(first, steps, strict=True)}
-    bad = _not_flown(arm, poses, T_all, inv_tcp, which, starts, obstacles, memo)
+    bad = not_flown(arm, poses, T_all, inv_tcp, which, starts, obstacles, memo)
     return np.array(steps, np.int64)[np.unique(which[bad])]
 
 
-def _not_flown(
+def not_flown(
     arm: Robot,
     poses: np.ndarray,
     T_part: np.ndarray,
@@ -137,10 +150,9 @@ def detour(
     q1: np.ndarray,
     obstacles: CellObstacles,
     memo: LinkMemo | None = None,
-) -> tuple[np.ndarray, bool] | None:
+) -> Way | None:
     """Where a program may go from sensor pose a (joints q0) to b (joints q1) when the arm
-    cannot fly the straight line: (the sensor pose, part frame, and whether it is reached
-    and left by joint moves) of the first of `_detour_poses` (above the line's middle,
+    cannot fly the straight line: through the first of `_detour_poses` (above the line's middle,
     T_part (4, 4) the part's pose in the base frame) the arm flies to and on from as it
     flies any straight line (`blocked_steps`), else by joint moves that keep the links and
     the sensor body clear of the cell at every step, the arm on the branch nearest q0
@@ -149,11 +161,11 @@ def detour(
     solutions = arm.inverse(T_part @ above @ inv_tcp)
     tcp, to_part = np.linalg.inv(inv_tcp), np.linalg.inv(T_part)
     for k, pose in enumerate(above):
-        there, on = _fractions(a, pose, LINE_STEP_MM), _fractions(pose, b, LINE_STEP_MM)
+        there, on = fractions(a, pose, LINE_STEP_MM), fractions(pose, b, LINE_STEP_MM)
         bent = np.concatenate([linear_move(a, pose, there), linear_move(pose, b, on[1:])])
         lines = np.zeros(len(bent), np.int64)
-        if not _not_flown(arm, bent, T_part, inv_tcp, lines, {0: q0}, obstacles, memo).any():
-            return pose, False
+        if not not_flown(arm, bent, T_part, inv_tcp, lines, {0: q0}, obstacles, memo).any():
+            return Way(pose[None], np.array([False]), False)
         found = nearest_solution(solutions[k : k + 1], arm.joint_limits, q0[None])
         if found is None:
             continue
@@ -163,7 +175,7 @@ def detour(
             continue
         if check_links(arm, path, obstacles, T_part, memo=memo).colliding.any():
             continue
-        return pose, True
+        return Way(pose[None], np.array([True]), True)
     return None
 
 
@@ -176,12 +188,10 @@ def detours(
     inv_tcp: np.ndarray,
     obstacles: CellObstacles,
     memo: LinkMemo | None = None,
-) -> dict[int, tuple[np.ndarray, bool]]:
+) -> dict[int, Way]:
     """For the straight moves into poses `lines` of `traj` the arm cannot fly (`joints` the
-    arm's along it), a `detour` each where there is one: {the line's end: (the detour's
-    sensor pose, to fly through before it, and whether it is reached and left by joint
-    moves)}."""
-    found: dict[int, tuple[np.ndarray, bool]] = {}
+    arm's along it), a `detour` each where there is one: {the line's end: the way there}."""
+    found: dict[int, Way] = {}
     for i in lines:
         a, b = traj.poses[i - 1], traj.poses[i]
         way = detour(arm, T_part, inv_tcp, a, b, joints[i - 1], joints[i], obstacles, memo)

@@ -253,12 +253,14 @@ class CellObstacles:
         self.table_block = block
         self.part_bounds = np.asarray(part.bounds, dtype=np.float64)  # where no arm stands
 
-    def sensor_clear(self, poses: np.ndarray) -> np.ndarray:
-        """(n,) bool: the sensor body at poses (n, 4, 4) keeps its clearance from the part,
-        the fixtures and the table (all True when no sensor was given)."""
+    def sensor_clear(self, poses: np.ndarray, clearance_mm: float | None = None) -> np.ndarray:
+        """(n,) bool: the sensor body at poses (n, 4, 4) keeps `clearance_mm` (None: its
+        clearance) from the part, the fixtures and the table (all True when no sensor was
+        given)."""
         if self._sensor is None:
             return np.ones(len(poses), bool)
-        return ~self._sensor.colliding(poses, self.clearance_mm)
+        clearance = self.clearance_mm if clearance_mm is None else clearance_mm
+        return ~self._sensor.colliding(poses, clearance)
 
     def capsules_hit(
         self, ends: np.ndarray, radii: np.ndarray, clearance_mm: float, exact: bool = True
