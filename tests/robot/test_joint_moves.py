@@ -89,11 +89,11 @@ def test_export_refuses_a_joint_move_that_swings_the_sensor_into_the_part() -> N
     assert "joint move that swings the sensor body into the part" in checked.first_problem(
         two.swath
     )
+    assert checked.sensor_summary().endswith("swung into it by 1 joint moves")
     # Entered on the same wrist, nothing swings.
     same = {0: flip[0], 1: flip[0]}
-    assert check_flyable(
-        two, arm, T, TCP, part, Cell(), spec.sensor, obstacles, entries=same
-    ).flyable
+    checked = check_flyable(two, arm, T, TCP, part, Cell(), spec.sensor, obstacles, entries=same)
+    assert checked.flyable and "along every joint move" in checked.sensor_summary()
 
 
 def test_a_lift_makes_the_flip_above_the_part_and_comes_straight_down() -> None:

@@ -204,6 +204,7 @@ def flyable_joints(
         warn = not report.ok  # near-singular poses or joint jumps: flyable, but say so
         say(("warning: " if warn else "") + report.summary() + (FLYABLE_ANYWAY if warn else ""))
         say(result.links.summary())
+        say(result.sensor_summary())
         return report.joints
     where = result.first_problem(plan.traj.swath)
     if not allow:
@@ -215,6 +216,7 @@ def flyable_joints(
     for line, passed in (
         (report.summary(), report.reachable),
         (result.links.summary(), result.links.clear),
+        (result.sensor_summary(), result.sensor_clear),
     ):
         if passed:
             say(line)

@@ -64,6 +64,19 @@ class Flyability:
     def joints(self) -> np.ndarray:
         return self.reach.joints
 
+    @property
+    def sensor_clear(self) -> bool:
+        return not (self.touching.any() or len(self.swept))
+
+    def sensor_summary(self) -> str:
+        """What the sensor body's checks found, in a line."""
+        if self.sensor_clear:
+            return "sensor body: clear of the cell at every pose and along every joint move"
+        return (
+            f"sensor body: in the cell at {int(self.touching.sum())} poses, swung into it by "
+            f"{len(self.swept)} joint moves"
+        )
+
     def first_problem(self, swath: np.ndarray) -> str:
         """'pose 12 (pass 3) is out of reach; <summaries>': the first offending pose."""
         first, what, _ = min(self.problems)
