@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+import scanplan.robot.fit as fit_module
 from scanplan.core.quantities import ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot import get_robot
@@ -142,3 +143,21 @@ def test_ways_put_in_are_entered_as_they_say_and_the_pose_after_is_descended_to(
     detour = Way(up[:1], np.array([True]), True)
     grown_traj, grown = marks.with_ways(traj, {3: detour})
     assert np.flatnonzero(grown.entry(grown_traj)).tolist() == [0, 2, 3, 4]
+
+
+def test_a_straight_move_down_from_a_lift_the_arm_cannot_fly_is_made_a_joint_move() -> None:
+    poses = np.tile(np.eye(4), (4, 1, 1))
+    poses[:, 0, 3] = np.arange(4.0)
+    traj = Trajectory(poses, np.array([0, 0, 1, 1]), np.ones(4, bool))
+    up = np.tile(np.eye(4), (2, 1, 1))
+    up[:, 2, 3] = 100.0
+    lifted_traj, marks = FitMarks.of(traj).with_ways(traj, {2: Way(up, np.ones(2, bool), False)})
+    assert not marks.entry(lifted_traj)[4]  # pass 1's first pose, reached straight down
+    # The reach check found that straight move (into pose 4) not flyable: a joint move then.
+    index = np.arange(len(lifted_traj))
+    lines = np.array([4])
+    _, marks, stuck = fit_module._gone_round(
+        lifted_traj, lifted_traj, index, lines, np.zeros(0, int), np.zeros((6, 6)), marks,
+        np.eye(4), get_robot("kr6-r900"), np.eye(4), None, {},
+    )  # fmt: skip
+    assert not len(stuck) and marks.entry(lifted_traj)[4]

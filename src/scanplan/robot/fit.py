@@ -359,7 +359,10 @@ def _gone_round(
     if stuck:
         return traj, m, np.array(stuck, np.int64)
     m.lifts[list(ways)] += 1
+    # A line's end is reached by a joint move unless a way round is found (also the end of
+    # a lift's straight move down the arm cannot fly from where the reach check enters it).
     m.resumed[index[lines]] = True
+    m.descended[index[lines]] = False
     if obstacles is not None and traj.external is None and T_all.ndim == 2:
         found = detours(current, lines, joints, arm, T_all, inv_tcp, obstacles, memo)
         ways |= {int(index[i]): way for i, way in found.items()}

@@ -13,7 +13,7 @@ import numpy as np
 from scanplan.robot.base import Robot
 from scanplan.robot.export.thinning import linear_move
 from scanplan.robot.links import LinkMemo, check_links, each_joint_move, joint_path
-from scanplan.robot.reach import nearest_solution
+from scanplan.robot.reach import JUMP_DEG, nearest_solution
 from scanplan.robot.straight_moves import LINE_STEP_MM, Way, fractions, not_flown
 from scanplan.world.capsule_collision import CellObstacles
 
@@ -103,8 +103,9 @@ def lift(
     (the configuration nearest q1 there), a straight move down to b; the first whose joint
     moves keep the sensor body and the links clear at every step (the links by the reach
     check's own cautious check, `exact=False`, so that it enters those poses as found here)
-    and whose straight move the arm flies (`straight_moves.not_flown`). T_part (4, 4): the
-    part's pose in the base frame. None if none does."""
+    and whose straight move the arm flies (`straight_moves.not_flown`), those with no joint
+    turning more than `reach.JUMP_DEG` from above b to b first. T_part (4, 4): the part's
+    pose in the base frame. None if none does."""
     to_part, tcp = np.linalg.inv(T_part), np.linalg.inv(inv_tcp)
     offsets = _lift_offsets(T_part, a, b)
     moved = np.stack([a, b])[None].repeat(len(offsets), axis=0)
@@ -112,14 +113,21 @@ def lift(
     solutions = arm.inverse(T_part @ moved.reshape(-1, 4, 4) @ inv_tcp).reshape(
         len(offsets), 2, -1, 6
     )
-    for (start, end), (ha, hb), sol in zip(
-        moved, np.linalg.norm(offsets, axis=2) > 0, solutions, strict=True
+    reached = []  # (order, ends, which ends move, joints there) of the lifts the arm reaches
+    for k, ((start, end), (ha, hb), sol) in enumerate(
+        zip(moved, np.linalg.norm(offsets, axis=2) > 0, solutions, strict=True)
     ):
         at_start = nearest_solution(sol[:1], arm.joint_limits, q0[None])
         at_end = nearest_solution(sol[1:], arm.joint_limits, q1[None])
-        if at_start is None or at_end is None:
-            continue
-        qa, qb = at_start[1], at_end[1]
+        if at_start is not None and at_end is not None:
+            # Last, a move down the reach check would not follow on its branch (a joint
+            # turning more than `JUMP_DEG`): it may enter the pass above b on another, and
+            # the fit then goes round that straight move again.
+            jump = hb and np.degrees(np.abs(at_end[1] - q1)).max() > JUMP_DEG
+            reached.append(
+                (k + len(offsets) * jump, (start, end), (ha, hb), at_start[1], at_end[1])
+            )
+    for _, (start, end), (ha, hb), qa, qb in sorted(reached, key=lambda r: r[0]):
         path = np.concatenate([joint_path(q0, qa), qa[None], joint_path(qa, qb), qb[None]])
         if not obstacles.sensor_clear(to_part @ arm.forward(path) @ tcp).all():
             continue

@@ -19,6 +19,10 @@ from scanplan.robot.presets import get_robot
 
 TWO_PI = 2 * np.pi
 
+# A joint turning more than this between consecutive poses of a pass is a jump: no longer
+# the branch the controller follows there (`check_reach`).
+JUMP_DEG = 30.0
+
 
 def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(q shifted by whole turns into the limits where it can be, (…,) all joints inside).
@@ -312,7 +316,7 @@ def check_reach(
     wrist_tol: float = np.sin(np.radians(5.0)),
     elbow_tol: float = np.sin(np.radians(5.0)),
     shoulder_tol_mm: float = 20.0,
-    jump_deg: float = 30.0,
+    jump_deg: float = JUMP_DEG,
     cell: CellView | None = None,
     entries: Mapping[int, np.ndarray] | None = None,
     entry: np.ndarray | None = None,
