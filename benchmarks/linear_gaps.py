@@ -29,7 +29,7 @@ from scanplan.planning.pipeline import Arm, plan_views
 from scanplan.rl.planners import make_planner
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.flyable import check_flyable
-from scanplan.robot.joint_moves import TOUCH_MM, sensor_swept
+from scanplan.robot.joint_moves import sensor_swept
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.presets import get_robot
 from scanplan.robot.straight_moves import LINE_STEP_MM, blocked_steps, long_steps
@@ -79,7 +79,7 @@ def main() -> None:
     jointed = entry & (np.arange(len(traj)) > 0)
     tcp = plan.arm.T_flange_sensor
     near = sensor_swept(robot, joints, jointed, T_base_part, tcp, obstacles)
-    into = sensor_swept(robot, joints, jointed, T_base_part, tcp, obstacles, TOUCH_MM)
+    into = checked.swept  # export's own verdict: into the cell
     print(
         f"{name}: {int(jointed.sum())} joint moves; the sensor body comes within "
         f"{spec.clearance_mm:g} mm of the cell on {len(near)} of them, into it on {len(into)}"

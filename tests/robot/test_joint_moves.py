@@ -119,8 +119,11 @@ def test_a_lift_makes_the_flip_above_the_part_and_comes_straight_down() -> None:
     ]
     path = np.concatenate([joint_path(q0, above[0]), joint_path(above[0], above[-1])])
     assert obstacles.sensor_clear(np.linalg.inv(T) @ arm.forward(path) @ TCP).all()
-    # A move already clear needs none of this: the lowest lift is the first clear one.
-    assert lift(arm, T, inv, pose, pose, q0, q0, obstacles) is not None
+    # Lifts are tried lowest first: where the wrist does not flip, 50 mm above the move's
+    # end is already clear, joint-moved to and come straight down from.
+    low = lift(arm, T, inv, pose, pose, q0, q0, obstacles)
+    assert low is not None and len(low.poses) == 1 and not low.end_jointed
+    assert np.isclose(low.poses[0, 2, 3], 160.0 + 50.0) and low.poses[0, 2, 3] < heights.max()
 
 
 def test_ways_put_in_are_entered_as_they_say_and_the_pose_after_is_descended_to() -> None:

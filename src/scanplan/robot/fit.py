@@ -154,7 +154,7 @@ def fit_to_robot(
     m = FitMarks.of(traj)
     splits = 0
     memo: LinkMemo = {}  # the rounds check much the same passes' links again
-    arm_cell = (arm, inv_tcp, obstacles, memo)  # where a detour is looked for
+    arm_cell = (arm, inv_tcp, obstacles, memo)  # what the last checks and ways round need
     for round_ in range(MAX_ROUNDS):
         current = traj.subset(m.keep, m.swath)
         T_now = kept(T_all, m.keep)
@@ -185,11 +185,7 @@ def fit_to_robot(
         if report.reachable and done and (why < 0).all():
             # Settled: the straight lines across what was given up and the sensor body
             # along the joint moves, last.
-            lines = blocked_steps(
-                arm, current, T_now, inv_tcp, report.joints, entry, obstacles, memo
-            )
-            jointed = entry | axis_steps(current, axes)  # the joint moves, turntable's too
-            swept = _swept(arm, report.joints, jointed, T_now, tcp, obstacles)
+            lines, swept = _unflown(current, report.joints, entry, T_now, tcp, axes, *arm_cell)
             if not len(lines) and not len(swept):
                 break
             traj, m, stuck = _gone_round(
@@ -201,6 +197,26 @@ def fit_to_robot(
             stuck_passes = np.isin(current.swath, current.swath[stuck])
             why[stuck_passes] = CAUSES.index("sensor on a joint move")
         splits += m.give_up(traj, index, why, np.union1d(flips, swings))
+    return _fitted(traj, m, T_base_part, T_all, tcp, axes, placement, turned, splits, *arm_cell)
+
+
+def _fitted(
+    traj: Trajectory,
+    m: FitMarks,
+    T_base_part: np.ndarray,
+    T_all: np.ndarray,
+    tcp: np.ndarray,
+    axes: ExternalAxes | None,
+    placement: Placement | None,
+    turned: int,
+    splits: int,
+    arm: Robot,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    memo: LinkMemo,
+) -> RobotFit:
+    """What a fit's last round leaves (`m` on `traj`, the part at `T_all`): the plan kept,
+    what was given up and why, and the verdict on it as `export` will check it."""
     beyond_mm = beyond_reach_mm(traj, arm, T_all, inv_tcp, m.cause)
     given_up, by_cause = _given_up_by_view(traj, m.keep, m.cause)
     reversed_passes = len(np.unique(m.swath[m.flipped & m.keep & traj.scanning]))
@@ -211,8 +227,13 @@ def fit_to_robot(
     # The verdict on what is kept, as `export` will check it (after the last round too).
     entry = m.entry(fitted)
     T_kept = kept(T_all, m.keep)
-    report, links, blocked = _verdict(fitted, arm, T_kept, inv_tcp, obstacles, axes, entry, memo)
-    swept = _swept(arm, report.joints, entry | axis_steps(fitted, axes), T_kept, tcp, obstacles)
+    report = _reach(fitted, arm, T_kept, inv_tcp, obstacles, entry, memo)
+    cell = (arm, inv_tcp, obstacles, memo)
+    blocked, swept = _unflown(fitted, report.joints, entry, T_kept, tcp, axes, *cell)
+    links = None
+    if obstacles is not None:
+        starts = entry | axis_steps(fitted, axes)
+        links = check_links(arm, report.joints, obstacles, T_kept, starts, memo=memo)
     return RobotFit(
         fitted,
         T_base_part,
@@ -227,7 +248,7 @@ def fit_to_robot(
         beyond_mm,
         reversed_passes,
         entry=entry,
-        blocked_lines=blocked,
+        blocked_lines=len(blocked),
         swept_moves=len(swept),
     )
 
@@ -251,29 +272,6 @@ def _reach(
         cell=None if obstacles is None else LinkClearance(arm, obstacles, T_now, memo),
         entry=entry,
     )
-
-
-def _verdict(
-    fitted: Trajectory,
-    arm: Robot,
-    T_now: np.ndarray,
-    inv_tcp: np.ndarray,
-    obstacles: CellObstacles | None,
-    axes: ExternalAxes | None,
-    entry: np.ndarray,
-    memo: LinkMemo | None = None,
-) -> tuple[ReachReport, LinkReport | None, int]:
-    """The reach check of `fitted` with the part at `T_now` (one pose, or one per pose),
-    each pass entered where `entry` says, in a cell its links along the path and the joint
-    moves into passes, and how many of its straight moves across poses given up the arm
-    cannot fly (`straight_moves.blocked_steps`)."""
-    report = _reach(fitted, arm, T_now, inv_tcp, obstacles, entry, memo)
-    lines = blocked_steps(arm, fitted, T_now, inv_tcp, report.joints, entry, obstacles, memo)
-    if obstacles is None:
-        return report, None, len(lines)
-    starts = entry | axis_steps(fitted, axes)
-    links = check_links(arm, report.joints, obstacles, T_now, starts, memo=memo)
-    return report, links, len(lines)
 
 
 def _given_up_by_view(
@@ -305,19 +303,28 @@ def beyond_reach_mm(
     return float(np.hypot(*flange_xy.T).max()) - reach_mm(arm)[0]
 
 
-def _swept(
-    arm: Robot,
+def _unflown(
+    traj: Trajectory,
     joints: np.ndarray,
     entry: np.ndarray,
     T_now: np.ndarray,
     tcp: np.ndarray,
+    axes: ExternalAxes | None,
+    arm: Robot,
+    inv_tcp: np.ndarray,
     obstacles: CellObstacles | None,
-) -> np.ndarray:
-    """The joint moves (into poses of the kept plan) that bring the sensor body within
-    the clearance of the cell (`joint_moves.sensor_swept`); none without a cell."""
+    memo: LinkMemo,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Of `traj` flown on `joints`, entered where `entry` says (the part at `T_now`), the
+    poses reached by a straight move across poses given up the arm cannot fly
+    (`straight_moves.blocked_steps`), and, in a cell, those reached by a joint move (a
+    turntable's too) that brings the sensor body within its clearance
+    (`joint_moves.sensor_swept`)."""
+    lines = blocked_steps(arm, traj, T_now, inv_tcp, joints, entry, obstacles, memo)
     if obstacles is None:
-        return np.zeros(0, np.int64)
-    return sensor_swept(arm, joints, entry, T_now, tcp, obstacles)
+        return lines, np.zeros(0, np.int64)
+    jointed = entry | axis_steps(traj, axes)
+    return lines, sensor_swept(arm, joints, jointed, T_now, tcp, obstacles)
 
 
 def _gone_round(
