@@ -13,7 +13,7 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import candidates, choose_values, hangs, values_at
+from scanplan.robot.axes_fit import candidates, choose_values, hangs, kept_at, values_at
 from scanplan.robot.axes_place import place_on_axes
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
@@ -229,3 +229,45 @@ def test_the_placement_judges_a_turntable_with_a_track_on_a_coarser_grid():
     # One axis alone keeps its grid: the coarse one would lose settings it can afford.
     alone = ExternalAxes(Turntable())
     np.testing.assert_array_equal(candidates(alone, arm, coarse=True), candidates(alone, arm))
+
+
+def test_several_paths_in_one_reach_check_are_followed_as_if_alone():
+    # The far view turned to each of a few angles: one check with restarts gives each
+    # copy the joints it gets checked alone (no joints carried over from the copy before).
+    traj = _near_and_far(12)
+    inv = np.linalg.inv(TCP)
+    alone, copies, swaths = [], [], []
+    for k, angle in enumerate((0.0, 90.0, 180.0, 270.0)):
+        T = part_poses(T0, np.full((len(traj), 1), angle), TURNTABLE)
+        flange = T @ traj.poses @ inv
+        alone.append(check_reach(flange, "ur5e", swath=traj.swath, scanning=traj.scanning).joints)
+        copies.append(flange)
+        swaths.append(traj.swath + 2 * k)
+    restarts = np.zeros(4 * len(traj), bool)
+    restarts[:: len(traj)] = True
+    scanning = np.tile(traj.scanning, 4)
+    together = check_reach(
+        np.concatenate(copies),
+        "ur5e",
+        swath=np.concatenate(swaths),
+        scanning=scanning,
+        restarts=restarts,
+    ).joints
+    assert np.array_equal(np.isnan(together), np.isnan(np.concatenate(alone)))
+    assert np.allclose(np.nan_to_num(together), np.nan_to_num(np.concatenate(alone)))
+    assert (~np.isnan(together).any(axis=1)).sum() > len(traj)  # several copies reached
+
+
+def test_settings_judged_together_keep_what_each_keeps_alone():
+    traj = _near_and_far(12)
+    inv = np.linalg.inv(TCP)
+    arm = get_robot("ur5e")
+    settings = candidates(TURNTABLE, arm)
+    box = Part(trimesh.creation.box((500.0, 200.0, 60.0)))
+    obstacles = obstacles_for(box, Cell.around(box), SensorSpec(), 20.0)
+    index = np.arange(len(traj))
+    for obs in (None, obstacles):
+        together = kept_at(traj, arm, T0, inv, obs, TURNTABLE, settings, index)
+        alone = [kept_at(traj, arm, T0, inv, obs, TURNTABLE, s[None], index)[0] for s in settings]
+        assert together.tolist() == alone
+        assert together.max() > together.min()  # the angle matters

@@ -24,7 +24,13 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
 from scanplan.robot.base import Robot
 from scanplan.robot.fit_marks import renumbered_passes
-from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, kept_by_pass, turned_passes
+from scanplan.robot.flown_poses import (
+    HALF_TURN,
+    flyable_poses,
+    kept_by_pass,
+    sensor_clear_both,
+    turned_passes,
+)
 from scanplan.robot.links import hung, obstacles_for
 from scanplan.robot.place import reach_mm
 from scanplan.robot.place_weights import sample_poses
@@ -144,27 +150,53 @@ def kept_at(
     index: np.ndarray,
 ) -> np.ndarray:
     """(c,) the scanning poses among `index` kept at each setting (each pass as planned
-    or turned half a turn, as the fit keeps them)."""
-    out = np.zeros(len(settings))
+    or turned half a turn, as the fit keeps them). The settings are judged in one call, a
+    copy of the poses per setting followed as a path of its own: the same counts as one
+    call per setting, without the cost of a call per setting on a view's few poses."""
     sub = traj.subset(np.isin(np.arange(len(traj)), index))
-    scanning = sub.scanning
-    for c, setting in enumerate(settings):
-        T = part_poses(T_base_part, values_at(axes, setting, T_base_part, sub.poses, inv_tcp), axes)
-        if obstacles is None:
-            good = [
-                ~np.isnan(
-                    check_reach(T @ p @ inv_tcp, arm, swath=sub.swath, scanning=scanning).joints
-                ).any(axis=1)
-                for p in (sub.poses, sub.poses @ HALF_TURN)
-            ]
-        else:
-            good = list(
-                flyable_poses(
-                    sub, arm, T, inv_tcp, obstacles, exact=False, choosing=np.ones(len(sub), bool)
-                )
+    m, c = len(sub), len(settings)
+    if not m:
+        return np.zeros(c)
+    values = np.concatenate([values_at(axes, s, T_base_part, sub.poses, inv_tcp) for s in settings])
+    T = part_poses(T_base_part, values, axes)
+    swath = sub.swath - sub.swath.min()
+    copies = Trajectory(
+        np.tile(sub.poses, (c, 1, 1)),
+        np.tile(swath, c) + np.repeat(np.arange(c) * (swath.max() + 1), m),
+        np.tile(sub.scanning, c),
+    )
+    restarts = np.zeros(c * m, bool)
+    restarts[::m] = True
+    if obstacles is None:
+        good = [
+            ~np.isnan(
+                check_reach(
+                    T @ p @ inv_tcp,
+                    arm,
+                    swath=copies.swath,
+                    scanning=copies.scanning,
+                    restarts=restarts,
+                ).joints
+            ).any(axis=1)
+            for p in (copies.poses, copies.poses @ HALF_TURN)
+        ]
+    else:
+        sensor = sensor_clear_both(sub.poses, obstacles)  # the same at every setting
+        good = list(
+            flyable_poses(
+                copies,
+                arm,
+                T,
+                inv_tcp,
+                obstacles,
+                sensor_ok=(np.tile(sensor[0], c), np.tile(sensor[1], c)),
+                exact=False,
+                choosing=np.ones(c * m, bool),
+                restarts=restarts,
             )
-        out[c] = kept_by_pass(sub.swath, good[0], good[1])[scanning].sum()
-    return out
+        )
+    kept = kept_by_pass(copies.swath, good[0], good[1]) & copies.scanning
+    return kept.reshape(c, m).sum(axis=1).astype(np.float64)
 
 
 def _pick(scores: np.ndarray, settings: np.ndarray, last: np.ndarray | None) -> int:

@@ -29,6 +29,7 @@ def flyable_poses(
     sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
     exact: bool = True,
     choosing: np.ndarray | None = None,
+    restarts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
     default) of `traj` the arm reaches within its limits with its links clear, and (the
@@ -38,7 +39,8 @@ def flyable_poses(
     (len(traj), 4, 4) one per pose (external axes). choosing: (m,) bool, for a caller that
     only chooses per pass the way that keeps more of these poses: a pass whose turned poses
     could not keep more of them than its planned ones keep (on reach and the sensor alone)
-    reads as turned nowhere, its links unchecked."""
+    reads as turned nowhere, its links unchecked. restarts: (m,) where another path starts,
+    as `check_reach` takes them (several paths judged at once)."""
     index = np.arange(len(traj)) if index is None else index
     if np.ndim(T_base_part) == 3:  # one per pose of `traj` (external axes)
         T_base_part = np.asarray(T_base_part)[index]
@@ -51,6 +53,7 @@ def flyable_poses(
             arm,
             swath=traj.swath[index],
             scanning=traj.scanning[index],
+            restarts=restarts,
         )
         joints = report.joints
         good = ~np.isnan(joints).any(axis=1)

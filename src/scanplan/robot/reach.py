@@ -320,6 +320,7 @@ def check_reach(
     cell: CellView | None = None,
     entries: Mapping[int, np.ndarray] | None = None,
     entry: np.ndarray | None = None,
+    restarts: np.ndarray | None = None,
 ) -> ReachReport:
     """Follow the path through IK and report what would stop or upset a real arm.
 
@@ -330,11 +331,13 @@ def check_reach(
     first pose (the configurations a fit chose, as its plan records them). entry: (n,)
     where each pass is entered (`trajectory.pass_entries`: the top of the move leading into
     it, the move's poses after it flown on the pass's configuration); None: at its first
-    pose. Each next pose of a pass takes the in-limit solution closest to the previous one,
-    as a controller executing linear moves would. A configuration flip is a sign change of
-    a singularity term (wrist, elbow, shoulder) between consecutive poses of one pass
-    (`swath`, `scanning`; without them the whole path is one pass): the path went through
-    that singularity. A jump is any joint turning more than `jump_deg` between consecutive
+    pose. restarts: (n,) True where another path starts (on a pass of its own), followed
+    as if checked alone (no joints before it; `q_start` is the first path's): several
+    paths in one call. Each next pose of a pass takes the in-limit solution closest to the
+    previous one, as a controller executing linear moves would. A configuration flip is a
+    sign change of a singularity term (wrist, elbow, shoulder) between consecutive poses of
+    one pass (`swath`, `scanning`; without them the whole path is one pass): the path went
+    through that singularity. A jump is any joint turning more than `jump_deg` between consecutive
     poses.
     """
     arm = get_robot(robot)
@@ -359,14 +362,19 @@ def check_reach(
     entered = np.r_[True, ~followed]
     pinned = q_start is not None
     last = -1  # the pose `prev` is the joints of (-1: none, or `q_start`)
+    path_of = np.zeros(n, int) if restarts is None else np.cumsum(restarts)
+    prev_path = path_of[0] if n else 0  # the path `prev` belongs to
     end = _run_ends(followed)
     # Sequential by nature (each pose's branch depends on the previous choice), but within a
     # pass the choice follows one branch: checked for a whole run at once (`_follow`).
     i = 0
     while i < n:
+        if prev is not None and path_of[i] != prev_path:  # another path: none before it
+            prev, last, pinned = None, -1, False
         if not exists[i].any():
             i += 1
             continue
+        prev_path = path_of[i]
         if prev is None or (entered[i] and not pinned):
             if entries is not None and i in entries:  # the configuration recorded
                 found = nearest_solution(solutions[i : i + 1], limits, np.asarray(entries[i])[None])
