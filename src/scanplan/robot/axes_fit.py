@@ -13,6 +13,7 @@ standing. Where the arm stands with them is `axes_place`'s.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -47,6 +48,8 @@ TRACK_OFFSETS = 9  # the track's candidate offsets, across the arm's reach
 COARSE_TURN_STEP_DEG = 45.0
 COARSE_TRACK_OFFSETS = 5
 SAMPLE_POSES = 96  # a view's poses a candidate setting is judged on
+# Poses (a copy per setting) judged in one reach check: about 100 MB of inverse kinematics.
+JUDGED_TOGETHER = 60_000
 # Among settings within this share of the best, the one nearest the last view's is held
 # (the axis moves less).
 NEAR_BEST = 0.01
@@ -150,23 +153,73 @@ def kept_at(
     index: np.ndarray,
 ) -> np.ndarray:
     """(c,) the scanning poses among `index` kept at each setting (each pass as planned
-    or turned half a turn, as the fit keeps them). The settings are judged in one call, a
-    copy of the poses per setting followed as a path of its own: the same counts as one
-    call per setting, without the cost of a call per setting on a view's few poses."""
-    sub = traj.subset(np.isin(np.arange(len(traj)), index))
-    m, c = len(sub), len(settings)
-    if not m:
-        return np.zeros(c)
-    values = np.concatenate([values_at(axes, s, T_base_part, sub.poses, inv_tcp) for s in settings])
-    T = part_poses(T_base_part, values, axes)
-    swath = sub.swath - sub.swath.min()
+    or turned half a turn, as the fit keeps them)."""
+    return kept_each(traj, arm, T_base_part, inv_tcp, obstacles, axes, [(settings, index)])[0]
+
+
+def kept_each(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    axes: ExternalAxes,
+    jobs: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> list[np.ndarray]:
+    """`kept_at` for each job (settings (c, k), index): the jobs' settings judged together,
+    a copy of a job's poses per setting followed as a path of its own (`check_reach`'s
+    restarts), about `JUDGED_TOGETHER` poses a call: the same counts as a call per setting,
+    without the cost of a call on a view's few poses each time."""
+    out: list[np.ndarray] = []
+    batch: list[tuple[np.ndarray, np.ndarray]] = []
+    size = 0
+    for settings, index in jobs:
+        batch.append((settings, index))
+        size += len(settings) * len(index)
+        if size >= JUDGED_TOGETHER:
+            out += _kept_together(traj, arm, T_base_part, inv_tcp, obstacles, axes, batch)
+            batch, size = [], 0
+    if batch:
+        out += _kept_together(traj, arm, T_base_part, inv_tcp, obstacles, axes, batch)
+    return out
+
+
+def _kept_together(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    axes: ExternalAxes,
+    jobs: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> list[np.ndarray]:
+    """`kept_each` of jobs judged in one call."""
+    poses, swaths, scanning, values, sensor, starts = [], [], [], [], [], []
+    shift, at = 0, 0
+    for settings, index in jobs:
+        sub = traj.subset(np.isin(np.arange(len(traj)), index))
+        m, c = len(sub), len(settings)
+        swath = sub.swath - (sub.swath.min() if m else 0)
+        span = int(swath.max()) + 1 if m else 0
+        poses.append(np.tile(sub.poses, (c, 1, 1)))
+        swaths.append(np.tile(swath, c) + shift + np.repeat(np.arange(c) * span, m))
+        scanning.append(np.tile(sub.scanning, c))
+        values += [values_at(axes, s, T_base_part, sub.poses, inv_tcp) for s in settings]
+        if obstacles is not None:  # the same at every setting
+            sensor.append([np.tile(b, c) for b in sensor_clear_both(sub.poses, obstacles)])
+        if m:
+            starts.append(at + m * np.arange(c))
+        shift, at = shift + c * span, at + c * m
+    if not starts:  # no poses to judge
+        return [np.zeros(len(settings)) for settings, _ in jobs]
     copies = Trajectory(
-        np.tile(sub.poses, (c, 1, 1)),
-        np.tile(swath, c) + np.repeat(np.arange(c) * (swath.max() + 1), m),
-        np.tile(sub.scanning, c),
+        np.concatenate(poses).reshape(-1, 4, 4),
+        np.concatenate(swaths).astype(np.int64),
+        np.concatenate(scanning).astype(bool),
     )
-    restarts = np.zeros(c * m, bool)
-    restarts[::m] = True
+    restarts = np.zeros(len(copies), bool)
+    restarts[np.concatenate(starts).astype(np.int64)] = True
+    T = part_poses(T_base_part, np.concatenate(values).reshape(len(copies), -1), axes)
     if obstacles is None:
         good = [
             ~np.isnan(
@@ -181,7 +234,6 @@ def kept_at(
             for p in (copies.poses, copies.poses @ HALF_TURN)
         ]
     else:
-        sensor = sensor_clear_both(sub.poses, obstacles)  # the same at every setting
         good = list(
             flyable_poses(
                 copies,
@@ -189,14 +241,32 @@ def kept_at(
                 T,
                 inv_tcp,
                 obstacles,
-                sensor_ok=(np.tile(sensor[0], c), np.tile(sensor[1], c)),
+                sensor_ok=(
+                    np.concatenate([b[0] for b in sensor]),
+                    np.concatenate([b[1] for b in sensor]),
+                ),
                 exact=False,
-                choosing=np.ones(c * m, bool),
+                choosing=np.ones(len(copies), bool),
                 restarts=restarts,
             )
         )
     kept = kept_by_pass(copies.swath, good[0], good[1]) & copies.scanning
-    return kept.reshape(c, m).sum(axis=1).astype(np.float64)
+    out, at = [], 0
+    for settings, index in jobs:
+        n = len(settings) * len(index)
+        out.append(kept[at : at + n].reshape(len(settings), -1).sum(axis=1).astype(np.float64))
+        at += n
+    return out
+
+
+def _judged_poses(traj: Trajectory, block: np.ndarray) -> np.ndarray:
+    """The poses a view's (`block`'s) settings are judged on: `SAMPLE_POSES` of its
+    scanning poses (of all its poses if it has none)."""
+    index = np.flatnonzero(block)
+    scan = index[traj.scanning[index]]
+    if not len(scan):
+        scan = index
+    return scan[sample_poses(traj.subset(np.isin(np.arange(len(traj)), scan)), SAMPLE_POSES)]
 
 
 def _pick(scores: np.ndarray, settings: np.ndarray, last: np.ndarray | None) -> int:
@@ -225,14 +295,12 @@ def choose_values(
     centre = traj.positions_mm.mean(axis=0) if part_centre is None else part_centre
     values = np.zeros((len(traj), len(axes.names)))
     chosen: list[np.ndarray] = []
+    blocks = view_blocks(traj)
+    jobs = [(settings, _judged_poses(traj, block)) for block in blocks]
+    every = kept_each(traj, arm, T_base_part, inv_tcp, obstacles, axes, jobs)
     last = None
-    for block in view_blocks(traj):
+    for block, scores in zip(blocks, every, strict=True):
         index = np.flatnonzero(block)
-        scan = index[traj.scanning[index]]
-        if not len(scan):
-            scan = index
-        sample = scan[sample_poses(traj.subset(np.isin(np.arange(len(traj)), scan)), SAMPLE_POSES)]
-        scores = kept_at(traj, arm, T_base_part, inv_tcp, obstacles, axes, settings, sample)
         best = settings[_pick(scores, settings, last)]
         chosen.append(best)
         values[index] = values_at(axes, best, T_base_part, traj.poses[index], inv_tcp)
@@ -312,6 +380,7 @@ __all__ = [
     "hangs",
     "kept",
     "kept_at",
+    "kept_each",
     "long_side",
     "resolved",
     "values_at",

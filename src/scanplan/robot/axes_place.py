@@ -15,7 +15,7 @@ from scanplan.robot.axes_fit import (
     SAMPLE_POSES,
     candidates,
     hangs,
-    kept_at,
+    kept_each,
     long_side,
     resolved,
     view_blocks,
@@ -187,18 +187,21 @@ def _kept_share(
     tried: list[np.ndarray] | None = None,
 ) -> tuple[float, list[np.ndarray]]:
     """The share of `sub`'s scanning poses the best per-view settings of `axes` keep with
-    the arm at `T` (`kept_at`), and each view's `LINK_SETTINGS` best settings. tried: the
+    the arm at `T` (`kept_each`), and each view's `LINK_SETTINGS` best settings. tried: the
     settings to judge each view on (all by default: those the reach alone ranked first,
     when the links judge them again)."""
     every = candidates(axes, arm, coarse=True)
+    jobs = [
+        (every if tried is None else tried[k], np.flatnonzero(block & sub.scanning))
+        for k, block in enumerate(view_blocks(sub))
+    ]
     score, best = 0.0, []
-    for k, block in enumerate(view_blocks(sub)):
-        index = np.flatnonzero(block & sub.scanning)
-        settings = every if tried is None else tried[k]
+    for (settings, index), kept in zip(
+        jobs, kept_each(sub, arm, T, inv_tcp, obstacles, axes, jobs), strict=True
+    ):
         if not len(index) or not len(settings):
             best.append(settings[:0])
             continue
-        kept = kept_at(sub, arm, T, inv_tcp, obstacles, axes, settings, index)
         score += kept.max()
         best.append(settings[_first(kept, LINK_SETTINGS)])
     return score / max(int(sub.scanning.sum()), 1), best
