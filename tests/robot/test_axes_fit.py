@@ -13,7 +13,14 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import candidates, choose_values, hangs, kept_at, values_at
+from scanplan.robot.axes_fit import (
+    candidates,
+    choose_values,
+    hangs,
+    kept_at,
+    kept_each,
+    values_at,
+)
 from scanplan.robot.axes_place import place_on_axes
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
@@ -271,3 +278,10 @@ def test_settings_judged_together_keep_what_each_keeps_alone():
         alone = [kept_at(traj, arm, T0, inv, obs, TURNTABLE, s[None], index)[0] for s in settings]
         assert together.tolist() == alone
         assert together.max() > together.min()  # the angle matters
+        # Two views' jobs in one call keep what each keeps in a call of its own.
+        near, far = np.flatnonzero(traj.swath == 0), np.flatnonzero(traj.swath == 1)
+        jobs = [(settings, near), (settings[::2], far)]
+        both = kept_each(traj, arm, T0, inv, obs, TURNTABLE, jobs)
+        assert [b.tolist() for b in both] == [
+            kept_at(traj, arm, T0, inv, obs, TURNTABLE, s, i).tolist() for s, i in jobs
+        ]
