@@ -285,3 +285,25 @@ def test_settings_judged_together_keep_what_each_keeps_alone():
         assert [b.tolist() for b in both] == [
             kept_at(traj, arm, T0, inv, obs, TURNTABLE, s, i).tolist() for s, i in jobs
         ]
+
+
+def test_place_keeps_a_turntable_plans_placement_and_searches_no_arm_alone(tmp_path):
+    # A plan flown with a turntable is judged with it, as export judges it: its own
+    # placement kept. Another arm gets no placement searched without the axes (its answer
+    # would be about a cell without the turntable): one line, exit 2.
+    out = tmp_path / "p.json"
+    made = CliRunner().invoke(
+        app,
+        ["plan", "training-piece", "--views", "top", "--robot", "ur5e",
+         "--tcp", "0,0,90,0,0,0", "--positioner", "turntable", "-o", str(out)],
+    )  # fmt: skip
+    assert made.exit_code == 0, made.output
+    planned = next(ln for ln in made.output.splitlines() if ln.startswith("ur5e at --part-pose"))
+    kept = CliRunner().invoke(app, ["place", str(out), "--robot", "ur5e", "--quiet"])
+    assert kept.exit_code == 0, kept.output
+    assert "the plan's own placement flies every pose" in kept.output
+    assert planned.split()[3].rstrip(":") in kept.output  # the same --part-pose
+    other = CliRunner().invoke(app, ["place", str(out), "--robot", "kr6-r900", "--quiet"])
+    assert other.exit_code == 2
+    assert "flown with external axes" in other.output and "--positioner" in other.output
+    assert "Traceback" not in other.output

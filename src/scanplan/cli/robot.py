@@ -247,7 +247,9 @@ def place_cmd(
     pose with no configuration flip in a pass, its links clear of the part, the table and
     the fixtures (the arm stands beside the table); print it as --part-pose. A plan made for
     this arm (and --tcp not given, or the plan's) keeps its own placement if the arm flies
-    every pose from there, as export checks it. Exit 2 if none does."""
+    every pose from there, as export checks it (with its turntable or track, if it has
+    them; the search is for the arm alone, so such a plan is not searched again). Exit 2 if
+    none does."""
     # Deferred: the placement search loads the kinematics and FCL, which --help need not.
     from scanplan.core.plan import read_plan
     from scanplan.jobs.place import place_plan, placement_lines

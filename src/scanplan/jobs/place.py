@@ -8,12 +8,14 @@ from scanplan.core.limits import TCP_MM
 from scanplan.core.plan import Plan
 from scanplan.jobs.planned import ProgressBar, Say, no_bar, plan_cell, planned_part, silent
 from scanplan.robot import get_robot
+from scanplan.robot.axes import with_disk
 from scanplan.robot.base import Robot
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.export.rotations import IDENTITY_POSE
 from scanplan.robot.flyable import check_flyable
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.place import Placement, place
+from scanplan.robot.program import axes_of
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.part import Part
 
@@ -55,6 +57,15 @@ def place_plan(
         if found is not None:
             say("the plan's own placement flies every pose (as export checks it): kept")
             return found
+    if plan.traj.external is not None:
+        # The search places the part for the arm alone: the plan's values of its axes would
+        # be read as turning nothing, and its answer would be about another cell.
+        beside = f" and {robot} does not fly it from its placement with them" if same_arm else ""
+        raise ValueError(
+            f"the plan is flown with external axes (a turntable or track){beside}; place "
+            "searches a placement for the arm alone: plan again with --robot "
+            f"{robot} and --positioner to place the arm with its axes"
+        )
     with bar("searching a placement"):
         return place(plan.traj, arm, T_tcp, heights, yaw_step_deg, obstacles=obstacles)
 
@@ -64,18 +75,18 @@ def planned_placement(
 ) -> Placement | None:
     """The placement `plan` records for the arm it was made for, if `arm` holding the
     sensor at `T_tcp` flies every pose from there as `export` checks it (each pass entered
-    on the joints recorded); None otherwise, or for a plan moved by external axes (their
-    stand is the plan's, not a placement of the part alone)."""
+    on the joints recorded); None otherwise. A plan moved by external axes is judged as
+    export judges it, with them (their stand and values are the plan's)."""
     recorded = plan.arm
-    if (
-        recorded is None
-        or plan.traj.external is not None
-        or not np.allclose(T_tcp, recorded.T_flange_sensor, atol=1e-6)
-    ):
+    if recorded is None or not np.allclose(T_tcp, recorded.T_flange_sensor, atol=1e-6):
         return None
+    axes = axes_of(plan)
+    cell = plan_cell(plan, part)
+    if axes is not None:  # the part moved pose by pose, the turntable's disk in the cell
+        cell = with_disk(cell, axes)
     checked = check_flyable(
-        plan.traj, arm, recorded.T_base_part, T_tcp, part, plan_cell(plan, part),
-        plan.spec.sensor, obstacles,
+        plan.traj, arm, recorded.T_base_part, T_tcp, part, cell, plan.spec.sensor,
+        obstacles if axes is None else None, axes=axes,
     )  # fmt: skip
     if not checked.flyable:
         return None
