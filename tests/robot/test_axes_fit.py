@@ -13,14 +13,8 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import (
-    candidates,
-    choose_values,
-    hangs,
-    kept_at,
-    kept_each,
-    values_at,
-)
+from scanplan.robot.axes_fit import candidates, choose_values, hangs
+from scanplan.robot.axes_kept import kept_at, kept_each, reach_bound_each, values_at
 from scanplan.robot.axes_place import place_on_axes
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
@@ -285,6 +279,12 @@ def test_settings_judged_together_keep_what_each_keeps_alone():
         assert [b.tolist() for b in both] == [
             kept_at(traj, arm, T0, inv, obs, TURNTABLE, s, i).tolist() for s, i in jobs
         ]
+    # The inverse kinematics' bound is at least what the reach check keeps, and is met
+    # where it keeps every pose.
+    bound = reach_bound_each(traj, arm, T0, inv, TURNTABLE, [(settings, index)])[0]
+    kept = kept_at(traj, arm, T0, inv, None, TURNTABLE, settings, index)
+    assert (bound >= kept).all() and (bound[kept == len(traj)] == len(traj)).all()
+    assert bound.min() < len(traj)  # some angle puts poses out of reach
 
 
 def test_place_keeps_a_turntable_plans_placement_and_searches_no_arm_alone(tmp_path):

@@ -13,7 +13,6 @@ standing. Where the arm stands with them is `axes_place`'s.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,21 +22,15 @@ from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
+from scanplan.robot.axes_kept import kept_each, values_at
 from scanplan.robot.base import Robot
 from scanplan.robot.fit_marks import renumbered_passes
-from scanplan.robot.flown_poses import (
-    HALF_TURN,
-    flyable_poses,
-    kept_by_pass,
-    sensor_clear_both,
-    turned_passes,
-)
+from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
 from scanplan.robot.links import hung, obstacles_for
 from scanplan.robot.place import reach_mm
 from scanplan.robot.place_weights import sample_poses
 from scanplan.robot.placed_arm import PlacedArm
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part
@@ -48,8 +41,6 @@ TRACK_OFFSETS = 9  # the track's candidate offsets, across the arm's reach
 COARSE_TURN_STEP_DEG = 45.0
 COARSE_TRACK_OFFSETS = 5
 SAMPLE_POSES = 96  # a view's poses a candidate setting is judged on
-# Poses (a copy per setting) judged in one reach check: about 100 MB of inverse kinematics.
-JUDGED_TOGETHER = 60_000
 # Among settings within this share of the best, the one nearest the last view's is held
 # (the axis moves less).
 NEAR_BEST = 0.01
@@ -112,151 +103,11 @@ def candidates(axes: ExternalAxes, robot: Robot, coarse: bool = False) -> np.nda
     return np.stack([g.reshape(-1) for g in grid], axis=1)
 
 
-def values_at(
-    axes: ExternalAxes,
-    setting: np.ndarray,
-    T_base_part: np.ndarray,
-    poses: np.ndarray,
-    inv_tcp: np.ndarray,
-) -> np.ndarray:
-    """(n, k) the axes' values at `poses` (part frame) for a `setting` (k,): the turntable's
-    angle as it is; the track at s = d·flange - offset (the flange's along-track position
-    at the turntable's angle), clipped to its travel."""
-    values = np.tile(np.asarray(setting, dtype=np.float64), (len(poses), 1))
-    if axes.track is not None:
-        assert axes.track.direction is not None
-        d = np.asarray(axes.track.direction, dtype=np.float64)
-        d = d / np.linalg.norm(d)
-        at = values.copy()
-        at[:, -1] = 0.0
-        flange = (part_poses(T_base_part, at, axes) @ poses @ inv_tcp)[:, :3, 3]
-        lo, hi = axes.limits[-1]
-        values[:, -1] = np.clip(flange @ d - setting[-1], lo, hi)
-    return values
-
-
 def view_blocks(traj: Trajectory) -> list[np.ndarray]:
     """(n,) masks: each view's poses (its passes and the moves into them), in order."""
     views = view_records(traj) or (ViewRecord(0, (0.0, 0.0, 1.0), 0, 1 << 30, 0),)
     out = [v.holds(traj.swath) for v in views]
     return [m for m in out if m.any()]
-
-
-def kept_at(
-    traj: Trajectory,
-    arm: Robot,
-    T_base_part: np.ndarray,
-    inv_tcp: np.ndarray,
-    obstacles: CellObstacles | None,
-    axes: ExternalAxes,
-    settings: np.ndarray,
-    index: np.ndarray,
-) -> np.ndarray:
-    """(c,) the scanning poses among `index` kept at each setting (each pass as planned
-    or turned half a turn, as the fit keeps them)."""
-    return kept_each(traj, arm, T_base_part, inv_tcp, obstacles, axes, [(settings, index)])[0]
-
-
-def kept_each(
-    traj: Trajectory,
-    arm: Robot,
-    T_base_part: np.ndarray,
-    inv_tcp: np.ndarray,
-    obstacles: CellObstacles | None,
-    axes: ExternalAxes,
-    jobs: Sequence[tuple[np.ndarray, np.ndarray]],
-) -> list[np.ndarray]:
-    """`kept_at` for each job (settings (c, k), index): the jobs' settings judged together,
-    a copy of a job's poses per setting followed as a path of its own (`check_reach`'s
-    restarts), about `JUDGED_TOGETHER` poses a call: the same counts as a call per setting,
-    without the cost of a call on a view's few poses each time."""
-    out: list[np.ndarray] = []
-    batch: list[tuple[np.ndarray, np.ndarray]] = []
-    size = 0
-    for settings, index in jobs:
-        batch.append((settings, index))
-        size += len(settings) * len(index)
-        if size >= JUDGED_TOGETHER:
-            out += _kept_together(traj, arm, T_base_part, inv_tcp, obstacles, axes, batch)
-            batch, size = [], 0
-    if batch:
-        out += _kept_together(traj, arm, T_base_part, inv_tcp, obstacles, axes, batch)
-    return out
-
-
-def _kept_together(
-    traj: Trajectory,
-    arm: Robot,
-    T_base_part: np.ndarray,
-    inv_tcp: np.ndarray,
-    obstacles: CellObstacles | None,
-    axes: ExternalAxes,
-    jobs: Sequence[tuple[np.ndarray, np.ndarray]],
-) -> list[np.ndarray]:
-    """`kept_each` of jobs judged in one call."""
-    poses, swaths, scanning, values, sensor, starts = [], [], [], [], [], []
-    shift, at = 0, 0
-    for settings, index in jobs:
-        sub = traj.subset(np.isin(np.arange(len(traj)), index))
-        m, c = len(sub), len(settings)
-        swath = sub.swath - (sub.swath.min() if m else 0)
-        span = int(swath.max()) + 1 if m else 0
-        poses.append(np.tile(sub.poses, (c, 1, 1)))
-        swaths.append(np.tile(swath, c) + shift + np.repeat(np.arange(c) * span, m))
-        scanning.append(np.tile(sub.scanning, c))
-        values += [values_at(axes, s, T_base_part, sub.poses, inv_tcp) for s in settings]
-        if obstacles is not None:  # the same at every setting
-            sensor.append([np.tile(b, c) for b in sensor_clear_both(sub.poses, obstacles)])
-        if m:
-            starts.append(at + m * np.arange(c))
-        shift, at = shift + c * span, at + c * m
-    if not starts:  # no poses to judge
-        return [np.zeros(len(settings)) for settings, _ in jobs]
-    copies = Trajectory(
-        np.concatenate(poses).reshape(-1, 4, 4),
-        np.concatenate(swaths).astype(np.int64),
-        np.concatenate(scanning).astype(bool),
-    )
-    restarts = np.zeros(len(copies), bool)
-    restarts[np.concatenate(starts).astype(np.int64)] = True
-    T = part_poses(T_base_part, np.concatenate(values).reshape(len(copies), -1), axes)
-    if obstacles is None:
-        good = [
-            ~np.isnan(
-                check_reach(
-                    T @ p @ inv_tcp,
-                    arm,
-                    swath=copies.swath,
-                    scanning=copies.scanning,
-                    restarts=restarts,
-                ).joints
-            ).any(axis=1)
-            for p in (copies.poses, copies.poses @ HALF_TURN)
-        ]
-    else:
-        good = list(
-            flyable_poses(
-                copies,
-                arm,
-                T,
-                inv_tcp,
-                obstacles,
-                sensor_ok=(
-                    np.concatenate([b[0] for b in sensor]),
-                    np.concatenate([b[1] for b in sensor]),
-                ),
-                exact=False,
-                choosing=np.ones(len(copies), bool),
-                restarts=restarts,
-            )
-        )
-    kept = kept_by_pass(copies.swath, good[0], good[1]) & copies.scanning
-    out, at = [], 0
-    for settings, index in jobs:
-        n = len(settings) * len(index)
-        out.append(kept[at : at + n].reshape(len(settings), -1).sum(axis=1).astype(np.float64))
-        at += n
-    return out
 
 
 def _judged_poses(traj: Trajectory, block: np.ndarray) -> np.ndarray:
@@ -379,10 +230,7 @@ __all__ = [
     "fitted_axes_record",
     "hangs",
     "kept",
-    "kept_at",
-    "kept_each",
     "long_side",
     "resolved",
-    "values_at",
     "view_blocks",
 ]

@@ -15,11 +15,11 @@ from scanplan.robot.axes_fit import (
     SAMPLE_POSES,
     candidates,
     hangs,
-    kept_each,
     long_side,
     resolved,
     view_blocks,
 )
+from scanplan.robot.axes_kept import kept_each, reach_bound_each
 from scanplan.robot.base import Robot
 from scanplan.robot.flyable import stands_clear
 from scanplan.robot.place import place, reach_mm
@@ -149,7 +149,7 @@ def _best_placement(
     best, best_score = None, -1.0
     sample = sample_poses(traj, 4 * SAMPLE_POSES)
     sub = traj.subset(np.isin(np.arange(len(traj)), sample))
-    scored: list[tuple[float, list[np.ndarray], np.ndarray]] = []
+    stands: list[tuple[np.ndarray, ExternalAxes]] = []
     for T in tries:
         choice = resolved(axes, part, T, traj)
         t = choice.turntable
@@ -157,7 +157,21 @@ def _best_placement(
             base = np.linalg.inv(T)[:3, 3]
             if np.hypot(*(base - t.axis_point_mm)[:2]) < t.radius_mm + BESIDE_DISK_MM:
                 continue  # the arm's column in the turntable
-        scored.append((*_kept_share(sub, arm, T, inv_tcp, None, choice), T))
+        stands.append((T, choice))
+    # Judged from the highest bound on what a stand keeps (its inverse kinematics alone)
+    # down, until the bound falls short of what the judging after this one looks at (within
+    # LINK_CHECKED_WITHIN of the best with the links, the best without): the same scores
+    # for every stand that matters, the others not judged.
+    bounds = [_reach_bound_share(sub, arm, T, inv_tcp, choice) for T, choice in stands]
+    margin = LINK_CHECKED_WITHIN if obstacles is not None else 0.0
+    judged: dict[int, tuple[float, list[np.ndarray]]] = {}
+    top = -np.inf
+    for k in np.argsort(-np.asarray(bounds), kind="stable"):
+        if bounds[k] < top - margin - 1e-9:
+            break
+        judged[k] = _kept_share(sub, arm, stands[k][0], inv_tcp, None, stands[k][1])
+        top = max(top, judged[k][0])
+    scored = [(*judged[k], stands[k][0]) for k in sorted(judged)]
     scored.sort(key=lambda st: -st[0])
     if obstacles is not None and scored:  # the links on those near the best
         top = scored[0][0]
@@ -205,6 +219,17 @@ def _kept_share(
         score += kept.max()
         best.append(settings[_first(kept, LINK_SETTINGS)])
     return score / max(int(sub.scanning.sum()), 1), best
+
+
+def _reach_bound_share(
+    sub: Trajectory, arm: Robot, T: np.ndarray, inv_tcp: np.ndarray, axes: ExternalAxes
+) -> float:
+    """At least `_kept_share`'s share without obstacles (`reach_bound_each` per view)."""
+    every = candidates(axes, arm, coarse=True)
+    jobs = [(every, np.flatnonzero(block & sub.scanning)) for block in view_blocks(sub)]
+    bounds = reach_bound_each(sub, arm, T, inv_tcp, axes, jobs)
+    most = sum(float(b.max()) for (_, index), b in zip(jobs, bounds, strict=True) if len(index))
+    return most / max(int(sub.scanning.sum()), 1)
 
 
 def _first(scores: np.ndarray, n: int) -> np.ndarray:
