@@ -22,7 +22,7 @@ from scanplan.core.context import PlanContext
 from scanplan.core.plan import ViewRecord, view_records
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, kept, part_poses, with_disk
-from scanplan.robot.axes_kept import kept_each, values_at
+from scanplan.robot.axes_kept import kept_each, reach_bound_each, values_at
 from scanplan.robot.base import Robot
 from scanplan.robot.fit_marks import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
@@ -120,6 +120,35 @@ def _judged_poses(traj: Trajectory, block: np.ndarray) -> np.ndarray:
     return scan[sample_poses(traj.subset(np.isin(np.arange(len(traj)), scan)), SAMPLE_POSES)]
 
 
+def _scores(
+    traj: Trajectory,
+    arm: Robot,
+    T_base_part: np.ndarray,
+    inv_tcp: np.ndarray,
+    obstacles: CellObstacles | None,
+    axes: ExternalAxes,
+    jobs: list[tuple[np.ndarray, np.ndarray]],
+) -> list[np.ndarray]:
+    """`kept_each`'s scores of the settings `_pick` may choose among (-1 for the others):
+    first those with the highest bound (`reach_bound_each`), then those whose bound is
+    within NEAR_BEST of the best kept so far; a setting bounded below that keeps less than
+    any `_pick` looks at, so the same setting is picked as with every one judged."""
+    bounds = reach_bound_each(traj, arm, T_base_part, inv_tcp, axes, jobs)
+    scores = [np.full(len(settings), -1.0) for settings, _ in jobs]
+    first = [b >= b.max() - 1e-9 if len(b) else b > 0 for b in bounds]
+    for chosen in (first, None):
+        if chosen is None:  # then all those that may come within NEAR_BEST of the best
+            chosen = [
+                (b >= max(sc.max(), 0.0) * (1.0 - NEAR_BEST) - 1e-9) & (sc < 0) if len(b) else b > 0
+                for b, sc in zip(bounds, scores, strict=True)
+            ]
+        part = [(settings[m], index) for (settings, index), m in zip(jobs, chosen, strict=True)]
+        kept = kept_each(traj, arm, T_base_part, inv_tcp, obstacles, axes, part)
+        for sc, m, k in zip(scores, chosen, kept, strict=True):
+            sc[m] = k
+    return scores
+
+
 def _pick(scores: np.ndarray, settings: np.ndarray, last: np.ndarray | None) -> int:
     """The best setting; among those within NEAR_BEST of it, the nearest to `last` (to
     every axis at 0 for the first view)."""
@@ -148,7 +177,7 @@ def choose_values(
     chosen: list[np.ndarray] = []
     blocks = view_blocks(traj)
     jobs = [(settings, _judged_poses(traj, block)) for block in blocks]
-    every = kept_each(traj, arm, T_base_part, inv_tcp, obstacles, axes, jobs)
+    every = _scores(traj, arm, T_base_part, inv_tcp, obstacles, axes, jobs)
     last = None
     for block, scores in zip(blocks, every, strict=True):
         index = np.flatnonzero(block)
