@@ -13,7 +13,14 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.planning.swaths import Swath
 from scanplan.robot import check_reach
 from scanplan.robot.axes import ExternalAxes, Track, Turntable, part_poses
-from scanplan.robot.axes_fit import candidates, choose_values, hangs
+from scanplan.robot.axes_fit import (
+    NEAR_BEST,
+    _pick,
+    _scores,
+    candidates,
+    choose_values,
+    hangs,
+)
 from scanplan.robot.axes_kept import kept_at, kept_each, reach_bound_each, values_at
 from scanplan.robot.axes_place import place_on_axes
 from scanplan.robot.export import parse_pose_arg
@@ -307,3 +314,23 @@ def test_place_keeps_a_turntable_plans_placement_and_searches_no_arm_alone(tmp_p
     assert other.exit_code == 2
     assert "flown with external axes" in other.output and "--positioner" in other.output
     assert "Traceback" not in other.output
+
+
+def test_the_settings_left_unjudged_could_not_be_picked():
+    # choose_values judges only the settings whose inverse-kinematics bound may come within
+    # NEAR_BEST of the best: it picks what judging every setting picks.
+    traj = _near_and_far(12)
+    inv = np.linalg.inv(TCP)
+    arm = get_robot("ur5e")
+    settings = candidates(TURNTABLE, arm)
+    box = Part(trimesh.creation.box((500.0, 200.0, 60.0)))
+    obstacles = obstacles_for(box, Cell.around(box), SensorSpec(), 20.0)
+    jobs = [(settings, np.flatnonzero(traj.swath == k)) for k in (0, 1)]
+    some = _scores(traj, arm, T0, inv, obstacles, TURNTABLE, jobs)
+    every = kept_each(traj, arm, T0, inv, obstacles, TURNTABLE, jobs)
+    for few, full in zip(some, every, strict=True):
+        assert _pick(few, settings, None) == _pick(full, settings, None)
+        assert np.array_equal(few[few >= 0], full[few >= 0])  # judged: as judged alone
+        near = full >= full.max() * (1.0 - NEAR_BEST) - 1e-9  # what _pick looks among
+        assert np.array_equal(few[near], full[near])
+    assert sum(int((few < 0).sum()) for few in some) > 0  # some settings left unjudged
