@@ -239,6 +239,12 @@ def test_the_placement_judges_a_turntable_with_a_track_on_a_coarser_grid():
     np.testing.assert_array_equal(candidates(alone, arm, coarse=True), candidates(alone, arm))
 
 
+def _box_cell():
+    """The cell of a 500 x 200 x 60 mm box on its table, as the links and sensor see it."""
+    box = Part(trimesh.creation.box((500.0, 200.0, 60.0)))
+    return obstacles_for(box, Cell.around(box), SensorSpec(), 20.0)
+
+
 def test_several_paths_in_one_reach_check_are_followed_as_if_alone():
     # The far view turned to each of a few angles: one check with restarts gives each
     # copy the joints it gets checked alone (no joints carried over from the copy before).
@@ -271,8 +277,7 @@ def test_settings_judged_together_keep_what_each_keeps_alone():
     inv = np.linalg.inv(TCP)
     arm = get_robot("ur5e")
     settings = candidates(TURNTABLE, arm)
-    box = Part(trimesh.creation.box((500.0, 200.0, 60.0)))
-    obstacles = obstacles_for(box, Cell.around(box), SensorSpec(), 20.0)
+    obstacles = _box_cell()
     index = np.arange(len(traj))
     for obs in (None, obstacles):
         together = kept_at(traj, arm, T0, inv, obs, TURNTABLE, settings, index)
@@ -323,8 +328,7 @@ def test_the_settings_left_unjudged_could_not_be_picked():
     inv = np.linalg.inv(TCP)
     arm = get_robot("ur5e")
     settings = candidates(TURNTABLE, arm)
-    box = Part(trimesh.creation.box((500.0, 200.0, 60.0)))
-    obstacles = obstacles_for(box, Cell.around(box), SensorSpec(), 20.0)
+    obstacles = _box_cell()
     jobs = [(settings, np.flatnonzero(traj.swath == k)) for k in (0, 1)]
     some = _scores(traj, arm, T0, inv, obstacles, TURNTABLE, jobs)
     every = kept_each(traj, arm, T0, inv, obstacles, TURNTABLE, jobs)
