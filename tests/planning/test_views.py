@@ -21,6 +21,9 @@ from scanplan.planning.views import (
     SCAN_UPHILL,
     VIEW_AXIS_MAX_TILT_DEG,
     View,
+    _best_axis,
+    _missed_axes,
+    _sees,
     candidate_views,
     depth_slabs,
     missed_views,
@@ -268,3 +271,86 @@ def test_missed_views_for_an_arm_are_aimed_only_at_what_it_reaches():
     assert part.mesh.triangles_center[views[0].faces, 0].mean() == pytest.approx(50.0)
     # An arm that reaches neither gets no view at all.
     assert missed_views(part, SPEC, samples, missed, 50, arm=_ReachesNearBlock(1e9)) == []
+
+
+class _ReachesOnlyTiltedTowardsIt:
+    """An arm standing at +y that reaches a sample only along an axis tilted towards it."""
+
+    @property
+    def stands_at(self) -> np.ndarray:
+        return np.array([0.0, 900.0, 0.0])
+
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        return np.full(len(points), axis[1] > 0.05)
+
+
+def test_missed_views_for_an_arm_take_the_axis_it_reaches_along_not_the_one_seeing_most():
+    # A block's wall is seen as well along its normal (the first axis tried) as tilted
+    # towards the arm; the arm reaches only along the tilted one: that one is taken, not
+    # the wall given up (as it was when the axis seeing most was taken first).
+    part = part_from_mesh(_box((0, 0, 50), (100, 200, 100)), "block")
+    samples = hemisphere_visible_samples(part, 3.0)
+    missed = part.mesh.face_normals[samples.faces][:, 0] > 0.99
+    plain = missed_views(part, SPEC, samples, missed, min_samples=50)
+    assert len(plain) == 1 and abs(plain[0].axis[1]) < 0.05  # seen most untilted
+    views = missed_views(
+        part, SPEC, samples, missed, min_samples=50, arm=_ReachesOnlyTiltedTowardsIt()
+    )
+    assert len(views) == 1
+    assert views[0].axis[1] > 0.05 and views[0].axis[0] > 0.9
+
+
+class _ReachesByAxis:
+    """An arm standing at +y reaching a sample along an axis when the sample lies far
+    enough towards it, the farther the more the axis tilts up; counts what it is asked."""
+
+    stands_at = np.array([0.0, 900.0, 0.0])
+
+    def __init__(self) -> None:
+        self.asked: list[tuple[float, ...]] = []
+
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        self.asked.append(tuple(np.round(axis, 9)))
+        return points[:, 1] > 400.0 * axis[2] - 100.0 * axis[1] - 60.0
+
+
+class _ReachesAll(_ReachesByAxis):
+    def reaches(self, points: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        self.asked.append(tuple(np.round(axis, 9)))
+        return np.ones(len(points), bool)
+
+
+def test_the_axis_an_arm_reaches_most_along_is_found_asking_it_of_fewer_axes():
+    # The two blocks' walls: the far one half hidden, more or less by each axis.
+    part = _two_blocks()
+    samples = hemisphere_visible_samples(part, 3.0)
+    normals = part.mesh.face_normals[samples.faces]
+    wall = normals[:, 0] > 0.99
+    points, normals = samples.points[wall], normals[wall]
+    bases = np.array([view_axis(n) for n in np.vstack([normals.mean(axis=0)[None], normals[:8]])])
+    arm = _ReachesByAxis()
+    axes = _missed_axes(bases, points, arm)
+    # Every axis judged, as the choice did before: the first reaching most.
+    cos_tol = math.cos(SPEC.tol_angle_rad)
+    reached, seeing = [], set()
+    for axis in axes:
+        sees = _sees(part, points, normals, axis, cos_tol)
+        if sees.any():
+            seeing.add(tuple(np.round(axis, 9)))
+        sees[sees] = _ReachesByAxis().reaches(points[sees], axis)
+        reached.append(sees)
+    counts = [int(r.sum()) for r in reached]
+    first = int(np.argmax(counts))
+    assert len(set(counts)) > 1  # the axes differ: the pick could be wrong
+    count, axis, which = _best_axis(part, SPEC, points, normals, axes, arm)
+    assert count == counts[first]
+    np.testing.assert_array_equal(axis, axes[first])
+    np.testing.assert_array_equal(which, reached[first])
+    # Each axis asked once at most (the samples' normals repeat their mean's: a flat wall).
+    assert len(seeing) < len(axes)
+    assert len(arm.asked) == len(set(arm.asked)) == len(seeing)
+    # An arm reaching all it is asked of: the axes seeing fewer than the first are not asked.
+    everywhere = _ReachesAll()
+    count, _, _ = _best_axis(part, SPEC, points, normals, axes, everywhere)
+    assert count == max(int(_sees(part, points, normals, a, cos_tol).sum()) for a in axes)
+    assert len(everywhere.asked) < len(seeing)

@@ -324,7 +324,6 @@ def missed_views(
     points = surface.points[idx]
     dirs = hemisphere_directions()
     label = np.argmax(normals @ dirs.T, axis=1)
-    cos_tol = math.cos(spec.tol_angle_rad)
     views: list[View] = []
     for b in np.unique(label):
         members = np.flatnonzero(label == b)
@@ -336,24 +335,10 @@ def missed_views(
             picks = rng.choice(members, min(len(members), MISSED_AXIS_SAMPLES), replace=False)
             bases = np.vstack([mean[None], normals[picks]])
             bases = np.array([view_axis(n) for n in bases])
-            best: tuple[int, np.ndarray, np.ndarray] | None = None
-            for axis in _missed_axes(bases, points[members], arm):
-                sees = _sees(part, points[members], normals[members], axis, cos_tol)
-                if best is None or int(sees.sum()) > best[0]:
-                    best = (int(sees.sum()), axis, sees)
-            assert best is not None
-            count, axis, sees = best
+            axes = _missed_axes(bases, points[members], arm)
+            count, axis, sees = _best_axis(part, spec, points[members], normals[members], axes, arm)
             if count < min_samples:
                 break
-            if arm is not None:
-                # Aimed only at what the arm reaches along the axis: what it does not is
-                # left to the next axis, or given up if the arm reaches too little of it.
-                reached = sees.copy()
-                reached[sees] = arm.reaches(points[members][sees], axis)
-                if reached.sum() < min_samples:
-                    members = members[~sees]
-                    continue
-                sees = reached
             seen = members[sees]
             members = np.setdiff1d(members, seen)
             depth = points[seen] @ axis
@@ -392,6 +377,43 @@ def _missed_axes(bases: np.ndarray, points: np.ndarray, arm: ArmReach | None) ->
     for tilt in MISSED_AXIS_TILTS_DEG[1:]:
         axes += [view_axis(a) for a in turned_towards(bases, to_arm, math.radians(tilt))]
     return axes
+
+
+def _best_axis(
+    part: Part,
+    spec: ScanSpec,
+    points: np.ndarray,
+    normals: np.ndarray,
+    axes: list[np.ndarray],
+    arm: ArmReach | None,
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """(count, axis, which): of `axes`, the first along which most of the samples (`points`,
+    `normals`) are seen (`_sees`), and with a placed `arm` reached too: the axis the arm
+    reaches most along (a wall's foot may be reached only from a steeper tilt than the one
+    seeing most). The arm is asked about the axes seeing most first, and no further once
+    an axis sees fewer than the most reached (it could reach no more than it sees)."""
+    cos_tol = math.cos(spec.tol_angle_rad)
+    # The same axis tried again (the samples' normals on a flat wall are its mean) sees and
+    # reaches the same: judged once (the first of equals is taken either way).
+    _, first = np.unique(np.round(np.asarray(axes), 9), axis=0, return_index=True)
+    axes = [axes[i] for i in np.sort(first)]
+    seen = [_sees(part, points, normals, axis, cos_tol) for axis in axes]
+    counts = [int(s.sum()) for s in seen]
+    if arm is None:
+        first = int(np.argmax(counts))
+        return counts[first], axes[first], seen[first]
+    best: tuple[int, int, np.ndarray] | None = None  # (reached, axis index, which)
+    for i in sorted(range(len(axes)), key=lambda i: -counts[i]):  # stable: ties in order
+        if best is not None and counts[i] < best[0]:
+            break
+        reached = seen[i].copy()
+        if reached.any():
+            reached[reached] = arm.reaches(points[reached], axes[i])
+        key = (int(reached.sum()), -i)
+        if best is None or key > (best[0], -best[1]):
+            best = (key[0], i, reached)
+    assert best is not None
+    return best[0], axes[best[1]], best[2]
 
 
 def _sees(

@@ -93,14 +93,20 @@ class PlacedArm:
         turns = np.arange(NOMINAL_TURNS) * (2 * np.pi / NOMINAL_TURNS)
         x = np.cos(turns)[:, None] * side + np.sin(turns)[:, None] * np.cross(beam, side)
         R = np.stack([x, np.cross(beam, x), np.broadcast_to(beam, x.shape)], axis=-1)
-        sensor = np.broadcast_to(np.eye(4), (NOMINAL_TURNS, len(points), 4, 4)).copy()
-        sensor[..., :3, :3] = R[:, None]
-        sensor[..., :3, 3] = points - self.context.spec.working_distance_mm * beam
-        flange = self.T_base_part @ sensor.reshape(-1, 4, 4) @ inv_rigid(self.tcp)
-        q = arm.inverse(flange)
-        _, inside = fit_limits(q, arm.joint_limits)
-        ok = (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
-        return ok.reshape(NOMINAL_TURNS, len(points)).any(axis=0)
+        origin = np.asarray(points, float) - self.context.spec.working_distance_mm * beam
+        inv_tcp = inv_rigid(self.tcp)
+        ok = np.zeros(len(origin), bool)
+        for turned in R:  # each turn asked only of the points no turn before reached
+            todo = np.flatnonzero(~ok)
+            if not len(todo):
+                break
+            sensor = np.broadcast_to(np.eye(4), (len(todo), 4, 4)).copy()
+            sensor[:, :3, :3] = turned
+            sensor[:, :3, 3] = origin[todo]
+            q = arm.inverse(self.T_base_part @ sensor @ inv_tcp)
+            _, inside = fit_limits(q, arm.joint_limits)
+            ok[todo] = (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
+        return ok
 
     def moves_clear(self, part: Part, traj: Trajectory) -> bool:
         """Whether the sensor body keeps its clearance of the cell at every pose of `traj`
