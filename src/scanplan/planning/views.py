@@ -395,8 +395,8 @@ def _best_axis(
     cos_tol = math.cos(spec.tol_angle_rad)
     # The same axis tried again (the samples' normals on a flat wall are its mean) sees and
     # reaches the same: judged once (the first of equals is taken either way).
-    _, first = np.unique(np.round(np.asarray(axes), 9), axis=0, return_index=True)
-    axes = [axes[i] for i in np.sort(first)]
+    _, once = np.unique(np.round(np.asarray(axes), 9), axis=0, return_index=True)
+    axes = [axes[i] for i in np.sort(once)]
     seen = [_sees(part, points, normals, axis, cos_tol) for axis in axes]
     counts = [int(s.sum()) for s in seen]
     if arm is None:
