@@ -313,9 +313,10 @@ def missed_views(
     `MISSED_AXIS_TILTS_DEG`; the samples an axis sees are cut into depth slabs along it (a
     gap of the distance tolerance: one raster holds one depth). One view per slab of at
     least `min_samples` samples, its region the faces they lie on. With a placed `arm`
-    (`ArmReach`), the axes are also tilted towards where it stands, and a view is aimed only
-    at the samples the arm reaches along its axis: an axis along which it reaches fewer than
-    `min_samples` gets none (the arm could fly nothing of it)."""
+    (`ArmReach`), the axes are also tilted towards where it stands, the axis taken is the one
+    the arm reaches most of the samples along (`_best_axis`), and a view is aimed only at the
+    samples it reaches there: a group along no axis of which it reaches `min_samples` gets
+    none (the arm could fly nothing of it)."""
     idx = np.flatnonzero(missed)
     if len(idx) < min_samples:
         return []
