@@ -21,7 +21,7 @@ from scanplan.robot.axes_fit import (
     choose_values,
     hangs,
 )
-from scanplan.robot.axes_kept import kept_at, kept_each, reach_bound_each, values_at
+from scanplan.robot.axes_kept import kept_each, reach_bound_each, values_at
 from scanplan.robot.axes_place import place_on_axes
 from scanplan.robot.export import parse_pose_arg
 from scanplan.robot.fit import fit_to_robot
@@ -272,29 +272,38 @@ def test_several_paths_in_one_reach_check_are_followed_as_if_alone():
     assert (~np.isnan(together).any(axis=1)).sum() > len(traj)  # several copies reached
 
 
-def test_settings_judged_together_keep_what_each_keeps_alone():
-    traj = _near_and_far(12)
-    inv = np.linalg.inv(TCP)
+def _settings_case():
+    """A near and a far view, a UR5e beside a turntable in the box cell, and the turntable's
+    settings: what the settings-judging tests judge."""
     arm = get_robot("ur5e")
-    settings = candidates(TURNTABLE, arm)
-    obstacles = _box_cell()
+    return _near_and_far(12), np.linalg.inv(TCP), arm, candidates(TURNTABLE, arm), _box_cell()
+
+
+def _kept(traj, obstacles, settings, index):
+    """What a UR5e at T0 keeps of `traj`'s poses `index` at each turntable setting, as one
+    job of `kept_each`."""
+    return kept_each(
+        traj, get_robot("ur5e"), T0, np.linalg.inv(TCP), obstacles, TURNTABLE, [(settings, index)]
+    )[0]
+
+
+def test_settings_judged_together_keep_what_each_keeps_alone():
+    traj, inv, arm, settings, obstacles = _settings_case()
     index = np.arange(len(traj))
     for obs in (None, obstacles):
-        together = kept_at(traj, arm, T0, inv, obs, TURNTABLE, settings, index)
-        alone = [kept_at(traj, arm, T0, inv, obs, TURNTABLE, s[None], index)[0] for s in settings]
+        together = _kept(traj, obs, settings, index)
+        alone = [_kept(traj, obs, s[None], index)[0] for s in settings]
         assert together.tolist() == alone
         assert together.max() > together.min()  # the angle matters
         # Two views' jobs in one call keep what each keeps in a call of its own.
         near, far = np.flatnonzero(traj.swath == 0), np.flatnonzero(traj.swath == 1)
         jobs = [(settings, near), (settings[::2], far)]
         both = kept_each(traj, arm, T0, inv, obs, TURNTABLE, jobs)
-        assert [b.tolist() for b in both] == [
-            kept_at(traj, arm, T0, inv, obs, TURNTABLE, s, i).tolist() for s, i in jobs
-        ]
+        assert [b.tolist() for b in both] == [_kept(traj, obs, s, i).tolist() for s, i in jobs]
     # The inverse kinematics' bound is at least what the reach check keeps, and is met
     # where it keeps every pose.
     bound = reach_bound_each(traj, arm, T0, inv, TURNTABLE, [(settings, index)])[0]
-    kept = kept_at(traj, arm, T0, inv, None, TURNTABLE, settings, index)
+    kept = _kept(traj, None, settings, index)
     assert (bound >= kept).all() and (bound[kept == len(traj)] == len(traj)).all()
     assert bound.min() < len(traj)  # some angle puts poses out of reach
 
@@ -324,11 +333,7 @@ def test_place_keeps_a_turntable_plans_placement_and_searches_no_arm_alone(tmp_p
 def test_the_settings_left_unjudged_could_not_be_picked():
     # choose_values judges only the settings whose inverse-kinematics bound may come within
     # NEAR_BEST of the best: it picks what judging every setting picks.
-    traj = _near_and_far(12)
-    inv = np.linalg.inv(TCP)
-    arm = get_robot("ur5e")
-    settings = candidates(TURNTABLE, arm)
-    obstacles = _box_cell()
+    traj, inv, arm, settings, obstacles = _settings_case()
     jobs = [(settings, np.flatnonzero(traj.swath == k)) for k in (0, 1)]
     some = _scores(traj, arm, T0, inv, obstacles, TURNTABLE, jobs)
     every = kept_each(traj, arm, T0, inv, obstacles, TURNTABLE, jobs)

@@ -51,21 +51,6 @@ def values_at(
     return values
 
 
-def kept_at(
-    traj: Trajectory,
-    arm: Robot,
-    T_base_part: np.ndarray,
-    inv_tcp: np.ndarray,
-    obstacles: CellObstacles | None,
-    axes: ExternalAxes,
-    settings: np.ndarray,
-    index: np.ndarray,
-) -> np.ndarray:
-    """(c,) the scanning poses among `index` kept at each setting (each pass as planned
-    or turned half a turn, as the fit keeps them)."""
-    return kept_each(traj, arm, T_base_part, inv_tcp, obstacles, axes, [(settings, index)])[0]
-
-
 def kept_each(
     traj: Trajectory,
     arm: Robot,
@@ -75,10 +60,12 @@ def kept_each(
     axes: ExternalAxes,
     jobs: Sequence[tuple[np.ndarray, np.ndarray]],
 ) -> list[np.ndarray]:
-    """`kept_at` for each job (settings (c, k), index): the jobs' settings judged together,
-    a copy of a job's poses per setting followed as a path of its own (`check_reach`'s
-    restarts), about `JUDGED_TOGETHER` poses a call: the same counts as a call per setting,
-    without the cost of a call on a view's few poses each time."""
+    """For each job (settings (c, k), index), (c,) the scanning poses among `index` kept at
+    each setting (each pass as planned or turned half a turn, as the fit keeps them). The
+    jobs' settings are judged together, a copy of a job's poses per setting followed as a
+    path of its own (`check_reach`'s restarts), about `JUDGED_TOGETHER` poses a call: the
+    same counts as a call per setting, without the cost of a call on a view's few poses
+    each time."""
 
     def judged(copies: _Copies) -> np.ndarray:
         if obstacles is None:
@@ -125,7 +112,7 @@ def reach_bound_each(
     axes: ExternalAxes,
     jobs: Sequence[tuple[np.ndarray, np.ndarray]],
 ) -> list[np.ndarray]:
-    """For each job (settings, index), (c,) at least what `kept_at` keeps without
+    """For each job (settings, index), (c,) at least what `kept_each` keeps without
     obstacles at each setting: per pass, the larger of its poses with an inverse kinematics
     solution within the joint limits as planned and as turned half a turn (the reach check
     keeps no pose without one, and a pass one way)."""
@@ -223,4 +210,4 @@ def _copies(
     return _Copies(copies, T, restarts, of, count, src)
 
 
-__all__ = ["JUDGED_TOGETHER", "kept_at", "kept_each", "reach_bound_each", "values_at"]
+__all__ = ["JUDGED_TOGETHER", "kept_each", "reach_bound_each", "values_at"]
