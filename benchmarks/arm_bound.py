@@ -48,8 +48,8 @@ from scanplan.core.quantities import ScanSpec
 from scanplan.robot.base import Robot, inv_rigid
 from scanplan.robot.export.rotations import pose_from_xyzabc
 from scanplan.robot.links import check_links, obstacles_for, swept_column
+from scanplan.robot.nearest_joints import fit_limits
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import fit_limits
 from scanplan.world.capsule_collision import CellObstacles
 
 _SAMPLES = 800  # visible samples judged (a random subset, the same for every placement)

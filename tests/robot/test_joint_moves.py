@@ -15,7 +15,7 @@ from scanplan.robot.fit_marks import FitMarks
 from scanplan.robot.flyable import check_flyable
 from scanplan.robot.joint_moves import TOUCH_MM, lift, sensor_swept
 from scanplan.robot.links import check_links, joint_path, obstacles_for
-from scanplan.robot.reach import fit_limits
+from scanplan.robot.nearest_joints import fit_limits
 from scanplan.robot.straight_moves import Way
 from scanplan.world.cell import Cell
 from scanplan.world.part import Part, part_from_mesh

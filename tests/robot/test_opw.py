@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from scanplan.robot import OPW_PRESETS, ROBOT_NAMES, check_reach, get_robot, load_robot_file
-from scanplan.robot.reach import fit_limits
+from scanplan.robot.nearest_joints import fit_limits
 
 PRESETS = list(ROBOT_NAMES)
 

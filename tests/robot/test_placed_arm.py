@@ -10,9 +10,9 @@ from scanplan.core.context import PlanContext
 from scanplan.core.quantities import UP, ScanSpec
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.export import parse_pose_arg
+from scanplan.robot.nearest_joints import fit_limits
 from scanplan.robot.placed_arm import NOMINAL_TURNS, PlacedArm
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import fit_limits
 
 TCP = parse_pose_arg("0,0,90,0,0,0")
 

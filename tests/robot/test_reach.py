@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from scanplan.robot.base import wrap
+from scanplan.robot.nearest_joints import fit_limits
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import _pass_start, _run_ends, check_reach, fit_limits, same_pass
+from scanplan.robot.reach import _pass_start, _run_ends, check_reach, same_pass
 
 
 def _pose_by_pose(poses, robot, q_start=None, swath=None, scanning=None, jump_deg=30.0):
@@ -29,7 +30,18 @@ def _pose_by_pose(poses, robot, q_start=None, swath=None, scanning=None, jump_de
     for i in range(n):
         if not exists[i].any():
             continue
-        if prev is None or (entered[i] and not pinned):
+        if prev is not None and entered[i] and not pinned and end[i] == i + 1:
+            # A move's pose: each branch turned the way nearest the joints before, if
+            # within the limits, else as the IK gives it; the nearest within them.
+            first, inside = fit_limits(solutions[i], limits)
+            ok = inside & ~np.isnan(first).any(axis=1)
+            if not ok.any():
+                continue
+            near, inside = fit_limits(prev + wrap(solutions[i] - prev), limits)
+            first = np.where((inside & ~np.isnan(near).any(axis=1))[:, None], near, first)
+            cand = first[ok]
+            prev = cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
+        elif prev is None or (entered[i] and not pinned):
             start = _pass_start(arm, solutions[i : end[i]], limits, prev, tol, jump_deg)
             if start is None:
                 continue
@@ -80,6 +92,42 @@ def test_follows_the_pose_by_pose_rule(robot: str, seed: int) -> None:
     np.testing.assert_allclose(got, want, atol=1e-9, equal_nan=True)
 
 
+@pytest.mark.parametrize("robot", ["ur5e", "kr6-r900"])
+@pytest.mark.parametrize("pinned", [False, True])
+def test_a_moves_poses_follow_the_pose_by_pose_rule_where_the_branch_changes(
+    robot: str, pinned: bool
+) -> None:
+    # Moves (each pose flown alone) that wander smoothly, jump to far configurations (the
+    # nearest branch changes: the stretch followed at once stops there), leave the reach,
+    # and sweep the wrist past a turn (shifted into the limits), between short passes.
+    arm = get_robot(robot)
+    rng = np.random.default_rng(7)
+    lim = np.clip(arm.joint_limits, -np.pi, np.pi)
+    q = rng.uniform(lim[:, 0] * 0.8, lim[:, 1] * 0.8)
+    joints, swath, scanning = [], [], []
+    for k in range(40):
+        moving = k % 4 != 3
+        for _ in range(int(rng.integers(3, 12))):
+            if moving and rng.random() < 0.15:
+                q = rng.uniform(lim[:, 0] * 0.8, lim[:, 1] * 0.8)
+            else:
+                q = q + rng.normal(0, 0.05, 6) + np.r_[0, 0, 0, 0, 0, 0.4 * moving]
+            joints.append(q.copy())
+            swath.append(k)
+            scanning.append(not moving)
+    poses = arm.forward(np.array(joints))
+    poses[rng.random(len(poses)) < 0.05, :3, 3] *= 5.0  # out of reach
+    swath, scanning = np.array(swath), np.array(scanning)
+    q_start = np.array(joints[0]) if pinned else None
+    got = check_reach(poses, robot, q_start, swath, scanning).joints
+    want = _pose_by_pose(poses, robot, q_start, swath, scanning)
+    np.testing.assert_allclose(got, want, atol=1e-9, equal_nan=True)
+    moves = ~np.isnan(want).any(axis=1) & ~scanning
+    signs = np.sign(arm.singularity_terms(want[moves]))
+    assert (signs[1:] != signs[:-1]).any(axis=1).sum() >= 5  # branches changed in moves
+    assert np.isnan(want[~scanning]).any()
+
+
 @pytest.mark.parametrize("stretch", [1, 7, 30, 200])
 def test_follows_the_pose_by_pose_rule_across_stretches_beyond_the_limits(stretch: int) -> None:
     # One pass whose A3 folds beyond the KR 6's -120° limit for `stretch` poses, twice: the
@@ -96,6 +144,24 @@ def test_follows_the_pose_by_pose_rule_across_stretches_beyond_the_limits(stretc
     np.testing.assert_allclose(report.joints, want, atol=1e-9, equal_nan=True)
     assert len(report.limit_violations) == 2 * stretch
     assert report.limit_violations[0] == 10 and report.limit_violations[-1] == 3 * stretch + 19
+
+
+@pytest.mark.parametrize("stretch", [1, 7, 300])
+def test_a_path_that_starts_beyond_the_limits_is_entered_where_it_comes_within(
+    stretch: int,
+) -> None:
+    # Its first `stretch` poses fold A3 beyond the KR 6's limit, with no joints before them:
+    # skipped at once to the first pose with an in-limit solution, the pass entered there.
+    arm = get_robot("kr6-r900")
+    q = np.tile(np.radians([20.0, -80.0, -100.0, 30.0, 40.0, 10.0]), (stretch + 40, 1))
+    q[:, 0] += np.linspace(0.0, 0.5, len(q))
+    q[:stretch, 2] = np.radians(-150.0)
+    poses = arm.forward(q)
+    swath, scanning = np.zeros(len(q), int), np.ones(len(q), bool)
+    report = check_reach(poses, arm, swath=swath, scanning=scanning)
+    want = _pose_by_pose(poses, "kr6-r900", swath=swath, scanning=scanning)
+    np.testing.assert_allclose(report.joints, want, atol=1e-9, equal_nan=True)
+    np.testing.assert_array_equal(report.limit_violations, np.arange(stretch))
 
 
 class _Cell:

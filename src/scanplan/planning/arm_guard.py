@@ -19,8 +19,9 @@ from scanplan.planning.online import pass_state
 from scanplan.planning.swaths import Swath, frame_poses
 from scanplan.robot.base import Robot, wrap
 from scanplan.robot.flown_poses import HALF_TURN
+from scanplan.robot.nearest_joints import fit_limits
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import check_reach, fit_limits
+from scanplan.robot.reach import check_reach
 
 # The shares of a refused correction tried in turn before the plan's own pose (0).
 CORRECTION_SHARES = (0.5, 0.25, 0.0)

@@ -21,7 +21,8 @@ from scanplan.robot.flown_poses import (
     kept_by_pass,
     sensor_clear_both,
 )
-from scanplan.robot.reach import check_reach, fit_limits
+from scanplan.robot.nearest_joints import fit_limits
+from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
 
 # Poses (a copy per setting) judged in one reach check: about 100 MB of inverse kinematics.

@@ -13,7 +13,8 @@ import numpy as np
 from scanplan.robot.base import Robot
 from scanplan.robot.export.thinning import linear_move
 from scanplan.robot.links import LinkMemo, check_links, each_joint_move, joint_path
-from scanplan.robot.reach import JUMP_DEG, nearest_solution
+from scanplan.robot.nearest_joints import nearest_solution
+from scanplan.robot.reach import JUMP_DEG
 from scanplan.robot.straight_moves import LINE_STEP_MM, Way, fractions, not_flown
 from scanplan.world.capsule_collision import CellObstacles
 

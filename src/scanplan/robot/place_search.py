@@ -17,7 +17,7 @@ from scanplan.core.limits import MAX_PLACEMENTS, check_count
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot
 from scanplan.robot.links import stands_in_cell
-from scanplan.robot.reach import fit_limits, limit_margin, reduce_last_axis
+from scanplan.robot.nearest_joints import fit_limits, limit_margin, reduce_last_axis
 from scanplan.world.capsule_collision import CellObstacles
 
 # Margins that count as "clear": 5° from a limit or a wrist/elbow singularity, 20 mm from

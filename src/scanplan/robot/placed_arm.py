@@ -17,8 +17,8 @@ from scanplan.robot.base import inv_rigid
 from scanplan.robot.fit_marks import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
 from scanplan.robot.links import obstacles_for
+from scanplan.robot.nearest_joints import fit_limits
 from scanplan.robot.presets import get_robot
-from scanplan.robot.reach import fit_limits
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
 from scanplan.world.part import Part

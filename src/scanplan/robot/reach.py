@@ -14,42 +14,19 @@ from pathlib import Path
 import numpy as np
 
 from scanplan.robot.base import Robot, wrap
+from scanplan.robot.nearest_joints import (
+    fit_limits,
+    follow,
+    limit_margin,
+    nearest_solution,
+    next_within,
+)
 from scanplan.robot.pass_branches import CellView, by_flown, flown_count
 from scanplan.robot.presets import get_robot
-
-TWO_PI = 2 * np.pi
 
 # A joint turning more than this between consecutive poses of a pass is a jump: no longer
 # the branch the controller follows there (`check_reach`).
 JUMP_DEG = 30.0
-
-
-def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(q shifted by whole turns into the limits where it can be, (…,) all joints inside).
-    Ranges wider than ±180° (KUKA A6 ±350°, UR ±360°) make several turns legal: the one
-    closest to the given q is kept."""
-    lo, hi = limits[:, 0], limits[:, 1]
-    # A turn down where above the range, up where below (never both: lo < hi), by
-    # arithmetic on the tests: the same values as choosing with `np.where`, at a third of
-    # its cost.
-    for _ in range(2):
-        q = q - TWO_PI * (q > hi) + TWO_PI * (q < lo)
-    return q, reduce_last_axis((q >= lo - 1e-12) & (q <= hi + 1e-12), np.logical_and)
-
-
-def limit_margin(q: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """(…,) rad to the nearest joint limit (negative beyond it)."""
-    return reduce_last_axis(np.minimum(q - limits[:, 0], limits[:, 1] - q), np.minimum)
-
-
-def reduce_last_axis(per_joint: np.ndarray, combine: np.ufunc) -> np.ndarray:
-    """`combine` reduced over the last axis (joints, singularity terms) column by column:
-    numpy's reduction over a short last axis costs twice to ten times as much, and the
-    placement search reduces millions of solutions."""
-    out = combine(per_joint[..., 0], per_joint[..., 1])
-    for j in range(2, per_joint.shape[-1]):
-        combine(out, per_joint[..., j], out=out)
-    return np.asarray(out)
 
 
 def same_pass(n: int, swath: np.ndarray | None, scanning: np.ndarray | None) -> np.ndarray:
@@ -207,9 +184,6 @@ def _pass_start(
     if prev is not None:  # each branch turned the way nearest the previous joints, if legal
         near, inside = fit_limits(prev + wrap(solutions[0] - prev), limits)
         first = np.where((inside & ~np.isnan(near).any(axis=1))[:, None], near, first)
-        if len(solutions) == 1:  # a move's pose: every branch flies it, the nearest wins
-            cand = first[ok]
-            return cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
     branches = np.flatnonzero(ok)
     path = solutions[:, branches]  # (m, b, 6)
     # Each branch followed continuously (unwrapped), from the first pose's turn.
@@ -249,64 +223,6 @@ def _pass_start(
     return cand[np.argmax(np.round(score, 4))]
 
 
-def _candidates(
-    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(m, 8, 6) each pose's solutions turned the way nearest `prev` (m, 6) and shifted into
-    the limits where they can be; (m, 8) their squared distance to `prev`, inf where there
-    is no solution within the limits."""
-    cand, inside = fit_limits(prev[:, None] + wrap(solutions - prev[:, None]), limits)
-    inside &= ~np.isnan(cand).any(axis=-1)
-    dist = np.where(inside, ((cand - prev[:, None]) ** 2).sum(axis=-1), np.inf)
-    return cand, dist
-
-
-def nearest_solution(
-    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray
-) -> tuple[int, np.ndarray] | None:
-    """(branch, joints) of the one pose's (1, 8, 6) in-limit solution nearest `prev` (1, 6),
-    as a controller moving linearly takes it; None if it has none within the limits."""
-    cand, dist = _candidates(solutions, limits, prev)
-    branch = int(np.argmin(dist[0]))
-    return None if not np.isfinite(dist[0, branch]) else (branch, cand[0, branch])
-
-
-def _next_within(
-    solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, lo: int, hi: int
-) -> int:
-    """The first pose from `lo` on, before `hi`, with an in-limit solution from `prev` (`hi`
-    if none): the poses `check_reach` would step one by one, finding none, while its joints
-    stay at `prev`. Looked for in growing windows, so a short gap costs a short look."""
-    size = 8
-    while lo < hi:
-        top = min(hi, lo + size)
-        _, dist = _candidates(solutions[lo:top], limits, np.broadcast_to(prev, (top - lo, 6)))
-        found = np.isfinite(dist).any(axis=1)
-        if found.any():
-            return lo + int(np.argmax(found))
-        lo, size = top, size * 8
-    return hi
-
-
-def _follow(solutions: np.ndarray, limits: np.ndarray, prev: np.ndarray, branch: int) -> np.ndarray:
-    """(t, 6) the joints of the first t poses of `solutions` (m, 8, 6) while taking, pose by
-    pose, the in-limit solution nearest the previous joints (`nearest_solution`) stays on
-    `branch` from `prev`: each pose checked against the branch's path unwrapped from `prev` at once,
-    so a pass costs a few array operations instead of a Python step a pose. t stops at the
-    first pose where the nearest is another branch, or none (the caller steps it alone)."""
-    if not len(solutions):
-        return np.zeros((0, 6))
-    along = solutions[:, branch]
-    path = prev + np.cumsum(wrap(np.diff(np.r_[prev[None], along], axis=0)), axis=0)
-    before = np.r_[prev[None], path[:-1]]
-    cand, dist = _candidates(solutions, limits, before)
-    held = (np.argmin(dist, axis=1) == branch) & np.isfinite(dist[:, branch])
-    # Shifted by a turn into the limits, or off the unwrapped path: stepped alone.
-    held &= (np.abs(cand[:, branch] - path) < 1e-9).all(axis=1)
-    t = len(held) if held.all() else int(np.argmin(held))
-    return cand[:t, branch]
-
-
 def check_reach(
     T_base_flange: np.ndarray,
     robot: str | Path | Robot = "ur5e",
@@ -324,21 +240,21 @@ def check_reach(
 ) -> ReachReport:
     """Follow the path through IK and report what would stop or upset a real arm.
 
-    Each pass (and each pose outside a pass) is entered on the branch that flies the most
-    of it (`_pass_start`; the first reachable pose on the solution closest to `q_start` if
-    given), with the arm's links clear of the `cell` along it and on the joint move into
-    it if a cell is given; or at the solution nearest the joints `entries` records for its
-    first pose (the configurations a fit chose, as its plan records them). entry: (n,)
-    where each pass is entered (`trajectory.pass_entries`: the top of the move leading into
-    it, the move's poses after it flown on the pass's configuration); None: at its first
-    pose. restarts: (n,) True where another path starts (on a pass of its own), followed
-    as if checked alone (no joints before it; `q_start` is the first path's): several
-    paths in one call. Each next pose of a pass takes the in-limit solution closest to the
-    previous one, as a controller executing linear moves would. A configuration flip is a
-    sign change of a singularity term (wrist, elbow, shoulder) between consecutive poses of
-    one pass (`swath`, `scanning`; without them the whole path is one pass): the path went
-    through that singularity. A jump is any joint turning more than `jump_deg` between consecutive
-    poses.
+    Each pass is entered on the branch that flies the most of it (`_pass_start`; the first
+    reachable pose on the solution closest to `q_start` if given), with the arm's links
+    clear of the `cell` along it and on the joint move into it if a cell is given; or at
+    the solution nearest the joints `entries` records for its first pose (the
+    configurations a fit chose, as its plan records them). A joint move's poses, each a
+    pass of its own, take the branch nearest the joints before. entry: (n,) where each pass
+    is entered (`trajectory.pass_entries`: the top of the move leading into it, the move's
+    poses after it flown on the pass's configuration); None: at its first pose. restarts:
+    (n,) True where another path starts (on a pass of its own), followed as if checked
+    alone (no joints before it; `q_start` is the first path's). Each next pose of a pass
+    takes the in-limit solution closest to the previous one, as a controller executing
+    linear moves would. A configuration flip is a sign change of a singularity term
+    (wrist, elbow, shoulder) between consecutive poses of one pass (`swath`, `scanning`;
+    without them the whole path is one pass). A jump is any joint turning more than
+    `jump_deg` between consecutive poses.
     """
     arm = get_robot(robot)
     poses = np.asarray(T_base_flange, dtype=np.float64)
@@ -356,17 +272,15 @@ def check_reach(
     # joint move: the branch that flies most of it from its start (or from its lead-in's).
     # Jumps count within a pass only (`linked`); flips also on the linear move down into a
     # pass from where it is entered (`followed`): a controller cannot flip in a linear move.
-    followed = linked
-    if entry is not None:
-        followed = _runs_linked(np.asarray(entry, dtype=bool), swath, scanning, linked)
-    entered = np.r_[True, ~followed]
+    followed = (
+        linked if entry is None else _runs_linked(np.asarray(entry, bool), swath, scanning, linked)
+    )
     pinned = q_start is not None
     last = -1  # the pose `prev` is the joints of (-1: none, or `q_start`)
     path_of = np.zeros(n, int) if restarts is None else np.cumsum(restarts)
     prev_path = path_of[0] if n else 0  # the path `prev` belongs to
-    end = _run_ends(followed)
-    # Sequential by nature (each pose's branch depends on the previous choice), but within a
-    # pass the choice follows one branch: checked for a whole run at once (`_follow`).
+    entered, end, recorded, alone, stops = _runs(followed, path_of, entries)
+    # Sequential, but a pass or a move follows one branch: a run checked at once (`follow`).
     i = 0
     while i < n:
         if prev is not None and path_of[i] != prev_path:  # another path: none before it
@@ -375,36 +289,57 @@ def check_reach(
             i += 1
             continue
         prev_path = path_of[i]
-        if prev is None or (entered[i] and not pinned):
-            if entries is not None and i in entries:  # the configuration recorded
+        by_move = bool(alone[i]) and not pinned
+        if prev is None or (entered[i] and not pinned and not by_move):
+            if recorded[i]:  # the configuration recorded
                 found = nearest_solution(solutions[i : i + 1], limits, np.asarray(entries[i])[None])
                 start = None if found is None else found[1]
             else:
                 start = _pass_start(
                     arm, solutions[i : end[i]], limits, prev, tol, jump_deg, cell, (i, last)
                 )
-            if start is None:
-                i += 1
+            if start is None:  # none within the limits: on to the next pose with one
+                hi = end[i] if prev is None else i + 1  # with joints before: as in a pass
+                i = next_within(solutions, limits, None, i + 1, hi)
                 continue
             prev, last = start, i
             joints[i] = prev
             i += 1
             continue
-        # In a pass, or the first pose when the caller gave `q_start`: the in-limit
-        # solution nearest the previous joints.
+        # In a pass, a move's pose, or the first pose when the caller gave `q_start`: the
+        # in-limit solution nearest the previous joints.
         pinned = False
         nearest = nearest_solution(solutions[i : i + 1], limits, prev[None])
         if nearest is None:
-            i = _next_within(solutions, limits, prev, i + 1, end[i])
+            i = next_within(solutions, limits, prev, i + 1, end[i])
             continue
         branch, prev = nearest
         joints[i], last = prev, i
-        ran = _follow(solutions[i + 1 : end[i]], limits, prev, branch)
+        stop = stops[np.searchsorted(stops, i + 1)] if by_move else end[i]
+        ran = follow(solutions[i + 1 : stop], limits, prev, branch)
         if len(ran):
             joints[i + 1 : i + 1 + len(ran)] = ran
             prev, last = ran[-1], i + len(ran)
         i += 1 + len(ran)
     return _report(arm, joints, exists, linked, tol, jump_deg, followed)
+
+
+def _runs(
+    followed: np.ndarray, path_of: np.ndarray, entries: Mapping[int, np.ndarray] | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of poses flown on one branch (`followed` (n - 1,) links them) as
+    `check_reach` steps them: (n,) where each run is entered, (n,) one past its last pose
+    (`_run_ends`), (n,) the poses whose entry `entries` records, (n,) the poses flown alone,
+    each a run of its own (a joint move's), their entry not recorded; and the sorted indices
+    (then n) a stretch of those followed at once stops at: each pose not flown alone or
+    starting another path (`path_of` changes)."""
+    n = len(followed) + 1
+    entered, end = np.r_[True, ~followed], _run_ends(followed)
+    recorded = np.zeros(n, bool)
+    recorded[[k for k in (entries or {}) if 0 <= k < n]] = True
+    alone = entered & (end == np.arange(1, n + 1)) & ~recorded
+    starts_path = path_of != np.r_[-1, path_of[:-1]]
+    return entered, end, recorded, alone, np.r_[np.flatnonzero(~alone | starts_path), n]
 
 
 def _report(

@@ -17,7 +17,8 @@ from scanplan.core.trajectory import MOVE_STEP_MM, Trajectory
 from scanplan.robot.base import Robot
 from scanplan.robot.export.thinning import linear_move
 from scanplan.robot.links import LinkMemo, check_links, joint_path
-from scanplan.robot.reach import check_reach, nearest_solution
+from scanplan.robot.nearest_joints import nearest_solution
+from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
 
 # The poses a straight line is checked at are this far apart at most: finer than the moves'
