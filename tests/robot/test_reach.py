@@ -7,8 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import wrap
-from scanplan.robot.nearest_joints import fit_limits
+from scanplan.robot.flown_poses import HALF_TURN, flyable_poses
+from scanplan.robot.nearest_joints import fit_limits, solvable
 from scanplan.robot.presets import get_robot
 from scanplan.robot.reach import _pass_start, _run_ends, check_reach, same_pass
 
@@ -126,6 +128,26 @@ def test_a_moves_poses_follow_the_pose_by_pose_rule_where_the_branch_changes(
     signs = np.sign(arm.singularity_terms(want[moves]))
     assert (signs[1:] != signs[:-1]).any(axis=1).sum() >= 5  # branches changed in moves
     assert np.isnan(want[~scanning]).any()
+
+
+@pytest.mark.parametrize("robot", ["ur5e", "kr6-r900"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_pose_has_joints_exactly_where_one_of_its_solutions_is_within_the_limits(
+    robot: str, seed: int
+) -> None:
+    # Whichever branch the check follows: what `flyable_poses` asks without a cell, as
+    # planned and turned about the beam, in one array operation (`solvable`).
+    poses, swath, scanning = _path(robot, seed)
+    arm = get_robot(robot)
+    traj = Trajectory(poses, swath, scanning)
+    flown = flyable_poses(traj, arm, np.eye(4), np.eye(4), None)
+    for k, flange in enumerate((poses, poses @ HALF_TURN)):
+        report = check_reach(flange, arm, swath=swath, scanning=scanning)
+        has_joints = ~np.isnan(report.joints).any(axis=1)
+        np.testing.assert_array_equal(solvable(arm.inverse(flange), arm.joint_limits), has_joints)
+        np.testing.assert_array_equal(flown[k], has_joints)
+    assert len(report.unreachable)
+    assert len(report.limit_violations) or robot == "ur5e"  # a UR's joints turn ±360°
 
 
 @pytest.mark.parametrize("stretch", [1, 7, 30, 200])

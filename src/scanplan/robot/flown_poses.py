@@ -11,6 +11,7 @@ import numpy as np
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import Robot
 from scanplan.robot.links import check_links
+from scanplan.robot.nearest_joints import solvable
 from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
 
@@ -34,7 +35,8 @@ def flyable_poses(
     """(as planned, turned half a turn about the beam): (m,) bool, the poses `index` (all by
     default) of `traj` the arm reaches within its limits with its links clear, and (the
     body is not symmetric about the beam) the sensor keeping its clearance. sensor_ok: that
-    last verdict for both, if known (it does not depend on the placement). exact=False: the
+    last verdict for both, if known (it does not depend on the placement); without
+    `obstacles`, reach and the sensor alone (no link checked). exact=False: the
     links' quick, slightly cautious verdict (`links.check_links`). T_base_part: (4, 4), or
     (len(traj), 4, 4) one per pose (external axes). choosing: (m,) bool, for a caller that
     only chooses per pass the way that keeps more of these poses: a pass whose turned poses
@@ -48,30 +50,26 @@ def flyable_poses(
         sensor_ok = sensor_clear_both(traj.poses[index], obstacles)
     out: list[np.ndarray] = []
     for k, poses in enumerate((traj.poses[index], traj.poses[index] @ HALF_TURN)):
-        report = check_reach(
-            T_base_part @ poses @ inv_tcp,
-            arm,
-            swath=traj.swath[index],
-            scanning=traj.scanning[index],
-            restarts=restarts,
-        )
-        joints = report.joints
+        flange = T_base_part @ poses @ inv_tcp
+        if obstacles is None:  # reach alone: where `check_reach` would find joints
+            good = solvable(arm.inverse(flange), arm.joint_limits)
+            out.append(good if sensor_ok is None else good & sensor_ok[k])
+            continue
+        swath, scanning = traj.swath[index], traj.scanning[index]
+        joints = check_reach(flange, arm, swath=swath, scanning=scanning, restarts=restarts).joints
         good = ~np.isnan(joints).any(axis=1)
         if sensor_ok is not None:
             good &= sensor_ok[k]
-        if k == 1 and choosing is not None and obstacles is not None:
+        if k == 1 and choosing is not None:
             # The links only take poses away: where even reach and the sensor keep no
             # more of the pass turned than its links leave as planned, it is not turned.
-            swath = traj.swath[index]
             passes, at = np.unique(swath, return_inverse=True)
             kept_planned = np.bincount(at, out[0] & choosing, len(passes))
             could_turned = np.bincount(at, good & choosing, len(passes))
             beaten = (could_turned <= kept_planned)[at]
             good &= ~beaten
             joints = np.where(beaten[:, None], np.nan, joints)  # not checked
-        if obstacles is not None:
-            links = check_links(arm, joints, obstacles, T_base_part, exact=exact)
-            good &= ~links.colliding
+        good &= ~check_links(arm, joints, obstacles, T_base_part, exact=exact).colliding
         out.append(good)
     return out[0], out[1]
 

@@ -26,6 +26,14 @@ def fit_limits(q: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return q, reduce_last_axis((q >= lo - 1e-12) & (q <= hi + 1e-12), np.logical_and)
 
 
+def solvable(solutions: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """(…,) whether any of each pose's IK solutions (…, 8, 6) lies within the limits, shifted
+    by whole turns: where `reach.check_reach` finds joints for it, whichever branch it
+    follows (the nearest in-limit solution exists exactly then), in one array operation."""
+    q, inside = fit_limits(solutions, limits)
+    return (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
+
+
 def limit_margin(q: np.ndarray, limits: np.ndarray) -> np.ndarray:
     """(…,) rad to the nearest joint limit (negative beyond it)."""
     return reduce_last_axis(np.minimum(q - limits[:, 0], limits[:, 1] - q), np.minimum)
@@ -74,8 +82,7 @@ def next_within(
     while lo < hi:
         top = min(hi, lo + size)
         if prev is None:
-            q, found = fit_limits(solutions[lo:top], limits)
-            found = (found & ~np.isnan(q).any(axis=-1)).any(axis=1)
+            found = solvable(solutions[lo:top], limits)
         else:
             _, dist = _candidates(solutions[lo:top], limits, np.broadcast_to(prev, (top - lo, 6)))
             found = np.isfinite(dist).any(axis=1)
@@ -112,4 +119,5 @@ __all__ = [
     "nearest_solution",
     "next_within",
     "reduce_last_axis",
+    "solvable",
 ]

@@ -17,7 +17,7 @@ from scanplan.robot.base import inv_rigid
 from scanplan.robot.fit_marks import renumbered_passes
 from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
 from scanplan.robot.links import obstacles_for
-from scanplan.robot.nearest_joints import fit_limits
+from scanplan.robot.nearest_joints import solvable
 from scanplan.robot.presets import get_robot
 from scanplan.world.capsule_collision import CellObstacles
 from scanplan.world.cell import planned_cell
@@ -104,8 +104,7 @@ class PlacedArm:
             sensor[:, :3, :3] = turned
             sensor[:, :3, 3] = origin[todo]
             q = arm.inverse(self.T_base_part @ sensor @ inv_tcp)
-            _, inside = fit_limits(q, arm.joint_limits)
-            ok[todo] = (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
+            ok[todo] = solvable(q, arm.joint_limits)
         return ok
 
     def moves_clear(self, part: Part, traj: Trajectory) -> bool:
