@@ -253,19 +253,28 @@ def test_a_budget_in_work_chooses_the_same_views_with_or_without_workers(housing
     assert picks[0].out_of_time and picks[1].out_of_time
 
 
-def test_a_second_choice_plans_no_view_the_first_planned(housing):
+def test_a_second_choice_plans_no_view_and_lists_no_candidate_the_first_did(housing, monkeypatch):
     # The choice for an arm runs after one without it on the same samples: the views that
-    # one planned are taken as planned (and as judged, where the arm flies all of them).
+    # one planned are taken as planned (and as judged, where the arm flies all of them),
+    # and the candidates it listed are not listed again.
     cell = planned_cell(PlanContext(SPEC, views="auto"), housing)
     raster = ViewRaster(SPEC, make_planner("geometric"), "auto", "auto", OVERLAP, cell)
     first = choose_views(housing, SPEC, raster, budget=ViewBudget(candidates=6), workers=0)
     assert len(first.known) >= len(first.plans) >= 2
+    assert len(first.listed) == len(view_choice_module.candidate_views(housing, SPEC)) > 0
 
     def never(*_):
-        raise AssertionError("a view planned twice")
+        raise AssertionError("a view planned or the candidates listed twice")
 
+    monkeypatch.setattr(view_choice_module, "candidate_views", never)
     again = choose_views(
-        housing, SPEC, never, budget=ViewBudget(candidates=6), workers=0, known=first.known
+        housing,
+        SPEC,
+        never,
+        budget=ViewBudget(candidates=6),
+        workers=0,
+        known=first.known,
+        listed=first.listed,
     )
     assert [v.view.key() for v in again.plans] == [v.view.key() for v in first.plans]
     assert again.coverage == first.coverage

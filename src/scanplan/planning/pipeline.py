@@ -126,16 +126,17 @@ def plan_views(
             scheduler=scheduler,
         )
         placed, known = None, None
+        listed: tuple[View, ...] = ()  # the candidates the choice without the arm listed
         if arm is not None:
             # Views chosen for the arm: placed where it flies most of what the views chosen
             # without it hold, then each candidate judged by what the arm flies of it there
             # (those the free choice planned are not planned again).
             first = choose()
-            known = first.known
+            known, listed = first.known, first.listed
             free, free_views, weights = _free_plan(part, first, spec, cell)
             arm, brackets = _placed(part, free, arm, context, obstacles, weights)
             placed = _placed_arm(arm, context, part, obstacles)
-        selection = choose(arm=placed, known=known)
+        selection = choose(arm=placed, known=known, listed=listed)
         plans = selection.plans
     plans, traj = join_views(part, order_views(plans), spec, cell)
     traj = replace(traj, meta=traj.meta | {"context": context.to_json_dict()})

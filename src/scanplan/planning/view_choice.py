@@ -78,6 +78,9 @@ class ViewSelection:
     # Every view planned, chosen or not, by key: what a second choice on the same samples
     # need not plan again (`ViewJudge.known`).
     known: KnownViews = field(default_factory=dict)
+    # The candidates listed (`candidate_views`; none if the top view was enough): what a
+    # second choice on the same part and spec need not list again.
+    listed: tuple[View, ...] = ()
 
 
 def steep_samples(part: Part, samples: VisibleSurface) -> np.ndarray:
@@ -111,6 +114,7 @@ def choose_views(
     scheduler: str | None = None,
     arm: PlacedArm | None = None,
     known: KnownViews | None = None,
+    listed: tuple[View, ...] = (),
 ) -> ViewSelection:
     """Greedy set cover of the surface a sensor can see from the upper hemisphere: the top
     view first (the paper's raster; on a panel it is all there is; none if nothing to
@@ -147,7 +151,8 @@ def choose_views(
     the next one the choice would try: the same views, sooner; with `scheduler`, as Dask
     tasks on that cluster. With a placed `arm`, each view is judged by what that arm flies
     of it (`placed_arm.PlacedArm.flown`), so the cover is of what the arm can scan; `known`, the
-    views a choice without the arm planned (`ViewSelection.known`), are not planned again."""
+    views a choice without the arm planned (`ViewSelection.known`), are not planned again,
+    and `listed`, the candidates it listed (`ViewSelection.listed`), not listed again."""
 
     spent = Spent(ViewBudget() if budget is None else budget)
     judge = ViewJudge(spec, plan, points_per_profile, seed, arm, known)
@@ -161,7 +166,7 @@ def choose_views(
         top_view = beside.submit(judge, part, View.looking_along(UP, 0))
         samples = hemisphere_visible_samples(part, _eval_spacing(spec, points_per_profile), seed)
         rule = _KeepRule(min_gain, gain_floor, min_gain_per_s)
-        greedy = _Greedy(part, spec, samples, spent, rule, coverage_target, arm)
+        greedy = _Greedy(part, spec, samples, spent, rule, coverage_target, arm, listed)
         steep = steep_samples(part, samples)
         if workers and scheduler is None and not top_view_may_suffice(steep, coverage_target):
             # The top view cannot be enough: the workers start now and plan, beside it, the
@@ -175,7 +180,12 @@ def choose_views(
         greedy.take_top(top_view)
         if greedy.target_reached():
             return ViewSelection(
-                greedy.plans, greedy.coverage, 0, greedy.chosen, known=greedy.known()
+                greedy.plans,
+                greedy.coverage,
+                0,
+                greedy.chosen,
+                known=greedy.known(),
+                listed=greedy.listed,
             )
         if greedy.pool is None:
             # Started only now: a part whose top view is enough (the door) needs no worker, and
@@ -215,8 +225,10 @@ class _Greedy:
         rule: _KeepRule,
         coverage_target: float,
         arm: PlacedArm | None = None,
+        listed: tuple[View, ...] = (),
     ) -> None:
         self.part, self.spec, self.samples, self.arm = part, spec, samples, arm
+        self.listed = listed
         self.spent, self.rule, self.coverage_target = spent, rule, coverage_target
         self.plans: list[ViewPlan] = []
         self.coverage: list[float] = []
@@ -241,8 +253,10 @@ class _Greedy:
     def start_workers(
         self, stack: ExitStack, judge: ViewJudge, workers: int, scheduler: str | None = None
     ) -> ViewWorkers:
-        """The candidates listed, then the workers that plan them started (left with `stack`)."""
-        self.candidates = candidate_views(self.part, self.spec)
+        """The candidates listed (unless given), then the workers that plan them started (left
+        with `stack`)."""
+        self.listed = self.listed or tuple(candidate_views(self.part, self.spec))
+        self.candidates = list(self.listed)
         # The samples on each candidate's faces: the bound on its gain.
         self.on_faces = [self._on_faces(v) for v in self.candidates]
         self.tried = {v.key() for v in self.candidates}
@@ -412,6 +426,7 @@ class _Greedy:
             exact,
             self.spent.timed_out,
             self.known(),
+            self.listed,
         )
 
     def known(self) -> KnownViews:

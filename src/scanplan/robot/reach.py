@@ -292,7 +292,8 @@ def check_reach(
         by_move = bool(alone[i]) and not pinned
         if prev is None or (entered[i] and not pinned and not by_move):
             if recorded[i]:  # the configuration recorded
-                found = nearest_solution(solutions[i : i + 1], limits, np.asarray(entries[i])[None])
+                at = np.asarray((entries or {})[i])[None]
+                found = nearest_solution(solutions[i : i + 1], limits, at)
                 start = None if found is None else found[1]
             else:
                 start = _pass_start(
@@ -306,8 +307,7 @@ def check_reach(
             joints[i] = prev
             i += 1
             continue
-        # In a pass, a move's pose, or the first pose when the caller gave `q_start`: the
-        # in-limit solution nearest the previous joints.
+        # In a pass or a move, or the first pose after `q_start`: the nearest in-limit joints.
         pinned = False
         nearest = nearest_solution(solutions[i : i + 1], limits, prev[None])
         if nearest is None:
