@@ -477,3 +477,16 @@ class DiesInAWorker:
         if multiprocessing.parent_process() is not None:
             os._exit(1)
         return self.raster(view_part, view)
+
+
+class FakeArm:
+    """A placed arm as the view choice asks it, for a fake that says only what it flies of
+    a view (`flown`): whether it flies more than so many poses follows from that, as
+    `PlacedArm.flown_beyond` answers."""
+
+    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
+        raise NotImplementedError
+
+    def flown_beyond(self, part: Part, traj: Trajectory, least: int) -> Trajectory | None:
+        flown = self.flown(part, traj)
+        return flown if flown.scanning.sum() > least else None

@@ -19,7 +19,14 @@ import scanplan.planning.pipeline as pipeline_module
 import scanplan.planning.view_choice as view_choice_module
 import scanplan.planning.view_joining as view_joining_module
 import scanplan.planning.view_workers as view_workers_module
-from helpers import HEMISPHERE, fcl_distance, fixture_files, overhang_part, straight
+from helpers import (
+    HEMISPHERE,
+    FakeArm,
+    fcl_distance,
+    fixture_files,
+    overhang_part,
+    straight,
+)
 from scanplan.cli import app
 from scanplan.core.context import PlanContext
 from scanplan.core.cycle import view_seconds
@@ -528,7 +535,7 @@ def test_the_planner_places_the_arm_where_place_does(housing_views):
     assert score == placement.score and evaluated == placement.evaluated > 0
 
 
-class _FliesAll:
+class _FliesAll(FakeArm):
     """An arm standing at -y that reaches every point and flies every view as planned."""
 
     stands_at = np.array([0.0, -900.0, 0.0])

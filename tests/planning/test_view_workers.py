@@ -14,7 +14,14 @@ import numpy as np
 import pytest
 
 import scanplan.planning.view_workers as view_workers
-from helpers import DiesInAWorker, Endless, loopback_cluster, overhang_part, tcp_server
+from helpers import (
+    DiesInAWorker,
+    Endless,
+    FakeArm,
+    loopback_cluster,
+    overhang_part,
+    tcp_server,
+)
 from scanplan.core.quantities import OVERLAP, UP, ScanSpec
 from scanplan.planning.pass_path import ViewRaster
 from scanplan.planning.view_choice import choose_views
@@ -154,7 +161,7 @@ def test_a_scheduler_address_that_is_no_scheduler_is_one_line():
             ViewWorkers(part, judge, 0, address)
 
 
-class _FliesOnlyFromAbove:
+class _FliesOnlyFromAbove(FakeArm):
     """An arm that flies a scanning pose only with its beam at most `max_tilt_deg` from
     straight down (its wrist meets a rim lower than that), the rest given up."""
 
@@ -194,7 +201,7 @@ def test_a_view_the_arm_cannot_fly_as_planned_is_flown_with_its_beams_raised(mon
     assert held.sum() > held_as_planned.sum()
 
 
-class _ReachesOnlyNearer:
+class _ReachesOnlyNearer(FakeArm):
     """An arm whose shoulder is at `shoulder_at`, that flies a scanning pose of a view
     planned as `planned` (4, 4 each) only where it is on the near side of the plane x =
     `near_x`, or brought at least `least_mm` nearer the shoulder along its laser line."""
@@ -269,7 +276,7 @@ def test_a_view_the_arm_reaches_only_part_of_is_flown_with_its_lines_slid_toward
         top_judge(part, top)
 
 
-class _FliesNothingThatMeasures:
+class _FliesNothingThatMeasures(FakeArm):
     """An arm standing where it flies no scanning pose of any view."""
 
     T_base_part = np.eye(4)

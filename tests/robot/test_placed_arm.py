@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+import scanplan.robot.flown_poses as flown_poses
 from helpers import plate_with_block
 from scanplan.core.context import PlanContext
 from scanplan.core.quantities import UP, ScanSpec
@@ -79,3 +80,35 @@ def test_moves_are_clear_unless_one_brings_the_sensor_body_into_the_part():
     # A scanning pose there is not a move's: `flown` judges it.
     scanning_inside = Trajectory(inside, traj.swath, np.ones(3, bool))
     assert arm.moves_clear(part, scanning_inside)
+
+
+def test_flown_beyond_is_what_flown_keeps_when_more_and_asks_no_link_when_it_cannot_be(
+    monkeypatch,
+):
+    part = plate_with_block()
+    wd = ScanSpec().working_distance_mm
+    down = Rotation.from_euler("x", 180, degrees=True).as_matrix()
+    top = float(part.bounds[1, 2])
+    poses, swath, scanning = [], [], []
+    for k, y in enumerate((-150.0, 0.0, 150.0)):
+        for x in np.linspace(-450.0, 450.0, 31):
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = down, (x, y, top + wd)
+            poses.append(T)
+            swath.append(k)
+            scanning.append(True)
+    traj = Trajectory(np.array(poses), np.array(swath), np.array(scanning))
+    arm = PlacedArm("kr6-r900", TCP, parse_pose_arg("650,0,-400,0,0,0"), PlanContext(ScanSpec()))
+    flown = arm.flown(part, traj)
+    kept = int(flown.scanning.sum())
+    assert 0 < kept < len(traj)  # the far ends are out of reach: both answers can be met
+    more = arm.flown_beyond(part, traj, kept - 1)
+    assert more is not None
+    np.testing.assert_array_equal(more.poses, flown.poses)
+    assert arm.flown_beyond(part, traj, kept) is None
+
+    def no_links(*_, **__):
+        raise AssertionError("links checked where reach alone rules the view out")
+
+    monkeypatch.setattr(flown_poses, "check_links", no_links)
+    assert arm.flown_beyond(part, traj, len(traj)) is None

@@ -136,8 +136,8 @@ class ViewJudge:
         none of its moves comes into the cell so (`flown` judges only the poses that scan),
         and the flown poses hold more in spec."""
         assert self.arm is not None
-        flown = self.arm.flown(part, moved.traj)
-        if flown.scanning.sum() <= best[1].scanning.sum():
+        flown = self.arm.flown_beyond(part, moved.traj, int(best[1].scanning.sum()))
+        if flown is None:
             return best
         if not self.arm.moves_clear(part, moved.traj):
             return best

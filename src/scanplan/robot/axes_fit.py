@@ -225,7 +225,12 @@ class PlacedArmOnAxes(PlacedArm):
             self._obstacles = (id(part), obstacles_for(part, cell, spec.sensor, spec.clearance_mm))
         return self._obstacles[1]
 
-    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
+    def flown(
+        self,
+        part: Part,
+        traj: Trajectory,
+        sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> Trajectory:
         arm = get_robot(self.robot)
         obstacles = self.obstacles(part)
         single = replace(traj, meta={k: v for k, v in traj.meta.items() if k != "views"})
@@ -233,7 +238,14 @@ class PlacedArmOnAxes(PlacedArm):
         T = part_poses(self.T_base_part, with_axes.external, self.axes)
         inv_tcp = np.linalg.inv(self.tcp)
         planned, turned = flyable_poses(
-            with_axes, arm, T, inv_tcp, obstacles, exact=False, choosing=traj.scanning
+            with_axes,
+            arm,
+            T,
+            inv_tcp,
+            obstacles,
+            sensor_ok=sensor_ok,
+            exact=False,
+            choosing=traj.scanning,
         )
         scanning = traj.scanning
         turn = np.isin(
@@ -243,6 +255,12 @@ class PlacedArmOnAxes(PlacedArm):
         poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
         swath = renumbered_passes(traj, keep, traj.swath, np.zeros(len(traj), bool))
         return replace(traj, poses=poses).subset(keep, swath)
+
+    def flown_beyond(self, part: Part, traj: Trajectory, least: int) -> Trajectory | None:
+        """`flown`, where it keeps more than `least` scanning poses, else None: judged whole
+        (each view is flown at a setting of its own, which one placement does not bound)."""
+        flown = self.flown(part, traj)
+        return flown if flown.scanning.sum() > least else None
 
 
 def fitted_axes_record(axes: ExternalAxes, traj: Trajectory) -> dict:

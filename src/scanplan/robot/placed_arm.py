@@ -15,7 +15,13 @@ from scanplan.core.context import PlanContext
 from scanplan.core.trajectory import Trajectory
 from scanplan.robot.base import inv_rigid
 from scanplan.robot.fit_marks import renumbered_passes
-from scanplan.robot.flown_poses import HALF_TURN, flyable_poses, turned_passes
+from scanplan.robot.flown_poses import (
+    HALF_TURN,
+    flyable_poses,
+    most_kept,
+    sensor_clear_both,
+    turned_passes,
+)
 from scanplan.robot.links import obstacles_for
 from scanplan.robot.nearest_joints import solvable
 from scanplan.robot.presets import get_robot
@@ -114,18 +120,31 @@ class PlacedArm:
         moves = traj.poses[~traj.scanning]
         return bool(self.obstacles(part).sensor_clear(moves).all())
 
-    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
+    def flown(
+        self,
+        part: Part,
+        traj: Trajectory,
+        sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> Trajectory:
         """`traj` as this arm flies it, quickly judged: each pass as planned or turned half
         a turn about the beam (whichever keeps more), its scanning poses that are out of
         reach or beyond the limits, or put a link or the sensor body into the cell, given
         up (a pass goes on after them as a new pass). Configuration flips are left to
         `fit_to_robot`, which splits a pass there and keeps its poses. `traj` itself when
-        the arm flies all of it as planned."""
+        the arm flies all of it as planned. sensor_ok: the sensor body's verdict at its
+        poses as planned and turned (`sensor_clear_both`), if known."""
         arm = get_robot(self.robot)
         obstacles = self.obstacles(part)
         inv_tcp = np.linalg.inv(self.tcp)
         planned, turned = flyable_poses(
-            traj, arm, self.T_base_part, inv_tcp, obstacles, exact=False, choosing=traj.scanning
+            traj,
+            arm,
+            self.T_base_part,
+            inv_tcp,
+            obstacles,
+            sensor_ok=sensor_ok,
+            exact=False,
+            choosing=traj.scanning,
         )
         scanning = traj.scanning
         better = turned_passes(traj.swath[scanning], planned[scanning], turned[scanning])
@@ -136,6 +155,20 @@ class PlacedArm:
         poses = np.where(turn[:, None, None], traj.poses @ HALF_TURN, traj.poses)
         swath = renumbered_passes(traj, keep, traj.swath, np.zeros(len(traj), bool))
         return replace(traj, poses=poses).subset(keep, swath)
+
+    def flown_beyond(self, part: Part, traj: Trajectory, least: int) -> Trajectory | None:
+        """`flown`, where it keeps more than `least` scanning poses of `traj`, else None. The
+        links only take poses away: where reach and the sensor alone, each pass the better
+        way, keep no more, its links are not checked (most views moved to fly more do not,
+        and each pose's reach is one array operation, `flyable_poses` without a cell)."""
+        arm = get_robot(self.robot)
+        sensor_ok = sensor_clear_both(traj.poses, self.obstacles(part))
+        inv_tcp = np.linalg.inv(self.tcp)
+        reached = flyable_poses(traj, arm, self.T_base_part, inv_tcp, None, sensor_ok=sensor_ok)
+        if most_kept(traj.swath, traj.scanning.astype(float), *reached) <= least:
+            return None
+        flown = self.flown(part, traj, sensor_ok)
+        return flown if flown.scanning.sum() > least else None
 
 
 __all__ = ["PlacedArm"]
