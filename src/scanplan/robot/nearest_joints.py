@@ -1,7 +1,7 @@
 """The joints a controller takes for a pose: the IK's solutions shifted by whole turns into
-the joint limits (`fit_limits`), the in-limit solution nearest the joints before
-(`nearest_solution`), and a branch followed that way over many poses at once (`follow`):
-what `reach.check_reach` steps a path with.
+the joint limits (`fit_limits`), whether any lies within them (`solvable`), the in-limit
+solution nearest the joints before (`nearest_solution`), and a branch followed that way
+over many poses at once (`follow`): what `reach.check_reach` steps a path with.
 """
 
 from __future__ import annotations
