@@ -225,12 +225,7 @@ class PlacedArmOnAxes(PlacedArm):
             self._obstacles = (id(part), obstacles_for(part, cell, spec.sensor, spec.clearance_mm))
         return self._obstacles[1]
 
-    def flown(
-        self,
-        part: Part,
-        traj: Trajectory,
-        sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> Trajectory:
+    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
         arm = get_robot(self.robot)
         obstacles = self.obstacles(part)
         single = replace(traj, meta={k: v for k, v in traj.meta.items() if k != "views"})
@@ -238,14 +233,7 @@ class PlacedArmOnAxes(PlacedArm):
         T = part_poses(self.T_base_part, with_axes.external, self.axes)
         inv_tcp = np.linalg.inv(self.tcp)
         planned, turned = flyable_poses(
-            with_axes,
-            arm,
-            T,
-            inv_tcp,
-            obstacles,
-            sensor_ok=sensor_ok,
-            exact=False,
-            choosing=traj.scanning,
+            with_axes, arm, T, inv_tcp, obstacles, exact=False, choosing=traj.scanning
         )
         scanning = traj.scanning
         turn = np.isin(

@@ -16,13 +16,10 @@ from scanplan.core.trajectory import Trajectory
 from scanplan.robot.axes import ExternalAxes, part_poses
 from scanplan.robot.base import Robot
 from scanplan.robot.flown_poses import (
-    HALF_TURN,
     flyable_poses,
     kept_by_pass,
     sensor_clear_both,
 )
-from scanplan.robot.nearest_joints import fit_limits
-from scanplan.robot.reach import check_reach
 from scanplan.world.capsule_collision import CellObstacles
 
 # Poses (a copy per setting) judged in one reach check: about 100 MB of inverse kinematics.
@@ -70,18 +67,7 @@ def kept_each(
 
     def judged(copies: _Copies) -> np.ndarray:
         if obstacles is None:
-            good = [
-                ~np.isnan(
-                    check_reach(
-                        copies.T @ p @ inv_tcp,
-                        arm,
-                        swath=copies.traj.swath,
-                        scanning=copies.traj.scanning,
-                        restarts=copies.restarts,
-                    ).joints
-                ).any(axis=1)
-                for p in (copies.traj.poses, copies.traj.poses @ HALF_TURN)
-            ]
+            good = list(flyable_poses(copies.traj, arm, copies.T, inv_tcp, None))  # reach alone
         else:
             # The sensor's clearance does not depend on the setting: judged once a pose.
             poses, at = np.unique(copies.source, return_inverse=True)
@@ -119,11 +105,8 @@ def reach_bound_each(
     keeps no pose without one, and a pass one way)."""
 
     def bound(copies: _Copies) -> np.ndarray:
-        held = []
-        for p in (copies.traj.poses, copies.traj.poses @ HALF_TURN):
-            q, inside = fit_limits(arm.inverse(copies.T @ p @ inv_tcp), arm.joint_limits)
-            reached = (inside & ~np.isnan(q).any(axis=-1)).any(axis=-1)
-            held.append(reached & copies.traj.scanning)
+        reached = flyable_poses(copies.traj, arm, copies.T, inv_tcp, None)  # reach alone
+        held = [r & copies.traj.scanning for r in reached]
         passes, first, at = np.unique(copies.traj.swath, return_index=True, return_inverse=True)
         most = np.maximum(
             np.bincount(at, held[0], len(passes)), np.bincount(at, held[1], len(passes))

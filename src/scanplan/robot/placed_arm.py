@@ -120,19 +120,20 @@ class PlacedArm:
         moves = traj.poses[~traj.scanning]
         return bool(self.obstacles(part).sensor_clear(moves).all())
 
-    def flown(
-        self,
-        part: Part,
-        traj: Trajectory,
-        sensor_ok: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> Trajectory:
+    def flown(self, part: Part, traj: Trajectory) -> Trajectory:
         """`traj` as this arm flies it, quickly judged: each pass as planned or turned half
         a turn about the beam (whichever keeps more), its scanning poses that are out of
         reach or beyond the limits, or put a link or the sensor body into the cell, given
         up (a pass goes on after them as a new pass). Configuration flips are left to
         `fit_to_robot`, which splits a pass there and keeps its poses. `traj` itself when
-        the arm flies all of it as planned. sensor_ok: the sensor body's verdict at its
-        poses as planned and turned (`sensor_clear_both`), if known."""
+        the arm flies all of it as planned."""
+        return self._flown(part, traj, None)
+
+    def _flown(
+        self, part: Part, traj: Trajectory, sensor_ok: tuple[np.ndarray, np.ndarray] | None
+    ) -> Trajectory:
+        """`flown`, the sensor body's verdict at its poses as planned and turned
+        (`sensor_clear_both`) given if known."""
         arm = get_robot(self.robot)
         obstacles = self.obstacles(part)
         inv_tcp = np.linalg.inv(self.tcp)
@@ -167,7 +168,7 @@ class PlacedArm:
         reached = flyable_poses(traj, arm, self.T_base_part, inv_tcp, None, sensor_ok=sensor_ok)
         if most_kept(traj.swath, traj.scanning.astype(float), *reached) <= least:
             return None
-        flown = self.flown(part, traj, sensor_ok)
+        flown = self._flown(part, traj, sensor_ok)
         return flown if flown.scanning.sum() > least else None
 
 
